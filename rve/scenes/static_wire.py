@@ -1,0 +1,187 @@
+"""Scene: the current-carrying wire in a magnetic field, solved statically (thesis §6.3).
+
+Contract
+--------
+``run(cfg, out_dir) -> dict`` takes a validated ``StaticWireConfig`` and returns the
+summary (also what ``rve run`` writes to summary.json): ``centre_displacement`` (the
+midpoint's distance from the support line, in units of L), ``analytical_centre_displacement``
+(chapter 3 helix, same units), ``newton_iterations`` (static phase), ``relaxation_steps``,
+``dofs``, ``wall_time_s`` per phase and in total, and the Newton residual history of the
+static phase. ``solve(cfg)`` returns the same plus the final state, for studies.
+
+Set-up (SPEC §5, thesis §6.3): the wire lies along e1 from -L to L (straight natural
+configuration, directors G1 = e2, G2 = e3); B = |B| (cos phi, 0, sin phi); a current
+I = J pi R^2 flows along +e1; the centroid ends are pinned and moved from +-L e1 to
++-Delta e1. Solution path ``dynamic_relaxation``: backward-Euler dynamics with damping
+-gamma v from the straight wire (tiny cosine z-offset, uniform compression velocity as the
+thesis), ends moving at constant speed for ``duration``, then static Newton from the relaxed
+state with velocities zeroed. Path ``continuation``: pseudo-transient continuation
+(K + sigma M) from the same start with the ends already at +-Delta. A twist gauge fixes
+the z component of g1 at the first node (the uniform rotation of circular sections about
+the centroid is a zero-energy mode; SPEC §7).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..analytic.helix import static_wire_reference
+from ..fem.lagrange import lagrange_basis
+from ..fem.mesh import fibril_mesh, straight_fibril
+from ..model import BeamMaterial, BeamModel, DirichletBC, PrescribedCurrent
+from ..solvers.dirk import integrate
+from ..solvers.static import static_solve
+
+__all__ = ["build", "solve", "run", "centre_displacement"]
+
+log = logging.getLogger("rve.scenes.static_wire")
+
+
+def build(cfg):
+    L = cfg.geometry.half_length
+    delta = cfg.geometry.clamp_half_distance
+    R = cfg.fibril.radius
+    mesh = fibril_mesh([straight_fibril([-L, 0, 0], [L, 0, 0], R, "wire")], cfg.mesh.elements, cfg.mesh.order)
+    phi = cfg.load.field_angle
+    B = cfg.load.field_magnitude * np.array([np.cos(phi), 0.0, np.sin(phi)])
+    current = cfg.load.current_density * np.pi * R**2
+    mat = BeamMaterial(
+        youngs_modulus=cfg.material.youngs_modulus,
+        poisson_ratio=cfg.material.poisson_ratio,
+        density=cfg.material.density,
+        damping=cfg.solver.relaxation.damping,
+    )
+    n0, n1 = mesh.end_nodes(0)
+    T = cfg.solver.relaxation.duration
+    speed = (L - delta) / T
+
+    def end_velocity(sign):
+        # left end (sign=-1) moves toward +e1, right end toward -e1, until t = T
+        return lambda t: np.array([-sign * speed if t < T * (1 - 1e-12) else 0.0, 0.0, 0.0])
+
+    bcs_dyn = [
+        DirichletBC(np.array([n0 * 9 + 0, n0 * 9 + 1, n0 * 9 + 2]), end_velocity(-1)),
+        DirichletBC(np.array([n1 * 9 + 0, n1 * 9 + 1, n1 * 9 + 2]), end_velocity(+1)),
+        DirichletBC(np.array([n0 * 9 + 5]), 0.0),  # twist gauge: g1_z at the first node
+    ]
+    model = BeamModel(
+        mesh, mat,
+        disk_points=cfg.mesh.disk_points,
+        axial_points=cfg.mesh.axial_points,
+        bcs=bcs_dyn,
+        prescribed_current=PrescribedCurrent(np.array([current]), B),
+    )
+    return model
+
+
+def initial_state(model, cfg, ends_at_clamps: bool = False):
+    L = cfg.geometry.half_length
+    delta = cfg.geometry.clamp_half_distance
+    X0 = model.mesh.X0
+    x = np.zeros(model.n)
+    w = np.zeros(model.n)
+    xn = model.nodal(x)
+    xn[:, :9] = X0
+    s = X0[:, 0] / L  # -1..1
+    xn[:, 2] += cfg.solver.relaxation.perturbation * L * np.cos(0.5 * np.pi * s)
+    if ends_at_clamps:
+        xn[:, 0] *= delta / L
+    else:
+        T = cfg.solver.relaxation.duration
+        model.nodal(w)[:, 0] = -(L - delta) / T * s  # thesis: vq = -(L - Delta)/T X1 e1
+    return x, w
+
+
+def centre_displacement(model, x, L) -> float:
+    """Distance of the centroid at the wire's midpoint from the support line (units of L)."""
+    mesh = model.mesh
+    p = mesh.order
+    # find the element containing s = L (the midpoint of [0, 2L]) and interpolate there
+    s_mid = 0.5 * mesh.elem_length.sum()
+    e = min(int(s_mid // mesh.elem_length[0]), mesh.n_elements - 1)
+    s0 = mesh.node_s[mesh.conn[e, 0]]
+    t = 2.0 * (s_mid - s0) / mesh.elem_length[e] - 1.0
+    N, _ = lagrange_basis(p, np.array([t]))
+    r = N[0] @ model.nodal(x)[mesh.conn[e], 0:3]
+    return float(np.hypot(r[1], r[2]) / L)
+
+
+def newton_options(cfg, model):
+    # residuals are forces: scale the absolute tolerance with the axial stiffness E A
+    EA = cfg.material.youngs_modulus * np.pi * cfg.fibril.radius**2
+    return {
+        "atol": cfg.solver.newton.atol * EA,
+        "rtol": cfg.solver.newton.rtol,
+        "max_iter": cfg.solver.newton.max_iter,
+    }
+
+
+def solve(cfg) -> dict:
+    t_start = time.perf_counter()
+    timings = {}
+    model = build(cfg)
+    L = cfg.geometry.half_length
+    nopts = newton_options(cfg, model)
+    timings["setup"] = time.perf_counter() - t_start
+    path = cfg.solver.path
+    t1 = time.perf_counter()
+    relax_steps = 0
+    relax_newton = 0
+    if path == "dynamic_relaxation":
+        x, w = initial_state(model, cfg)
+        T = cfg.solver.relaxation.duration
+        res = integrate(model, x, w, 0.0, T, cfg.solver.relaxation.steps, stages=1,
+                        newton_opts={**nopts, "max_iter": 25}, consistent=False)
+        x, w = res.x, res.w
+        relax_steps, relax_newton = res.steps, res.newton_iterations
+        timings["relaxation"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        x, w, nres = static_solve(model, x, np.zeros_like(w), T, nopts)
+    elif path == "continuation":
+        from ..solvers.static import pseudo_transient_solve
+
+        x, w = initial_state(model, cfg, ends_at_clamps=True)
+        T = cfg.solver.relaxation.duration
+        x, w, pres = pseudo_transient_solve(model, x, np.zeros_like(w), T, atol=nopts["atol"], rtol=nopts["rtol"])
+        relax_newton = pres.iterations
+        timings["relaxation"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        x, w, nres = static_solve(model, x, np.zeros_like(w), T, nopts)
+    else:  # pragma: no cover - the schema forbids it
+        raise ValueError(f"solver.path = {path!r}: must be 'dynamic_relaxation' or 'continuation'")
+    timings["static"] = time.perf_counter() - t2
+    if not nres.converged:
+        raise RuntimeError(
+            f"static Newton did not converge after {nres.iterations} iterations: {nres.reason}; "
+            f"residuals {[f'{r:.3e}' for r in nres.residuals]}")
+    timings["total"] = time.perf_counter() - t_start
+    ref = static_wire_reference(
+        cfg.load.current_density * cfg.load.field_magnitude / cfg.material.youngs_modulus,
+        cfg.geometry.clamp_half_distance / L, cfg.load.field_angle)
+    return {
+        "centre_displacement": centre_displacement(model, x, L),
+        "analytical_centre_displacement": float(ref.centre_displacement),
+        "newton_iterations": int(nres.iterations),
+        "newton_residuals": [float(r) for r in nres.residuals],
+        "newton_rates": [float(r) for r in nres.rates],
+        "relaxation_steps": int(relax_steps),
+        "relaxation_newton_iterations": int(relax_newton),
+        "dofs": int(model.n),
+        "free_dofs": int(model.n - 5),
+        "fields": list(model.layout.fields),
+        "order": int(cfg.mesh.order),
+        "elements": int(cfg.mesh.elements),
+        "radius": float(cfg.fibril.radius),
+        "min_det_F": model.basis.min_det_F(model.nodal(x)),
+        "wall_time_s": {k: float(v) for k, v in timings.items()},
+        "_state": {"x": x, "model": model},
+    }
+
+
+def run(cfg, out_dir: Path) -> dict:
+    out = solve(cfg)
+    out.pop("_state")
+    return out
