@@ -1,0 +1,233 @@
+"""The ``rve`` command line.
+
+    rve run CONFIG [--set KEY=VALUE ...] [--out DIR] [-v]   run a scene, write DIR/summary.json
+    rve validate CONFIG [--set KEY=VALUE ...] [--json]       print the resolved config (internal units)
+    rve schema SCENE                                         print the JSON schema of a scene's input
+    rve scenes                                               list the known scenes
+
+Exit codes: 0 success, 2 invalid configuration or usage (messages on stderr, no
+traceback). A new subcommand is a function ``_add_<name>(subparsers)`` that adds its
+parser with ``set_defaults(func=...)``, listed in ``_SUBCOMMANDS``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+from .config import ConfigError, config_as_dict, config_units, json_schema, load_config
+from .config.models import SCENE_MODELS
+from .io.atomic import atomic_write_json, to_jsonable
+
+__all__ = ["main", "build_parser", "format_config"]
+
+log = logging.getLogger("rve.cli")
+
+EXIT_OK = 0
+EXIT_CONFIG = 2
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("rve")
+    except Exception:  # not installed (running from a source tree)
+        return "unknown"
+
+
+def _setup_logging(verbosity: int) -> None:
+    level = logging.WARNING if verbosity <= 0 else logging.INFO if verbosity == 1 else logging.DEBUG
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    # basicConfig does nothing when the root logger already has handlers (pytest, notebooks);
+    # the package loggers ("rve", "rve.newton", ...) get the level either way.
+    logging.getLogger("rve").setLevel(level)
+
+
+def _config_error(exc: ConfigError, source: Optional[str] = None) -> int:
+    head = f"rve: invalid configuration{f' {source}' if source else ''}:"
+    print(head, file=sys.stderr)
+    for line in exc.errors:
+        print(f"  {line}", file=sys.stderr)
+    return EXIT_CONFIG
+
+
+# --------------------------------------------------------------------------- formatting
+def _yaml_scalar(value) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, int):
+        return str(value)
+    return json.dumps(value)
+
+
+def format_config(cfg) -> str:
+    """The validated config as YAML in internal units, each quantity annotated with its
+    unit (``radius: 0.02  # mm``). The output is itself a valid config."""
+    data = config_as_dict(cfg)
+    units = config_units(cfg)
+    lines: list[str] = []
+
+    def emit(d: dict, u: dict, indent: int) -> None:
+        pad = "  " * indent
+        for key, value in d.items():
+            unit = u.get(key) if isinstance(u, dict) else None
+            if isinstance(value, dict):
+                lines.append(f"{pad}{key}:")
+                emit(value, unit if isinstance(unit, dict) else {}, indent + 1)
+            else:
+                text = f"{pad}{key}: {_yaml_scalar(value)}"
+                if isinstance(unit, str) and unit != "dimensionless":
+                    text += f"  # {unit}"
+                lines.append(text)
+
+    emit(data, units, 0)
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- subcommands
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .scenes import SCENES, run_scene
+
+    try:
+        cfg = load_config(args.config, args.overrides)
+    except ConfigError as exc:
+        return _config_error(exc, args.config)
+    if cfg.scene not in SCENES:
+        print(f"rve: scene {cfg.scene!r} has a config model but no implementation "
+              f"(known: {', '.join(SCENES)})", file=sys.stderr)
+        return EXIT_CONFIG
+    out_dir = Path(args.out) if args.out else Path("results") / "runs" / Path(args.config).stem
+    log.info("running scene %s -> %s", cfg.scene, out_dir)
+    summary = run_scene(cfg, out_dir)
+    resolved = config_as_dict(cfg)
+    record = dict(summary)
+    record.setdefault("provenance", {
+        "scene": cfg.scene,
+        "config_file": str(args.config),
+        "overrides": list(args.overrides),
+        "config": resolved,
+        "rve_version": _version(),
+        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    })
+    atomic_write_json(out_dir / "config.json", resolved)
+    path = atomic_write_json(out_dir / "summary.json", record)
+    print(json.dumps(to_jsonable(summary), indent=2))
+    print(f"rve: wrote {path}", file=sys.stderr)
+    return EXIT_OK
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    try:
+        cfg = load_config(args.config, args.overrides)
+    except ConfigError as exc:
+        return _config_error(exc, args.config)
+    if args.json:
+        print(json.dumps(config_as_dict(cfg), indent=2))
+    else:
+        print(f"# {args.config}: valid; resolved values in internal units (mm, ms, g, N, MPa, K, A, V, kT)")
+        sys.stdout.write(format_config(cfg))
+    return EXIT_OK
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    try:
+        schema = json_schema(args.scene)
+    except ConfigError as exc:
+        return _config_error(exc)
+    print(json.dumps(schema, indent=2))
+    return EXIT_OK
+
+
+def _cmd_scenes(args: argparse.Namespace) -> int:
+    from .scenes import SCENES
+
+    for name in sorted(set(SCENE_MODELS) | set(SCENES)):
+        model = SCENE_MODELS.get(name)
+        doc = (model.__doc__ or "").strip().splitlines()[0] if model and model.__doc__ else ""
+        impl = SCENES.get(name, "(no implementation)")
+        print(f"{name:20s} {impl:32s} {doc}")
+    return EXIT_OK
+
+
+def _common(config: bool) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(add_help=False)
+    if config:
+        p.add_argument("config", metavar="CONFIG", help="scene config (YAML)")
+        p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a config value, e.g. --set mesh.order=3 --set 'load.field_magnitude=2 T' "
+                            "(repeatable; the value is read as YAML)")
+    p.add_argument("-v", "--verbose", action="count", default=0,
+                   help="log progress (-v: INFO, e.g. Newton iterations; -vv: DEBUG)")
+    return p
+
+
+def _add_run(sub) -> None:
+    p = sub.add_parser("run", parents=[_common(True)], help="run a scene and write its summary",
+                       description="Validate CONFIG, run its scene and write DIR/summary.json "
+                                   "(plus DIR/config.json, the resolved config in internal units).")
+    p.add_argument("--out", metavar="DIR", help="output directory (default: results/runs/<config stem>)")
+    p.set_defaults(func=_cmd_run)
+
+
+def _add_validate(sub) -> None:
+    p = sub.add_parser("validate", parents=[_common(True)], help="validate a config and print it resolved",
+                       description="Validate CONFIG (with overrides) and print it in internal units.")
+    p.add_argument("--json", action="store_true", help="print JSON instead of annotated YAML")
+    p.set_defaults(func=_cmd_validate)
+
+
+def _add_schema(sub) -> None:
+    p = sub.add_parser("schema", parents=[_common(False)], help="print the JSON schema of a scene's config",
+                       description="Print the JSON schema of the raw input of SCENE (for Snakemake's validate).")
+    p.add_argument("scene", metavar="SCENE", help=f"scene name ({', '.join(SCENE_MODELS)})")
+    p.set_defaults(func=_cmd_schema)
+
+
+def _add_scenes(sub) -> None:
+    p = sub.add_parser("scenes", parents=[_common(False)], help="list the known scenes")
+    p.set_defaults(func=_cmd_scenes)
+
+
+_SUBCOMMANDS: list[Callable] = [_add_run, _add_validate, _add_schema, _add_scenes]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="rve", description="Fibril-level textile simulation: scenes, configs and lookup tables.")
+    parser.add_argument("--version", action="version", version=f"rve {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Entry point of the ``rve`` script; returns the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits on --help / usage errors
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_CONFIG
+    _setup_logging(args.verbose)
+    try:
+        return args.func(args)
+    except BrokenPipeError:  # output piped into `head` and the like
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return EXIT_OK
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,110 @@
+"""Atomic file output: a file either keeps its old content or gets the complete new one.
+
+Every writer goes to a temporary file in the destination's directory (so the final
+``os.replace`` is a rename on one filesystem, atomic on POSIX and Windows) and renames it
+over the destination only when writing succeeded. A killed run therefore never leaves a
+truncated ``summary.json``, netCDF table or PNG behind, which is what lets Snakemake and
+checkpoint/resume logic trust any file that exists.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator, Union
+
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_write_json", "to_jsonable"]
+
+PathLike = Union[str, os.PathLike]
+
+
+@contextlib.contextmanager
+def atomic_path(path: PathLike) -> Iterator[Path]:
+    """Yield a temporary path to write ``path``'s content to; on normal exit of the block it
+    is moved onto ``path`` (``os.replace``), on an exception it is deleted and ``path`` is
+    left untouched. Parent directories are created.
+
+    The temporary path lives in a fresh hidden directory next to ``path`` and has the same
+    file name, so writers that pick the format from the suffix (matplotlib, xarray) work::
+
+        with atomic_path("out/table.nc") as tmp:
+            ds.to_netcdf(tmp)
+    """
+    path = Path(path)
+    parent = path.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmpdir = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent))
+    tmp = tmpdir / path.name
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise FileNotFoundError(f"atomic_path: nothing was written to {tmp} for {path}")
+        if tmp.is_dir():
+            raise IsADirectoryError(f"atomic_path: {tmp} is a directory; only files are supported")
+        os.replace(tmp, path)
+        _fsync_dir(parent)
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+
+
+def _fsync_dir(directory: Path) -> None:
+    # Make the rename durable; not possible (nor needed) on every platform.
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def atomic_write_bytes(path: PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (flushed and fsynced before the rename)."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+    return Path(path)
+
+
+def atomic_write_text(path: PathLike, text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path`` atomically."""
+    return atomic_write_bytes(path, text.encode(encoding))
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Convert numpy scalars/arrays, paths, sets and tuples to plain JSON types.
+    Non-finite floats are kept (written as NaN/Infinity, which Python's json reads)."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, set, frozenset)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, (str, bool, int, type(None))):
+        return obj
+    if isinstance(obj, float):
+        return obj
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    tolist = getattr(obj, "tolist", None)  # numpy arrays and scalars
+    if callable(tolist):
+        return to_jsonable(tolist())
+    item = getattr(obj, "item", None)
+    if callable(item):
+        return to_jsonable(item())
+    dump = getattr(obj, "model_dump", None)  # pydantic models
+    if callable(dump):
+        return to_jsonable(dump(mode="json"))
+    raise TypeError(f"cannot write {type(obj).__name__} as JSON: {obj!r}")
+
+
+def atomic_write_json(path: PathLike, obj: Any, indent: int = 2, sort_keys: bool = False) -> Path:
+    """Write ``obj`` as JSON to ``path`` atomically (numpy types are converted)."""
+    text = json.dumps(to_jsonable(obj), indent=indent, sort_keys=sort_keys) + "\n"
+    return atomic_write_text(path, text)
