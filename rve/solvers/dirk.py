@@ -1,0 +1,491 @@
+"""L-stable SDIRK time integration of ``M dw/dt + F(x, w, t) = 0``, ``dx/dt = w`` (mech).
+
+Thesis §6.2 and Appendix C; see ``docs/time_integration.md``.
+
+* ``sdirk(s)`` -- the Butcher tableaus of the singly diagonally implicit, stiffly accurate,
+  L-stable family with s = 1 (backward Euler), 2 and 3 stages (orders 1, 2, 3). The
+  3-stage last row printed in Appendix C as ``b2 b2 α`` is ``b1 b2 α``.
+* ``dirk_step`` -- one step: each stage is ONE monolithic Newton solve for the stage
+  value ``w_i`` on the free dofs, the positions being eliminated through
+  ``x_i = x̂_i + h a_ii w_i`` (§6.2.2). Stiffly accurate => ``(x1, w1)`` is the last stage.
+* ``integrate`` -- the time loop, with step cutting on failure and regrowth after success,
+  landing exactly on ``t_end``; or ``fixed_step=True`` (failure raises at once).
+* ``consistent_initialization`` -- solves ``F = 0`` for the massless (algebraic) dofs at
+  t0 so that e.g. the potential V(0) is consistent with x(0), w(0).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+from .newton import NewtonResult, newton
+from .system import FreeDofs, massless_dofs, mech_mask
+
+__all__ = [
+    "Tableau", "sdirk", "BACKWARD_EULER", "SDIRK2", "SDIRK3", "SDIRK3_ALPHA",
+    "order_conditions", "stability_function",
+    "StepInfo", "StepFailure", "IntegrationFailure", "IntegrationResult",
+    "dirk_step", "integrate", "consistent_initialization", "DirkStepper",
+]
+
+log = logging.getLogger("rve.dirk")
+
+
+# ----------------------------------------------------------------------------- tableaus
+@dataclass(frozen=True)
+class Tableau:
+    """Butcher tableau ``(A, b, c)`` of a diagonally implicit Runge-Kutta method."""
+
+    name: str
+    A: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    order: int
+
+    @property
+    def stages(self) -> int:
+        return int(self.b.size)
+
+    @property
+    def stiffly_accurate(self) -> bool:
+        return bool(np.allclose(self.A[-1], self.b, rtol=0, atol=1e-15) and abs(self.c[-1] - 1) < 1e-15)
+
+    def check(self, tol: float = 1e-14) -> None:
+        """Raise ``ValueError`` unless the tableau is lower triangular with c = A·1,
+        stiffly accurate, and satisfies the order conditions up to ``order``."""
+        s = self.stages
+        if self.A.shape != (s, s) or self.c.shape != (s,):
+            raise ValueError(f"{self.name}: inconsistent shapes")
+        if np.any(np.triu(self.A, 1) != 0):
+            raise ValueError(f"{self.name}: A is not lower triangular")
+        if not np.allclose(self.A.sum(axis=1), self.c, rtol=0, atol=tol):
+            raise ValueError(f"{self.name}: c != A 1")
+        if not self.stiffly_accurate:
+            raise ValueError(f"{self.name}: not stiffly accurate (last row of A != b or c_s != 1)")
+        bad = {k: v for k, v in order_conditions(self, self.order).items() if abs(v) > tol}
+        if bad:
+            raise ValueError(f"{self.name}: order conditions violated: {bad}")
+
+
+def _order_trees(A, b, c):
+    """Residuals of the Runge-Kutta order conditions (rooted trees up to order 4)."""
+    Ac = A @ c
+    return {
+        1: {"sum b = 1": b.sum() - 1.0},
+        2: {"b.c = 1/2": b @ c - 1 / 2},
+        3: {"b.c^2 = 1/3": b @ c**2 - 1 / 3, "b.A.c = 1/6": b @ Ac - 1 / 6},
+        4: {
+            "b.c^3 = 1/4": b @ c**3 - 1 / 4,
+            "b.(c*A.c) = 1/8": b @ (c * Ac) - 1 / 8,
+            "b.A.c^2 = 1/12": b @ (A @ c**2) - 1 / 12,
+            "b.A.A.c = 1/24": b @ (A @ Ac) - 1 / 24,
+        },
+    }
+
+
+def order_conditions(tableau: Tableau, order: int) -> dict:
+    """``{condition: residual}`` for all order conditions of orders 1..``order`` (<= 4)."""
+    if not 1 <= order <= 4:
+        raise ValueError("order conditions are tabulated for orders 1..4")
+    trees = _order_trees(tableau.A, tableau.b, tableau.c)
+    out = {}
+    for p in range(1, order + 1):
+        out.update({f"p{p}: {k}": float(v) for k, v in trees[p].items()})
+    return out
+
+
+def stability_function(tableau: Tableau, z: complex) -> complex:
+    """R(z) = 1 + z bᵀ (I − z A)⁻¹ 1 (y' = λy, z = hλ)."""
+    s = tableau.stages
+    k = np.linalg.solve(np.eye(s) - z * tableau.A, np.ones(s, dtype=complex))
+    return complex(1 + z * (tableau.b @ k))
+
+
+#: α of the 3-stage method: root of α³ − 3α² + 3α/2 − 1/6 = 0 in (1/6, 1/2).
+SDIRK3_ALPHA = 0.43586652150845899942
+
+
+def _make_tableaus():
+    be = Tableau("backward Euler (SDIRK1)", np.array([[1.0]]), np.array([1.0]), np.array([1.0]), 1)
+
+    g = 1.0 - math.sqrt(2.0) / 2.0
+    A2 = np.array([[g, 0.0], [1.0 - g, g]])
+    s2 = Tableau("SDIRK2 (γ = 1 − √2/2)", A2, A2[-1].copy(), np.array([g, 1.0]), 2)
+
+    a = SDIRK3_ALPHA
+    tau = (1.0 + a) / 2.0
+    b1 = -(6 * a * a - 16 * a + 1) / 4.0
+    b2 = (6 * a * a - 20 * a + 5) / 4.0
+    A3 = np.array([[a, 0.0, 0.0], [tau - a, a, 0.0], [b1, b2, a]])
+    s3 = Tableau("SDIRK3 (α = 0.4358665215...)", A3, A3[-1].copy(), np.array([a, tau, 1.0]), 3)
+    for t in (be, s2, s3):
+        t.check()
+    return be, s2, s3
+
+
+BACKWARD_EULER, SDIRK2, SDIRK3 = _make_tableaus()
+
+
+def sdirk(stages: int) -> Tableau:
+    """The L-stable, stiffly accurate SDIRK method with ``stages`` = 1, 2 or 3 stages."""
+    try:
+        return {1: BACKWARD_EULER, 2: SDIRK2, 3: SDIRK3}[int(stages)]
+    except KeyError:
+        raise ValueError(f"SDIRK family has 1, 2 or 3 stages, not {stages}") from None
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass
+class StepInfo:
+    """What one accepted step cost."""
+
+    t: float                     # start time of the step
+    h: float                     # step size
+    stage_iterations: list       # Newton iterations per stage
+    stage_residuals: list        # Newton residual history per stage
+    linear_solves: int = 0
+
+    @property
+    def newton_iterations(self) -> int:
+        return int(sum(self.stage_iterations))
+
+
+class StepFailure(RuntimeError):
+    """A stage Newton solve failed (no convergence, NaN, iteration limit, inadmissible)."""
+
+    def __init__(self, stage: int, t: float, h: float, residuals, reason: str, newton_iterations: int = 0,
+                 linear_solves: int = 0):
+        self.stage = stage
+        self.t = t
+        self.h = h
+        self.residuals = list(residuals)
+        self.reason = reason
+        self.newton_iterations = newton_iterations
+        self.linear_solves = linear_solves
+        super().__init__(
+            f"stage {stage} of the step from t = {t:.9g} with h = {h:.6g} failed: {reason}; "
+            f"residuals {_fmt_res(self.residuals)}"
+        )
+
+
+class IntegrationFailure(RuntimeError):
+    """The integration gave up. Carries the last good state ``(x, w, t)``."""
+
+    def __init__(self, message: str, x, w, t, h, residuals, step_failure: Optional[StepFailure] = None,
+                 result: "Optional[IntegrationResult]" = None):
+        super().__init__(message)
+        self.x = x
+        self.w = w
+        self.t = t
+        self.h = h
+        self.residuals = list(residuals)
+        self.step_failure = step_failure
+        self.result = result
+
+    @property
+    def last_good_state(self):
+        return self.x, self.w, self.t
+
+
+@dataclass
+class IntegrationResult:
+    x: np.ndarray
+    w: np.ndarray
+    t: float
+    steps: int = 0                       # accepted steps
+    rejected: int = 0                    # failed (cut) attempts
+    newton_iterations: int = 0           # all Newton iterations, including failed attempts
+    linear_solves: int = 0               # sparse LU solves (one per Newton iteration)
+    h_min: float = math.inf
+    history: list = field(default_factory=list)   # (t_end_of_step, h, newton its) per accepted step
+
+
+def _fmt_res(res) -> str:
+    return "[" + ", ".join(f"{r:.3e}" for r in res) + "]"
+
+
+def _linear_solves(res: NewtonResult) -> int:
+    """One sparse LU solve per Newton iteration (+1 for an attempt that failed in/after it)."""
+    n = int(res.iterations)
+    if not res.converged and res.reason.startswith(("linear solve", "non-finite Newton update", "no admissible")):
+        n += 1
+    return n
+
+
+def _newton_kwargs(newton_opts) -> dict:
+    opts = dict(newton_opts or {})
+    opts.pop("label", None)
+    return opts
+
+
+# ----------------------------------------------------------------------------- stepping
+class DirkStepper:
+    """Holds what is constant over a run (M, mech mask, restriction caches) for a system."""
+
+    def __init__(self, system, tableau: Tableau, newton_opts: Optional[dict] = None):
+        self.system = system
+        self.tableau = tableau
+        self.n = int(system.n)
+        self.mech = mech_mask(system)
+        self.mechf = self.mech.astype(float)
+        self.M = sp.csr_matrix(system.mass())
+        if self.M.shape != (self.n, self.n):
+            raise ValueError(f"mass matrix has shape {self.M.shape}, expected ({self.n}, {self.n})")
+        self.newton_opts = _newton_kwargs(newton_opts)
+        self._Mcoo = self.M.tocoo()
+        self._free_cache: dict = {}
+        self._mass_cache: dict = {}
+
+    def free_dofs(self, idx) -> FreeDofs:
+        return FreeDofs.cached(self._free_cache, self.n, idx)
+
+    def mass_triplets(self, fd: FreeDofs):
+        """M restricted to the free dofs of ``fd`` (cached per constraint set)."""
+        trip = self._mass_cache.get(fd.key)
+        if trip is None:
+            if len(self._mass_cache) > 16:
+                self._mass_cache.clear()
+            trip = self._mass_cache[fd.key] = fd.triplets(self._Mcoo)
+        return trip
+
+    def step(self, x0, w0, t0: float, h: float):
+        """One step from (x0, w0, t0) of size h -> (x1, w1, StepInfo); raises StepFailure."""
+        sysm, tab, M, mechf = self.system, self.tableau, self.M, self.mechf
+        x0 = np.asarray(x0, float)
+        w0 = np.asarray(w0, float)
+        s = tab.stages
+        Mw0 = M @ w0
+        W, Fs = [], []
+        its, ress = [], []
+        nsolves = 0
+        w_prev = w0
+        for i in range(s):
+            ti = t0 + tab.c[i] * h
+            haii = h * tab.A[i, i]
+            # explicit part of the stage: x̂_i and the constant part of the residual
+            xhat = x0.copy()
+            rhs = Mw0.copy()
+            for j in range(i):
+                aij = h * tab.A[i, j]
+                if aij != 0.0:
+                    xhat += aij * mechf * W[j]
+                    rhs -= aij * Fs[j]
+            idx, vals = sysm.constraints(ti)
+            idx = np.asarray(idx, dtype=np.int64)
+            fd = self.free_dofs(idx)
+            wi = np.array(w_prev, dtype=float, copy=True)
+            wi[idx] = vals
+            free = fd.free
+            cache = {}
+
+            def state(u, wi=wi, free=free, xhat=xhat, haii=haii):
+                w = wi.copy()
+                w[free] = u
+                return xhat + haii * mechf * w, w
+
+            def fun(u, ti=ti, haii=haii, rhs=rhs, fd=fd, state=state, cache=cache):
+                x, w = state(u)
+                F, Fx, Fw = sysm.evaluate(x, w, ti, jacobian=True)
+                F = np.asarray(F, float)
+                cache["u"], cache["F"] = u.copy(), F
+                G = M @ w + haii * F - rhs
+                # J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech), restricted to the free dofs
+                J = fd.assemble([self.mass_triplets(fd), fd.triplets(Fw, haii),
+                                 fd.triplets(Fx, haii * haii, self.mech)])
+                return G[fd.free], J
+
+            def adm(u, state=state):
+                return bool(sysm.admissible(state(u)[0]))
+
+            label = f"dirk s{s} stage {i + 1} t={ti:.6g}"
+            res = newton(fun, wi[free], admissible=adm, label=label, **self.newton_opts)
+            its.append(res.iterations)
+            ress.append(list(res.residuals))
+            nsolves += _linear_solves(res)
+            reason = None
+            if not res.converged:
+                reason = res.reason or "Newton did not converge"
+            elif not np.all(np.isfinite(res.u)):
+                reason = "non-finite stage solution"
+            xi, wsol = state(res.u)
+            if reason is None and not sysm.admissible(xi):
+                reason = "inadmissible stage state (det F <= 0)"
+            if reason is not None:
+                raise StepFailure(i + 1, t0, h, res.residuals, reason, int(sum(its)), nsolves)
+            W.append(wsol)
+            if i < s - 1:  # the last stage's F is not needed (stiffly accurate)
+                if "u" in cache and np.array_equal(cache["u"], res.u):
+                    Fi = cache["F"]
+                else:
+                    Fi = np.asarray(sysm.evaluate(xi, wsol, ti, jacobian=False)[0], float)
+                Fs.append(Fi)
+            w_prev = wsol
+        # stiffly accurate (A[s-1] = b, c_s = 1): the step result is the last stage
+        return xi, W[-1], StepInfo(t0, h, its, ress, nsolves)
+
+
+def dirk_step(system, tableau, x0, w0, t0: float, h: float, newton_opts: Optional[dict] = None):
+    """One SDIRK step of size ``h`` from ``(x0, w0)`` at ``t0``.
+
+    ``tableau`` is a ``Tableau`` or a stage count (1, 2, 3). Returns ``(x1, w1, StepInfo)``;
+    raises ``StepFailure`` if a stage Newton solve fails. ``newton_opts`` are passed to
+    ``rve.solvers.newton.newton`` (atol, rtol, max_iter, line_search, max_halvings, ...).
+    """
+    tab = tableau if isinstance(tableau, Tableau) else sdirk(tableau)
+    return DirkStepper(system, tab, newton_opts).step(x0, w0, t0, h)
+
+
+# ----------------------------------------------------------------------------- init
+def consistent_initialization(system, x0, w0, t0: float, newton_opts: Optional[dict] = None):
+    """Make ``w0`` consistent at ``t0``: apply the constraints at t0 and solve ``F = 0`` for
+    the free massless (algebraic) dofs with x and all other w fixed.
+
+    Returns ``(w0_consistent, NewtonResult or None)`` (None when there is nothing to solve).
+    Raises ``IntegrationFailure`` when the solve fails.
+    """
+    n = int(system.n)
+    mech = mech_mask(system)
+    x0 = np.asarray(x0, float)
+    w = np.array(w0, dtype=float, copy=True)
+    idx, vals = system.constraints(t0)
+    idx = np.asarray(idx, dtype=np.int64)
+    w[idx] = vals
+    alg = massless_dofs(system.mass()) & ~mech
+    alg[idx] = False
+    if not alg.any():
+        return w, None
+    fd = FreeDofs(n, np.flatnonzero(~alg))
+
+    def fun(u):
+        ww = w.copy()
+        ww[fd.free] = u
+        F, _, Fw = system.evaluate(x0, ww, t0, jacobian=True)
+        return np.asarray(F, float)[fd.free], fd.matrix(Fw)
+
+    res = newton(fun, w[fd.free], label=f"dirk consistent init t={t0:.6g}", **_newton_kwargs(newton_opts))
+    if not res.converged:
+        raise IntegrationFailure(
+            f"consistent initialisation of the massless dofs at t = {t0:.9g} failed: {res.reason}; "
+            f"residuals {_fmt_res(res.residuals)}", x0, np.asarray(w0, float), t0, 0.0, res.residuals)
+    w[fd.free] = res.u
+    return w, res
+
+
+# ----------------------------------------------------------------------------- driver
+def integrate(
+    system,
+    x0,
+    w0,
+    t0: float,
+    t_end: float,
+    n_steps: int,
+    stages: int = 1,
+    newton_opts: Optional[dict] = None,
+    max_cuts: int = 8,
+    on_step: Optional[Callable] = None,
+    progress: bool = False,
+    fixed_step: bool = False,
+    grow_after: int = 2,
+    consistent: bool = True,
+    tableau: Optional[Tableau] = None,
+) -> IntegrationResult:
+    """Integrate from ``t0`` to ``t_end`` with nominal step ``h0 = (t_end − t0)/n_steps``.
+
+    Step control (``fixed_step=False``): a failed step (``StepFailure``) is discarded and
+    retried from the last good state with half the step; after ``grow_after`` consecutive
+    successes the step doubles again, never beyond ``h0``. Steps are clipped to the
+    nominal grid ``t0 + k h0`` so a run always lands exactly on ``t_end`` (and on every
+    grid point). After ``max_cuts`` consecutive cuts the next failure raises
+    ``IntegrationFailure`` (message: time, step size, residual history; attributes: last
+    good ``x, w, t``). With ``fixed_step=True`` every step is ``h0`` and the first failure
+    raises ``IntegrationFailure`` at once.
+
+    ``on_step(t, x, w, info)`` is called after every accepted step. With ``consistent``
+    the massless dofs are first solved for at t0 (``consistent_initialization``).
+    """
+    tab = tableau if tableau is not None else sdirk(stages)
+    if n_steps < 1 or not t_end > t0:
+        raise ValueError("need n_steps >= 1 and t_end > t0")
+    stepper = DirkStepper(system, tab, newton_opts)
+    x = np.array(x0, dtype=float, copy=True)
+    w = np.array(w0, dtype=float, copy=True)
+    t = float(t0)
+    out = IntegrationResult(x, w, t)
+    if consistent:
+        w, res0 = consistent_initialization(system, x, w, t, newton_opts)
+        if res0 is not None:
+            out.newton_iterations += res0.iterations
+            out.linear_solves += _linear_solves(res0)
+    h0 = (float(t_end) - float(t0)) / int(n_steps)
+    h = h0
+    k_next = 1                   # index of the next nominal grid point
+    cuts = 0                     # consecutive cuts
+    successes = 0                # consecutive successes since the last cut
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=float(t_end) - float(t0), desc=f"SDIRK{tab.stages}",
+                   bar_format="{l_bar}{bar}| t-t0 = {n:.6g}/{total:.6g} [{elapsed}<{remaining}{postfix}]")
+
+    def grid(k):
+        return float(t_end) if k >= n_steps else float(t0) + k * h0
+
+    try:
+        while k_next <= n_steps:
+            t_target = grid(k_next)
+            h_try = min(h, t_target - t)
+            lands = h_try >= (t_target - t) * (1 - 1e-9) or (t_target - t - h_try) < 1e-9 * h0
+            if lands:
+                h_try = t_target - t
+            try:
+                x1, w1, info = stepper.step(x, w, t, h_try)
+            except StepFailure as fail:
+                out.rejected += 1
+                out.newton_iterations += fail.newton_iterations
+                out.linear_solves += fail.linear_solves
+                log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)",
+                         out.steps + 1, t, h_try, fail.stage, fail.reason)
+                if fixed_step or cuts >= max_cuts:
+                    why = ("fixed-step mode" if fixed_step
+                           else f"{cuts} consecutive step cuts (max_cuts = {max_cuts})")
+                    raise IntegrationFailure(
+                        f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
+                        f"after {why}: stage {fail.stage}: {fail.reason}; Newton residuals "
+                        f"{_fmt_res(fail.residuals)}; last good state at t = {t:.9g}",
+                        x.copy(), w.copy(), t, h_try, fail.residuals, fail, out) from fail
+                cuts += 1
+                successes = 0
+                h = h_try / 2.0
+                continue
+            # accepted
+            t = t_target if lands else t + h_try
+            if lands:
+                k_next += 1
+            x, w = x1, w1
+            cuts = 0
+            successes += 1
+            out.steps += 1
+            out.newton_iterations += info.newton_iterations
+            out.linear_solves += info.linear_solves
+            out.h_min = min(out.h_min, h_try)
+            out.history.append((t, h_try, info.newton_iterations))
+            log.info("step %d t=%.6g h=%.3e newton its=%s", out.steps, t, h_try, info.stage_iterations)
+            if bar is not None:
+                bar.n = t - float(t0)
+                bar.set_postfix(h=f"{h_try:.2e}", its=info.newton_iterations, refresh=False)
+                bar.refresh()
+            if on_step is not None:
+                on_step(t, x, w, info)
+            if not fixed_step and h < h0 and successes >= grow_after:
+                h = min(2.0 * h, h0)
+                successes = 0
+    finally:
+        if bar is not None:
+            bar.close()
+    out.x, out.w, out.t = x, w, t
+    return out

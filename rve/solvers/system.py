@@ -1,0 +1,161 @@
+"""The interface between a discretised physical model and the time/static solvers.
+
+Contract
+--------
+A ``DynamicSystem`` is the semi-discrete system of thesis §6.2.2 written in one mixed
+vector ``w`` of size ``n`` (velocities of the mechanical dofs, temperatures, potentials)
+and a companion vector ``x`` of the *same* size and layout::
+
+    M dw/dt + F(x, w, t) = 0,        dx/dt = w   on the mechanical dofs (``mech``).
+
+* ``n`` -- number of dofs of ``w`` (and of ``x``).
+* ``mech`` -- bool array (n,): True where ``w`` is the velocity of ``x``. At the other dofs
+  ``x`` is an unused placeholder (the "null" fields of §6.2.2) that must stay 0; the
+  solvers never write anything but 0-increments there.
+* ``mass()`` -- the constant sparse mass matrix M (n x n). Rows of massless (algebraic,
+  quasistatic) dofs such as the electric potential V are entirely zero; such a dof is an
+  index-1 algebraic unknown whose equation ``F_V(x, w, t) = 0`` must be solvable for it
+  (``dF_V/dV`` nonsingular).
+* ``evaluate(x, w, t, jacobian=True)`` -> ``(F, Fx, Fw)``: the residual F (ndarray, n)
+  and the exact partial Jacobians ``Fx = dF/dx`` and ``Fw = dF/dw`` as scipy sparse
+  matrices (n x n); both are ``None`` when ``jacobian=False``. Columns of ``Fx`` at
+  non-mechanical dofs are ignored by the solvers.
+* ``constraints(t)`` -> ``(idx, values)``: Dirichlet conditions on ``w`` at time ``t``
+  (int array, float array). At a mechanical dof the value is a prescribed *velocity*
+  (``x`` follows by integrating it with the same Runge-Kutta rule); at a temperature or
+  potential dof it is the prescribed value itself. The rows of F at constrained dofs are
+  never used (reactions can be read from them by the caller).
+* ``admissible(x)`` -> bool: False when ``x`` is physically inadmissible (det F <= 0 at a
+  quadrature point); Newton steps and Runge-Kutta stages into such states are rejected.
+  May always return True.
+
+The solvers only call these members; they never mutate the system.
+"""
+from __future__ import annotations
+
+from typing import Protocol, Tuple, runtime_checkable
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["DynamicSystem", "FreeDofs", "massless_dofs", "mech_mask", "scale_columns"]
+
+
+@runtime_checkable
+class DynamicSystem(Protocol):
+    """Semi-discrete system ``M dw/dt + F(x, w, t) = 0``, ``dx/dt = w`` on ``mech`` dofs.
+
+    See the module docstring for the full contract.
+    """
+
+    n: int
+    mech: np.ndarray
+
+    def mass(self) -> sp.spmatrix:
+        """Constant mass matrix M (n x n); zero rows at massless (algebraic) dofs."""
+        ...
+
+    def evaluate(self, x: np.ndarray, w: np.ndarray, t: float, jacobian: bool = True
+                 ) -> Tuple[np.ndarray, "sp.spmatrix | None", "sp.spmatrix | None"]:
+        """Return ``(F, dF/dx, dF/dw)``; the Jacobians are None if ``jacobian=False``."""
+        ...
+
+    def constraints(self, t: float) -> Tuple[np.ndarray, np.ndarray]:
+        """Dirichlet data on ``w`` at time t: ``(idx, values)`` (velocity on mech dofs)."""
+        ...
+
+    def admissible(self, x: np.ndarray) -> bool:
+        """False if ``x`` is inadmissible (det F <= 0 somewhere)."""
+        ...
+
+
+def mech_mask(system) -> np.ndarray:
+    """The ``mech`` attribute as a bool array of length ``n``."""
+    m = np.asarray(system.mech, dtype=bool)
+    if m.shape != (system.n,):
+        raise ValueError(f"system.mech has shape {m.shape}, expected ({system.n},)")
+    return m
+
+
+def massless_dofs(M) -> np.ndarray:
+    """Bool mask of the rows of ``M`` that are identically zero (algebraic dofs)."""
+    M = sp.csr_matrix(M)
+    rowabs = np.asarray(abs(M).sum(axis=1)).ravel()
+    return rowabs == 0.0
+
+
+class FreeDofs:
+    """Restriction of vectors and sparse matrices to the unconstrained dofs.
+
+    Built once per constraint set (``idx``) and reused: ``free`` is the sorted index
+    array of unconstrained dofs, ``matrix(A)`` extracts ``A[free][:, free]`` in one
+    O(nnz) pass through COO (no fancy CSR indexing), returned in CSC form ready for the
+    direct solver.
+    """
+
+    def __init__(self, n: int, constrained):
+        self.n = int(n)
+        self.constrained = np.unique(np.asarray(constrained, dtype=np.int64).ravel())
+        is_free = np.ones(self.n, dtype=bool)
+        is_free[self.constrained] = False
+        self.is_free = is_free
+        self.free = np.flatnonzero(is_free)
+        self.new_index = np.full(self.n, -1, dtype=np.int64)
+        self.new_index[self.free] = np.arange(self.free.size)
+        self.key = self.constrained.tobytes()
+
+    @property
+    def size(self) -> int:
+        return int(self.free.size)
+
+    def matrix(self, A) -> sp.csc_matrix:
+        A = A.tocoo() if sp.issparse(A) else sp.coo_matrix(A)
+        r = self.new_index[A.row]
+        c = self.new_index[A.col]
+        keep = (r >= 0) & (c >= 0)
+        m = self.free.size
+        return sp.csc_matrix((A.data[keep], (r[keep], c[keep])), shape=(m, m))
+
+    def triplets(self, A, coef: float = 1.0, colmask: "np.ndarray | None" = None):
+        """Restricted COO triplets ``(rows, cols, data)`` of ``coef * A @ diag(colmask)``."""
+        if A is None:  # e.g. Fx of a system without mechanical dofs
+            e = np.zeros(0, dtype=np.int64)
+            return e, e, np.zeros(0)
+        A = A if isinstance(A, (sp.coo_matrix, getattr(sp, "coo_array", sp.coo_matrix))) else sp.coo_matrix(A)
+        r = self.new_index[A.row]
+        c = self.new_index[A.col]
+        keep = (r >= 0) & (c >= 0)
+        if colmask is not None:
+            keep &= colmask[A.col]
+        return r[keep], c[keep], coef * A.data[keep]
+
+    def assemble(self, parts) -> sp.csc_matrix:
+        """Sum of restricted triplet sets (from ``triplets``) as one CSC matrix
+        (duplicates summed): a single O(nnz) pass, no intermediate sparse additions."""
+        parts = [p for p in parts if p[0].size]
+        m = self.free.size
+        if not parts:
+            return sp.csc_matrix((m, m))
+        r = np.concatenate([p[0] for p in parts])
+        c = np.concatenate([p[1] for p in parts])
+        d = np.concatenate([p[2] for p in parts])
+        return sp.csc_matrix((d, (r, c)), shape=(m, m))
+
+    @classmethod
+    def cached(cls, cache: dict, n: int, constrained) -> "FreeDofs":
+        """Return the restriction for ``constrained``, reusing one from ``cache``."""
+        key = np.unique(np.asarray(constrained, dtype=np.int64).ravel()).tobytes()
+        fd = cache.get(key)
+        if fd is None:
+            fd = cls(n, constrained)
+            if len(cache) > 16:
+                cache.clear()
+            cache[key] = fd
+        return fd
+
+
+def scale_columns(A, mask: np.ndarray):
+    """``A @ diag(mask)`` for a 0/1 column mask, in O(nnz) (returns a new CSR matrix)."""
+    A = sp.csr_matrix(A, copy=True)
+    A.data *= mask[A.indices]
+    return A
