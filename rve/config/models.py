@@ -253,6 +253,10 @@ class Relaxation(Section):
         2e-3, ge=0, description="volumetric damping coefficient gamma of f = -gamma v (g/(mm^3 ms) = N ms/mm^4)")
     perturbation: Dimensionless = Field(
         0.01, ge=0, description="amplitude of the initial cosine z-offset, as a fraction of half_length")
+    coarse_order: Optional[Integer] = Field(
+        2, ge=1, le=4, description="relax on a coarse mesh of this order, then prolong (null: relax on the target mesh)")
+    coarse_elements: Optional[Integer] = Field(
+        8, ge=1, description="elements of the coarse relaxation mesh (null: relax on the target mesh)")
 
 
 class NewtonSettings(Section):
