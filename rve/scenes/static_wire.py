@@ -41,8 +41,10 @@ __all__ = ["build", "solve", "run", "centre_displacement"]
 log = logging.getLogger("rve.scenes.static_wire")
 
 
-def build(cfg, order: int | None = None, elements: int | None = None):
-    """The wire model on the configured mesh, or on (order, elements) if given."""
+def build(cfg, order: int | None = None, elements: int | None = None, gauge_end: int = 0):
+    """The wire model on the configured mesh, or on (order, elements) if given.
+
+    ``gauge_end`` picks the end (0 or 1) whose g1_z component carries the twist gauge."""
     L = cfg.geometry.half_length
     delta = cfg.geometry.clamp_half_distance
     R = cfg.fibril.radius
@@ -70,7 +72,7 @@ def build(cfg, order: int | None = None, elements: int | None = None):
     bcs_dyn = [
         DirichletBC(np.array([n0 * 9 + 0, n0 * 9 + 1, n0 * 9 + 2]), end_velocity(-1)),
         DirichletBC(np.array([n1 * 9 + 0, n1 * 9 + 1, n1 * 9 + 2]), end_velocity(+1)),
-        DirichletBC(np.array([n0 * 9 + 5]), 0.0),  # twist gauge: g1_z at the first node
+        DirichletBC(np.array([(n0, n1)[gauge_end] * 9 + 5]), 0.0),  # twist gauge: g1_z at one end
     ]
     model = BeamModel(
         mesh, mat,
