@@ -102,4 +102,6 @@ class BeamBasis:
         return np.swapaxes(np.matmul(self.D, U[:, None, :, :]), -1, -2)
 
     def min_det_F(self, x: np.ndarray) -> float:
-        return float(np.linalg.det(self.deformation_gradient(x)).min())
+        from ..physics.elasticity import det_inv
+
+        return float(det_inv(self.deformation_gradient(x))[0].min())

@@ -295,8 +295,7 @@ class DirkStepper:
                 cache["u"], cache["F"] = u.copy(), F
                 G = M @ w + haii * F - rhs
                 # J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech), restricted to the free dofs
-                J = fd.assemble([self.mass_triplets(fd), fd.triplets(Fw, haii),
-                                 fd.triplets(Fx, haii * haii, self.mech)])
+                J = fd.combine([(self.M, 1.0, None), (Fw, haii, None), (Fx, haii * haii, mechf)])
                 return G[fd.free], J
 
             def adm(u, state=state):

@@ -57,6 +57,7 @@ class StaticProblem:
         nonmech_idx = idx[~self.mech[idx]]
         self.w[nonmech_idx] = np.asarray(vals, float)[~self.mech[idx]]
         self.fd = FreeDofs(self.n, idx)
+        self._mechf = self.mech.astype(float)
         self.free = self.fd.free
         self.free_mech = self.mech[self.free]
 
@@ -75,7 +76,7 @@ class StaticProblem:
         x, w = self.state(u)
         F, Fx, Fw = self.system.evaluate(x, w, self.t, jacobian=True)
         fd = self.fd
-        J = fd.assemble([fd.triplets(Fx, 1.0, self.mech), fd.triplets(Fw, 1.0, ~self.mech)])
+        J = fd.combine([(Fx, 1.0, self._mechf), (Fw, 1.0, 1.0 - self._mechf)])
         return np.asarray(F, float)[self.free], J
 
     def admissible(self, u) -> bool:
