@@ -179,9 +179,10 @@ def knit(
     """Rows (courses) of knitted loops as an RVE; each course a yarn of ``rows`` fibrils.
 
     Course r lies along x at ``y_r = (r - (n_rows - 1)/2) * row_spacing`` and is the
-    curve shifted along itself by ``r * row_phase`` loops (X3 -> X3 + r * row_phase *
-    2 pi / p, then translated back in x; a multiple of 1/2 keeps every yarn end on the
-    box faces x = -+hx). The box is ``hx = n_loops * loop_length / 2``,
+    curve shifted along itself by ``phi_r = (r * row_phase mod 1)`` loops (X3 -> X3 +
+    phi_r * 2 pi / p, then translated back by phi_r loops in x: with the default 1/2 odd
+    courses are shifted by half a loop; a shift by a whole loop would mirror the e1 term,
+    hence the mod 1; a multiple of 1/2 keeps every yarn end on the box faces x = -+hx). The box is ``hx = n_loops * loop_length / 2``,
     ``hy = n_rows * row_spacing / 2``, ``hz = |A2| + stack reach + R``. ``rows=(1,)``
     gives one fibril per yarn. The defaults keep the yarn axes of neighbouring courses
     more than a yarn diameter apart (tests/test_fabrics.py).
@@ -203,7 +204,7 @@ def knit(
     fibrils, fib_yarn, yarns, tags, frames = [], [], [], [], []
     ycourse = (np.arange(n_rows) - (n_rows - 1) / 2.0) * row_spacing
     for r, yr in enumerate(ycourse):
-        phi = r * row_phase * 2.0 * np.pi / p
+        phi = ((r * row_phase) % 1.0) * 2.0 * np.pi / p
         shift = np.array([-(1.0 + C) * phi, yr, 0.0])
 
         def local(s, phi=phi):
