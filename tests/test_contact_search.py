@@ -115,19 +115,19 @@ def test_segment_distance_matches_reference():
 
 def test_closest_points_vs_dense_sampling():
     rng = np.random.default_rng(3)
-    p = rng.normal(size=(200, 3, 3)) * 2
-    a = rng.normal(size=(200, 1, 3))
-    b = a + rng.normal(size=(200, 1, 3))
+    p = rng.normal(size=(100, 3, 3)) * 2
+    a = rng.normal(size=(100, 1, 3))
+    b = a + rng.normal(size=(100, 1, 3))
     s = closest_points(p, a, b)
-    assert s.shape == (200, 3)
+    assert s.shape == (100, 3)
     assert np.all((s >= 0) & (s <= 1))
     assert np.any(s == 0) and np.any(s == 1) and np.any((s > 0) & (s < 1))
-    grid = np.linspace(0, 1, 10001)
+    grid = np.linspace(0, 1, 4001)
     line = a[:, :, None, :] + grid[None, None, :, None] * (b - a)[:, :, None, :]
     dense = np.linalg.norm(p[:, :, None, :] - line, axis=-1)
     ours = np.linalg.norm(p - (a + s[..., None] * (b - a)), axis=-1)
     assert np.all(ours <= dense.min(axis=-1) + 1e-12)
-    assert np.allclose(s, grid[np.argmin(dense, axis=-1)], atol=1e-4)
+    assert np.allclose(s, grid[np.argmin(dense, axis=-1)], atol=2e-4)
     # degenerate chord
     assert closest_points(np.ones(3), np.zeros(3), np.zeros(3)) == 0.0
 
