@@ -1,0 +1,413 @@
+"""A ``DynamicSystem`` with contact between fibrils: the base model plus the contact terms.
+
+Thesis §4.3, §4.4.6 (the contact integral of F), Algorithm 5.1 (two-element
+contributions assembled into the one global system); SPEC §3. Forms:
+``rve.physics.contact_forms``; choices and figures: docs/contact.md.
+
+Contract
+--------
+``ContactSystem(base, params, x=None)`` wraps a ``BeamModel`` (or anything with its
+``mesh``, ``layout``, ``nodal``, ``n``, ``mech``, ``mass``, ``evaluate``,
+``constraints``, ``admissible`` and an ``ElementPattern`` ``pattern`` with full
+node blocks) and implements the ``DynamicSystem`` protocol:
+
+* ``rebuild(x)`` builds the contact map (``rve.contact.build_contact_map``: KD-tree
+  candidates within ``cutoff = max(R+ + R-) + params.margin``, ``n_gp`` points per pair)
+  and a **union sparsity pattern** of the base element pattern and every candidate pair's
+  contact blocks. Until the next ``rebuild``, ``evaluate`` returns ``Fx``, ``Fw`` and
+  ``mass()`` returns ``M`` on that one CSR structure, so the solvers' restriction fast
+  path (``FreeDofs.combine``) applies. ``rebuild`` changes the structure: a solver that
+  cached ``mass()`` (``DirkStepper``, i.e. one ``integrate`` call) must be restarted after
+  it — the relaxation driver integrates in chunks of ``rebuild_every`` steps.
+* Between rebuilds the *pairs* are fixed; on each pair the closest points ``s-`` are
+  recomputed at every evaluation (``params.recompute_closest``, default) with their
+  tangent, or frozen at the rebuild state.
+* ``evaluate(x, w, t, jacobian)``: base terms + penalty (mechanics: chord end centroids),
+  + ``h_C a [[T]]`` (if the layout has T and ``heat_transfer > 0``) + ``sigma_C a [[V]]``
+  (if V and ``conductance > 0``), exact tangents.
+* Diagnostics: ``contact_state(x)`` (overlaps, active pairs/points, widths) and
+  ``fibril_contact_forces(x)`` (the contact force on every fibril, (n_fibrils, 3)).
+* ``stats``: counts and accumulated wall times of rebuilds and contact assemblies.
+
+Everything else (``mesh``, ``layout``, ``nodal``, ``end_currents``, ...) is forwarded
+to the base model.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..physics.contact_forms import (
+    chord_geometry, effective_modulus, effective_radius, hertz_kappa, penalty_forces, scalar_jump,
+)
+from .search import ContactMap, build_contact_map
+
+__all__ = ["ContactParams", "ContactSystem"]
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Contact law and map settings (units: mm, N, MPa, W, A, V).
+
+    ``penalty`` P*: line load per unit overlap (N/mm per mm = N/mm^2); the penalty force
+    per unit length is P* g. ``youngs_modulus`` E* of the Hertz width (None: from the base
+    material, 1/E* = 2 (1 - nu^2)/E). ``heat_transfer`` h_C (W/(mm^2 K)) and
+    ``conductance`` sigma_C (A/(mm^2 V)) of the jump terms. ``n_gp`` points per pair;
+    ``margin`` added to R+ + R- for the search cutoff (covers motion between rebuilds);
+    ``g_eps`` the Hertz regularisation as a fraction of the smallest radius;
+    ``recompute_closest`` recomputes s- at every evaluation (else frozen per rebuild);
+    ``rebuild_every`` is advisory (drivers read it)."""
+
+    penalty: float
+    youngs_modulus: Optional[float] = None
+    heat_transfer: float = 0.0
+    conductance: float = 0.0
+    n_gp: int = 4
+    margin: float = 0.1
+    g_eps: float = 1e-3
+    recompute_closest: bool = True
+    rebuild_every: int = 5
+
+    def __post_init__(self):
+        if not self.penalty > 0:
+            raise ValueError(f"contact penalty must be > 0, got {self.penalty}")
+        if self.heat_transfer < 0 or self.conductance < 0:
+            raise ValueError("contact heat_transfer and conductance must be >= 0")
+        if int(self.n_gp) < 1:
+            raise ValueError(f"n_gp must be >= 1, got {self.n_gp}")
+        if not self.margin >= 0:
+            raise ValueError(f"margin must be >= 0, got {self.margin}")
+        if not self.g_eps >= 0:
+            raise ValueError(f"g_eps must be >= 0, got {self.g_eps}")
+
+
+def _timer(stats, key, t0):
+    stats[key] = stats.get(key, 0.0) + (time.perf_counter() - t0)
+
+
+class ContactSystem:
+    def __init__(self, base, params: ContactParams, x=None):
+        self.base = base
+        self.params = params
+        self.mesh = base.mesh
+        self.layout = base.layout
+        self.n = base.n
+        self.mech = base.mech
+        mesh = self.mesh
+        mat = getattr(base, "material", None)
+        if params.youngs_modulus is not None:
+            self.E_star = float(params.youngs_modulus)
+        elif mat is not None:
+            self.E_star = float(effective_modulus(mat.youngs_modulus, mat.youngs_modulus,
+                                                  mat.poisson_ratio, mat.poisson_ratio))
+        else:
+            raise ValueError("ContactParams.youngs_modulus is needed when the base model has no material")
+        self.fields = [f for f in ("T", "V") if self.layout.has(f)]
+        self.use_T = self.layout.has("T") and params.heat_transfer > 0
+        self.use_V = self.layout.has("V") and params.conductance > 0
+        self.scalar = [f for f, on in (("T", self.use_T), ("V", self.use_V)) if on]
+        b = self.layout.block
+        self.comps = np.array([0, 1, 2] + [self.layout.offset[f] for f in self.scalar], dtype=np.int64)
+        self.nC = len(self.comps)
+        self.g_eps = float(params.g_eps) * float(mesh.radius.min())
+        self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
+        self.stats = {"rebuilds": 0, "evaluations": 0, "rebuild_s": 0.0, "contact_s": 0.0, "base_s": 0.0}
+        self._b = b
+        # base element pattern: node-level graph with full b x b blocks
+        pat = base.pattern
+        self._base_indptr = pat.indptr
+        self._base_indices = pat.indices
+        self._base_nnz = int(pat.nnz)
+        conn = mesh.conn
+        nn = conn.shape[1]
+        Nn = mesh.n_nodes
+        keys = (conn[:, :, None].astype(np.int64) * Nn + conn[:, None, :]).ravel()
+        self._base_nodekeys = np.unique(keys)
+        if self._base_nodekeys.size * b * b != self._base_nnz:
+            raise ValueError("base pattern is not made of full node blocks; ContactSystem needs an ElementPattern")
+        self._base_rowstart = np.searchsorted(self._base_nodekeys, np.arange(Nn, dtype=np.int64) * Nn)
+        self._nn = nn
+        self.map: Optional[ContactMap] = None
+        self._matcache: dict = {}
+        self.rebuild(np.zeros(self.n) if x is None else x)
+
+    # ------------------------------------------------------------------ forwarding
+    def __getattr__(self, name):
+        if name == "base":  # not yet set (during construction)
+            raise AttributeError(name)
+        return getattr(self.base, name)
+
+    def nodal(self, u):
+        return self.layout.as_nodal(u)
+
+    def mass(self):
+        return self._M
+
+    def constraints(self, t):
+        return self.base.constraints(t)
+
+    def admissible(self, x) -> bool:
+        return self.base.admissible(x)
+
+    # ------------------------------------------------------------------ map + pattern
+    def rebuild(self, x):
+        """Rebuild the contact map at state ``x`` and the union sparsity pattern."""
+        t0 = time.perf_counter()
+        mesh, b, nC = self.mesh, self._b, self.nC
+        xn = self.nodal(np.asarray(x, float))
+        cmap = build_contact_map(xn[:, :3], mesh, self.cutoff, self.params.n_gp)
+        self.map = cmap
+        conn = mesh.conn
+        nn = self._nn
+        ep, em = cmap.e_plus, cmap.e_minus
+        P = ep.size
+        if self.scalar:
+            local = np.concatenate([conn[ep], conn[em]], axis=1)  # (P, 2nn)
+            endpos = np.array([0, nn - 1, nn, 2 * nn - 1])
+        else:
+            local = np.concatenate([cmap.nodes_plus, cmap.nodes_minus], axis=1)  # (P, 4)
+            endpos = np.arange(4)
+        self._local = local
+        self._endpos = endpos
+        m = local.shape[1]
+        self._m = m
+        fp, fm = cmap.fibril_plus, cmap.fibril_minus
+        R = mesh.radius
+        self._gap_radius = R[fp] + R[fm]
+        self._weight = mesh.elem_length[ep] / cmap.n_gp
+        self._kappa = hertz_kappa(effective_radius(R[fp], R[fm]), self.params.penalty, self.E_star)
+        self._gdofs = (local[:, :, None] * b + self.comps[None, None, :]).reshape(P, m * nC)
+        # --- slots of every local matrix entry (P, m, nC, m, nC) in the union pattern
+        Nn = mesh.n_nodes
+        I = np.broadcast_to(local[:, :, None], (P, m, m)).astype(np.int64)
+        J = np.broadcast_to(local[:, None, :], (P, m, m)).astype(np.int64)
+        nkey = (I * Nn + J).ravel()
+        pos = np.searchsorted(self._base_nodekeys, nkey)
+        pos_c = np.minimum(pos, self._base_nodekeys.size - 1)
+        inbase = self._base_nodekeys[pos_c] == nkey
+        ckeys, cinv = np.unique(nkey[~inbase], return_inverse=True)
+        U = ckeys.size
+        ci = self.comps
+        # contact-only node pairs: original entry index after the base entries
+        orig = np.empty((nkey.size, nC, nC), dtype=np.int64)
+        blk = (np.arange(nC)[:, None] * nC + np.arange(nC)[None, :])
+        orig[~inbase] = self._base_nnz + cinv[:, None, None] * (nC * nC) + blk[None]
+        # base node pairs: indptr[i b + c] + k(i, j) b + c'
+        ib = I.ravel()[inbase]
+        kpos = pos[inbase] - self._base_rowstart[ib]
+        orig[inbase] = (self._base_indptr[ib[:, None] * b + ci[None, :]][:, :, None]
+                        + (kpos * b)[:, None, None] + ci[None, None, :])
+        # union CSR: base entries + contact-only entries (disjoint), sorted by scipy
+        n = self.n
+        brow = np.repeat(np.arange(n, dtype=np.int64), np.diff(self._base_indptr))
+        crow = ((ckeys // Nn)[:, None, None] * b + ci[None, :, None])
+        ccol = ((ckeys % Nn)[:, None, None] * b + ci[None, None, :])
+        crow = np.broadcast_to(crow, (U, nC, nC)).ravel()
+        ccol = np.broadcast_to(ccol, (U, nC, nC)).ravel()
+        rows = np.concatenate([brow, crow])
+        cols = np.concatenate([self._base_indices.astype(np.int64), ccol])
+        total = rows.size
+        tag = sp.coo_matrix((np.arange(total, dtype=float), (rows, cols)), shape=(n, n)).tocsr()
+        tag.sort_indices()
+        order = tag.data.astype(np.int64)
+        inv = np.empty(total, dtype=np.int64)
+        inv[order] = np.arange(total)
+        self._u_indptr = tag.indptr
+        self._u_indices = tag.indices
+        self._u_nnz = total
+        self._u_keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(tag.indptr)) * n + tag.indices
+        self._base_map = inv[: self._base_nnz]
+        # local slot layout (P, m, nC, m, nC)
+        slots = inv[orig].reshape(P, m, m, nC, nC).transpose(0, 1, 3, 2, 4)
+        self._slots = np.ascontiguousarray(slots).reshape(P, -1)
+        self._matcache = {}
+        self._M = self._to_union(self.base.mass())
+        self._zero = self._csr(np.zeros(self._u_nnz))
+        self._x_rebuild = np.array(xn[:, :3], copy=True)
+        self.stats["rebuilds"] += 1
+        _timer(self.stats, "rebuild_s", t0)
+        return cmap
+
+    def _csr(self, data):
+        return sp.csr_matrix((data, self._u_indices, self._u_indptr), shape=(self.n, self.n))
+
+    def _union_map(self, A):
+        """Positions of the entries of CSR ``A`` in the union data array (cached)."""
+        if A.indptr is self._base_indptr or (
+                A.nnz == self._base_nnz and np.array_equal(A.indptr, self._base_indptr)
+                and np.array_equal(A.indices, self._base_indices)):
+            return self._base_map
+        key = (A.nnz, hash(A.indptr.tobytes()), hash(A.indices.tobytes()))
+        mp = self._matcache.get(key)
+        if mp is None:
+            rows = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(A.indptr))
+            k = rows * self.n + A.indices
+            mp = np.searchsorted(self._u_keys, k)
+            if np.any(self._u_keys[np.minimum(mp, self._u_nnz - 1)] != k):
+                raise ValueError("a base matrix has entries outside its element pattern")
+            if len(self._matcache) > 8:
+                self._matcache.clear()
+            self._matcache[key] = mp
+        return mp
+
+    def _union_data(self, A):
+        data = np.zeros(self._u_nnz)
+        if A is None:
+            return data
+        A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
+        if A.nnz:
+            if not A.has_canonical_format:
+                A = A.copy()
+                A.sum_duplicates()
+            data[self._union_map(A)] = A.data
+        return data
+
+    def _to_union(self, A):
+        return self._csr(self._union_data(A))
+
+    # ------------------------------------------------------------------ contact terms
+    def _geometry(self, x, sel=None):
+        cmap = self.map
+        r = self.nodal(np.asarray(x, float))[:, :3]
+        npl, nmi = cmap.nodes_plus, cmap.nodes_minus
+        sp_, sm, gr = cmap.s_plus, None if self.params.recompute_closest else cmap.s_minus, self._gap_radius
+        if sel is not None:
+            npl, nmi, sp_, gr = npl[sel], nmi[sel], sp_[sel], gr[sel]
+            sm = None if sm is None else sm[sel]
+        return chord_geometry(r[npl[:, 0]], r[npl[:, 1]], r[nmi[:, 0]], r[nmi[:, 1]], sp_, gr, sm)
+
+    def active_pairs(self, x) -> np.ndarray:
+        """Indices of the map's pairs with at least one overlapping point at ``x``."""
+        if self.map.n_pairs == 0:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(self._geometry(x).active.any(axis=1))
+
+    def contact_terms(self, x, w, jacobian: bool = True):
+        """Contact residual (n,) and local matrices on the active pairs.
+
+        Returns ``(F, act, Kx, Kw)``: ``act`` the active pair indices, ``Kx``/``Kw``
+        (len(act), m*nC*m*nC) local entries laid out as ``self._slots[act]``."""
+        n, m, nC = self.n, self._m, self.nC
+        F = np.zeros(n)
+        if self.map.n_pairs == 0:
+            return F, np.zeros(0, np.int64), None, None
+        geo_all = self._geometry(x)
+        act = np.flatnonzero(geo_all.active.any(axis=1))
+        if act.size == 0:
+            return F, act, None, None
+        geo = self._geometry(x, act)
+        Pa = act.size
+        wgt = self._weight[act]
+        Rl = np.zeros((Pa, m, nC))
+        Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
+        Kw = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
+        Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian)
+        ep = self._endpos
+        Rl[:, ep, 0:3] += Rm
+        if jacobian:
+            for k in range(4):
+                for l in range(4):
+                    Kx[:, ep[k], 0:3, ep[l], 0:3] += Km[:, k, :, l, :]
+        if self.scalar:
+            wn = self.nodal(np.asarray(w, float))
+            conn = self.mesh.conn
+            epair, mpair = self.map.e_plus[act], self.map.e_minus[act]
+            for ic, f in enumerate(self.scalar):
+                c = 3 + ic
+                off = self.layout.offset[f]
+                coef = self.params.heat_transfer if f == "T" else self.params.conductance
+                u = wn[:, off]
+                R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u[conn[mpair]], wgt, coef,
+                                        self._kappa[act], self.g_eps, jacobian)
+                Rl[:, :, c] += R
+                if jacobian:
+                    Kw[:, :, c, :, c] += Ju
+                    for k in range(4):
+                        Kx[:, :, c, ep[k], 0:3] += JX[:, :, k, :]
+        F += np.bincount(self._gdofs[act].ravel(), weights=Rl.ravel(), minlength=n)
+        if not jacobian:
+            return F, act, None, None
+        return F, act, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
+
+    # ------------------------------------------------------------------ DynamicSystem
+    def evaluate(self, x, w, t, jacobian: bool = True):
+        self.stats["evaluations"] += 1
+        t0 = time.perf_counter()
+        F, Fx, Fw = self.base.evaluate(x, w, t, jacobian)
+        _timer(self.stats, "base_s", t0)
+        t1 = time.perf_counter()
+        Fc, act, Kx, Kw = self.contact_terms(x, w, jacobian)
+        F = np.asarray(F, float) + Fc
+        if not jacobian:
+            _timer(self.stats, "contact_s", t1)
+            return F, None, None
+        dx = self._union_data(Fx)
+        dw = self._union_data(Fw)
+        if act.size:
+            s = self._slots[act].ravel()
+            dx += np.bincount(s, weights=Kx.ravel(), minlength=self._u_nnz)
+            if self.scalar:
+                dw += np.bincount(s, weights=Kw.ravel(), minlength=self._u_nnz)
+        out = F, self._csr(dx), self._csr(dw)
+        _timer(self.stats, "contact_s", t1)
+        return out
+
+    # ------------------------------------------------------------------ diagnostics
+    def max_displacement_since_rebuild(self, x) -> float:
+        r = self.nodal(np.asarray(x, float))[:, :3]
+        return float(np.sqrt(((r - self._x_rebuild) ** 2).sum(axis=1)).max())
+
+    def contact_state(self, x) -> dict:
+        """Overlap statistics of the current map at ``x``.
+
+        ``max_overlap`` (mm) and ``max_overlap_over_R`` (overlap / min(R+, R-)),
+        ``pairs``, ``active_pairs``, ``active_points``, ``max_width`` (Hertz a, mm),
+        ``total_normal_force`` (N; sum over points of w P* g)."""
+        from ..physics.contact_forms import hertz_width
+
+        out = {"pairs": int(self.map.n_pairs), "active_pairs": 0, "active_points": 0, "max_overlap": 0.0,
+               "max_overlap_over_R": 0.0, "max_width": 0.0, "total_normal_force": 0.0}
+        if self.map.n_pairs == 0:
+            return out
+        geo = self._geometry(x)
+        g = np.where(geo.active, geo.g, 0.0)
+        R = self.mesh.radius
+        rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])
+        a, _ = hertz_width(g, self._kappa[:, None], self.g_eps)
+        out.update(active_pairs=int(geo.active.any(axis=1).sum()), active_points=int(geo.active.sum()),
+                   max_overlap=float(g.max()), max_overlap_over_R=float((g / rmin[:, None]).max()),
+                   max_width=float(a.max()),
+                   total_normal_force=float((self._weight[:, None] * self.params.penalty * g).sum()))
+        return out
+
+    def fibril_contact_forces(self, x) -> np.ndarray:
+        """Contact force acting on every fibril (N), (n_fibrils, 3): minus the contact
+        residual summed over the fibril's centroid dofs."""
+        Fc, _, _, _ = self.contact_terms(x, np.zeros(self.n), jacobian=False)
+        rn = self.nodal(Fc)[:, :3]
+        out = np.zeros((self.mesh.n_fibrils, 3))
+        np.add.at(out, self.mesh.node_fibril, -rn)
+        return out
+
+    def contact_conductance(self, x, field: str = "V") -> dict:
+        """Discrete contact conductance between every pair of fibrils in contact:
+        ``{(f+, f-): sum_points w c_C a(g)}`` (A/V for V, W/K for T)."""
+        from ..physics.contact_forms import hertz_width
+
+        coef = self.params.conductance if field == "V" else self.params.heat_transfer
+        out: dict = {}
+        if self.map.n_pairs == 0:
+            return out
+        geo = self._geometry(x)
+        g = np.where(geo.active, geo.g, 0.0)
+        a, _ = hertz_width(g, self._kappa[:, None], self.g_eps)
+        Gp = (self._weight[:, None] * coef * a).sum(axis=1)
+        nf = self.mesh.n_fibrils
+        key = self.map.fibril_plus.astype(np.int64) * nf + self.map.fibril_minus
+        uk, inv = np.unique(key, return_inverse=True)
+        tot = np.bincount(inv, weights=Gp, minlength=uk.size)
+        return {(int(k // nf), int(k % nf)): float(v) for k, v in zip(uk, tot) if v > 0}

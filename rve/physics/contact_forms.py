@@ -1,0 +1,225 @@
+"""Contact forms between fibrils: penalty traction, Hertz width, thermal and electric jumps.
+
+Thesis §4.3.2-4.3.3 and §4.4.6 (the contact integral of the summed variational form);
+SPEC §3; derivation and choices in docs/contact.md.
+
+Contract
+--------
+Pure, vectorised functions over ALL contact quadrature points at once (no Python loop over
+pairs or points). A contact point k of pair p sits at the chord parameter ``s+`` on the +
+element and ``s-`` on the - element (conventions of ``rve.contact.search``: the chord of an
+element runs from its first to its last node, ``r(s) = (1 - s) r_a + s r_b``).
+
+* Geometry on the **linear centroid chords** (SPEC §3, thesis simplification 1): the four
+  chord end positions ``X = (a+, b+, a-, b-)`` (each (P, 3)) are the only mechanical
+  unknowns of a pair. ``p = a+ + s+ (b+ - a+)``, ``q = a- + s- (b- - a-)``,
+  ``[[r]] = p - q``, ``rho = |[[r]]|``, ``n = [[r]]/rho`` (pointing from - to +),
+  overlap ``g = R+ + R- - rho``.
+* ``s-`` is **recomputed at every evaluation** as the clamped closest point (eq. 4.3.2)
+  by default (``chord_geometry(..., s_minus=None)``), and its dependence on X is in the
+  tangent (``ds`` below; zero where the closest point is clamped to a chord end). The
+  contact is then the gradient of the energy ``sum_k w_k P*/2 <g_k>^2`` of a frictionless
+  contact: no spurious tangential force when fibrils slide between two rebuilds of the map.
+  Passing a frozen ``s_minus`` gives the frozen-table variant of the thesis (``ds = 0``,
+  the tangent is exact for it too).
+* Penalty (mechanics): on the points with ``g > 0`` the force on the + side is
+  ``w P* g n`` (and its opposite on the - side), distributed to the chord ends with the
+  linear weights ``c = (1 - s+, s+, -(1 - s-), -s-)``. Residual (internal-force sign of
+  ``M dw/dt + F = 0``): ``F_X = -w P* g c n``. Tangent, with ``d = b- - a-``::
+
+      K = w P* [ c c^T (x) ((1 + g/rho) n n^T - (g/rho) I) + (g/rho) |d|^2 ds ds^T ]
+
+  (exact; ``ds`` = d s- / d X, (4, 3) per point). Zero for ``g <= 0``: the residual is C^1
+  at the onset g = 0 (it vanishes there), the tangent jumps.
+* Hertz line-contact width ``a(g) = kappa sqrt(g)``, ``kappa = sqrt(4 R* P* / (pi E*))``
+  (P* g is the line load). Its derivative ``kappa / (2 sqrt g)`` is unbounded at the onset;
+  ``hertz_width`` regularises with ``a = kappa g / sqrt(g + g_eps)`` (relative error
+  ``g_eps / (2 g)`` for ``g >> g_eps``, slope ``kappa / sqrt(g_eps)`` at g = 0, a(0) = 0).
+  ``g_eps = 0`` gives the exact square root (derivative infinite at 0).
+* Thermal / electric jump terms ``[[du]] c_C a(g) [[u]]`` (u = T with c_C = h_C, u = V with
+  c_C = sigma_C): u is interpolated with the **elements' own Lagrange basis** at the
+  reference coordinate ``xi = 2 s - 1`` (so interior nodes of p >= 2 elements take part);
+  ``[[u]] = u+(s+) - u-(s-)``. Residual rows: ``+w c_C a [[u]] N+`` on the + element's
+  nodes and ``-w c_C a [[u]] N-(s-)`` on the - element's. Positive semi-definite in u, as
+  the conduction terms of the model. The x-tangent has the a'(g) term and, with a
+  recomputed s-, the dN-/ds terms.
+* Weights: ``w = l+ / n_gp`` per point, ``l+`` the + element's length in the reference
+  parameter xi3 (the thesis integrates ``d xi3`` along the + element; see docs).
+
+Arrays: P pairs, G points per pair, nn nodes per element. Local mechanical unknowns are
+ordered (node k in (a+, b+, a-, b-), component i), local scalar unknowns (+ element nodes,
+then - element nodes).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..fem.lagrange import lagrange_basis
+
+__all__ = [
+    "ChordGeometry",
+    "chord_geometry",
+    "hertz_kappa",
+    "hertz_width",
+    "penalty_forces",
+    "scalar_jump",
+    "effective_modulus",
+    "effective_radius",
+]
+
+_CM = np.array([0.0, 0.0, 1.0, -1.0])  # d(d)/dX coefficients, with d = b- - a- (sign: -C^T)
+
+
+def effective_radius(R_plus, R_minus):
+    """R* = (1/R+ + 1/R-)^-1."""
+    return 1.0 / (1.0 / np.asarray(R_plus, float) + 1.0 / np.asarray(R_minus, float))
+
+
+def effective_modulus(E_plus, E_minus, nu_plus=0.0, nu_minus=0.0):
+    """Hertz E* with 1/E* = (1 - nu+^2)/E+ + (1 - nu-^2)/E- (E/2 for equal fibrils, nu = 0)."""
+    return 1.0 / ((1.0 - nu_plus**2) / E_plus + (1.0 - nu_minus**2) / E_minus)
+
+
+def hertz_kappa(R_star, penalty, E_star):
+    """kappa of a = kappa sqrt(g): sqrt(4 R* P* / (pi E*))."""
+    return np.sqrt(4.0 * np.asarray(R_star, float) * penalty / (np.pi * E_star))
+
+
+def hertz_width(g, kappa, g_eps: float = 0.0):
+    """Regularised Hertz width and its derivative, ``(a, da/dg)``; zero for g <= 0.
+
+    ``a = kappa g / sqrt(g + g_eps)``; with ``g_eps = 0`` the exact ``kappa sqrt(g)``."""
+    g = np.asarray(g, float)
+    pos = g > 0
+    gp = np.where(pos, g, 0.0)
+    den = np.sqrt(gp + g_eps)
+    safe = np.where(pos, den, 1.0)
+    a = np.where(pos, kappa * gp / safe, 0.0)
+    da = np.where(pos, kappa * (gp + 2.0 * g_eps) / (2.0 * safe**3), 0.0)
+    return a, da
+
+
+@dataclass
+class ChordGeometry:
+    """Per-point kinematics of the contact table (P pairs, G points).
+
+    s_plus, s_minus (P, G); j (P, G, 3) = [[r]]; rho (P, G); n (P, G, 3); g (P, G);
+    c (P, G, 4) chord weights of X in [[r]]; ds (P, G, 4, 3) = d s-/d X (zero when clamped
+    or frozen); dd (P,) = |b- - a-|^2; active (P, G) = g > 0."""
+
+    s_plus: np.ndarray
+    s_minus: np.ndarray
+    j: np.ndarray
+    rho: np.ndarray
+    n: np.ndarray
+    g: np.ndarray
+    c: np.ndarray
+    ds: np.ndarray
+    dd: np.ndarray
+    active: np.ndarray
+
+
+def chord_geometry(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> ChordGeometry:
+    """Contact kinematics for chords (a+, b+) and (a-, b-), each (P, 3).
+
+    ``gap_radius`` (P,) is R+ + R-. ``s_minus=None`` recomputes the clamped closest points
+    (with their tangent ``ds``); an array freezes them (``ds = 0``)."""
+    ap, bp, am, bm = (np.asarray(v, float) for v in (ap, bp, am, bm))
+    sp_ = np.asarray(s_plus, float)
+    P, G = sp_.shape
+    p = ap[:, None, :] + sp_[..., None] * (bp - ap)[:, None, :]
+    d = bm - am
+    dd = np.einsum("pi,pi->p", d, d)
+    ddsafe = np.where(dd > 0, dd, 1.0)
+    if s_minus is None:
+        st = np.einsum("pgi,pi->pg", p - am[:, None, :], d) / ddsafe[:, None]
+        st = np.where(dd[:, None] > 0, st, 0.0)
+        s = np.clip(st, 0.0, 1.0)
+        free = (st > 0.0) & (st < 1.0)
+    else:
+        s = np.broadcast_to(np.asarray(s_minus, float), (P, G)).copy()
+        free = np.zeros((P, G), bool)
+    q = am[:, None, :] + s[..., None] * d[:, None, :]
+    j = p - q
+    rho = np.sqrt(np.einsum("pgi,pgi->pg", j, j))
+    tiny = 1e-300
+    n = j / np.maximum(rho, tiny)[..., None]
+    g = np.asarray(gap_radius, float)[:, None] - rho
+    c = np.stack([1.0 - sp_, sp_, -(1.0 - s), -s], axis=-1)  # (P, G, 4)
+    # ds/dX_k = (c_k d - cm_k [[r]]) / |d|^2 where the closest point is interior
+    ds = (c[..., None] * d[:, None, None, :] - _CM[None, None, :, None] * j[:, :, None, :]) / ddsafe[:, None, None, None]
+    ds *= free[..., None, None]
+    active = (g > 0.0) & (rho > tiny)
+    return ChordGeometry(sp_, s, j, rho, n, g, c, ds, dd, active)
+
+
+def penalty_forces(geo: ChordGeometry, weight, penalty, jacobian: bool = True):
+    """Penalty residual (P, 4, 3) and tangent (P, 4, 3, 4, 3) (None without jacobian).
+
+    ``weight`` (P,) or (P, G): quadrature weight of each point; ``penalty`` P* (scalar or
+    (P,)), the line load per unit overlap."""
+    w = np.broadcast_to(np.asarray(weight, float).reshape(geo.g.shape[0], -1), geo.g.shape)
+    Ps = np.asarray(penalty, float)
+    Ps = Ps[:, None] if Ps.ndim == 1 else Ps
+    alpha = np.where(geo.active, w * Ps, 0.0)  # (P, G)
+    gpos = np.where(geo.active, geo.g, 0.0)
+    f = alpha * gpos  # line force magnitude times weight
+    R = -np.einsum("pg,pgk,pgi->pki", f, geo.c, geo.n)
+    if not jacobian:
+        return R, None
+    rho = np.where(geo.active, geo.rho, 1.0)
+    grho = gpos / rho
+    nn = geo.n[..., :, None] * geo.n[..., None, :]
+    eye = np.eye(3)
+    A = alpha[..., None, None] * ((1.0 + grho)[..., None, None] * nn - grho[..., None, None] * eye)  # (P,G,3,3)
+    K = np.einsum("pgk,pgl,pgij->pkilj", geo.c, geo.c, A, optimize=True)
+    beta = alpha * grho * geo.dd[:, None]  # (P, G)
+    if np.any(beta != 0.0):
+        K += np.einsum("pg,pgki,pglj->pkilj", beta, geo.ds, geo.ds, optimize=True)
+    return R, K
+
+
+def lagrange_at(order: int, s) -> tuple[np.ndarray, np.ndarray]:
+    """Element Lagrange values and d/ds at chord parameters s (any shape) -> (..., nn) each."""
+    s = np.asarray(s, float)
+    N, dN = lagrange_basis(order, (2.0 * s - 1.0).ravel())
+    nn = order + 1
+    return N.reshape(s.shape + (nn,)), 2.0 * dN.reshape(s.shape + (nn,))
+
+
+def scalar_jump(geo: ChordGeometry, order: int, u_plus, u_minus, weight, coef, kappa, g_eps: float = 0.0,
+                jacobian: bool = True):
+    """Thermal or electric contact term ``int [[du]] coef a(g) [[u]]`` for all pairs.
+
+    ``u_plus``, ``u_minus`` (P, nn): nodal T or V of the two elements; ``coef`` h_C or
+    sigma_C; ``kappa`` (scalar or (P,)) of the Hertz width. Returns ``(R, Ju, JX)``:
+    R (P, 2nn) rows (+ nodes, - nodes); Ju (P, 2nn, 2nn) = dR/du; JX (P, 2nn, 4, 3) =
+    dR/dX (chord ends). Ju, JX are None without jacobian."""
+    P, G = geo.g.shape
+    w = np.broadcast_to(np.asarray(weight, float).reshape(P, -1), (P, G))
+    kap = np.asarray(kappa, float)
+    kap = kap[:, None] if kap.ndim == 1 else kap
+    a, da = hertz_width(np.where(geo.active, geo.g, 0.0), kap, g_eps)
+    Np, _ = lagrange_at(order, geo.s_plus)  # (P, G, nn)
+    Nm, dNm = lagrange_at(order, geo.s_minus)
+    up = np.asarray(u_plus, float)
+    um = np.asarray(u_minus, float)
+    jump = np.einsum("pga,pa->pg", Np, up) - np.einsum("pga,pa->pg", Nm, um)
+    k = np.where(geo.active, w * coef, 0.0)  # (P, G)
+    flux = k * a * jump
+    phi = np.concatenate([Np, -Nm], axis=-1)  # (P, G, 2nn)
+    R = np.einsum("pg,pgA->pA", flux, phi)
+    if not jacobian:
+        return R, None, None
+    Ju = np.einsum("pg,pgA,pgB->pAB", k * a, phi, phi, optimize=True)
+    # d flux / dX = k [ a'(g) [[u]] dg/dX - a (du-/ds) ds/dX ],  dg/dX_k = -c_k n
+    dum = np.einsum("pga,pa->pg", dNm, um)
+    dgdX = -geo.c[..., None] * geo.n[:, :, None, :]  # (P, G, 4, 3)
+    dflux = (k * da * jump)[..., None, None] * dgdX - (k * a * dum)[..., None, None] * geo.ds
+    JX = np.einsum("pgA,pgki->pAki", phi, dflux, optimize=True)
+    # the - rows also move with N-(s-): d(-N- flux)/dX = -dN-/ds flux ds/dX
+    nn = order + 1
+    JX[:, nn:] -= np.einsum("pga,pg,pgki->paki", dNm, flux, geo.ds, optimize=True)
+    return R, Ju, JX
