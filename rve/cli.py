@@ -4,6 +4,7 @@
     rve validate CONFIG [--set KEY=VALUE ...] [--json]       print the resolved config (internal units)
     rve schema SCENE                                         print the JSON schema of a scene's input
     rve scenes                                               list the known scenes
+    rve table summary|interpolate|export|plot PATH ...       work with an RVE lookup table
 
 Exit codes: 0 success, 2 invalid configuration or usage (messages on stderr, no
 traceback). A new subcommand is a function ``_add_<name>(subparsers)`` that adds its
@@ -198,7 +199,115 @@ def _add_scenes(sub) -> None:
     p.set_defaults(func=_cmd_scenes)
 
 
-_SUBCOMMANDS: list[Callable] = [_add_run, _add_validate, _add_schema, _add_scenes]
+# --------------------------------------------------------------------------- table
+def _table_error(exc: BaseException) -> int:
+    print(f"rve table: {exc}", file=sys.stderr)
+    return EXIT_CONFIG
+
+
+def _parse_param(text: str):
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise ValueError(f"--param needs NAME=VALUE, got {text!r}")
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        return name.strip(), value.strip()
+
+
+def _format_interpolated(ds, method: str) -> str:
+    """One block per (mode, strain): ``name[labels] = value units`` lines."""
+    import numpy as np
+
+    lines = []
+    modes = [ds["mode"].item()] if ds["mode"].ndim == 0 else list(ds["mode"].values)
+    strains = [float(ds["strain"])] if ds["strain"].ndim == 0 else [float(s) for s in ds["strain"].values]
+    fixed = [f"{d}={ds[d].item()}" for d in ds.coords
+             if ds[d].ndim == 0 and d not in ("mode", "strain")]
+    for m in modes:
+        for s in strains:
+            one = ds
+            if "mode" in ds.dims:
+                one = one.sel(mode=m)
+            if "strain" in ds.dims:
+                one = one.sel(strain=s)
+            head = f"mode={m} strain={s:g} method={method}"
+            lines.append("# " + " ".join([head] + fixed))
+            for name, var in one.data_vars.items():
+                units = var.attrs.get("units", "")
+                dims = list(var.dims)
+                for index in np.ndindex(var.shape):
+                    labels = ",".join(str(one[d].values[i]) for d, i in zip(dims, index))
+                    tag = f"{name}[{labels}]" if labels else name
+                    lines.append(f"{tag} = {float(var.values[index]):.10g} {units}".rstrip())
+    return "\n".join(lines) + "\n"
+
+
+def _cmd_table(args: argparse.Namespace) -> int:
+    from . import tables
+
+    try:
+        ds = tables.open_table(args.path)
+        if args.table_command == "summary":
+            sys.stdout.write(tables.summarize(ds))
+        elif args.table_command == "interpolate":
+            params = dict(_parse_param(p) for p in args.params)
+            strain = args.strain if len(args.strain) > 1 else args.strain[0]
+            out = tables.interpolate(ds, strain, mode=args.mode, method=args.method, **params)
+            if args.variables:
+                missing = [v for v in args.variables if v not in out.data_vars]
+                if missing:
+                    raise ValueError(f"unknown variable {missing[0]!r} (known: {', '.join(out.data_vars)})")
+                out = out[args.variables]
+            if args.json:
+                print(json.dumps(tables.to_json_dict(out), indent=1))
+            else:
+                sys.stdout.write(_format_interpolated(out, args.method))
+        elif args.table_command == "export":
+            for path in tables.export_table(ds, args.out, args.format):
+                print(f"rve: wrote {path}", file=sys.stderr)
+        elif args.table_command == "plot":
+            for path in tables.plot_table(ds, args.out):
+                print(f"rve: wrote {path}", file=sys.stderr)
+    except (ValueError, KeyError, OSError) as exc:
+        return _table_error(exc)
+    return EXIT_OK
+
+
+def _add_table(sub) -> None:
+    p = sub.add_parser("table", parents=[_common(False)], help="inspect, interpolate, export a lookup table",
+                       description="Work with an RVE lookup table (netCDF written by rve.tables; "
+                                   "docs/lookup_tables.md).")
+    tsub = p.add_subparsers(dest="table_command", metavar="ACTION", required=True)
+    s = tsub.add_parser("summary", parents=[_common(False)], help="print a summary of the table")
+    s.add_argument("path", metavar="PATH", help="lookup table (.nc)")
+    i = tsub.add_parser("interpolate", parents=[_common(False)], help="print values at given strains",
+                        description="Interpolate the table at one or more strains (exact at stored "
+                                    "strains; outside the table range is an error).")
+    i.add_argument("path", metavar="PATH", help="lookup table (.nc)")
+    i.add_argument("--mode", help="deformation mode (uniaxial, shear; default: all modes)")
+    i.add_argument("--strain", type=float, action="append", required=True,
+                   help="strain to interpolate at (repeatable)")
+    i.add_argument("--method", choices=("linear", "cubic"), default="linear",
+                   help="linear, or cubic = monotone PCHIP (default: linear)")
+    i.add_argument("--param", dest="params", action="append", default=[], metavar="NAME=VALUE",
+                   help="swept parameter value, e.g. --param fibril_radius=0.15 (repeatable)")
+    i.add_argument("--var", dest="variables", action="append", default=[], metavar="NAME",
+                   help="print only this variable (repeatable)")
+    i.add_argument("--json", action="store_true", help="print JSON instead of text")
+    e = tsub.add_parser("export", parents=[_common(False)], help="export for macroscale FE codes")
+    e.add_argument("path", metavar="PATH", help="lookup table (.nc)")
+    e.add_argument("--format", required=True, choices=("csv", "json", "dat"),
+                   help="csv (long table), json, dat (whitespace lookup per mode)")
+    e.add_argument("--out", required=True, metavar="FILE",
+                   help="output file (dat: FILE's stem + .<mode> + suffix per mode)")
+    g = tsub.add_parser("plot", parents=[_common(False)], help="write PNG figures of the table")
+    g.add_argument("path", metavar="PATH", help="lookup table (.nc)")
+    g.add_argument("--out", required=True, metavar="PREFIX", help="PNG path prefix")
+    p.set_defaults(func=_cmd_table)
+
+
+_SUBCOMMANDS: list[Callable] = [_add_run, _add_validate, _add_schema, _add_scenes, _add_table]
 
 
 def build_parser() -> argparse.ArgumentParser:
