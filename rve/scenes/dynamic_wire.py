@@ -1,0 +1,355 @@
+"""Scene: the dynamic wire (thesis §6.4, Tables 6.3-6.4): current, heat and motion coupled.
+
+Contract
+--------
+``run(cfg, out_dir) -> dict`` takes a validated ``DynamicWireConfig``, integrates from rest
+to ``t_max`` with the SDIRK scheme of ``cfg.time.stages`` and returns the summary: the probes
+``y0`` (centre centroid y), ``z_half``, ``T_half``, ``V_half`` (at l = 1/2, a quarter of the
+way from the +L end... i.e. X1 = L/2) at t_max, ``V_half_initial`` (t = 0, the voltage
+divider, 0.1 V for Table 6.3), the dofs per field (``dofs``) of each solve, Newton
+statistics (iterations, observed convergence rates of the stage solves), step-control
+statistics and wall times. It writes ``out_dir/dynamic_wire_history.nc`` (probe time
+history, netCDF, written atomically). On an ``IntegrationFailure`` it writes the last good
+state to ``out_dir/dynamic_wire_last_good_state.npz`` (and the history so far) and raises
+``SimulationAborted`` (a ``SystemExit`` carrying a message with the time, the step size and
+the Newton residual history).
+
+``simulate(cfg, ...)`` is the same run returning the numbers in memory (studies, tests).
+
+Set-up: the wire lies along e1 from -L to L (straight natural configuration, directors
+G1 = e2, G2 = e3), centroids pinned at both ends, the sections free to rotate;
+B = |B| (cos phi, 0, sin phi); V = voltage_left / voltage_right at the ends (or a resistor
+circuit at +L), T = end_temperature at both ends; everything starts at rest with T = 0 and
+V consistent (solved at t = 0). The current along +e1 (from +0.2 V at +L to -0.2 V at -L
+flows along -e1: the Lorentz force I r' x B then points along +e2) bends the wire, whose
+motion induces the back-EMF; T enters through mu(T) and the Seebeck EMF. Parameters that
+Table 6.3 lacks and the reading of its garbled entries: docs/coupled_fields.md.
+
+Dofs: "only what a scene needs": with T feeding back (alpha_mu or S non-zero) the monolithic
+solve has (mech, T, V) = 11 dofs a node; otherwise (mech, V) = 10 a node and T is solved
+afterwards (``ThermalPostSystem``) from the stored Joule heat history.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..fem.lagrange import lagrange_basis
+from ..fem.mesh import fibril_mesh, straight_fibril
+from ..model import (
+    BeamMaterial, BeamModel, CircuitBC, Couplings, DirichletBC, RowScaledSystem, ThermalPostSystem,
+    feedback_from_temperature,
+)
+from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate
+from ..solvers.newton import convergence_rates
+
+__all__ = ["build", "initial_state", "probes", "simulate", "run", "SimulationAborted", "PROBES",
+           "newton_options"]
+
+log = logging.getLogger("rve.scenes.dynamic_wire")
+
+#: probe name -> (long name, unit)
+PROBES = {
+    "y0": ("centroid y displacement at the centre, l = 0", "mm"),
+    "z_half": ("centroid z displacement at l = 1/2", "mm"),
+    "T_half": ("temperature change at l = 1/2", "K"),
+    "V_half": ("electric potential at l = 1/2", "V"),
+}
+
+
+class SimulationAborted(SystemExit):
+    """The time integration gave up; the last good state was saved. ``str()`` is the message."""
+
+    def __init__(self, message: str, path: Path, t: float, h: float, residuals):
+        super().__init__(message)
+        self.message = message
+        self.path = path
+        self.t = t
+        self.h = h
+        self.residuals = list(residuals)
+
+    def __str__(self) -> str:
+        return self.message
+
+
+def temperature_mode(cfg) -> str:
+    mat = _material(cfg)
+    mode = cfg.couplings.temperature
+    fb = feedback_from_temperature(mat, _couplings(cfg))
+    if mode == "auto":
+        return "coupled" if fb else "post"
+    if mode == "post" and fb:
+        raise ValueError("couplings.temperature = 'post' but T feeds back (alpha_mu or the Seebeck "
+                         "coefficient is on): use 'coupled' or 'auto'")
+    return mode
+
+
+def _material(cfg) -> BeamMaterial:
+    m = cfg.material
+    return BeamMaterial(
+        youngs_modulus=m.youngs_modulus, poisson_ratio=m.poisson_ratio, density=m.density, damping=m.damping,
+        electrical_conductivity=m.electrical_conductivity, seebeck=m.seebeck, heat_capacity=m.heat_capacity,
+        thermal_conductivity=m.thermal_conductivity, alpha_mu=m.alpha_mu)
+
+
+def _couplings(cfg, with_T: bool = True) -> Couplings:
+    c = cfg.couplings
+    phi = cfg.load.field_angle
+    B = cfg.load.field_magnitude * np.array([np.cos(phi), 0.0, np.sin(phi)])
+    return Couplings(B=tuple(B), lorentz=c.lorentz, back_emf=c.back_emf, joule=c.joule and with_T,
+                     seebeck=c.seebeck and with_T, thermal_softening=c.thermal_softening and with_T)
+
+
+def build(cfg, mode: str | None = None) -> BeamModel:
+    """The model of the scene; ``mode`` 'coupled' (T dofs) or 'post' (no T dofs)."""
+    mode = mode or temperature_mode(cfg)
+    L = cfg.geometry.half_length
+    R = cfg.fibril.radius
+    mesh = fibril_mesh([straight_fibril([-L, 0, 0], [L, 0, 0], R, "wire")], cfg.mesh.elements, cfg.mesh.order)
+    with_T = mode == "coupled"
+    fields = ("mech", "T", "V") if with_T else ("mech", "V")
+    n0, n1 = mesh.end_nodes(0)
+    b = 9 + len(fields) - 1
+    bcs = [DirichletBC(np.array([n0 * b, n0 * b + 1, n0 * b + 2]), 0.0),
+           DirichletBC(np.array([n1 * b, n1 * b + 1, n1 * b + 2]), 0.0)]
+    oV = 9 + (1 if with_T else 0)
+    circuits = []
+    if cfg.load.circuit_resistance is None:
+        bcs.append(DirichletBC(np.array([n0 * b + oV, n1 * b + oV]),
+                               np.array([cfg.load.voltage_left, cfg.load.voltage_right])))
+    else:
+        bcs.append(DirichletBC(np.array([n0 * b + oV]), cfg.load.voltage_left))
+        circuits.append(CircuitBC.resistor(n1, cfg.load.circuit_resistance, cfg.load.voltage_right, np.pi * R**2))
+    if with_T:
+        bcs.append(DirichletBC(np.array([n0 * b + 9, n1 * b + 9]), cfg.load.end_temperature))
+    return BeamModel(mesh, _material(cfg), disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points,
+                     fields=fields, bcs=bcs, couplings=_couplings(cfg, with_T), circuits=circuits)
+
+
+def initial_state(model: BeamModel):
+    x = np.zeros(model.n)
+    w = np.zeros(model.n)
+    model.nodal(x)[:, :9] = model.mesh.X0
+    return x, w
+
+
+def _probe_weights(model: BeamModel, s: float):
+    """(nodes, weights) interpolating a nodal field at reference arc length s."""
+    mesh = model.mesh
+    h = mesh.elem_length[0]
+    e = min(int(np.floor(s / h + 1e-12)), mesh.n_elements - 1)
+    s0 = mesh.node_s[mesh.conn[e, 0]]
+    t = 2.0 * (s - s0) / mesh.elem_length[e] - 1.0
+    N, _ = lagrange_basis(mesh.order, np.array([t]))
+    return mesh.conn[e], N[0]
+
+
+class _Probes:
+    def __init__(self, model: BeamModel, L: float):
+        self.model = model
+        self.c_nodes, self.c_w = _probe_weights(model, L)          # l = 0   (X1 = 0)
+        self.q_nodes, self.q_w = _probe_weights(model, 1.5 * L)    # l = 1/2 (X1 = L/2)
+
+    def __call__(self, x, w, T_nodal=None) -> dict:
+        xn, wn = self.model.nodal(x), self.model.nodal(w)
+        m = self.model
+        out = {
+            "y0": float(self.c_w @ (xn[self.c_nodes, 1] - m.mesh.X0[self.c_nodes, 1])),
+            "z_half": float(self.q_w @ (xn[self.q_nodes, 2] - m.mesh.X0[self.q_nodes, 2])),
+            "V_half": float(self.q_w @ wn[self.q_nodes, m.oV]),
+        }
+        if T_nodal is not None:
+            out["T_half"] = float(self.q_w @ T_nodal[self.q_nodes])
+        elif m.has_T:
+            out["T_half"] = float(self.q_w @ wn[self.q_nodes, m.oT])
+        return out
+
+
+def probes(model: BeamModel, x, w, L: float = 1.0) -> dict:
+    return _Probes(model, L)(x, w)
+
+
+def newton_options(cfg) -> dict:
+    return {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
+
+
+def _rates_summary(stage_residuals: list) -> dict:
+    """Observed Newton orders over all stage solves (the last defined rate of each solve
+    that took >= 2 iterations), and one example history."""
+    last = []
+    example = None
+    for res in stage_residuals:
+        r = [q for q in convergence_rates(res) if np.isfinite(q)]
+        if len(res) >= 3 and r:
+            last.append(r[-1])
+            if example is None or len(res) > len(example):
+                example = list(res)
+    return {
+        "observed_orders_median": float(np.median(last)) if last else float("nan"),
+        "observed_orders_min": float(np.min(last)) if last else float("nan"),
+        "stage_solves_with_rate": len(last),
+        "example_stage_residuals": example or [],
+    }
+
+
+def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_step: bool | None = None,
+             record: bool = True, progress: bool = False, keep_state: bool = False) -> dict:
+    """Run the scene in memory. Raises ``IntegrationFailure`` (carrying the last good state)."""
+    t_start = time.perf_counter()
+    stages = int(stages or cfg.time.stages)
+    steps = int(steps or cfg.time.steps)
+    fixed = (not cfg.time.step_control) if fixed_step is None else bool(fixed_step)
+    mode = temperature_mode(cfg)
+    model = build(cfg, mode)
+    L = cfg.geometry.half_length
+    t_max = cfg.time.t_max
+    h0 = t_max / steps
+    nopts = newton_options(cfg)
+    probe = _Probes(model, L)
+    x0, w0 = initial_state(model)
+    system = RowScaledSystem(model, model.row_scales(h0, x0, w0))
+    w0, init_res = consistent_initialization(system, x0, w0, 0.0, nopts)
+    p0 = probe(x0, w0)
+    if mode == "post":
+        p0["T_half"] = 0.0
+    every = cfg.time.history_every
+    hist = {"t": [0.0], **{k: [p0[k]] for k in p0}, "current_mid": [], "h": [0.0], "newton_iterations": [0]}
+    joule_t, joule_Q = [0.0], [model.joule_power(x0, w0)] if mode == "post" else []
+    mid_elem = model.mesh.n_elements // 2
+    hist["current_mid"].append(float(model.axial_current(x0, w0)[mid_elem - 1, -1]))
+    stage_res = []
+    count = [0]
+
+    def on_step(t, x, w, info):
+        stage_res.extend(info.stage_residuals)
+        if mode == "post":
+            joule_t.append(t)
+            joule_Q.append(model.joule_power(x, w))
+        count[0] += 1
+        if record and (count[0] % every == 0 or t >= t_max * (1 - 1e-12)):
+            p = probe(x, w)
+            hist["t"].append(t)
+            for k, v in p.items():
+                hist[k].append(v)
+            if mode == "post":
+                hist["T_half"].append(np.nan)
+            hist["current_mid"].append(float(model.axial_current(x, w)[mid_elem - 1, -1]))
+            hist["h"].append(info.h)
+            hist["newton_iterations"].append(info.newton_iterations)
+
+    t1 = time.perf_counter()
+    try:
+        res = integrate(system, x0, w0, 0.0, t_max, steps, stages=stages, newton_opts=nopts,
+                        max_cuts=cfg.time.max_cuts, on_step=on_step, progress=progress, fixed_step=fixed,
+                        consistent=False)
+    except IntegrationFailure as exc:
+        exc.history = hist
+        exc.model = model
+        exc.mode = mode
+        raise
+    t2 = time.perf_counter()
+    x, w = res.x, res.w
+    out_probes = probe(x, w)
+    dofs = {"coupled_solve": model.dof_counts()}
+    post = None
+    if mode == "post":
+        # T afterwards: the heat equation alone over the stored Joule history, same scheme and steps
+        n0, n1 = model.mesh.end_nodes(0)
+        tsys = ThermalPostSystem(model, np.asarray(joule_t), np.asarray(joule_Q), [n0, n1],
+                                 cfg.load.end_temperature)
+        Tsc = RowScaledSystem(tsys, 1.0 / np.asarray(abs(tsys.mass()).sum(axis=1)).ravel())
+        T0 = np.zeros(tsys.n)
+        tres = integrate(Tsc, np.zeros(tsys.n), T0, 0.0, t_max, steps, stages=stages, newton_opts=nopts,
+                         max_cuts=cfg.time.max_cuts, fixed_step=fixed, consistent=False)
+        out_probes["T_half"] = float(probe.q_w @ tres.w[probe.q_nodes])
+        dofs["thermal_post_solve"] = {"T": int(tsys.n), "total": int(tsys.n)}
+        post = {"steps": tres.steps, "newton_iterations": tres.newton_iterations, "T": tres.w}
+    t3 = time.perf_counter()
+    ends = model.end_currents(x, w)[0]
+    out = {
+        "probes": out_probes,
+        "V_half_initial": p0["V_half"],
+        "temperature_mode": mode,
+        "fields": list(model.layout.fields),
+        "dofs": dofs,
+        "stages": stages,
+        "steps_nominal": steps,
+        "steps_accepted": res.steps,
+        "steps_rejected": res.rejected,
+        "h_nominal": h0,
+        "h_min": res.h_min,
+        "fixed_step": fixed,
+        "newton_iterations": res.newton_iterations + (init_res.iterations if init_res is not None else 0),
+        "newton_iterations_per_stage": res.newton_iterations / max(1, len(stage_res)),
+        "newton": _rates_summary(stage_res),
+        "end_currents_out": [float(ends[0]), float(ends[1])],
+        "wall_time_s": {"setup": t1 - t_start, "integration": t2 - t1, "thermal_post": t3 - t2,
+                        "total": t3 - t_start},
+    }
+    if record:
+        out["history"] = {k: np.asarray(v, float) for k, v in hist.items()}
+    if keep_state:
+        out["_state"] = {"x": x, "w": w, "model": model, "post": post}
+    return out
+
+
+def history_dataset(hist: dict, attrs: dict | None = None):
+    import xarray as xr
+
+    t = np.asarray(hist["t"])
+    data = {}
+    for k, (long, unit) in PROBES.items():
+        if k in hist and len(hist[k]) == len(t):
+            data[k] = ("time", np.asarray(hist[k], float), {"long_name": long, "units": unit})
+    if len(hist.get("current_mid", [])) == len(t):
+        data["current_mid"] = ("time", np.asarray(hist["current_mid"]),
+                               {"long_name": "current through the section next to the centre (along +e1)",
+                                "units": "A"})
+    data["h"] = ("time", np.asarray(hist["h"]), {"long_name": "accepted step size", "units": "ms"})
+    data["newton_iterations"] = ("time", np.asarray(hist["newton_iterations"], float),
+                                 {"long_name": "Newton iterations of the step (all stages)", "units": "1"})
+    ds = xr.Dataset(data, coords={"time": ("time", t, {"long_name": "time", "units": "ms"})})
+    ds.attrs.update(attrs or {})
+    return ds
+
+
+def _write_history(path: Path, hist: dict, attrs: dict) -> None:
+    from ..io.atomic import atomic_path
+
+    ds = history_dataset(hist, attrs)
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp)
+
+
+def run(cfg, out_dir: Path) -> dict:
+    out_dir = Path(out_dir)
+    attrs = {"scene": "dynamic_wire", "source": "rve.scenes.dynamic_wire"}
+    try:
+        out = simulate(cfg, record=True)
+    except IntegrationFailure as exc:
+        from ..io.atomic import atomic_path
+
+        path = out_dir / "dynamic_wire_last_good_state.npz"
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, x=exc.x, w=exc.w, t=exc.t, h=exc.h, residuals=np.asarray(exc.residuals, float),
+                         fields=np.array(exc.model.layout.fields))
+        hist = getattr(exc, "history", None)
+        if hist is not None and len(hist["t"]) > 1:
+            hist = {k: v for k, v in hist.items() if k != "T_half" or exc.mode == "coupled"}
+            _write_history(out_dir / "dynamic_wire_history.nc", hist, {**attrs, "status": "aborted"})
+        res = ", ".join(f"{r:.3e}" for r in exc.residuals)
+        msg = (f"rve dynamic_wire: time integration failed at t = {exc.t:.9g} ms with step size h = {exc.h:.6g} ms; "
+               f"Newton residual history [{res}]. Last good state (t = {exc.t:.9g} ms) saved to {path}. "
+               f"Cause: {exc}")
+        log.error(msg)
+        raise SimulationAborted(msg, path, exc.t, exc.h, exc.residuals) from exc
+    hist = out.pop("history")
+    if out["temperature_mode"] == "post":
+        hist.pop("T_half", None)  # T is solved after the run; only its final value is known
+    _write_history(out_dir / "dynamic_wire_history.nc", hist, attrs)
+    out["history_file"] = str(out_dir / "dynamic_wire_history.nc")
+    return out
