@@ -1,0 +1,51 @@
+# Shared set-up of the rve pipeline: config validation, study helpers, the default targets.
+# Rules live in the other .smk files; they call package functions (rve.studies.*).
+
+from snakemake.utils import validate
+
+from rve.studies import static_wire as static_wire_study
+
+
+validate(config, schema="../schemas/pipeline.schema.yaml")
+
+
+wildcard_constraints:
+    order=r"[1-9]",
+    elements=r"[0-9]+",
+    radius=r"[0-9]+(\.[0-9]+)?(e-?[0-9]+)?",
+
+
+# --------------------------------------------------------------------------- static wire
+STATIC_WIRE = config["verification"]["static_wire"]
+STATIC_WIRE_DIR = "results/verification/static_wire"
+STATIC_WIRE_NC = "results/verification/static_wire.nc"
+STATIC_WIRE_RADIUS_PNG = "results/verification/static_wire_radius.png"
+STATIC_WIRE_CONVERGENCE_PNG = "results/verification/static_wire_convergence.png"
+STATIC_WIRE_ORDERS_CSV = "results/verification/static_wire_orders.csv"
+STATIC_WIRE_ORDERS_MD = "results/verification/static_wire_orders.md"
+
+STATIC_WIRE_OUTPUTS = [
+    STATIC_WIRE_NC,
+    STATIC_WIRE_RADIUS_PNG,
+    STATIC_WIRE_CONVERGENCE_PNG,
+    STATIC_WIRE_ORDERS_CSV,
+    STATIC_WIRE_ORDERS_MD,
+]
+
+
+def static_wire_point_records(wildcards=None):
+    """JSON records of every solve of the study (radius sweep and convergence series)."""
+    return [
+        f"{STATIC_WIRE_DIR}/points/{static_wire_study.point_name(p, n, r)}.json"
+        for p, n, r in static_wire_study.study_points(STATIC_WIRE)
+    ]
+
+
+def resource_mem_mb(key):
+    return config["resources"][key]
+
+
+# --------------------------------------------------------------------------- default target
+# What `snakemake -j2` builds. For now the static-wire verification study; a later issue
+# makes the RVE lookup tables the default target: change this list only.
+DEFAULT_TARGETS = STATIC_WIRE_OUTPUTS
