@@ -11,11 +11,14 @@ import os
 from pathlib import Path
 from typing import Union
 
+from ..config import fabric as _fabric_config  # noqa: F401  (registers the fabric_relax config model)
+
 __all__ = ["SCENES", "scene_module", "run_scene"]
 
 #: scene name -> module path; the module defines ``run(cfg, out_dir: pathlib.Path) -> dict``
 SCENES: dict[str, str] = {
     "static_wire": "rve.scenes.static_wire",
+    "fabric_relax": "rve.scenes.fabric_relax",
 }
 
 

@@ -1,0 +1,93 @@
+"""Config model of the fabric relaxation scene (``scene: fabric_relax``; thesis §7.3-7.4).
+
+Registered in ``rve.config.models.SCENE_MODELS`` by ``register_scene_model`` when this
+module is imported (``rve.scenes`` imports it, so ``rve run`` and ``load_config`` after
+``import rve.scenes`` know the scene). Parameter choices: docs/relaxation.md.
+"""
+from __future__ import annotations
+
+from typing import Literal, Optional
+
+from pydantic import Field
+
+from .models import (
+    ContactConductance, DampingCoefficient, Density, Dimensionless, HeatTransferCoefficient, Integer, Length,
+    Quantity, SceneConfig, Section, Stress, Time, register_scene_model,
+)
+
+__all__ = ["FabricRelaxConfig"]
+
+#: line load per unit overlap of the contact penalty (N/mm per mm)
+Penalty = Quantity("N/mm^2")
+
+
+class FabricSpec(Section):
+    kind: Literal["plain", "twill_2_1", "twill_2_2", "basket_2_2", "knit"] = Field(
+        "plain", description="weave pattern (rve.fabrics.WEAVE_PATTERNS) or the thesis knit")
+    n_warp: Integer = Field(4, ge=1, description="warp yarns (weaves)")
+    n_weft: Integer = Field(4, ge=1, description="weft yarns (weaves)")
+    spacing: Length = Field("2 mm", gt=0, description="yarn spacing (weaves); half-width = n * spacing / 2")
+    amplitude: Length = Field("0.525 mm", ge=0, description="crimp amplitude A (weaves)")
+    fibril_diameter: Length = Field("0.3 mm", gt=0, description="fibril diameter d = 2R")
+    rows: list[Integer] = Field([3, 4, 3], min_length=1, description="fibrils per stack row, bottom to top")
+    knit_rows: Integer = Field(3, ge=1, description="courses (knit)")
+    knit_loops: Integer = Field(4, ge=1, description="loops per course (knit)")
+
+
+class FabricMaterial(Section):
+    youngs_modulus: Stress = Field("1.26 MPa", gt=0, description="Young's modulus E (Table 7.1)")
+    poisson_ratio: Dimensionless = Field(0.0, ge=0, lt=0.5, description="Poisson ratio (0 in the thesis)")
+    density: Density = Field("1 g/cm^3", gt=0, description="mass density (Table 7.1's '1.0 g/mm^3' read as g/cm^3)")
+
+
+class FabricContact(Section):
+    penalty: Penalty = Field("50 N/mm^2", gt=0, description="P*: penalty line load per unit overlap")
+    heat_transfer: HeatTransferCoefficient = Field(
+        "0.1 W/(mm^2*K)", ge=0, description="h_C (stored for the probe solves; unused in a mechanics-only relaxation)")
+    conductance: ContactConductance = Field(
+        "1 A/(mm^2*V)", ge=0, description="sigma_C (stored for the probe solves; unused in relaxation)")
+    n_gp: Integer = Field(4, ge=1, description="contact points per element pair")
+    margin: Length = Field("0.1 mm", ge=0, description="search cutoff = 2R + margin")
+    g_eps: Dimensionless = Field(1e-3, ge=0, description="Hertz width regularisation, fraction of R")
+    recompute_closest: bool = Field(True, description="recompute s- at every evaluation (else frozen per rebuild)")
+
+
+class FabricMesh(Section):
+    order: Integer = Field(1, ge=1, le=4, description="Lagrange order p")
+    elements: Integer = Field(30, ge=1, description="elements per fibril")
+    disk_points: Literal[4, 8, 16] = Field(4, description="unit-disk rule across the section")
+    axial_points: Optional[Integer] = Field(None, ge=1, description="Gauss points per element; null = order + 1")
+
+
+class FabricRelaxation(Section):
+    damping: DampingCoefficient = Field("20 N*ms/mm^4", ge=0, description="volumetric damping gamma (heavy)")
+    duration: Time = Field("20 ms", gt=0, description="dynamic relaxation time")
+    steps: Integer = Field(40, ge=1, description="backward-Euler steps of the dynamic relaxation")
+    rebuild_every: Integer = Field(5, ge=1, description="contact map rebuilt every k steps (thesis: 5)")
+    newton_rtol: Dimensionless = Field(1e-6, gt=0, description="stage Newton relative tolerance (relaxation)")
+    newton_max_iter: Integer = Field(25, ge=1, description="stage Newton iterations (relaxation)")
+    static: bool = Field(True, description="static Newton solve after the dynamic relaxation")
+    static_atol: Dimensionless = Field(1e-9, gt=0, description="static Newton absolute tolerance on |F| (N)")
+    static_rounds: Integer = Field(4, ge=1, description="static solves, each after a map rebuild, until the map is stable")
+    static_max_iter: Integer = Field(40, ge=1, description="Newton iterations per static solve")
+
+
+class FabricOutput(Section):
+    netcdf: bool = Field(True, description="relaxed state as netCDF (relaxed_state.nc)")
+    vtk: bool = Field(True, description="tube meshes (.vtp) of the initial and relaxed states + a .pvd series")
+    png: bool = Field(True, description="headless render of the relaxed state")
+    n_theta: Integer = Field(12, ge=3, description="points per ring of the tube mesh")
+    vtk_every: Integer = Field(0, ge=0, description="also write the state every k map rebuilds (0: only start/end)")
+
+
+@register_scene_model
+class FabricRelaxConfig(SceneConfig):
+    """Relax a generated fabric to static equilibrium under contact (thesis §7.3-7.4)."""
+
+    scene: Literal["fabric_relax"] = Field(description="scene name")
+    fabric: FabricSpec = Field(default_factory=FabricSpec)
+    material: FabricMaterial = Field(default_factory=FabricMaterial)
+    contact: FabricContact = Field(default_factory=FabricContact)
+    mesh: FabricMesh = Field(default_factory=FabricMesh)
+    relaxation: FabricRelaxation = Field(default_factory=FabricRelaxation)
+    output: FabricOutput = Field(default_factory=FabricOutput)

@@ -1,0 +1,266 @@
+"""Scene: relax a generated fabric to static equilibrium under contact (thesis §7.3-7.4).
+
+Contract
+--------
+``run(cfg, out_dir) -> dict`` for a validated ``FabricRelaxConfig`` (rve.config.fabric):
+
+* builds the fabric (``rve.fabrics``: plain/twill/basket weave or the thesis knit), its
+  mesh, a mechanics-only ``BeamModel`` (SPEC §4: no T or V during relaxation) with the
+  centroid of every fibril end pinned at its designed position and the directors free
+  (a twist gauge, g1_z at each fibril's first node, removes the zero-energy rotation of
+  each fibril about its own axis; SPEC §7), wrapped in a ``ContactSystem``;
+* relaxes it (``rve.contact.relax.relax_to_equilibrium``: damped backward-Euler dynamics
+  with the map rebuilt every k steps, then static Newton);
+* writes to ``out_dir``: ``relaxed_state.nc`` (xarray/netCDF: reference, initial and
+  relaxed nodal states, fibril and yarn ids, radius, connectivity, the config in the
+  attributes), ``tubes_initial.vtp``, ``tubes_relaxed.vtp`` (+ intermediate states with
+  ``output.vtk_every``) and ``relaxation.pvd`` (Appendix D tube meshes), ``relaxed.png``
+  (headless render), and returns the summary (``rve run`` writes it to summary.json):
+  dofs, contact pairs, max overlap / R, clamp reactions per box side (3 components, N),
+  yarn stack geometry before/after (``stack``), wall times, Newton iterations.
+
+``solve(cfg)`` does the same without writing files and returns the summary with the
+state under ``"_state"``. ``build(cfg)`` returns ``(fabric, system, x0)``.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..contact.relax import RelaxSettings, relax_to_equilibrium
+from ..contact.system import ContactParams, ContactSystem
+from ..model import BeamMaterial, BeamModel, DirichletBC
+
+__all__ = ["build", "solve", "run", "make_fabric", "clamp_reactions", "stack_geometry", "write_state"]
+
+log = logging.getLogger("rve.scenes.fabric_relax")
+
+
+def make_fabric(spec):
+    from .. import fabrics
+
+    if spec.kind == "knit":
+        return fabrics.knit(n_rows=spec.knit_rows, n_loops=spec.knit_loops, fibril_diameter=spec.fibril_diameter)
+    return fabrics.weave(spec.kind, spec.n_warp, spec.n_weft, spacing=spec.spacing, amplitude=spec.amplitude,
+                         fibril_diameter=spec.fibril_diameter, rows=tuple(spec.rows))
+
+
+def build(cfg):
+    fab = make_fabric(cfg.fabric)
+    mesh = fab.mesh(cfg.mesh.elements, cfg.mesh.order)
+    x0n = fab.initial_state(mesh)
+    ends = np.array([t.node(mesh) for t in fab.end_tags], dtype=np.int64)
+    first = mesh.node_offsets[:-1].astype(np.int64)
+    pinned = (ends[:, None] * 9 + np.arange(3)[None, :]).ravel()
+    gauge = first * 9 + 5  # g1_z at each fibril's first node (velocity 0)
+    mat = BeamMaterial(cfg.material.youngs_modulus, cfg.material.poisson_ratio, cfg.material.density,
+                       damping=cfg.relaxation.damping)
+    base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points,
+                     bcs=[DirichletBC(pinned, 0.0), DirichletBC(gauge, 0.0)])
+    c = cfg.contact
+    params = ContactParams(penalty=c.penalty, heat_transfer=c.heat_transfer, conductance=c.conductance,
+                           n_gp=c.n_gp, margin=c.margin, g_eps=c.g_eps, recompute_closest=c.recompute_closest,
+                           rebuild_every=cfg.relaxation.rebuild_every)
+    x0 = np.zeros(base.n)
+    base.nodal(x0)[:, :9] = x0n
+    system = ContactSystem(base, params, x0)
+    return fab, system, x0
+
+
+def clamp_reactions(fab, system, x, t=0.0) -> dict:
+    """Force (N) the clamps exert on the fibrils, summed per box side: {side: [Fx, Fy, Fz]}.
+
+    At a pinned centroid the residual F (internal minus external force) is what the clamp
+    must supply, so the clamp force is F there."""
+    F, _, _ = system.evaluate(x, np.zeros(system.n), t, jacobian=False)
+    Fn = system.nodal(F)[:, :3]
+    out = {}
+    for side in ("x-", "x+", "y-", "y+"):
+        nodes = fab.end_nodes(system.mesh, side)
+        if nodes.size:
+            out[side] = [float(v) for v in Fn[nodes].sum(axis=0)]
+    return out
+
+
+def _yarn_sections(fab, mesh, xn, yarn):
+    """Fibril centroids of ``yarn`` at each crossing coordinate: (n_cross, n_fib, 2)
+    = (lateral, vertical) offsets from the yarn's mean centroid there."""
+    p = fab.params
+    direction = yarn.direction
+    if direction == "warp":
+        along, lat_ax, cuts = 0, 1, p["weft_x"]
+    else:
+        along, lat_ax, cuts = 1, 0, p["warp_y"]
+    secs = []
+    for f in yarn.fibrils:  # per fibril of one yarn (10): vectorised over nodes and cuts
+        nodes = mesh.fibril_nodes(f)
+        r = xn[nodes, :3]
+        s = r[:, along]
+        order = np.argsort(s)
+        pts = np.stack([np.interp(cuts, s[order], r[order, k]) for k in range(3)], axis=-1)  # (n_cut, 3)
+        secs.append(pts)
+    secs = np.stack(secs, axis=1)  # (n_cut, n_fib, 3)
+    secs = secs - secs.mean(axis=1, keepdims=True)
+    return np.stack([secs[..., lat_ax], secs[..., 2]], axis=-1)
+
+
+def _levels(z, gap):
+    """Number of clusters of the sorted values z separated by more than ``gap``."""
+    zs = np.sort(z)
+    return int(1 + np.count_nonzero(np.diff(zs) > gap))
+
+
+def stack_geometry(fab, mesh, xn) -> dict:
+    """Yarn cross-sections at the crossings: mean stack height, width and number of
+    vertical levels (fibril rows; clusters of centroid heights more than R apart),
+    averaged over yarns and crossings. Weaves only (empty for knits)."""
+    if "weft_x" not in fab.params:
+        return {}
+    R = float(mesh.radius.min())
+    H, W, L = [], [], []
+    for y in fab.yarns:
+        sec = _yarn_sections(fab, mesh, xn, y)
+        H.append(sec[..., 1].max(axis=1) - sec[..., 1].min(axis=1))
+        W.append(sec[..., 0].max(axis=1) - sec[..., 0].min(axis=1))
+        L.append([_levels(s[:, 1], R) for s in sec])
+    H, W, L = np.concatenate(H), np.concatenate(W), np.concatenate(L)
+    return {"height_mm": float(H.mean()), "width_mm": float(W.mean()), "levels_mean": float(L.mean()),
+            "levels_histogram": {int(k): int(v) for k, v in zip(*np.unique(L, return_counts=True))}}
+
+
+def solve(cfg, on_rebuild=None) -> dict:
+    t_start = time.perf_counter()
+    fab, system, x0 = build(cfg)
+    mesh = system.mesh
+    t_setup = time.perf_counter() - t_start
+    st0 = system.contact_state(x0)
+    r = cfg.relaxation
+    settings = RelaxSettings(duration=r.duration, steps=r.steps, rebuild_every=r.rebuild_every,
+                             newton_rtol=r.newton_rtol, newton_max_iter=r.newton_max_iter,
+                             newton_atol=r.static_atol, static=r.static, static_atol=r.static_atol,
+                             static_rounds=r.static_rounds, static_max_iter=r.static_max_iter)
+    res = relax_to_equilibrium(system, x0, np.zeros(system.n), settings, on_rebuild=on_rebuild)
+    st = system.contact_state(res.x)
+    n_fixed = len(system.constraints(0.0)[0])
+    xn0, xn = system.nodal(x0), system.nodal(res.x)
+    summary = {
+        "fabric": fab.kind,
+        "fibrils": int(mesh.n_fibrils),
+        "elements_per_fibril": int(cfg.mesh.elements),
+        "order": int(mesh.order),
+        "dofs": int(system.n),
+        "free_dofs": int(system.n - n_fixed),
+        "contact_pairs": int(st["pairs"]),
+        "active_contact_pairs": int(st["active_pairs"]),
+        "initial_max_overlap_over_R": float(st0["max_overlap_over_R"]),
+        "max_overlap_over_R": float(st["max_overlap_over_R"]),
+        "max_overlap_mm": float(st["max_overlap"]),
+        "total_contact_force_N": float(st["total_normal_force"]),
+        "clamp_reactions_N": clamp_reactions(fab, system, res.x, res.t),
+        "stack": {"initial": stack_geometry(fab, mesh, xn0), "relaxed": stack_geometry(fab, mesh, xn)},
+        "static_converged": bool(res.static_converged),
+        "dynamic_steps": int(res.dynamic_steps),
+        "dynamic_newton_iterations": int(res.dynamic_newton_iterations),
+        "static_newton_iterations": int(res.static_newton_iterations),
+        "static_residuals": [float(v) for v in getattr(res.static_result, "residuals", [])],
+        "map_rebuilds": int(system.stats["rebuilds"]),
+        "min_det_F": float(system.base.basis.min_det_F(xn)),
+        "wall_time_s": {"setup": t_setup, "dynamic": res.timings.get("dynamic", 0.0),
+                        "static": res.timings.get("static", 0.0), "total": time.perf_counter() - t_start},
+        "history": res.history,
+        "_state": {"fabric": fab, "system": system, "x0": x0, "x": res.x},
+    }
+    return summary
+
+
+def write_state(path, fab, system, x0, x, cfg=None) -> Path:
+    """The relaxed state as a self-describing netCDF file (xarray), written atomically."""
+    import xarray as xr
+
+    from ..io.atomic import atomic_path
+
+    mesh = system.mesh
+    comp = ["r_x", "r_y", "r_z", "g1_x", "g1_y", "g1_z", "g2_x", "g2_y", "g2_z"]
+    nodal = lambda v: system.nodal(v)[:, :9]  # noqa: E731
+    ds = xr.Dataset(
+        {
+            "reference": (("node", "component"), mesh.X0,
+                          {"long_name": "natural (stress-free) configuration r0, G1, G2", "units": "mm"}),
+            "initial": (("node", "component"), nodal(x0),
+                        {"long_name": "designed initial state r, g1, g2", "units": "mm"}),
+            "relaxed": (("node", "component"), nodal(x),
+                        {"long_name": "relaxed static equilibrium r, g1, g2", "units": "mm"}),
+            "node_fibril": (("node",), mesh.node_fibril.astype(np.int32), {"long_name": "fibril of each node"}),
+            "node_s": (("node",), mesh.node_s, {"long_name": "reference parameter along the fibril", "units": "mm"}),
+            "fibril_yarn": (("fibril",), np.asarray(fab.fibril_yarn, np.int32), {"long_name": "yarn of each fibril"}),
+            "radius": (("fibril",), mesh.radius, {"long_name": "fibril section radius", "units": "mm"}),
+            "fibril_name": (("fibril",), np.array(mesh.names, dtype=str), {"long_name": "fibril name"}),
+            "conn": (("element", "element_node"), mesh.conn.astype(np.int32),
+                     {"long_name": "global node indices of each element, in axial order"}),
+            "yarn_direction": (("yarn",), np.array([y.direction for y in fab.yarns], dtype=str),
+                               {"long_name": "yarn direction"}),
+        },
+        coords={"component": comp},
+        attrs={"title": f"relaxed {fab.kind}", "element_order": int(mesh.order),
+               "half_widths_mm": [float(v) for v in fab.half_widths],
+               "conventions": "node-interleaved beam state: centroid r and directors g1, g2 per node (mm)",
+               "config": json.dumps(_cfg_dict(cfg)) if cfg is not None else "{}"},
+    )
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp)
+    return Path(path)
+
+
+def _cfg_dict(cfg):
+    from ..config import config_as_dict
+
+    return config_as_dict(cfg)
+
+
+def run(cfg, out_dir: Path) -> dict:
+    from ..io.vtk import render_png, tube_surface, write_pvd, write_tubes
+
+    out_dir = Path(out_dir)
+    o = cfg.output
+    series = []
+    if o.vtk:
+        # the initial state is written before the run (useful when a run is interrupted)
+        fab0 = make_fabric(cfg.fabric)
+        mesh0 = fab0.mesh(cfg.mesh.elements, cfg.mesh.order)
+        p = write_tubes(out_dir / "tubes_initial.vtp", mesh0, fab0.initial_state(mesh0), o.n_theta,
+                        {"yarn": np.asarray(fab0.fibril_yarn)[mesh0.node_fibril]})
+        series.append((0.0, p.name))
+    on_rebuild = None
+    if o.vtk and o.vtk_every > 0:
+        def on_rebuild(chunk, t, x, w):
+            if chunk % o.vtk_every == 0:
+                mesh = fab0.mesh(cfg.mesh.elements, cfg.mesh.order)
+                xn = x.reshape(mesh.n_nodes, -1)
+                q = write_tubes(out_dir / f"tubes_{chunk:04d}.vtp", mesh, xn, o.n_theta,
+                                {"yarn": np.asarray(fab0.fibril_yarn)[mesh.node_fibril]})
+                series.append((float(t), q.name))
+
+    summary = solve(cfg, on_rebuild)
+    state = summary.pop("_state")
+    fab, system, x0, x = state["fabric"], state["system"], state["x0"], state["x"]
+    mesh = system.mesh
+    files = {}
+    yarn = np.asarray(fab.fibril_yarn)[mesh.node_fibril]
+    if o.netcdf:
+        files["state"] = write_state(out_dir / "relaxed_state.nc", fab, system, x0, x, cfg).name
+    if o.vtk:
+        p = write_tubes(out_dir / "tubes_relaxed.vtp", mesh, system.nodal(x), o.n_theta, {"yarn": yarn})
+        series.append((float(summary["history"][-1].get("t", 1.0)) if summary["history"] else 1.0, p.name))
+        files["vtk"] = [name for _, name in series]
+        files["pvd"] = write_pvd(out_dir / "relaxation.pvd", series).name
+    if o.png:
+        surf = tube_surface(mesh, system.nodal(x), o.n_theta, {"yarn": yarn})
+        files["png"] = "relaxed.png"
+        summary["render"] = render_png(out_dir / "relaxed.png", surf, scalars="yarn",
+                                       title=f"relaxed {fab.kind}: {mesh.n_fibrils} fibrils")
+    summary["files"] = files
+    return summary
