@@ -176,40 +176,39 @@ def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Opti
     return out
 
 
-def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20):
+def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20,
+                  max_rejections=12):
     """Static Newton on ``F(x, 0, t) = 0`` with the centroid motion per iteration capped
-    at ``step_cap`` and the contact map rebuilt after ``step_cap`` of motion (module
-    docstring). Returns ``(x, w, NewtonResult)``."""
+    at ``step_cap``, the contact map rebuilt after ``step_cap`` of motion, and a
+    Levenberg-Marquardt safeguard: a step that increases |F| is rejected and retried
+    with ``(K + sigma M) du = -F`` (sigma raised 8x per rejection, lowered 4x after an
+    accepted step, down to pure Newton). Returns ``(x, w, NewtonResult)``."""
     w0 = np.zeros(system.n)
-    prob = StaticProblem(system, x, w0, t)
-    u = prob.u0()
-    free = prob.free
     lay = system.layout
-    cen = prob.free_mech & np.isin(free % lay.block, (0, 1, 2))
-    cen_idx = np.flatnonzero(cen)
-    res = []
-    r0 = None
-    for it in range(max_iter + 1):
-        xc, _ = prob.state(u)
-        if system.max_displacement_since_rebuild(xc) > step_cap:
-            system.rebuild(xc)
-            prob = StaticProblem(system, xc, w0, t)  # fresh restriction plans for the new structure
-            u = prob.u0()
-        r, J = prob(u)
-        rn = float(np.linalg.norm(r))
-        res.append(rn)
-        r0 = rn if r0 is None else r0
-        rates = convergence_rates(res)
-        log.info("capped newton it=%d |r|=%.3e rate=%s pairs=%d", it, rn, f"{rates[-1]:.2f}" if rates else "-",
-                 system.map.n_pairs)
+
+    def setup(xc):
+        prob = StaticProblem(system, xc, w0, t)  # fresh restriction plans for the current structure
+        free = prob.free
+        cen = np.flatnonzero(prob.free_mech & np.isin(free % lay.block, (0, 1, 2)))
+        return prob, cen, prob.fd.matrix(system.mass())
+
+    prob, cen_idx, Mff = setup(np.asarray(x, float))
+    u = prob.u0()
+    r, J = prob(u)
+    rn = float(np.linalg.norm(r))
+    res = [rn]
+    r0 = rn
+    sigma, sig_min = 0.0, None
+    rejections = 0
+    it = 0
+    while it < max_iter:
         if not np.isfinite(rn):
             return (*prob.state(u), NewtonResult(u, False, it, res, "non-finite residual"))
         if rn <= atol or rn <= rtol * r0:
             return (*prob.state(u), NewtonResult(u, True, it, res))
-        if it == max_iter:
-            break
+        A = J if sigma == 0.0 else (J + sigma * Mff).tocsc()
         try:
-            du = -sparse_solve(J, r)
+            du = -sparse_solve(A, r)
         except RuntimeError as exc:
             return (*prob.state(u), NewtonResult(u, False, it, res, f"linear solve failed: {exc}"))
         if not np.all(np.isfinite(du)):
@@ -222,7 +221,39 @@ def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.0
             step *= 0.5
         else:
             return (*prob.state(u), NewtonResult(u, False, it, res, "no admissible step (det F <= 0)"))
-        u = u + step * du
+        x_cur, _ = prob.state(u)
+        ut = u + step * du
+        xt, _ = prob.state(ut)
+        rebuilt = system.max_displacement_since_rebuild(xt) > step_cap
+        if rebuilt:
+            system.rebuild(xt)
+            prob, cen_idx, Mff = setup(xt)
+            ut = prob.u0()
+        rt, Jt = prob(ut)
+        rtn = float(np.linalg.norm(rt))
+        if np.isfinite(rtn) and (rtn <= rn or rejections >= max_rejections):
+            it += 1
+            u, r, J, rn = ut, rt, Jt, rtn
+            res.append(rn)
+            rejections = 0
+            sigma = 0.0 if sigma <= (sig_min or 0.0) else sigma / 4.0
+            rates = convergence_rates(res)
+            log.info("capped newton it=%d |r|=%.3e step=%.3g sigma=%.3g rate=%s pairs=%d", it, rn, step, sigma,
+                     f"{rates[-1]:.2f}" if rates else "-", system.map.n_pairs)
+            continue
+        # reject: back to the current iterate, more regularisation
+        rejections += 1
+        if sig_min is None:
+            dK = np.abs(J.diagonal())
+            dM = np.abs(Mff.diagonal())
+            sig_min = 1e-3 * float(dK.max() / dM.max()) if dM.max() > 0 else 1.0
+        sigma = max(8.0 * sigma, sig_min)
+        log.info("capped newton step rejected (|r| %.3e -> %.3e), sigma -> %.3g", rn, rtn, sigma)
+        if rebuilt:  # the map and structure moved with the trial: re-evaluate the iterate on them
+            prob, cen_idx, Mff = setup(x_cur)
+            u = prob.u0()
+            r, J = prob(u)
+            rn = float(np.linalg.norm(r))
     return (*prob.state(u), NewtonResult(u, False, max_iter, res,
                                          f"no convergence in {max_iter} iterations (|r| = {res[-1]:.3e})"))
 
