@@ -43,7 +43,7 @@ from .fem.assembly import DofLayout, ElementPattern
 from .fem.basis import BeamBasis
 from .fem.mesh import FibrilMesh
 from .physics.beam_forms import lorentz_force, mass_matrix
-from .physics.electric_forms import axial_current, emf, lorentz_force_field, potential_equation, section_ops
+from .physics.electric_forms import axial_current, cross, emf, lorentz_force_field, potential_equation, section_ops
 from .physics.elasticity import lame
 from .physics.thermal_forms import (
     capacity_matrix, conduction, joule_heating, joule_source, temperature_at_quadrature,
@@ -57,12 +57,26 @@ def _inv_det3(F):
     """Inverse and determinant of a batch of 3x3 matrices by cofactors (no LAPACK call
     per matrix: ~10x faster than np.linalg.inv on the (E, nq) batches of a fibril)."""
     c0, c1, c2 = F[..., :, 0], F[..., :, 1], F[..., :, 2]
-    r0 = np.cross(c1, c2)
-    r1 = np.cross(c2, c0)
-    r2 = np.cross(c0, c1)
+    r0 = cross(c1, c2)
+    r1 = cross(c2, c0)
+    r2 = cross(c0, c1)
     det = np.einsum("...i,...i->...", c0, r0)
     inv = np.stack([r0, r1, r2], axis=-2) / det[..., None, None]
     return inv, det
+
+
+_DTD = {}
+
+
+def _DtD_cache(basis: BeamBasis) -> np.ndarray:
+    key = id(basis)
+    hit = _DTD.get(key)
+    if hit is None or hit[0] is not basis:
+        if len(_DTD) > 32:
+            _DTD.clear()
+        DD = np.matmul(np.swapaxes(basis.D, 2, 3), basis.D)  # (E, nq, naf, naf)
+        hit = _DTD[key] = (basis, DD)
+    return hit[1]
 
 
 def neo_hookean_element_forces(basis: BeamBasis, U, mu, lam, want_tangent: bool = True, want_dmu: bool = False):
@@ -93,14 +107,17 @@ def neo_hookean_element_forces(basis: BeamBasis, U, mu, lam, want_tangent: bool 
         return R, None, dR
     Gf = G.reshape(E, nq, naf * 3)
     Gc1 = Gf * (W * c1)[:, :, None]
-    T2 = np.matmul(np.swapaxes(Gc1, 1, 2), Gf).reshape(E, naf, 3, naf, 3)  # [a,k,b,i]
-    K = T2.transpose(0, 1, 4, 3, 2).copy()  # [a,i,b,k]
+    # accumulate in the layout [a, k, b, i] (the c1 term is a plain matmul there); the
+    # returned [a, i, b, k] is a transposed view (the caller's reshape copies it once)
+    Kt = np.matmul(np.swapaxes(Gc1, 1, 2), Gf).reshape(E, naf, 3, naf, 3)
     if np.any(lam != 0):
         Gl = Gf * (W * lam)[:, :, None]
-        K += np.matmul(np.swapaxes(Gl, 1, 2), Gf).reshape(E, naf, 3, naf, 3)  # [a,i,b,k]
-    Dw = (Dt * (W * mu)[:, :, None, None]).transpose(0, 2, 1, 3).reshape(E, naf, nq * 3)
-    DtD = np.matmul(Dw, D.reshape(E, nq * 3, naf))  # [a, b]
-    K += DtD[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
+        Kt += np.matmul(np.swapaxes(Gl, 1, 2), Gf).reshape(E, naf, 3, naf, 3).transpose(0, 1, 4, 3, 2)
+    DD = _DtD_cache(basis)  # (E, nq, naf, naf): sum_J D[J, a] D[J, b] per quadrature point
+    DtD = np.matmul((W * mu)[:, None, :], DD.reshape(E, nq, naf * naf)).reshape(E, naf, naf)
+    for i in range(3):
+        Kt[:, :, i, :, i] += DtD
+    K = Kt.transpose(0, 1, 4, 3, 2)
     return R, K, dR
 
 
@@ -200,6 +217,7 @@ class BeamModel:
         prescribed_current: PrescribedCurrent | None = None,
         couplings: Couplings | None = None,
         circuits: list[CircuitBC] | tuple = (),
+        field_ramp=None,
     ):
         self.mesh = mesh
         self.material = material
@@ -218,6 +236,8 @@ class BeamModel:
             lorentz=False, back_emf=False, joule=False, seebeck=False, thermal_softening=False)
         self.active = self._resolve_couplings(self.couplings, material)
         self.B = np.asarray(self.couplings.B, float)
+        #: optional t -> factor on B (a smooth switch-on of the field); None: B constant
+        self.field_ramp = field_ramp
         self.circuits = list(circuits)
         if circuits and "V" not in tuple(fields):
             raise ValueError("circuit boundary conditions need the 'V' field")
@@ -248,7 +268,30 @@ class BeamModel:
             self._circ_J = np.array([c.area * c.J_bar for c in self.circuits])
             ip, ind = self.pattern.indptr, self.pattern.indices
             self._circ_slot = np.array([ip[i] + int(np.flatnonzero(ind[ip[i]:ip[i + 1]] == i)[0]) for i in idx])
+        self._rs = None  # row scale (see with_row_scale)
+        self._rs_data = None
         self.stats = {"assemblies": 0}
+
+    def with_row_scale(self, scale) -> "BeamModel":
+        """A shallow copy of the model whose equations (rows of M, F, Fx, Fw) are multiplied
+        by ``scale`` inside the kernel (what ``RowScaledSystem`` does, without rebuilding
+        sparse matrices every call). Same solutions; Newton's norms weigh every field in its
+        own unit (``row_scales``)."""
+        import copy
+
+        m = copy.copy(self)
+        m._rs = np.asarray(scale, float).copy()
+        pat = self.pattern
+        rows = np.repeat(np.arange(self.n), np.diff(pat.indptr))
+        m._rs_data = m._rs[rows]
+        M = sp.csr_matrix(self._M)
+        if M.nnz == pat.nnz and np.array_equal(M.indices, pat.indices) and np.array_equal(M.indptr, pat.indptr):
+            m._M = sp.csr_matrix((M.data * m._rs_data, pat.indices, pat.indptr), shape=M.shape)
+        else:  # pragma: no cover - the mass matrix always has the element pattern
+            m._M = (sp.diags(m._rs) @ M).tocsr()
+        m._C_scaled = None
+        m.stats = {"assemblies": 0}
+        return m
 
     # ------------------------------------------------------------------ couplings
     def _resolve_couplings(self, c: Couplings, mat: BeamMaterial) -> dict:
@@ -328,10 +371,16 @@ class BeamModel:
     def admissible(self, x) -> bool:
         return self.basis.min_det_F(self.nodal(x)) > 0.0
 
-    def _emf(self, U, Uv, Te, Ve):
+    def field(self, t=None) -> np.ndarray:
+        """B at time t (the full B when t is None or there is no ramp)."""
+        if self.field_ramp is None or t is None:
+            return self.B
+        return self.B * float(self.field_ramp(t))
+
+    def _emf(self, U, Uv, Te, Ve, B=None):
         a = self.active
         zeros = np.zeros_like(Ve)
-        return emf(self.ops, U, Uv, Te if Te is not None else zeros, Ve, self.B,
+        return emf(self.ops, U, Uv, Te if Te is not None else zeros, Ve, self.B if B is None else B,
                    seebeck=self.material.seebeck if a["seebeck"] else 0.0, back_emf=a["back_emf"])
 
     def evaluate(self, x, w, t, jacobian: bool = True):
@@ -373,7 +422,8 @@ class BeamModel:
         # --- electrics
         if self.has_V:
             sig = mat.electrical_conductivity
-            m = self._emf(U, Uv, Te, Ve)
+            Bt = self.field(t)
+            m = self._emf(U, Uv, Te, Ve, Bt)
             RV, JV = potential_equation(self.ops, m, sig, jacobian)
             Re[:, :, oV] += RV
             if jacobian:
@@ -384,7 +434,7 @@ class BeamModel:
                     Kx[:, :, oV, :, :9] += JV["x"].reshape(E, nn, nn, 9)
                     Kw[:, :, oV, :, :9] += JV["v"].reshape(E, nn, nn, 9)
             if a["lorentz"]:
-                RL, JL = lorentz_force_field(self.ops, m, sig, self.B, jacobian)
+                RL, JL = lorentz_force_field(self.ops, m, sig, Bt, jacobian)
                 Re[:, :, :9] += RL.reshape(E, nn, 9)
                 if jacobian:
                     Kx[:, :, :9, :, :9] += JL["x"].reshape(E, nn, 9, nn, 9)
@@ -408,6 +458,8 @@ class BeamModel:
             F = F + self._C @ w
         if self.circuits:
             F[self._circ_idx] += self._circ_r * w[self._circ_idx] + self._circ_J
+        if self._rs is not None:
+            F *= self._rs
         if not jacobian:
             return F, None, None
         if self._Ce is not None:
@@ -418,6 +470,9 @@ class BeamModel:
         Fw = self.pattern.assemble_matrix(Kw.reshape(E, ld, ld))
         if self.circuits:
             Fw.data[self._circ_slot] += self._circ_r
+        if self._rs is not None:
+            Fx.data *= self._rs_data
+            Fw.data *= self._rs_data
         return F, Fx, Fw
 
     def _evaluate_mech(self, x, w, jacobian):
@@ -432,28 +487,37 @@ class BeamModel:
         F = self.pattern.assemble_vector(self._embed_vector(Rm))
         if self._C is not None:
             F = F + self._C @ w
+        if self._rs is not None:
+            F *= self._rs
         if not jacobian:
             return F, None, None
         Fx = self._assemble_mech_matrix(Km)
         Fw = self._C if self._C is not None else sp.csr_matrix((self.n, self.n))
+        if self._rs is not None:
+            Fx.data *= self._rs_data
+            if self._C is not None:
+                if getattr(self, "_C_scaled", None) is None:
+                    self._C_scaled = (sp.diags(self._rs) @ self._C).tocsr()
+                Fw = self._C_scaled
         return F, Fx, Fw
 
     # ------------------------------------------------------------------ post-processing
-    def axial_current(self, x, w) -> np.ndarray:
+    def axial_current(self, x, w, t=None) -> np.ndarray:
         """Current through the section at every axial Gauss point, (E, ng), in A."""
         if not self.has_V:
             raise ValueError("no 'V' field: the current is not a model unknown")
         U, Uv, Te, Ve = self.element_fields(x, w)
-        return axial_current(self.ops, self._emf(U, Uv, Te, Ve), self.material.electrical_conductivity)
+        return axial_current(self.ops, self._emf(U, Uv, Te, Ve, self.field(t)), self.material.electrical_conductivity)
 
-    def end_currents(self, x, w) -> np.ndarray:
+    def end_currents(self, x, w, t=None) -> np.ndarray:
         """Current leaving every fibril through its (first, last) end node, (n_fibrils, 2), in A.
 
         It is minus the conduction part of the V equation at the end node (the weak form
         -int delta V' I + sum_ends delta V I_out = 0); at a Dirichlet end it is the reaction
         current, at a circuit end it equals area (r_bar V + J_bar) at convergence."""
         U, Uv, Te, Ve = self.element_fields(x, w)
-        RV, _ = potential_equation(self.ops, self._emf(U, Uv, Te, Ve), self.material.electrical_conductivity, False)
+        RV, _ = potential_equation(self.ops, self._emf(U, Uv, Te, Ve, self.field(t)),
+                                   self.material.electrical_conductivity, False)
         rv = np.bincount(self.mesh.conn.ravel(), weights=RV.ravel(), minlength=self.mesh.n_nodes)
         out = np.zeros((self.mesh.n_fibrils, 2))
         for f in range(self.mesh.n_fibrils):
@@ -461,10 +525,10 @@ class BeamModel:
             out[f] = -rv[n0], -rv[n1]
         return out
 
-    def joule_power(self, x, w) -> np.ndarray:
+    def joule_power(self, x, w, t=None) -> np.ndarray:
         """Nodal Joule heat input int N_a sigma0 e^2 dV0 (W), (n_nodes,)."""
         U, Uv, Te, Ve = self.element_fields(x, w)
-        Q = joule_source(self.ops, self._emf(U, Uv, Te, Ve), self.material.electrical_conductivity)
+        Q = joule_source(self.ops, self._emf(U, Uv, Te, Ve, self.field(t)), self.material.electrical_conductivity)
         return np.bincount(self.mesh.conn.ravel(), weights=Q.ravel(), minlength=self.mesh.n_nodes)
 
     def row_scales(self, t_ref: float, x, w) -> np.ndarray:

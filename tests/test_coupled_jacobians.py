@@ -166,3 +166,40 @@ def test_conduction_current_of_a_uniform_field_is_sigma_A_E():
     assert np.allclose(I, MAT.electrical_conductivity * np.pi * R**2 * 0.1, rtol=1e-12)
     ends = model.end_currents(x, w)
     assert np.allclose(ends[0], [-I[0, 0], I[0, 0]], rtol=1e-12)
+
+
+def test_row_scaled_model_is_the_scaled_system():
+    """with_row_scale (in-kernel) == RowScaledSystem (generic wrapper) == S * model."""
+    from rve.model import RowScaledSystem
+
+    rng = np.random.default_rng(3)
+    model = make_model(2, True, CASES["all"])
+    x, w = random_state(model, rng)
+    s = rng.uniform(0.5, 2.0, model.n)
+    a = model.with_row_scale(s)
+    b = RowScaledSystem(model, s)
+    F0, Fx0, Fw0 = model.evaluate(x, w, 0.0)
+    for sysm in (a, b):
+        F, Fx, Fw = sysm.evaluate(x, w, 0.0)
+        assert np.allclose(F, s * F0, rtol=1e-14, atol=0)
+        assert np.allclose(Fx.toarray(), s[:, None] * Fx0.toarray(), rtol=1e-14, atol=0)
+        assert np.allclose(Fw.toarray(), s[:, None] * Fw0.toarray(), rtol=1e-14, atol=0)
+        assert np.allclose(sysm.mass().toarray(), s[:, None] * model.mass().toarray(), rtol=1e-14, atol=0)
+    # the original model is untouched
+    assert np.array_equal(model.evaluate(x, w, 0.0)[0], F0)
+
+
+def test_fast_neo_hookean_matches_beam_forms():
+    from rve.model import neo_hookean_element_forces
+    from rve.physics.beam_forms import internal_force, internal_force_dmu
+
+    rng = np.random.default_rng(5)
+    for order, curved in [(1, False), (2, True), (3, True)]:
+        model = make_model(order, curved, CASES["all"])
+        x, _ = random_state(model, rng, scale=0.05)
+        U = model.basis.element_values(model.nodal(x))
+        mu = 2.0 + rng.uniform(size=model.basis.W.shape)
+        R0, K0 = internal_force(model.basis, U, mu, 0.4, True)
+        R1, K1, dR = neo_hookean_element_forces(model.basis, U, mu, 0.4, True, True)
+        assert rel_err(R1, R0) < 1e-12 and rel_err(K1, K0) < 1e-12
+        assert rel_err(dR, internal_force_dmu(model.basis, U)) < 1e-12

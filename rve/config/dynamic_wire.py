@@ -36,7 +36,7 @@ class DynamicWireMaterial(Section):
     poisson_ratio: Dimensionless = Field(0.0, ge=0, lt=0.5, description="Poisson ratio nu (0 in the thesis)")
     density: Density = Field("5e-9 g/mm^3", gt=0, description="mass density rho (g/mm^3); not in Table 6.3")
     heat_capacity: SpecificHeat = Field(
-        "5e3 J/(kg*K)", gt=0, description="specific heat c_p (mJ/(g K)); not in Table 6.3")
+        "5e4 J/(kg*K)", gt=0, description="specific heat c_p (mJ/(g K)); not in Table 6.3")
     thermal_conductivity: ThermalConductivity = Field(
         "0.2 W/(mm*K)", gt=0, description="thermal conductivity k0 (W/(mm K)); not in Table 6.3")
     electrical_conductivity: ElectricConductivity = Field("10 S/mm", gt=0, description="sigma0 (S/mm)")
@@ -58,6 +58,9 @@ class DynamicWireLoad(Section):
     end_temperature: Temperature = Field(0.0, description="temperature change held at both ends (K)")
     field_magnitude: MagneticField = Field("1 T", ge=0, description="|B| (kT)")
     field_angle: Angle = Field("45 deg", description="angle phi of B = |B|(cos phi, 0, sin phi) to the wire (rad)")
+    field_ramp_time: Time = Field(
+        "0.5 us", ge=0, description="B is switched on smoothly (C2 quintic) over this time (ms); 0 = a step at "
+                                    "t = 0 (see docs/coupled_fields.md: the step excites unresolvable axial modes)")
 
 
 class DynamicWireCouplings(Section):
@@ -80,7 +83,7 @@ class DynamicWireMesh(Section):
 
 
 class DynamicWireTime(Section):
-    t_max: Time = Field("4 us", gt=0, description="final time t_max (ms); not in Table 6.3")
+    t_max: Time = Field("3 us", gt=0, description="final time t_max (ms); not in Table 6.3")
     steps: Integer = Field(400, ge=1, description="nominal number of time steps")
     stages: Literal[1, 2, 3] = Field(3, description="SDIRK stages s (order s)")
     step_control: bool = Field(True, description="halve and retry failed steps (else: fixed steps, fail at once)")
@@ -90,7 +93,8 @@ class DynamicWireTime(Section):
 
 class DynamicWireNewton(Section):
     atol: Dimensionless = Field(
-        1e-10, gt=0, description="absolute tolerance on the row-scaled stage residual (natural units of w)")
+        1e-8, gt=0, description="absolute tolerance on the row-scaled stage residual (natural units of w: "
+                                "mm/ms, 1/ms, K, V; the velocities are ~100 mm/ms)")
     rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance on the stage residual")
     max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
 

@@ -299,3 +299,8 @@ def register_scene_model(model: type[SceneConfig]) -> type[SceneConfig]:
     (name,) = typing.get_args(ann)
     SCENE_MODELS[name] = model
     return model
+
+
+# Scene models that live in their own modules register themselves on import; importing
+# them here makes every scene known wherever SCENE_MODELS is (loader, CLI validate/schema).
+from . import dynamic_wire as _dynamic_wire  # noqa: E402,F401

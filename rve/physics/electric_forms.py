@@ -45,6 +45,13 @@ __all__ = ["SectionOps", "section_ops", "EMF", "emf", "potential_equation", "lor
            "cross_matrix", "axial_current"]
 
 
+def cross(a, b) -> np.ndarray:
+    """a x b over the last axis (broadcasting), without np.cross's axis juggling."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def cross_matrix(B) -> np.ndarray:
     """C with C[i, m] = d (a x B)_i / d a_m (a x B = C a)."""
     return np.einsum("imk,k->im", levi_civita, np.asarray(B, float))
@@ -112,9 +119,9 @@ def emf(ops: SectionOps, U, Uv, Te, Ve, B, seebeck: float = 0.0, back_emf: bool 
         e = e - seebeck * np.einsum("eqn,en->eq", ops.dNq, Te)
     if back_emf:
         v = np.matmul(ops.Nx, Uv)  # (E, nq, 3)
-        c = np.cross(v, B)
+        c = cross(v, B)
         e = e + np.einsum("eqi,eqi->eq", c, a)
-        Bxa = np.cross(B, a)
+        Bxa = cross(B, a)
     else:
         c = np.zeros_like(a)
         Bxa = c

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Union
 
 from ..config import fabric as _fabric_config  # noqa: F401  (registers the fabric_relax config model)
+from ..config import dynamic_wire as _dynamic_wire_config  # noqa: F401  (registers the dynamic_wire config model)
 
 __all__ = ["SCENES", "scene_module", "run_scene"]
 
@@ -19,6 +20,7 @@ __all__ = ["SCENES", "scene_module", "run_scene"]
 SCENES: dict[str, str] = {
     "static_wire": "rve.scenes.static_wire",
     "fabric_relax": "rve.scenes.fabric_relax",
+    "dynamic_wire": "rve.scenes.dynamic_wire",
 }
 
 

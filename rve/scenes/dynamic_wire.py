@@ -126,7 +126,21 @@ def build(cfg, mode: str | None = None) -> BeamModel:
     if with_T:
         bcs.append(DirichletBC(np.array([n0 * b + 9, n1 * b + 9]), cfg.load.end_temperature))
     return BeamModel(mesh, _material(cfg), disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points,
-                     fields=fields, bcs=bcs, couplings=_couplings(cfg, with_T), circuits=circuits)
+                     fields=fields, bcs=bcs, couplings=_couplings(cfg, with_T), circuits=circuits,
+                     field_ramp=field_ramp(cfg.load.field_ramp_time))
+
+
+def field_ramp(t_r: float):
+    """The switch-on of B: 0 -> 1 over [0, t_r] by the C2 quintic s^3 (10 - 15 s + 6 s^2)
+    (None for t_r = 0: a step, B on at t = 0 as in the thesis)."""
+    if not t_r > 0:
+        return None
+
+    def ramp(t):
+        s = min(max(t / t_r, 0.0), 1.0)
+        return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
+
+    return ramp
 
 
 def initial_state(model: BeamModel):
@@ -210,16 +224,16 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
     nopts = newton_options(cfg)
     probe = _Probes(model, L)
     x0, w0 = initial_state(model)
-    system = RowScaledSystem(model, model.row_scales(h0, x0, w0))
+    system = model.with_row_scale(model.row_scales(h0, x0, w0))
     w0, init_res = consistent_initialization(system, x0, w0, 0.0, nopts)
     p0 = probe(x0, w0)
     if mode == "post":
         p0["T_half"] = 0.0
     every = cfg.time.history_every
     hist = {"t": [0.0], **{k: [p0[k]] for k in p0}, "current_mid": [], "h": [0.0], "newton_iterations": [0]}
-    joule_t, joule_Q = [0.0], [model.joule_power(x0, w0)] if mode == "post" else []
+    joule_t, joule_Q = [0.0], [model.joule_power(x0, w0, 0.0)] if mode == "post" else []
     mid_elem = model.mesh.n_elements // 2
-    hist["current_mid"].append(float(model.axial_current(x0, w0)[mid_elem - 1, -1]))
+    hist["current_mid"].append(float(model.axial_current(x0, w0, 0.0)[mid_elem - 1, -1]))
     stage_res = []
     count = [0]
 
@@ -227,7 +241,7 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
         stage_res.extend(info.stage_residuals)
         if mode == "post":
             joule_t.append(t)
-            joule_Q.append(model.joule_power(x, w))
+            joule_Q.append(model.joule_power(x, w, t))
         count[0] += 1
         if record and (count[0] % every == 0 or t >= t_max * (1 - 1e-12)):
             p = probe(x, w)
@@ -236,7 +250,7 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
                 hist[k].append(v)
             if mode == "post":
                 hist["T_half"].append(np.nan)
-            hist["current_mid"].append(float(model.axial_current(x, w)[mid_elem - 1, -1]))
+            hist["current_mid"].append(float(model.axial_current(x, w, t)[mid_elem - 1, -1]))
             hist["h"].append(info.h)
             hist["newton_iterations"].append(info.newton_iterations)
 
@@ -268,7 +282,7 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
         dofs["thermal_post_solve"] = {"T": int(tsys.n), "total": int(tsys.n)}
         post = {"steps": tres.steps, "newton_iterations": tres.newton_iterations, "T": tres.w}
     t3 = time.perf_counter()
-    ends = model.end_currents(x, w)[0]
+    ends = model.end_currents(x, w, t_max)[0]
     out = {
         "probes": out_probes,
         "V_half_initial": p0["V_half"],

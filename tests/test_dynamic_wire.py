@@ -1,0 +1,174 @@
+"""Dynamic wire scene (thesis §6.4): analytical checks that can fail, the decoupled-T path,
+step control and failure handling, outputs."""
+import logging
+
+import numpy as np
+import pytest
+
+import rve.config.dynamic_wire  # noqa: F401  (registers the scene model)
+from rve.config.dynamic_wire import DynamicWireConfig
+from rve.scenes.dynamic_wire import SimulationAborted, build, initial_state, run, simulate
+from rve.solvers.dirk import consistent_initialization
+
+
+def config(**sections):
+    cfg = DynamicWireConfig(scene="dynamic_wire")
+    for dotted, value in sections.items():
+        sec, key = dotted.split("__")
+        setattr(getattr(cfg, sec), key, value)
+    return cfg
+
+
+def test_voltage_divider_at_rest():
+    """t = 0, wire at rest, T = 0: V is linear, V(l = 1/2) = 2/5 * 3/4 - 1/5 = 0.1 V."""
+    cfg = config()
+    model = build(cfg)
+    x, w = initial_state(model)
+    w, _ = consistent_initialization(model, x, w, 0.0, {"atol": 1e-14, "rtol": 1e-14})
+    V = model.nodal(w)[:, model.oV]
+    s = model.mesh.node_s
+    assert np.allclose(V, -0.2 + 0.4 * s / 2.0, atol=1e-13)
+    out = simulate(cfg, steps=2, record=False, stages=1)
+    assert abs(out["V_half_initial"] - 0.1) < 1e-12
+
+
+def heated_rod_config():
+    # B = 0: nothing moves; T still couples back (Seebeck, mu(T)), and the steady state of
+    # the discrete problem is exact at the nodes (P1, uniform current => uniform Joule source)
+    cfg = config(load__field_magnitude=0.0, time__stages=1, time__steps=40)
+    m = cfg.material
+    tau = m.density * m.heat_capacity * 4.0 / (np.pi**2 * m.thermal_conductivity)
+    cfg.time.t_max = 60 * tau
+    cfg.newton.atol = 1e-13  # the slowest thermal mode is ~400x weaker than the scaled residual
+    return cfg
+
+
+def test_resistively_heated_rod_reaches_the_parabola_and_ohms_law():
+    cfg = heated_rod_config()
+    out = simulate(cfg, keep_state=True, record=False)
+    st = out["_state"]
+    model, x, w = st["model"], st["x"], st["w"]
+    m = cfg.material
+    Lw = 2.0 * cfg.geometry.half_length
+    A = np.pi * cfg.fibril.radius**2
+    dV = cfg.load.voltage_right - cfg.load.voltage_left
+    E_field = dV / Lw
+    s = model.mesh.node_s
+    T_exact = m.electrical_conductivity * E_field**2 / (2 * m.thermal_conductivity) * s * (Lw - s)
+    T = model.nodal(w)[:, model.oT]
+    assert T_exact.max() > 0.5  # a real heating
+    assert np.abs(T - T_exact).max() < 1e-9 * T_exact.max()
+    # Ohm's law: I = dV sigma0 A / length (current along -e1: from +0.2 V at +L to -0.2 V)
+    I = model.axial_current(x, w)
+    assert np.allclose(I, -dV * m.electrical_conductivity * A / Lw, rtol=1e-9)
+    # the Seebeck EMF bends V away from the straight line by -S (T - 0)
+    V = model.nodal(w)[:, model.oV]
+    assert np.allclose(V, -0.2 + dV * s / Lw - m.seebeck * T, atol=1e-10)
+    # current in = current out
+    ends = model.end_currents(x, w)[0]
+    assert abs(ends[0] + ends[1]) < 1e-12 * abs(ends[0])
+
+
+def test_current_in_equals_current_out_at_steady_state_with_a_circuit():
+    """Moving wire with a resistor circuit at +L, damped to rest: the current entering at -L
+    equals the current leaving at +L, the circuit current and the current everywhere, and
+    equals (V_ext - V_left) / (R + R_wire) (the Seebeck EMF integrates to 0 with T(0) = T(L))."""
+    R = 50.0  # ohm
+    # near-critical damping of the swing (gamma / rho ~ 2 omega_1) and L-stable steps
+    cfg = config(load__circuit_resistance=R, material__damping=5e-5, time__stages=1, time__steps=60)
+    cfg.time.t_max = 0.015
+    out = simulate(cfg, keep_state=True, record=False)
+    st = out["_state"]
+    model, x, w = st["model"], st["x"], st["w"]
+    assert np.abs(w[model.mech]).max() < 1e-4  # at rest (velocities while moving: ~100 mm/ms)
+    m = cfg.material
+    A = np.pi * cfg.fibril.radius**2
+    R_wire = 2.0 / (m.electrical_conductivity * A)
+    I_exact = (cfg.load.voltage_right - cfg.load.voltage_left) / (R + R_wire)
+    ends = model.end_currents(x, w)[0]  # leaving through (-L, +L)
+    assert abs(ends[0] + ends[1]) < 1e-9 * abs(ends[1])
+    n1 = model.mesh.end_nodes(0)[1]
+    V1 = model.nodal(w)[n1, model.oV]
+    I_circuit = (V1 - cfg.load.voltage_right) / R  # leaving +L through the resistor
+    assert np.isclose(ends[1], I_circuit, rtol=1e-9)
+    # (a residual velocity v ~ 1e-4 mm/ms leaves a back-EMF ~ 1e-7 V/mm against 0.2 V/mm)
+    assert np.allclose(model.axial_current(x, w), -I_exact, rtol=1e-5)
+    assert np.isclose(ends[1], -I_exact, rtol=1e-5)
+    # the wire is bent by the Lorentz force at steady state
+    assert out["probes"]["y0"] > 1e-3
+
+
+def test_newton_is_quadratic_within_a_stage(caplog):
+    cfg = config(time__steps=100)
+    cfg.time.t_max = 4e-3 * 5 / 100
+    with caplog.at_level(logging.INFO, logger="rve.newton"):
+        out = simulate(cfg, steps=5, record=False)
+    assert out["newton"]["observed_orders_median"] > 1.8
+    assert any("rate=" in r.getMessage() for r in caplog.records)
+    res = out["newton"]["example_stage_residuals"]
+    assert len(res) >= 3 and res[-1] < 1e-8
+
+
+def test_decoupled_temperature_is_post_solved_with_fewer_dofs():
+    """alpha_mu = S = 0: T does not feed back; 'auto' drops the T dofs and solves T after the
+    run; the result matches the monolithic (mech, T, V) solve to the time-discretisation error."""
+    kw = dict(material__alpha_mu=0.0, material__seebeck=0.0, time__steps=40)
+    cfg = config(**kw)
+    cfg.time.t_max = 1e-3
+    post = simulate(cfg, record=False)
+    assert post["temperature_mode"] == "post"
+    n = cfg.mesh.elements + 1
+    assert post["dofs"]["coupled_solve"] == {"mech": 9 * n, "V": n, "total": 10 * n}
+    assert post["dofs"]["thermal_post_solve"]["total"] == n
+    cfg2 = config(**kw, couplings__temperature="coupled")
+    cfg2.time.t_max = 1e-3
+    mono = simulate(cfg2, record=False)
+    assert mono["dofs"]["coupled_solve"]["total"] == 11 * n
+    for k in ("y0", "z_half", "V_half"):
+        assert abs(post["probes"][k] - mono["probes"][k]) <= 1e-9 * max(1e-3, abs(mono["probes"][k]))
+    assert abs(post["probes"]["T_half"] - mono["probes"]["T_half"]) < 2e-3 * abs(mono["probes"]["T_half"])
+
+
+def test_post_mode_refused_when_T_feeds_back():
+    cfg = config(couplings__temperature="post")
+    with pytest.raises(ValueError, match="feeds back"):
+        simulate(cfg, steps=1)
+
+
+def test_failed_fixed_step_run_saves_last_good_state(tmp_path):
+    # backward Euler with 25 fixed steps cannot start the swing (see the stability benchmark)
+    cfg = config(time__stages=1, time__steps=25, time__step_control=False, load__field_ramp_time=0.0)
+    with pytest.raises(SimulationAborted) as info:
+        run(cfg, tmp_path)
+    msg = str(info.value)
+    assert "t = 0" in msg and "h = 0.00016" in msg and "residual history" in msg
+    data = np.load(tmp_path / "dynamic_wire_last_good_state.npz")
+    assert data["x"].shape == data["w"].shape and float(data["t"]) == 0.0
+    assert len(data["residuals"]) > 1
+    assert isinstance(info.value, SystemExit)
+
+
+def test_run_writes_history_and_summary(tmp_path):
+    import xarray as xr
+
+    cfg = config(time__steps=20)
+    cfg.time.t_max = 2e-4
+    out = run(cfg, tmp_path)
+    assert out["dofs"]["coupled_solve"]["total"] == 11 * 41
+    assert set(out["probes"]) == {"y0", "z_half", "T_half", "V_half"}
+    ds = xr.open_dataset(tmp_path / "dynamic_wire_history.nc")
+    assert ds.sizes["time"] == 21
+    assert ds["V_half"].attrs["units"] == "V" and ds["T_half"].attrs["units"] == "K"
+    assert abs(float(ds["V_half"][0]) - 0.1) < 1e-12
+    assert np.isclose(float(ds["time"][-1]), 2e-4)
+    ds.close()
+
+
+def test_config_file_loads():
+    from rve.config.loader import load_config
+
+    cfg = load_config("configs/scenes/dynamic_wire.yaml")
+    assert cfg.scene == "dynamic_wire"
+    assert np.isclose(cfg.load.field_magnitude, 1e-3)
+    assert np.isclose(cfg.material.damping, 1e-11)
+    assert np.isclose(cfg.time.t_max, 4e-3)
