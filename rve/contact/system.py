@@ -223,7 +223,7 @@ class ContactSystem:
         self._base_map = inv[: self._base_nnz]
         # local slot layout (P, m, nC, m, nC)
         slots = inv[orig].reshape(P, m, m, nC, nC).transpose(0, 1, 3, 2, 4)
-        self._slots = np.ascontiguousarray(slots).reshape(P, -1)
+        self._slots = np.ascontiguousarray(slots).reshape(P, m * nC * m * nC)
         self._matcache = {}
         self._M = self._to_union(self.base.mass())
         self._zero = self._csr(np.zeros(self._u_nnz))
