@@ -36,7 +36,10 @@ __all__ = [
 
 #: The one unit registry of the package. Offset units (degC) convert to kelvin when
 #: multiplied by a number, so ``"20 degC"`` reads as 293.15 K.
-ureg = pint.UnitRegistry(autoconvert_offset_to_baseunit=True)
+#: ``cache_folder=":auto:"`` keeps pint's parsed definitions in the user cache folder:
+#: building the registry from scratch costs ~1 s per process (measured), which dominated
+#: short Snakemake jobs.
+ureg = pint.UnitRegistry(autoconvert_offset_to_baseunit=True, cache_folder=":auto:")
 Q_ = ureg.Quantity
 
 
