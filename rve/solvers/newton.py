@@ -54,9 +54,27 @@ def convergence_rates(res) -> list:
     return out
 
 
+#: Our Jacobians are structurally symmetric with dominant diagonals (beam stiffness, mass,
+#: conduction, contact penalties). SuperLU in symmetric mode (minimum degree on A^T + A,
+#: diagonal pivots) fills about half as much as COLAMD with partial pivoting: measured on
+#: the 80-fibril weave (21,760 free dofs) 0.77 s vs 1.65 s per factorisation, 4.2 M vs
+#: 9.1 M factor entries (docs/engine.md). If a diagonal pivot breaks down or the solve is
+#: inaccurate, we fall back to COLAMD with partial pivoting.
+_SYMMETRIC = dict(permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
+_FALLBACK_RTOL = 1e-8
+
+
 def sparse_solve(J, r):
-    """Direct sparse solve J du = r (SuperLU with COLAMD ordering)."""
+    """Direct sparse solve J du = r (SuperLU; symmetric mode first, COLAMD fallback)."""
     J = sp.csc_matrix(J)
+    r = np.asarray(r, float)
+    try:
+        du = spla.splu(J, **_SYMMETRIC).solve(r)
+        rn = np.linalg.norm(r)
+        if np.all(np.isfinite(du)) and np.linalg.norm(J @ du - r) <= _FALLBACK_RTOL * max(rn, 1e-300):
+            return du
+    except RuntimeError:  # exactly singular diagonal pivot
+        pass
     return spla.spsolve(J, r, permc_spec="COLAMD")
 
 
