@@ -43,7 +43,7 @@ from .fem.assembly import DofLayout, ElementPattern
 from .fem.basis import BeamBasis
 from .fem.mesh import FibrilMesh
 from .physics.beam_forms import lorentz_force, mass_matrix
-from .physics.electric_forms import axial_current, cross, emf, lorentz_force_field, potential_equation, section_ops
+from .physics.electric_forms import axial_current, coupled_forms, cross, emf, lorentz_force_field, potential_equation, section_ops
 from .physics.elasticity import lame
 from .physics.thermal_forms import (
     capacity_matrix, conduction, joule_heating, joule_source, temperature_at_quadrature,
@@ -443,40 +443,45 @@ class BeamModel:
             Re[:, :, oT] += np.einsum("eab,eb->ea", self._KTT, Te)
             if jacobian:
                 Kw[:, :, oT, :, oT] += self._KTT
-        # --- electrics
+        # --- electrics: current conservation, Lorentz force, Joule heat (one fused kernel)
         if self.has_V:
             sig = mat.electrical_conductivity
             Bt = self.field(t)
             m = self._emf(U, Uv, Te, Ve, Bt)
-            RV, JV = potential_equation(self.ops, m, sig, jacobian)
-            Re[:, :, oV] += RV
-            if jacobian:
-                Kw[:, :, oV, :, oV] += JV["V"]
-                if JV["T"] is not None:
-                    Kw[:, :, oV, :, oT] += JV["T"]
-                if JV["x"] is not None:
-                    Kx[:, :, oV, :, :9] += JV["x"].reshape(E, nn, nn, 9)
-                    Kw[:, :, oV, :, :9] += JV["v"].reshape(E, nn, nn, 9)
-            if a["lorentz"]:
-                RL, JL = lorentz_force_field(self.ops, m, sig, Bt, jacobian)
-                Re[:, :, :9] += RL.reshape(E, nn, 9)
-                if jacobian:
-                    Kx[:, :, :9, :, :9] += JL["x"].reshape(E, nn, 9, nn, 9)
-                    Kw[:, :, :9, :, oV] += JL["V"].reshape(E, nn, 9, nn)
-                    if JL["T"] is not None:
-                        Kw[:, :, :9, :, oT] += JL["T"].reshape(E, nn, 9, nn)
-                    if JL["v"] is not None:
-                        Kw[:, :, :9, :, :9] += JL["v"].reshape(E, nn, 9, nn, 9)
+            R, J = coupled_forms(self.ops, m, sig, Bt, lorentz=a["lorentz"], joule=a["joule"],
+                                 want_tangent=jacobian)
+            Re[:, :, oV] += R["V"]
             if a["joule"]:
-                RJ, JJ = joule_heating(self.ops, m, sig, jacobian)
-                Re[:, :, oT] += RJ
-                if jacobian:
-                    Kw[:, :, oT, :, oV] += JJ["V"]
-                    if JJ["T"] is not None:
-                        Kw[:, :, oT, :, oT] += JJ["T"]
-                    if JJ["x"] is not None:
-                        Kx[:, :, oT, :, :9] += JJ["x"].reshape(E, nn, nn, 9)
-                        Kw[:, :, oT, :, :9] += JJ["v"].reshape(E, nn, nn, 9)
+                Re[:, :, oT] += R["T"]
+            if a["lorentz"]:
+                Re[:, :, :9] += R["L"].reshape(E, nn, 9)
+            if jacobian:
+                S = m.seebeck
+                n3 = nn * 9
+                rows = [(oV, J["S"][:, :nn])]
+                if a["joule"]:
+                    rows.append((oT, J["S"][:, nn:]))
+                for o, blk in rows:
+                    if m.back_emf:
+                        Kx[:, :, o, :, :9] += blk[:, :, :n3].reshape(E, nn, nn, 9)
+                        Kw[:, :, o, :, :9] += blk[:, :, n3:2 * n3].reshape(E, nn, nn, 9)
+                        bV = blk[:, :, 2 * n3:]
+                    else:
+                        bV = blk
+                    Kw[:, :, o, :, oV] += bV
+                    if S:
+                        Kw[:, :, o, :, oT] += S * bV
+                if a["lorentz"]:
+                    JL = J["L"].reshape(E, nn, 9, -1)
+                    Kx[:, :, :9, :, :9] += JL[..., :n3].reshape(E, nn, 9, nn, 9)
+                    if m.back_emf:
+                        Kw[:, :, :9, :, :9] += JL[..., n3:2 * n3].reshape(E, nn, 9, nn, 9)
+                        bV = JL[..., 2 * n3:]
+                    else:
+                        bV = JL[..., n3:]
+                    Kw[:, :, :9, :, oV] += bV
+                    if S:
+                        Kw[:, :, :9, :, oT] += S * bV
         F = self.pattern.assemble_vector(Re)
         if self._C is not None:
             F = F + self._C @ w

@@ -203,3 +203,38 @@ def test_fast_neo_hookean_matches_beam_forms():
         R1, K1, dR = neo_hookean_element_forces(model.basis, U, mu, 0.4, True, True)
         assert rel_err(R1, R0) < 1e-12 and rel_err(K1, K0) < 1e-12
         assert rel_err(dR, internal_force_dmu(model.basis, U)) < 1e-12
+
+
+@pytest.mark.parametrize("back_emf", [True, False])
+def test_fused_kernel_equals_the_separate_forms(back_emf):
+    """coupled_forms (used by the model) == potential_equation + lorentz_force_field +
+    joule_heating (the readable per-term forms), residuals and Jacobians."""
+    from rve.physics.electric_forms import coupled_forms, emf, lorentz_force_field, potential_equation
+    from rve.physics.thermal_forms import joule_heating
+
+    rng = np.random.default_rng(11)
+    model = make_model(2, True, CASES["all"])
+    x, w = random_state(model, rng)
+    U, Uv, Te, Ve = model.element_fields(x, w)
+    m = emf(model.ops, U, Uv, Te, Ve, B, seebeck=0.4, back_emf=back_emf)
+    R, J = coupled_forms(model.ops, m, 2.0, B)
+    RV, JV = potential_equation(model.ops, m, 2.0)
+    RL, JL = lorentz_force_field(model.ops, m, 2.0, B)
+    RJ, JJ = joule_heating(model.ops, m, 2.0)
+    assert rel_err(R["V"], RV) < 1e-13 and rel_err(R["L"], RL) < 1e-13 and rel_err(R["T"], RJ) < 1e-13
+    E, nn = RV.shape
+    n3 = nn * 9
+    S_V, S_T = J["S"][:, :nn], J["S"][:, nn:]
+    L = J["L"]
+    if back_emf:
+        assert rel_err(S_V[:, :, :n3], JV["x"].reshape(E, nn, n3)) < 1e-13
+        assert rel_err(S_V[:, :, n3:2 * n3], JV["v"].reshape(E, nn, n3)) < 1e-13
+        assert rel_err(S_T[:, :, :n3], JJ["x"].reshape(E, nn, n3)) < 1e-13
+        assert rel_err(L[..., n3:2 * n3], JL["v"].reshape(E, nn * 3, 3, n3)) < 1e-13
+        vcol = slice(2 * n3, None)
+    else:
+        vcol = slice(n3, None)
+    assert rel_err(S_V[:, :, -nn:], JV["V"]) < 1e-13
+    assert rel_err(S_T[:, :, -nn:], JJ["V"]) < 1e-13
+    assert rel_err(L[..., :n3], JL["x"].reshape(E, nn * 3, 3, n3)) < 1e-13
+    assert rel_err(L[..., vcol], JL["V"]) < 1e-13

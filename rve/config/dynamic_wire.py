@@ -83,7 +83,7 @@ class DynamicWireMesh(Section):
 
 
 class DynamicWireTime(Section):
-    t_max: Time = Field("2.7 us", gt=0, description="final time t_max (ms); not in Table 6.3")
+    t_max: Time = Field("2.1 us", gt=0, description="final time t_max (ms); not in Table 6.3")
     steps: Integer = Field(400, ge=1, description="nominal number of time steps")
     stages: Literal[1, 2, 3] = Field(3, description="SDIRK stages s (order s)")
     step_control: bool = Field(True, description="halve and retry failed steps (else: fixed steps, fail at once)")

@@ -205,3 +205,57 @@ def lorentz_force_field(ops: SectionOps, m: EMF, sigma0, B, want_tangent: bool =
         Y = sL[:, :, :, None] * m.Bxa[:, :, None, :]  # (E, nq, i, m)
         J["v"] = -_outer_q2(WNx, ops.Nx, Y)
     return R, J
+
+
+def coupled_forms(ops: SectionOps, m: EMF, sigma0, B, lorentz: bool = True, joule: bool = True,
+                  want_tangent: bool = True):
+    """All EMF-driven terms at once (what ``potential_equation``, ``lorentz_force_field`` and
+    ``thermal_forms.joule_heating`` compute separately), with the Jacobians formed by two
+    batched matmuls: every block is sum_q (row test function)(q) x (column factor)(q).
+
+    Returns ``(R, J)``. R: 'V' (E, nn), 'T' (E, nn) Joule part or None, 'L' (E, naf, 3) or
+    None. J (None without tangent): 'S' (E, r, C) for the scalar rows [V rows; T rows if
+    joule] and 'L' (E, naf, 3, C) for the mechanical rows, over the columns
+    C = [x (naf*3) | v (naf*3) | V (nn)] when the back-EMF is on, C = [V (nn)] otherwise;
+    the T columns are S times the V columns (de/dT_b = S de/dV_b)."""
+    E, nq = m.e.shape
+    nn = ops.nn
+    naf = ops.Nx.shape[2]
+    s = _sig(sigma0, E)
+    sW = s * ops.W  # (E, nq)
+    e = m.e
+    rho = [-sW[:, :, None] * ops.dNq]  # V rows: R_V = -sum sW dN_a e
+    if joule:
+        rho.append(-2.0 * (sW * e)[:, :, None] * ops.Nq[None])  # d/de of -sW N_a e^2
+    R = {"V": np.einsum("eqa,eq->ea", rho[0], e),
+         "T": -np.einsum("qa,eq->ea", ops.Nq, sW * e * e) if joule else None, "L": None}
+    if lorentz:
+        L = cross(m.a, np.broadcast_to(np.asarray(B, float), m.a.shape))  # a x B
+        rhoM = -sW[:, :, None] * ops.Nx  # (E, nq, naf)
+        R["L"] = np.matmul(np.swapaxes(rhoM, 1, 2), e[:, :, None] * L)  # (E, naf, 3)
+    if not want_tangent:
+        return R, None
+    cols = []
+    if m.back_emf:
+        cols.append((ops.Dx3[:, :, :, None] * m.c[:, :, None, :]).reshape(E, nq, naf * 3))
+        cols.append((ops.Nx[:, :, :, None] * m.Bxa[:, :, None, :]).reshape(E, nq, naf * 3))
+    cols.append(-ops.dNq)
+    COL = np.concatenate(cols, axis=2) if len(cols) > 1 else cols[0]
+    RHO = np.concatenate(rho, axis=2) if len(rho) > 1 else rho[0]
+    J = {"S": np.matmul(np.swapaxes(RHO, 1, 2), COL), "L": None}
+    if lorentz:
+        C = cross_matrix(B)
+        Ys = []
+        if m.back_emf:
+            X = e[:, :, None, None] * C[None, None] + L[:, :, :, None] * m.c[:, :, None, :]  # (E, nq, i, m)
+            Ys.append((ops.Dx3[:, :, None, :, None] * X[:, :, :, None, :]).reshape(E, nq, 3, naf * 3))
+            Ys.append((ops.Nx[:, :, None, :, None] * (L[:, :, :, None] * m.Bxa[:, :, None, :])[:, :, :, None, :])
+                      .reshape(E, nq, 3, naf * 3))
+        else:
+            Ys.append((ops.Dx3[:, :, None, :, None] * (e[:, :, None, None] * C[None, None])[:, :, :, None, :])
+                      .reshape(E, nq, 3, naf * 3))
+        Ys.append(-L[:, :, :, None] * ops.dNq[:, :, None, :])
+        Y = np.concatenate(Ys, axis=3)
+        J["L"] = np.matmul(np.swapaxes(rhoM, 1, 2), Y.reshape(E, nq, -1)).reshape(E, naf, 3, -1)
+        J["L_x_only"] = not m.back_emf  # then the columns are [x | V]
+    return R, J

@@ -38,6 +38,7 @@ rule dynamic_wire_reference:
         stages=DYNAMIC_WIRE["reference"]["stages"],
         steps=DYNAMIC_WIRE["reference"]["steps"],
     threads: 1
+    priority: 10  # the longest job: start it first so the series share the other core
     resources:
         mem_mb=500,
     run:
