@@ -12,7 +12,7 @@ smallest step, wall times; then per scheme the largest h at which the fixed-step
 finishes and whether every controlled run finished; and the peak memory of the process.
 
 Never fails on a slow machine; it only prints. Run:
-``python benchmarks/dynamic_wire_stability.py [--stages 1 2 3] [--steps 100 50 25 12 6]
+``python benchmarks/dynamic_wire_stability.py [--stages 1 2 3] [--steps 100 50 25 12 6 4 3]
 [--set load.field_ramp_time=0]``.
 """
 from __future__ import annotations
@@ -45,7 +45,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default="configs/scenes/dynamic_wire.yaml")
     ap.add_argument("--stages", type=int, nargs="+", default=[1, 2, 3])
-    ap.add_argument("--steps", type=int, nargs="+", default=[100, 50, 25, 12, 6])
+    ap.add_argument("--steps", type=int, nargs="+", default=[100, 50, 25, 12, 6, 4, 3])
     ap.add_argument("--set", dest="overrides", action="append", default=[],
                     help="config override, e.g. --set load.field_ramp_time=0 (the thesis's step switch-on)")
     args = ap.parse_args()
