@@ -457,28 +457,22 @@ class BeamModel:
                 Re[:, :, :9] += R["L"].reshape(E, nn, 9)
             if jacobian:
                 S = m.seebeck
-                n3 = nn * 9
-                rows = [(oV, J["S"][:, :nn])]
+                rows = [(oV, slice(0, nn))]
                 if a["joule"]:
-                    rows.append((oT, J["S"][:, nn:]))
-                for o, blk in rows:
-                    if m.back_emf:
-                        Kx[:, :, o, :, :9] += blk[:, :, :n3].reshape(E, nn, nn, 9)
-                        Kw[:, :, o, :, :9] += blk[:, :, n3:2 * n3].reshape(E, nn, nn, 9)
-                        bV = blk[:, :, 2 * n3:]
-                    else:
-                        bV = blk
+                    rows.append((oT, slice(nn, 2 * nn)))
+                for o, sl in rows:
+                    if J["Sx"] is not None:
+                        Kx[:, :, o, :, :9] += J["Sx"][:, sl].reshape(E, nn, nn, 9)
+                        Kw[:, :, o, :, :9] += J["Sv"][:, sl].reshape(E, nn, nn, 9)
+                    bV = J["SV"][:, sl]
                     Kw[:, :, o, :, oV] += bV
                     if S:
                         Kw[:, :, o, :, oT] += S * bV
                 if a["lorentz"]:
-                    JL = J["L"].reshape(E, nn, 9, -1)
-                    Kx[:, :, :9, :, :9] += JL[..., :n3].reshape(E, nn, 9, nn, 9)
-                    if m.back_emf:
-                        Kw[:, :, :9, :, :9] += JL[..., n3:2 * n3].reshape(E, nn, 9, nn, 9)
-                        bV = JL[..., 2 * n3:]
-                    else:
-                        bV = JL[..., n3:]
+                    Kx[:, :, :9, :, :9] += J["Lx"].reshape(E, nn, 9, nn, 9)
+                    if J["Lv"] is not None:
+                        Kw[:, :, :9, :, :9] += J["Lv"].reshape(E, nn, 9, nn, 9)
+                    bV = J["LV"].reshape(E, nn, 9, nn)
                     Kw[:, :, :9, :, oV] += bV
                     if S:
                         Kw[:, :, :9, :, oT] += S * bV

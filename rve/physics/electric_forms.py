@@ -210,24 +210,27 @@ def lorentz_force_field(ops: SectionOps, m: EMF, sigma0, B, want_tangent: bool =
 def coupled_forms(ops: SectionOps, m: EMF, sigma0, B, lorentz: bool = True, joule: bool = True,
                   want_tangent: bool = True):
     """All EMF-driven terms at once (what ``potential_equation``, ``lorentz_force_field`` and
-    ``thermal_forms.joule_heating`` compute separately), with the Jacobians formed by two
-    batched matmuls: every block is sum_q (row test function)(q) x (column factor)(q).
+    ``thermal_forms.joule_heating`` compute separately), the Jacobians by three batched
+    matmuls over the quadrature points: every block is sum_q (row test function x column
+    basis function)(q) x (coefficient)(q).
 
     Returns ``(R, J)``. R: 'V' (E, nn), 'T' (E, nn) Joule part or None, 'L' (E, naf, 3) or
-    None. J (None without tangent): 'S' (E, r, C) for the scalar rows [V rows; T rows if
-    joule] and 'L' (E, naf, 3, C) for the mechanical rows, over the columns
-    C = [x (naf*3) | v (naf*3) | V (nn)] when the back-EMF is on, C = [V (nn)] otherwise;
-    the T columns are S times the V columns (de/dT_b = S de/dV_b)."""
+    None. J (None without tangent), for the scalar rows S = [V rows; T rows if joule]
+    (r = nn or 2 nn of them) and the mechanical rows L:
+    'Sx', 'Sv' (E, r, naf, 3) (None without back-EMF), 'SV' (E, r, nn),
+    'Lx' (E, naf, 3, naf, 3), 'Lv' (same, None without back-EMF), 'LV' (E, naf, 3, nn)
+    (None without lorentz); the T columns are S times the V columns (de/dT_b = S de/dV_b)."""
     E, nq = m.e.shape
     nn = ops.nn
     naf = ops.Nx.shape[2]
     s = _sig(sigma0, E)
     sW = s * ops.W  # (E, nq)
     e = m.e
-    rho = [-sW[:, :, None] * ops.dNq]  # V rows: R_V = -sum sW dN_a e
+    rho = -sW[:, :, None] * ops.dNq  # V rows: R_V = -sum sW dN_a e
     if joule:
-        rho.append(-2.0 * (sW * e)[:, :, None] * ops.Nq[None])  # d/de of -sW N_a e^2
-    R = {"V": np.einsum("eqa,eq->ea", rho[0], e),
+        rho = np.concatenate([rho, -2.0 * (sW * e)[:, :, None] * ops.Nq[None]], axis=2)  # d/de of -sW N_a e^2
+    r = rho.shape[2]
+    R = {"V": np.einsum("eqa,eq->ea", rho[:, :, :nn], e),
          "T": -np.einsum("qa,eq->ea", ops.Nq, sW * e * e) if joule else None, "L": None}
     if lorentz:
         L = cross(m.a, np.broadcast_to(np.asarray(B, float), m.a.shape))  # a x B
@@ -235,27 +238,40 @@ def coupled_forms(ops: SectionOps, m: EMF, sigma0, B, lorentz: bool = True, joul
         R["L"] = np.matmul(np.swapaxes(rhoM, 1, 2), e[:, :, None] * L)  # (E, naf, 3)
     if not want_tangent:
         return R, None
-    cols = []
-    if m.back_emf:
-        cols.append((ops.Dx3[:, :, :, None] * m.c[:, :, None, :]).reshape(E, nq, naf * 3))
-        cols.append((ops.Nx[:, :, :, None] * m.Bxa[:, :, None, :]).reshape(E, nq, naf * 3))
-    cols.append(-ops.dNq)
-    COL = np.concatenate(cols, axis=2) if len(cols) > 1 else cols[0]
-    RHO = np.concatenate(rho, axis=2) if len(rho) > 1 else rho[0]
-    J = {"S": np.matmul(np.swapaxes(RHO, 1, 2), COL), "L": None}
+    J = {"Sx": None, "Sv": None, "SV": None, "Lx": None, "Lv": None, "LV": None}
+    tr = lambda A: np.swapaxes(A, 1, 2)  # noqa: E731
+    # V columns: d e / d V_b = -dN_b (scalar rows), -L_i dN_b (mechanical rows)
     if lorentz:
+        left = np.concatenate([rho, rhoM], axis=2)  # (E, nq, r + naf)
+        right = np.concatenate([-ops.dNq, (-L[:, :, :, None] * ops.dNq[:, :, None, :]).reshape(E, nq, 3 * nn)], axis=2)
+        KV = np.matmul(tr(left), right)  # (E, r + naf, nn + 3 nn)
+        J["SV"] = KV[:, :r, :nn]
+        J["LV"] = KV[:, r:, nn:].reshape(E, naf, 3, nn)
         C = cross_matrix(B)
-        Ys = []
-        if m.back_emf:
-            X = e[:, :, None, None] * C[None, None] + L[:, :, :, None] * m.c[:, :, None, :]  # (E, nq, i, m)
-            Ys.append((ops.Dx3[:, :, None, :, None] * X[:, :, :, None, :]).reshape(E, nq, 3, naf * 3))
-            Ys.append((ops.Nx[:, :, None, :, None] * (L[:, :, :, None] * m.Bxa[:, :, None, :])[:, :, :, None, :])
-                      .reshape(E, nq, 3, naf * 3))
+        X = e[:, :, None, None] * C[None, None]  # d(e L_i)/da_m at fixed e, (E, nq, i, m)
+    else:
+        J["SV"] = np.matmul(tr(rho), -ops.dNq)
+    # x columns: d e / d u_(b,m) = c_m Dx3_b; v columns: Bxa_m Nx_b
+    if m.back_emf:
+        if lorentz:
+            X = X + L[:, :, :, None] * m.c[:, :, None, :]
+            PD = np.concatenate([(rho[:, :, :, None] * ops.Dx3[:, :, None, :]).reshape(E, nq, r * naf),
+                                 (rhoM[:, :, :, None] * ops.Dx3[:, :, None, :]).reshape(E, nq, naf * naf)], axis=2)
+            PN = np.concatenate([(rho[:, :, :, None] * ops.Nx[:, :, None, :]).reshape(E, nq, r * naf),
+                                 (rhoM[:, :, :, None] * ops.Nx[:, :, None, :]).reshape(E, nq, naf * naf)], axis=2)
+            Kx = np.matmul(tr(PD), np.concatenate([m.c, X.reshape(E, nq, 9)], axis=2))  # (E, r naf + naf^2, 12)
+            Y = (L[:, :, :, None] * m.Bxa[:, :, None, :]).reshape(E, nq, 9)
+            Kv = np.matmul(tr(PN), np.concatenate([m.Bxa, Y], axis=2))
+            J["Sx"] = Kx[:, :r * naf, :3].reshape(E, r, naf, 3)
+            J["Sv"] = Kv[:, :r * naf, :3].reshape(E, r, naf, 3)
+            J["Lx"] = Kx[:, r * naf:, 3:].reshape(E, naf, naf, 3, 3).transpose(0, 1, 3, 2, 4)
+            J["Lv"] = Kv[:, r * naf:, 3:].reshape(E, naf, naf, 3, 3).transpose(0, 1, 3, 2, 4)
         else:
-            Ys.append((ops.Dx3[:, :, None, :, None] * (e[:, :, None, None] * C[None, None])[:, :, :, None, :])
-                      .reshape(E, nq, 3, naf * 3))
-        Ys.append(-L[:, :, :, None] * ops.dNq[:, :, None, :])
-        Y = np.concatenate(Ys, axis=3)
-        J["L"] = np.matmul(np.swapaxes(rhoM, 1, 2), Y.reshape(E, nq, -1)).reshape(E, naf, 3, -1)
-        J["L_x_only"] = not m.back_emf  # then the columns are [x | V]
+            PD = (rho[:, :, :, None] * ops.Dx3[:, :, None, :]).reshape(E, nq, r * naf)
+            PN = (rho[:, :, :, None] * ops.Nx[:, :, None, :]).reshape(E, nq, r * naf)
+            J["Sx"] = np.matmul(tr(PD), m.c).reshape(E, r, naf, 3)
+            J["Sv"] = np.matmul(tr(PN), m.Bxa).reshape(E, r, naf, 3)
+    elif lorentz:
+        PD = (rhoM[:, :, :, None] * ops.Dx3[:, :, None, :]).reshape(E, nq, naf * naf)
+        J["Lx"] = np.matmul(tr(PD), X.reshape(E, nq, 9)).reshape(E, naf, naf, 3, 3).transpose(0, 1, 3, 2, 4)
     return R, J
