@@ -20,6 +20,7 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -64,10 +65,39 @@ _SYMMETRIC = dict(permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True, D
 _FALLBACK_RTOL = 1e-8
 
 
+#: Single fibrils (and anything else whose node-interleaved matrix is narrowly banded) go
+#: to LAPACK's banded LU: for the 451-dof dynamic wire ~10x cheaper than SuperLU.
+_BANDED_MAX_BANDWIDTH = 48
+
+
+def _banded_solve(J, r):
+    """Solve with LAPACK gbsv if J is narrowly banded; None otherwise."""
+    n = J.shape[0]
+    if J.nnz == 0 or n < 8:
+        return None
+    # J is CSC without duplicate entries: columns from indptr, rows in indices
+    cols = np.repeat(np.arange(n), np.diff(J.indptr))
+    d = cols - J.indices
+    lo, up = int(max(0, -d.min())), int(max(0, d.max()))
+    if max(lo, up) > _BANDED_MAX_BANDWIDTH:
+        return None
+    ab = np.zeros((lo + up + 1, n))
+    ab[up - d, cols] = J.data
+    try:
+        return scipy.linalg.solve_banded((lo, up), ab, r, check_finite=False)
+    except np.linalg.LinAlgError:
+        return None
+
+
 def sparse_solve(J, r):
-    """Direct sparse solve J du = r (SuperLU; symmetric mode first, COLAMD fallback)."""
+    """Direct sparse solve J du = r: banded LAPACK for narrow bands, else SuperLU in
+    symmetric mode, with COLAMD + partial pivoting as the fallback."""
     J = sp.csc_matrix(J)
+    J.sum_duplicates()
     r = np.asarray(r, float)
+    du = _banded_solve(J, r)
+    if du is not None and np.all(np.isfinite(du)):
+        return du
     try:
         du = spla.splu(J, **_SYMMETRIC).solve(r)
         rn = np.linalg.norm(r)
