@@ -476,9 +476,9 @@ class BeamModel:
                     Kw[:, :, :9, :, oV] += bV
                     if S:
                         Kw[:, :, :9, :, oT] += S * bV
+        if self._Ce is not None:  # damping -gamma v, element by element (no sparse mat-vec)
+            Re[:, :, :9] += np.matmul(self._Ce.reshape(E, nn * 9, nn * 9), Uv.reshape(E, nn * 9, 1)).reshape(E, nn, 9)
         F = self.pattern.assemble_vector(Re)
-        if self._C is not None:
-            F = F + self._C @ w
         if self.circuits:
             F[self._circ_idx] += self._circ_r * w[self._circ_idx] + self._circ_J
         if self._rs is not None:
