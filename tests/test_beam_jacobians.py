@@ -2,38 +2,10 @@
 import numpy as np
 import pytest
 
-from rve.fem.mesh import Fibril, fibril_mesh, straight_fibril, orthonormal_directors
+from rve.fem.mesh import fibril_mesh, straight_fibril
 from rve.model import BeamMaterial, BeamModel, PrescribedCurrent
+from rve.testing import fd_jacobian, helix_fibril, rel_err
 from rve.physics.elasticity import neo_hookean_energy, neo_hookean_stress, neo_hookean_tangent
-
-
-def fd_jacobian(fun, u, eps=1e-6):
-    f0 = fun(u)
-    J = np.zeros((f0.size, u.size))
-    for k in range(u.size):
-        up = u.copy(); up[k] += eps
-        um = u.copy(); um[k] -= eps
-        J[:, k] = (fun(up) - fun(um)) / (2 * eps)
-    return J
-
-
-def rel_err(A, B):
-    return np.abs(A - B).max() / max(np.abs(B).max(), 1e-300)
-
-
-def helix_fibril(radius=0.1):
-    """A curved natural configuration (quarter turn of a helix) with Frenet-like directors."""
-    a, c = 1.0, 0.5
-
-    def frame(s):
-        s = np.asarray(s, float)
-        r0 = np.stack([a * np.cos(s), a * np.sin(s), c * s], 1)
-        t = np.stack([-a * np.sin(s), a * np.cos(s), np.full_like(s, c)], 1)
-        t /= np.linalg.norm(t, axis=1, keepdims=True)
-        g1, g2 = orthonormal_directors(t)
-        return r0, g1, g2
-
-    return Fibril(length=1.5, radius=radius, frame=frame)
 
 
 def random_state(model, rng, scale=0.01):

@@ -8,22 +8,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from rve.fem.mesh import Fibril, fibril_mesh, orthonormal_directors, straight_fibril
+from rve.fem.mesh import fibril_mesh, straight_fibril
+from rve.testing import fd_jacobian, helix_fibril, rel_err
 from rve.model import BeamMaterial, BeamModel, CircuitBC, Couplings, DirichletBC, feedback_from_temperature
-
-
-def helix_fibril(radius=0.1):
-    a, c = 1.0, 0.5
-
-    def frame(s):
-        s = np.asarray(s, float)
-        r0 = np.stack([a * np.cos(s), a * np.sin(s), c * s], 1)
-        t = np.stack([-a * np.sin(s), a * np.cos(s), np.full_like(s, c)], 1)
-        t /= np.linalg.norm(t, axis=1, keepdims=True)
-        g1, g2 = orthonormal_directors(t)
-        return r0, g1, g2
-
-    return Fibril(length=1.5, radius=radius, frame=frame)
 
 
 MAT = BeamMaterial(youngs_modulus=3.0, poisson_ratio=0.2, density=1.0, damping=0.3,
@@ -68,25 +55,12 @@ def random_state(model, rng, scale=0.02):
     return x, w
 
 
-def fd_columns(fun, u, cols, eps=1e-6):
-    out = np.zeros((fun(u).size, len(cols)))
-    for j, k in enumerate(cols):
-        up = u.copy(); up[k] += eps
-        um = u.copy(); um[k] -= eps
-        out[:, j] = (fun(up) - fun(um)) / (2 * eps)
-    return out
-
-
-def rel_err(A, B):
-    return np.abs(A - B).max() / max(np.abs(B).max(), 1e-300)
-
-
 def check_jacobians(model, x, w, tol=1e-6):
     F, Fx, Fw = model.evaluate(x, w, 0.0)
     Fx, Fw = Fx.toarray(), Fw.toarray()
     mech = np.flatnonzero(model.mech)
-    Jx = fd_columns(lambda u: model.evaluate(u, w, 0.0, jacobian=False)[0], x, mech)
-    Jw = fd_columns(lambda u: model.evaluate(x, u, 0.0, jacobian=False)[0], w, np.arange(model.n))
+    Jx = fd_jacobian(lambda u: model.evaluate(u, w, 0.0, jacobian=False)[0], x, mech)
+    Jw = fd_jacobian(lambda u: model.evaluate(x, u, 0.0, jacobian=False)[0], w, np.arange(model.n))
     assert rel_err(Fx[:, mech], Jx) < tol, rel_err(Fx[:, mech], Jx)
     assert rel_err(Fw, Jw) < tol, rel_err(Fw, Jw)
     # and per field block (so that a small block cannot hide behind a large one)
@@ -190,7 +164,8 @@ def test_row_scaled_model_is_the_scaled_system():
 
 
 def test_fast_neo_hookean_matches_beam_forms():
-    from rve.model import neo_hookean_element_forces
+    from rve.testing import fd_jacobian, helix_fibril, rel_err
+from rve.model import neo_hookean_element_forces
     from rve.physics.beam_forms import internal_force, internal_force_dmu
 
     rng = np.random.default_rng(5)
