@@ -50,6 +50,9 @@ class FabricContact(Section):
     margin: Length = Field("0.1 mm", ge=0, description="search cutoff = 2R + margin")
     g_eps: Dimensionless = Field(1e-3, ge=0, description="Hertz width regularisation, fraction of R")
     recompute_closest: bool = Field(True, description="recompute s- at every evaluation (else frozen per rebuild)")
+    onset: Dimensionless = Field(
+        0.0, ge=0, description="width of the C2 onset of the penalty law, fraction of R (0: the linear law P* g); "
+                               "the law of the relaxed state")
 
 
 class FabricMesh(Section):
@@ -60,6 +63,17 @@ class FabricMesh(Section):
 
 
 class FabricRelaxation(Section):
+    method: Literal["energy", "dynamic"] = Field(
+        "energy", description="energy: static energy minimisation (trust-region Newton with inertia check, "
+                              "continuation in the penalty onset); dynamic: damped backward Euler + capped Newton")
+    onset_continuation: list[Dimensionless] = Field(
+        [0.05, 0.01], description="energy: onset widths (fractions of R) of the stages before the final one, "
+                                  "which uses contact.onset")
+    coarse_elements: Optional[Integer] = Field(
+        None, ge=1, description="energy: mesh sequencing, relax first on this many elements per fibril, "
+                                "interpolate, finish on mesh.elements (null: target mesh only)")
+    energy_max_iter: Integer = Field(300, ge=1, description="energy: Newton iterations per stage")
+    wall_budget_s: Optional[float] = Field(None, gt=0, description="energy: stop after this wall time (s)")
     damping: DampingCoefficient = Field("20 N*ms/mm^4", ge=0, description="volumetric damping gamma (heavy)")
     duration: Time = Field("20 ms", gt=0, description="dynamic relaxation time")
     steps: Integer = Field(40, ge=1, description="backward-Euler steps of the dynamic relaxation")

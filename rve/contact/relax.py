@@ -35,11 +35,15 @@ from typing import Callable, Optional
 
 import numpy as np
 
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
 from ..solvers.dirk import IntegrationFailure, integrate
 from ..solvers.newton import NewtonResult, convergence_rates, sparse_solve
 from ..solvers.static import StaticProblem, pseudo_transient_solve
 
-__all__ = ["RelaxSettings", "RelaxResult", "relax_to_equilibrium", "capped_newton"]
+__all__ = ["RelaxSettings", "RelaxResult", "relax_to_equilibrium", "capped_newton", "minimize_energy",
+           "MinimizeResult", "factor_inertia"]
 
 log = logging.getLogger("rve.contact.relax")
 
@@ -59,6 +63,10 @@ class RelaxSettings:
     static_rounds: int = 4
     static_max_iter: int = 40
     step_cap: Optional[float] = None
+    method: str = "dynamic"
+    onset_schedule: tuple = (0.0,)
+    energy_max_iter: int = 300
+    time_budget: Optional[float] = None
 
 
 @dataclass
@@ -85,6 +93,10 @@ def _free_residual(system, x, t):
 
 def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Optional[Callable] = None,
                          t0: float = 0.0) -> RelaxResult:
+    if settings.method == "energy":
+        return _relax_energy(system, x, settings, on_rebuild, t0)
+    if settings.method != "dynamic":
+        raise ValueError(f"unknown relaxation method {settings.method!r} (energy, dynamic)")
     s = settings
     t_start = time.perf_counter()
     x = np.array(x, float, copy=True)
@@ -176,6 +188,56 @@ def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Opti
     return out
 
 
+def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:
+    """Continuation in the penalty onset: ``minimize_energy`` with the onset width set to
+    each entry of ``s.onset_schedule`` in turn (fractions of R; the last is the law of the
+    result), each stage from the previous one's minimum. A map rebuild at the end checks
+    that no pair came into contact unseen (cannot happen under the step guard; logged)."""
+    t_start = time.perf_counter()
+    x = np.array(x, float, copy=True)
+    out = RelaxResult(x, np.zeros(system.n), float(t0))
+    sched = [float(v) for v in s.onset_schedule] or [float(system.params.onset)]
+    system.rebuild(x)
+    for k, eps in enumerate(sched):
+        system.set_onset(eps)
+        budget = None if s.time_budget is None else max(1.0, s.time_budget - (time.perf_counter() - t_start))
+        xs, _, res = minimize_energy(system, x, t0, atol=s.static_atol, rtol=s.static_rtol,
+                                     max_iter=s.energy_max_iter, step_cap=s.step_cap, label=f"onset={eps:g}R",
+                                     time_budget=budget, sigma0=None if k == 0 else 0.0)
+        x = xs
+        st = system.contact_state(x)
+        rec = {"phase": "static", "stage": k + 1, "method": "minimize_energy", "onset_over_R": eps,
+               "converged": bool(res.converged), "newton_iterations": int(res.iterations),
+               "factorizations": int(res.factorizations), "rejections": int(res.rejections),
+               "map_rebuilds": int(res.rebuilds), "negative_pivots": int(res.negative_pivots),
+               "residuals": [float(v) for v in res.residuals], "energies": [float(v) for v in res.energies],
+               "sigmas": [float(v) for v in res.sigmas], "steps": [float(v) for v in res.steps],
+               "pairs": st["pairs"], "active_pairs": st["active_pairs"],
+               "max_overlap_over_R": st["max_overlap_over_R"], "wall_s": time.perf_counter() - t_start,
+               "reason": res.reason}
+        out.history.append(rec)
+        out.static_newton_iterations += res.iterations
+        out.static_result = res
+        out.static_converged = bool(res.converged)
+        log.info("onset stage %d (%gR): converged=%s its=%d factorizations=%d |F|=%.3e Pi=%.10g wall=%.1f s",
+                 k + 1, eps, res.converged, res.iterations, res.factorizations, res.residuals[-1],
+                 res.energies[-1], rec["wall_s"])
+        if on_rebuild is not None:
+            on_rebuild(k + 1, float(t0), x, np.zeros(system.n))
+        if not res.converged and res.reason.startswith("time budget"):
+            break
+    before = set(zip(*_active_keys(system, x)))
+    system.rebuild(x)
+    after = set(zip(*_active_keys(system, x)))
+    if not after <= before:
+        log.warning("final map rebuild found %d active pairs the map had missed", len(after - before))
+        out.static_converged = False
+    out.timings["dynamic"] = 0.0
+    out.timings["static"] = out.timings["total"] = time.perf_counter() - t_start
+    out.x, out.w = x, np.zeros(system.n)
+    return out
+
+
 def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20,
                   max_rejections=12):
     """Static Newton on ``F(x, 0, t) = 0`` with the centroid motion per iteration capped
@@ -261,3 +323,175 @@ def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.0
 def _active_keys(system, x):
     act = system.active_pairs(x)
     return system.map.e_plus[act], system.map.e_minus[act]
+
+
+# ----------------------------------------------------------------------------- energy minimiser
+#: SuperLU as a symmetric factorisation: minimum degree on A^T + A, diagonal pivots only.
+#: For a symmetric matrix the diagonal of U is then the D of A = L D L^T (up to rounding),
+#: so the number of negative entries is the number of negative eigenvalues (Sylvester).
+_SYM = dict(permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
+
+
+def factor_inertia(A):
+    """Factorise the symmetric sparse ``A`` (SuperLU, symmetric mode, diagonal pivots) and
+    count its negative eigenvalues from the pivots. Returns ``(lu, n_negative)``;
+    ``(None, -1)`` when a pivot is exactly zero."""
+    try:
+        lu = spla.splu(sp.csc_matrix(A), **_SYM)
+    except RuntimeError:
+        return None, -1
+    d = lu.U.diagonal()
+    if not np.all(np.isfinite(d)):
+        return None, -1
+    return lu, int(np.count_nonzero(d < 0.0))
+
+
+@dataclass
+class MinimizeResult(NewtonResult):
+    """``NewtonResult`` of ``minimize_energy`` plus its per-iteration record:
+    ``energies`` (N mm), ``sigmas`` (regularisation used by each accepted step),
+    ``steps`` (step fraction alpha), ``factorizations``, ``rejections``, ``rebuilds``,
+    ``negative_pivots`` (inertia of the last unregularised tangent; 0: a local minimum)."""
+
+    energies: list = field(default_factory=list)
+    sigmas: list = field(default_factory=list)
+    steps: list = field(default_factory=list)
+    factorizations: int = 0
+    rejections: int = 0
+    rebuilds: int = 0
+    negative_pivots: int = -1
+
+
+def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
+                    label="minimize", time_budget=None):
+    """Static equilibrium of a mechanics-only ``ContactSystem`` as a **local minimum** of its
+    potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
+    with a Levenberg-Marquardt trust region, an inertia check and the energy as merit.
+
+    Each iteration solves ``(K + sigma M) du = -F`` on the free dofs (K the exact tangent,
+    M the mass matrix as the metric), after raising sigma until the factorised matrix has no
+    negative pivot (so du is a descent direction even where K is indefinite: the stacks of
+    frictionless fibrils pass saddles on their way down); the centroid motion of a step is
+    capped at ``step_cap`` (default half the search margin) and the contact map is rebuilt
+    before a trial that would carry a centroid more than half the margin from where the map
+    was built (no contact is jumped over; the energy does not depend on the map under that
+    guard). A trial is accepted when the energy decreases (within rounding, the residual
+    must decrease); sigma follows the agreement ``ratio`` of the actual and the predicted
+    (quadratic model) energy change: /4 after a good full step, down to 0 (pure Newton,
+    quadratic convergence), x4 after a poor or rejected one; ``sigma0`` is the first sigma
+    (default 1e-6 of the stiffest mode's; 0 to start with plain Newton from a near solution). Converged when
+    ``|F_free| <= atol`` or ``<= rtol |F_0|``.
+
+    Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.contact.relax``.
+    """
+    t0 = time.perf_counter()
+    w0 = np.zeros(system.n)
+    lay = system.layout
+    guard = 0.5 * float(system.params.margin)
+    cap = guard if step_cap is None else float(step_cap)
+    if cap > guard:
+        raise ValueError(f"step_cap {cap} exceeds half the search margin {guard}")
+
+    def setup(xc):
+        prob = StaticProblem(system, xc, w0, t)
+        cen = np.flatnonzero(prob.free_mech & np.isin(prob.free % lay.block, (0, 1, 2)))
+        return prob, cen, prob.fd.matrix(system.mass())
+
+    x = np.array(x, float, copy=True)
+    if system.max_displacement_since_rebuild(x) > 0.0:
+        system.rebuild(x)
+    prob, cen, Mff = setup(x)
+    u = prob.u0()
+    r, J = prob(u)
+    rn = float(np.linalg.norm(r))
+    Pi = float(system.energy(x))
+    out = MinimizeResult(u, False, 0, [rn], energies=[Pi])
+    r0 = rn
+    dK, dM = np.abs(J.diagonal()).max(), np.abs(Mff.diagonal()).max()
+    scale = float(dK / dM) if dM > 0 else 1.0  # sigma of the stiffest mode
+    sig_floor = 1e-8 * scale
+    sigma = 1e-6 * scale if sigma0 is None else float(sigma0)
+    it = 0
+    while True:
+        if rn <= atol or rn <= rtol * r0:
+            out.converged = True
+            break
+        if it >= max_iter:
+            out.reason = f"no convergence in {max_iter} iterations (|F| = {rn:.3e})"
+            break
+        if time_budget is not None and time.perf_counter() - t0 > time_budget:
+            out.reason = f"time budget {time_budget:.0f} s spent (|F| = {rn:.3e})"
+            break
+        if not np.isfinite(rn):
+            out.reason = "non-finite residual"
+            break
+        # factorise K + sigma M, raising sigma until it is positive definite
+        for _ in range(60):
+            lu, neg = factor_inertia(J if sigma == 0.0 else J + sigma * Mff)
+            out.factorizations += 1
+            if sigma == 0.0:
+                out.negative_pivots = neg
+            if neg == 0:
+                break
+            sigma = max(4.0 * sigma, sig_floor)
+        else:
+            out.reason = "no positive definite regularisation found"
+            break
+        du = -lu.solve(r)
+        slope = float(r @ du)
+        quad = float(du @ (J @ du))
+        move = float(np.abs(du[cen]).max()) * np.sqrt(3.0) if cen.size else 0.0
+        alpha = min(1.0, cap / move) if move > 0 else 1.0
+        x_cur = prob.state(u)[0]
+        ut = u + alpha * du
+        xt = prob.state(ut)[0]
+        rebuilt = False
+        if system.max_displacement_since_rebuild(xt) > guard:
+            system.rebuild(x_cur)  # same energy at x_cur; the trial is within the guard of it
+            out.rebuilds += 1
+            rebuilt = True
+        Pt = float(system.energy(xt))
+        pred = alpha * slope + 0.5 * alpha * alpha * quad
+        ratio = (Pt - Pi) / pred if pred < 0 else -1.0
+        noise = 1e-12 * max(1.0, abs(Pi))
+        accept = Pt < Pi - noise
+        if rebuilt:
+            prob, cen, Mff = setup(x_cur)
+            u = prob.u0()
+            ut = u + alpha * du
+        if accept or (np.isfinite(Pt) and Pt <= Pi + noise):
+            rt, Jt = prob(ut)
+            rtn = float(np.linalg.norm(rt))
+            if not accept:
+                accept = rtn < rn  # energy change lost in rounding: the residual decides
+        if not accept:
+            out.rejections += 1
+            sigma = max(4.0 * sigma, sig_floor)
+            log.info("%s it=%d rejected: dPi=%.3e predicted %.3e, sigma -> %.3g", label, it + 1, Pt - Pi, pred,
+                     sigma)
+            if rebuilt:
+                r, J = prob(u)  # same values, new structure
+            continue
+        it += 1
+        dPi = Pt - Pi
+        u, r, J, rn, Pi = ut, rt, Jt, rtn, Pt
+        out.residuals.append(rn)
+        out.energies.append(Pi)
+        out.sigmas.append(sigma)
+        out.steps.append(alpha)
+        if ratio > 0.75 and alpha == 1.0:
+            sigma = sigma / 8.0 if sigma / 8.0 > sig_floor else 0.0
+        elif ratio > 0.5 and alpha == 1.0:
+            sigma = sigma / 4.0 if sigma / 4.0 > sig_floor else 0.0
+        elif ratio < 0.25:
+            sigma = max(4.0 * sigma, sig_floor)
+        elif alpha < 1.0:
+            sigma = max(2.0 * sigma, sig_floor)
+        rates = convergence_rates(out.residuals)
+        log.info("%s it=%d |F|=%.3e Pi=%.12e dPi=%.2e ratio=%.2f step=%.3g sigma=%.3g pairs=%d rate=%s wall=%.1f",
+                 label, it, rn, Pi, dPi, ratio, alpha, out.sigmas[-1], system.map.n_pairs,
+                 f"{rates[-1]:.2f}" if rates else "-", time.perf_counter() - t0)
+    out.u = u
+    out.iterations = it
+    xs, ws = prob.state(u)
+    return xs, ws, out

@@ -27,6 +27,12 @@ node blocks) and implements the ``DynamicSystem`` protocol:
   (if V and ``conductance > 0``), exact tangents.
 * Diagnostics: ``contact_state(x)`` (overlaps, active pairs/points, widths) and
   ``fibril_contact_forces(x)`` (the contact force on every fibril, (n_fibrils, 3)).
+* ``energy(x)``: the total potential of a mechanics-only system, beam strain energy
+  (``beam_strain_energy``) + penalty energy (``contact_energy``); ``F(x, 0)`` is its exact
+  gradient (the merit function of the static minimiser ``rve.contact.relax.minimize_energy``).
+* ``onset`` (mm): width of the C² onset of the penalty law (``contact_forms.penalty_law``);
+  ``params.onset`` gives it as a fraction of the smallest radius, ``set_onset(fraction)``
+  changes it in place (a continuation parameter; the map and pattern stay).
 * ``stats``: counts and accumulated wall times of rebuilds and contact assemblies.
 
 Everything else (``mesh``, ``layout``, ``nodal``, ``end_currents``, ...) is forwarded
@@ -42,11 +48,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..physics.contact_forms import (
-    chord_geometry, effective_modulus, effective_radius, hertz_kappa, penalty_forces, scalar_jump,
+    chord_gaps, chord_geometry, effective_modulus, effective_radius, hertz_kappa, penalty_energy, penalty_forces,
+    penalty_law, scalar_jump,
 )
 from .search import ContactMap, build_contact_map
 
-__all__ = ["ContactParams", "ContactSystem"]
+__all__ = ["ContactParams", "ContactSystem", "beam_strain_energy"]
 
 
 @dataclass(frozen=True)
@@ -60,7 +67,8 @@ class ContactParams:
     ``margin`` added to R+ + R- for the search cutoff (covers motion between rebuilds);
     ``g_eps`` the Hertz regularisation as a fraction of the smallest radius;
     ``recompute_closest`` recomputes s- at every evaluation (else frozen per rebuild);
-    ``rebuild_every`` is advisory (drivers read it)."""
+    ``rebuild_every`` is advisory (drivers read it); ``onset`` the width of the C² onset
+    of the penalty law as a fraction of the smallest radius (0: the linear law P* g)."""
 
     penalty: float
     youngs_modulus: Optional[float] = None
@@ -71,6 +79,7 @@ class ContactParams:
     g_eps: float = 1e-3
     recompute_closest: bool = True
     rebuild_every: int = 5
+    onset: float = 0.0
 
     def __post_init__(self):
         if not self.penalty > 0:
@@ -83,6 +92,8 @@ class ContactParams:
             raise ValueError(f"margin must be >= 0, got {self.margin}")
         if not self.g_eps >= 0:
             raise ValueError(f"g_eps must be >= 0, got {self.g_eps}")
+        if not self.onset >= 0:
+            raise ValueError(f"onset must be >= 0, got {self.onset}")
 
 
 def _timer(stats, key, t0):
@@ -114,6 +125,7 @@ class ContactSystem:
         self.comps = np.array([0, 1, 2] + [self.layout.offset[f] for f in self.scalar], dtype=np.int64)
         self.nC = len(self.comps)
         self.g_eps = float(params.g_eps) * float(mesh.radius.min())
+        self.onset = float(params.onset) * float(mesh.radius.min())
         self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
         self.stats = {"rebuilds": 0, "evaluations": 0, "rebuild_s": 0.0, "contact_s": 0.0, "base_s": 0.0}
         self._b = b
@@ -181,52 +193,74 @@ class ContactSystem:
         self._weight = mesh.elem_length[ep] / cmap.n_gp
         self._kappa = hertz_kappa(effective_radius(R[fp], R[fm]), self.params.penalty, self.E_star)
         self._gdofs = (local[:, :, None] * b + self.comps[None, None, :]).reshape(P, m * nC)
-        # --- slots of every local matrix entry (P, m, nC, m, nC) in the union pattern
+        # --- union CSR built at the node-block level (no global sort of the entries).
+        # Node pairs: the base element blocks (full b x b) and the contact-only blocks
+        # (components `comps` x `comps`). In a row of a contact component every neighbour
+        # contributes its block's columns; in the other rows only the base neighbours do.
         Nn = mesh.n_nodes
-        I = np.broadcast_to(local[:, :, None], (P, m, m)).astype(np.int64)
-        J = np.broadcast_to(local[:, None, :], (P, m, m)).astype(np.int64)
-        nkey = (I * Nn + J).ravel()
-        pos = np.searchsorted(self._base_nodekeys, nkey)
-        pos_c = np.minimum(pos, self._base_nodekeys.size - 1)
-        inbase = self._base_nodekeys[pos_c] == nkey
-        ckeys, cinv = np.unique(nkey[~inbase], return_inverse=True)
-        U = ckeys.size
-        ci = self.comps
-        # contact-only node pairs: original entry index after the base entries
-        orig = np.empty((nkey.size, nC, nC), dtype=np.int64)
-        blk = (np.arange(nC)[:, None] * nC + np.arange(nC)[None, :])
-        orig[~inbase] = self._base_nnz + cinv[:, None, None] * (nC * nC) + blk[None]
-        # base node pairs: indptr[i b + c] + k(i, j) b + c'
-        ib = I.ravel()[inbase]
-        kpos = pos[inbase] - self._base_rowstart[ib]
-        orig[inbase] = (self._base_indptr[ib[:, None] * b + ci[None, :]][:, :, None]
-                        + (kpos * b)[:, None, None] + ci[None, None, :])
-        # union CSR: base entries + contact-only entries (disjoint), sorted by scipy
         n = self.n
-        brow = np.repeat(np.arange(n, dtype=np.int64), np.diff(self._base_indptr))
-        crow = ((ckeys // Nn)[:, None, None] * b + ci[None, :, None])
-        ccol = ((ckeys % Nn)[:, None, None] * b + ci[None, None, :])
-        crow = np.broadcast_to(crow, (U, nC, nC)).ravel()
-        ccol = np.broadcast_to(ccol, (U, nC, nC)).ravel()
-        rows = np.concatenate([brow, crow])
-        cols = np.concatenate([self._base_indices.astype(np.int64), ccol])
-        total = rows.size
-        tag = sp.coo_matrix((np.arange(total, dtype=float), (rows, cols)), shape=(n, n)).tocsr()
-        tag.sort_indices()
-        order = tag.data.astype(np.int64)
-        inv = np.empty(total, dtype=np.int64)
-        inv[order] = np.arange(total)
-        self._u_indptr = tag.indptr
-        self._u_indices = tag.indices
+        ci = self.comps
+        isc = np.zeros(b, bool)
+        isc[ci] = True
+        nkey = (local[:, :, None].astype(np.int64) * Nn + local[:, None, :]).ravel()  # (P m m)
+        ukey = np.unique(nkey)
+        bkeys = self._base_nodekeys
+        pos = np.minimum(np.searchsorted(bkeys, ukey), bkeys.size - 1)
+        ckeys = ukey[bkeys[pos] != ukey]
+        keys = np.concatenate([bkeys, ckeys])
+        order = np.argsort(keys, kind="stable")
+        keys = keys[order]
+        isbase = order < bkeys.size
+        nodeI = keys // Nn
+        wc = np.where(isbase, b, nC).astype(np.int64)  # columns in a contact-component row
+        wo = np.where(isbase, b, 0).astype(np.int64)  # columns in another row
+        first = np.searchsorted(nodeI, np.arange(Nn + 1, dtype=np.int64))  # node -> merged range
+        cwc = np.concatenate([[0], np.cumsum(wc)])
+        cwo = np.concatenate([[0], np.cumsum(wo)])
+        offc = cwc[:-1] - cwc[first[nodeI]]  # column offset of the block in its row
+        offo = cwo[:-1] - cwo[first[nodeI]]
+        lenc = cwc[first[1:]] - cwc[first[:-1]]  # (Nn,) row lengths
+        leno = cwo[first[1:]] - cwo[first[:-1]]
+        rowlen = np.where(isc[None, :], lenc[:, None], leno[:, None]).ravel()  # (n,)
+        indptr = np.concatenate([[0], np.cumsum(rowlen)]).astype(np.int64)
+        total = int(indptr[-1])
+        # column patterns of one contact-component row / one other row of every node
+        nodeJ = keys % Nn
+        colc = np.where(isbase[:, None], nodeJ[:, None] * b + np.arange(b)[None, :],
+                        np.pad(nodeJ[:, None] * b + ci[None, :], ((0, 0), (0, b - nC)), constant_values=-1))
+        Qc = colc.ravel()[(np.arange(b)[None, :] < wc[:, None]).ravel()]
+        Qo = (nodeJ[isbase, None] * b + np.arange(b)[None, :]).ravel()
+        startc = cwc[first[:-1]]
+        starto = cwo[first[:-1]] + Qc.size
+        src = np.where(isc[None, :], startc[:, None], starto[:, None]).ravel()
+        Q = np.concatenate([Qc, Qo])
+        rep = np.repeat(src - indptr[:-1], rowlen)
+        indices = Q[np.arange(total, dtype=np.int64) + rep].astype(np.int32)
+        self._u_indptr = indptr.astype(np.int32) if total < 2**31 - 1 else indptr
+        self._u_indices = indices
         self._u_nnz = total
-        self._u_keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(tag.indptr)) * n + tag.indices
-        self._base_map = inv[: self._base_nnz]
-        # local slot layout (P, m, nC, m, nC)
-        slots = inv[orig].reshape(P, m, m, nC, nC).transpose(0, 1, 3, 2, 4)
-        self._slots = np.ascontiguousarray(slots).reshape(P, m * nC * m * nC)
+        self._u_keys_cache = None
+        # base entries -> union positions: per base node pair (I, J), entries (c, c')
+        bI, bJ = bkeys // Nn, bkeys % Nn
+        kpos = np.arange(bkeys.size) - self._base_rowstart[bI]  # J's rank among I's base neighbours
+        mpos = np.searchsorted(keys, bkeys)
+        rows_b = bI[:, None] * b + np.arange(b)[None, :]  # (B, b)
+        off_b = np.where(isc[None, :], offc[mpos][:, None], offo[mpos][:, None])  # (B, b)
+        src_pos = (self._base_indptr[rows_b][:, :, None] + (kpos * b)[:, None, None]
+                   + np.arange(b)[None, None, :])
+        dst_pos = indptr[rows_b][:, :, None] + off_b[:, :, None] + np.arange(b)[None, None, :]
+        base_map = np.empty(self._base_nnz, dtype=np.int64)
+        base_map[src_pos.ravel()] = dst_pos.ravel()
+        self._base_map = base_map
+        # local slot layout (P, m, nC, m, nC): indptr[I b + c_i] + offset of block (I, J) + column
+        mp = np.searchsorted(keys, nkey).reshape(P, m, m)
+        rowstart = indptr[local[:, :, None].astype(np.int64) * b + ci[None, None, :]]  # (P, m, nC)
+        colpos = np.where(isbase[mp][..., None], ci[None, None, None, :], np.arange(nC)[None, None, None, :])
+        slots = (rowstart[:, :, :, None, None]
+                 + (offc[mp][:, :, None, :, None] + colpos[:, :, None, :, :]))
+        self._slots = slots.reshape(P, m * nC * m * nC)
         self._matcache = {}
         self._M = self._to_union(self.base.mass())
-        self._zero = self._csr(np.zeros(self._u_nnz))
         self._x_rebuild = np.array(xn[:, :3], copy=True)
         self.stats["rebuilds"] += 1
         _timer(self.stats, "rebuild_s", t0)
@@ -246,8 +280,12 @@ class ContactSystem:
         if mp is None:
             rows = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(A.indptr))
             k = rows * self.n + A.indices
-            mp = np.searchsorted(self._u_keys, k)
-            if np.any(self._u_keys[np.minimum(mp, self._u_nnz - 1)] != k):
+            if self._u_keys_cache is None:
+                self._u_keys_cache = (np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self._u_indptr)) * self.n
+                                      + self._u_indices)
+            uk = self._u_keys_cache
+            mp = np.searchsorted(uk, k)
+            if np.any(uk[np.minimum(mp, self._u_nnz - 1)] != k):
                 raise ValueError("a base matrix has entries outside its element pattern")
             if len(self._matcache) > 8:
                 self._matcache.clear()
@@ -270,21 +308,49 @@ class ContactSystem:
         return self._csr(self._union_data(A))
 
     # ------------------------------------------------------------------ contact terms
+    def set_onset(self, fraction: float) -> None:
+        """Onset width of the penalty law as a fraction of the smallest radius (0: linear)."""
+        if not fraction >= 0:
+            raise ValueError(f"onset must be >= 0, got {fraction}")
+        self.onset = float(fraction) * float(self.mesh.radius.min())
+
+    def _ends(self, x, sel=None):
+        r = self.nodal(np.asarray(x, float))[:, :3]
+        npl, nmi = self.map.nodes_plus, self.map.nodes_minus
+        if sel is not None:
+            npl, nmi = npl[sel], nmi[sel]
+        return r[npl[:, 0]], r[npl[:, 1]], r[nmi[:, 0]], r[nmi[:, 1]]
+
     def _geometry(self, x, sel=None):
         cmap = self.map
-        r = self.nodal(np.asarray(x, float))[:, :3]
-        npl, nmi = cmap.nodes_plus, cmap.nodes_minus
         sp_, sm, gr = cmap.s_plus, None if self.params.recompute_closest else cmap.s_minus, self._gap_radius
         if sel is not None:
-            npl, nmi, sp_, gr = npl[sel], nmi[sel], sp_[sel], gr[sel]
+            sp_, gr = sp_[sel], gr[sel]
             sm = None if sm is None else sm[sel]
-        return chord_geometry(r[npl[:, 0]], r[npl[:, 1]], r[nmi[:, 0]], r[nmi[:, 1]], sp_, gr, sm)
+        return chord_geometry(*self._ends(x, sel), sp_, gr, sm)
+
+    def gaps(self, x) -> np.ndarray:
+        """Overlaps g (n_pairs, n_gp) of every point of the map at ``x`` (no tangent data)."""
+        cmap = self.map
+        sm = None if self.params.recompute_closest else cmap.s_minus
+        return chord_gaps(*self._ends(x), cmap.s_plus, self._gap_radius, sm)
 
     def active_pairs(self, x) -> np.ndarray:
         """Indices of the map's pairs with at least one overlapping point at ``x``."""
         if self.map.n_pairs == 0:
             return np.zeros(0, dtype=np.int64)
-        return np.flatnonzero(self._geometry(x).active.any(axis=1))
+        return np.flatnonzero((self.gaps(x) > 0.0).any(axis=1))
+
+    def contact_energy(self, x) -> float:
+        """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x``."""
+        if self.map.n_pairs == 0:
+            return 0.0
+        return penalty_energy(self.gaps(x), self._weight, self.params.penalty, self.onset)
+
+    def energy(self, x) -> float:
+        """Total potential (N mm) of a mechanics-only system: beam strain energy + penalty
+        energy; +inf where det F <= 0 somewhere. Its gradient is ``F(x, 0, t)``."""
+        return beam_strain_energy(self.base, x) + self.contact_energy(x)
 
     def contact_terms(self, x, w, jacobian: bool = True):
         """Contact residual (n,) and local matrices on the active pairs.
@@ -295,8 +361,7 @@ class ContactSystem:
         F = np.zeros(n)
         if self.map.n_pairs == 0:
             return F, np.zeros(0, np.int64), None, None
-        geo_all = self._geometry(x)
-        act = np.flatnonzero(geo_all.active.any(axis=1))
+        act = self.active_pairs(x)
         if act.size == 0:
             return F, act, None, None
         geo = self._geometry(x, act)
@@ -305,7 +370,7 @@ class ContactSystem:
         Rl = np.zeros((Pa, m, nC))
         Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
         Kw = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
-        Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian)
+        Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
         ep = self._endpos
         Rl[:, ep, 0:3] += Rm
         if jacobian:
@@ -366,22 +431,24 @@ class ContactSystem:
 
         ``max_overlap`` (mm) and ``max_overlap_over_R`` (overlap / min(R+, R-)),
         ``pairs``, ``active_pairs``, ``active_points``, ``max_width`` (Hertz a, mm),
-        ``total_normal_force`` (N; sum over points of w P* g)."""
+        ``total_normal_force`` (N; sum over points of w φ'(g), i.e. w P* g for the linear law)."""
         from ..physics.contact_forms import hertz_width
 
         out = {"pairs": int(self.map.n_pairs), "active_pairs": 0, "active_points": 0, "max_overlap": 0.0,
                "max_overlap_over_R": 0.0, "max_width": 0.0, "total_normal_force": 0.0}
         if self.map.n_pairs == 0:
             return out
-        geo = self._geometry(x)
-        g = np.where(geo.active, geo.g, 0.0)
+        g = self.gaps(x)
+        active = g > 0.0
+        g = np.where(active, g, 0.0)
         R = self.mesh.radius
         rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])
         a, _ = hertz_width(g, self._kappa[:, None], self.g_eps)
-        out.update(active_pairs=int(geo.active.any(axis=1).sum()), active_points=int(geo.active.sum()),
+        out.update(active_pairs=int(active.any(axis=1).sum()), active_points=int(active.sum()),
                    max_overlap=float(g.max()), max_overlap_over_R=float((g / rmin[:, None]).max()),
                    max_width=float(a.max()),
-                   total_normal_force=float((self._weight[:, None] * self.params.penalty * g).sum()))
+                   total_normal_force=float((self._weight[:, None]
+                                             * penalty_law(g, self.params.penalty, self.onset)[1]).sum()))
         return out
 
     def fibril_contact_forces(self, x) -> np.ndarray:
@@ -411,3 +478,23 @@ class ContactSystem:
         uk, inv = np.unique(key, return_inverse=True)
         tot = np.bincount(inv, weights=Gp, minlength=uk.size)
         return {(int(k // nf), int(k % nf)): float(v) for k, v in zip(uk, tot) if v > 0}
+
+
+def beam_strain_energy(base, x) -> float:
+    """Neo-Hookean strain energy ``Σ_q W ψ(F)`` (N mm) of a ``BeamModel`` at state ``x``,
+    ``ψ = μ/2 (tr C − 3) − μ ln J + λ/2 (ln J)²`` (the energy whose gradient is the model's
+    mechanical residual); +inf where det F <= 0. Mechanics only: a model with a prescribed
+    current (Lorentz force) or temperature-dependent μ has no such potential."""
+    if getattr(base, "prescribed_current", None) is not None:
+        raise ValueError("beam_strain_energy: the Lorentz load of a prescribed current has no potential")
+    basis = base.basis
+    Fg = basis.deformation_gradient(base.nodal(np.asarray(x, float)))
+    a = Fg.reshape(Fg.shape[:-2] + (9,))
+    A, B, C, D, E, F, G, H, I = np.moveaxis(a, -1, 0)
+    det = A * (E * I - F * H) - B * (D * I - F * G) + C * (D * H - E * G)
+    if not det.min() > 0.0:
+        return float("inf")
+    lnJ = np.log(det)
+    mu, lam = float(base.mu), float(base.lam)
+    psi = 0.5 * mu * ((a * a).sum(axis=-1) - 3.0) - mu * lnJ + 0.5 * lam * lnJ * lnJ
+    return float((basis.W * psi).sum())

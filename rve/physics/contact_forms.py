@@ -31,6 +31,16 @@ element runs from its first to its last node, ``r(s) = (1 - s) r_a + s r_b``).
 
   (exact; ``ds`` = d s- / d X, (4, 3) per point). Zero for ``g <= 0``: the residual is C^1
   at the onset g = 0 (it vanishes there), the tangent jumps.
+* **Onset smoothing** (``onset`` = ε, mm; default 0 = the linear law above): the penalty is
+  the derivative of the energy density ``φ(g)`` per unit length, ``φ = P* g³/(6ε)`` for
+  ``0 < g < ε`` and ``P* (g²/2 − ε g/2 + ε²/6)`` beyond, so the line load ``φ'`` rises as
+  ``P* g²/(2ε)`` and joins ``P* (g − ε/2)``, and the stiffness ``φ''`` ramps from 0 to P*
+  (C² energy, continuous tangent: Newton's model does not jump when a point touches).
+  With ``φ'`` and ``φ''`` the tangent above reads
+  ``K = w [φ'' c cᵀ ⊗ n nᵀ + (φ'/ρ)(c cᵀ ⊗ (n nᵀ − I) + |d|² ds dsᵀ)]``; ε = 0 gives
+  ``φ' = P* g``, ``φ'' = P*``. ``penalty_law`` evaluates φ, φ', φ''; ``penalty_energy`` the
+  summed energy ``Σ w φ(g)`` (the residual is its exact gradient). ``chord_gaps`` is the
+  overlap alone (no tangent data), for a cheap pass over all pairs.
 * Hertz line-contact width ``a(g) = kappa sqrt(g)``, ``kappa = sqrt(4 R* P* / (pi E*))``
   (P* g is the line load). Its derivative ``kappa / (2 sqrt g)`` is unbounded at the onset;
   ``hertz_width`` regularises with ``a = kappa g / sqrt(g + g_eps)`` (relative error
@@ -64,6 +74,9 @@ __all__ = [
     "hertz_kappa",
     "hertz_width",
     "penalty_forces",
+    "penalty_law",
+    "penalty_energy",
+    "chord_gaps",
     "scalar_jump",
     "effective_modulus",
     "effective_radius",
@@ -155,30 +168,81 @@ def chord_geometry(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> ChordGeo
     return ChordGeometry(sp_, s, j, rho, n, g, c, ds, dd, active)
 
 
-def penalty_forces(geo: ChordGeometry, weight, penalty, jacobian: bool = True):
+def penalty_law(g, penalty, onset: float = 0.0):
+    """Energy density per unit length ``φ(g)``, line load ``φ'(g)`` and stiffness ``φ''(g)``
+    of the penalty (all zero for g <= 0); ``onset`` ε (mm) is the width of the C² cubic
+    onset (0: ``φ = P* g²/2``). ``penalty`` scalar or broadcastable to g."""
+    g = np.asarray(g, float)
+    P = np.asarray(penalty, float)
+    gp = np.maximum(g, 0.0)
+    if onset <= 0.0:
+        return 0.5 * P * gp * gp, P * gp, np.where(g > 0.0, P, 0.0)
+    eps = float(onset)
+    lo = gp < eps
+    e = np.where(lo, P * gp**3 / (6.0 * eps), P * (0.5 * gp * gp - 0.5 * eps * gp + eps * eps / 6.0))
+    f = np.where(lo, P * gp * gp / (2.0 * eps), P * (gp - 0.5 * eps))
+    k = np.where(g > 0.0, np.where(lo, P * gp / eps, P), 0.0)
+    return e, f, k
+
+
+def penalty_energy(geo, weight, penalty, onset: float = 0.0) -> float:
+    """``Σ_points w φ(g)``: the penalty energy whose gradient is ``penalty_forces``' residual.
+    ``geo`` needs ``g`` (and ``active``) only: a ``ChordGeometry`` or the ``chord_gaps`` array."""
+    g = geo.g if hasattr(geo, "g") else np.asarray(geo, float)
+    w = np.broadcast_to(np.asarray(weight, float).reshape(g.shape[0], -1), g.shape)
+    Ps = np.asarray(penalty, float)
+    Ps = Ps[:, None] if Ps.ndim == 1 else Ps
+    e, _, _ = penalty_law(g, Ps, onset)
+    return float((w * e).sum())
+
+
+def penalty_forces(geo: ChordGeometry, weight, penalty, jacobian: bool = True, onset: float = 0.0):
     """Penalty residual (P, 4, 3) and tangent (P, 4, 3, 4, 3) (None without jacobian).
 
     ``weight`` (P,) or (P, G): quadrature weight of each point; ``penalty`` P* (scalar or
-    (P,)), the line load per unit overlap."""
+    (P,)), the line load per unit overlap; ``onset`` the C² onset width ε (mm, 0: linear)."""
     w = np.broadcast_to(np.asarray(weight, float).reshape(geo.g.shape[0], -1), geo.g.shape)
     Ps = np.asarray(penalty, float)
     Ps = Ps[:, None] if Ps.ndim == 1 else Ps
-    alpha = np.where(geo.active, w * Ps, 0.0)  # (P, G)
     gpos = np.where(geo.active, geo.g, 0.0)
-    f = alpha * gpos  # line force magnitude times weight
+    _, phi1, phi2 = penalty_law(gpos, Ps, onset)
+    f = np.where(geo.active, w * phi1, 0.0)  # line load times weight
     R = -np.einsum("pg,pgk,pgi->pki", f, geo.c, geo.n)
     if not jacobian:
         return R, None
+    k = np.where(geo.active, w * phi2, 0.0)
     rho = np.where(geo.active, geo.rho, 1.0)
-    grho = gpos / rho
+    fr = f / rho
     nn = geo.n[..., :, None] * geo.n[..., None, :]
-    eye = np.eye(3)
-    A = alpha[..., None, None] * ((1.0 + grho)[..., None, None] * nn - grho[..., None, None] * eye)  # (P,G,3,3)
+    A = (k + fr)[..., None, None] * nn - fr[..., None, None] * np.eye(3)  # (P, G, 3, 3)
     K = np.einsum("pgk,pgl,pgij->pkilj", geo.c, geo.c, A, optimize=True)
-    beta = alpha * grho * geo.dd[:, None]  # (P, G)
+    beta = fr * geo.dd[:, None]  # (P, G)
     if np.any(beta != 0.0):
         K += np.einsum("pg,pgki,pglj->pkilj", beta, geo.ds, geo.ds, optimize=True)
     return R, K
+
+
+def chord_gaps(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> np.ndarray:
+    """Overlaps ``g`` (P, G) only (same conventions as ``chord_geometry``, no tangent data):
+    the cheap pass that finds the active pairs before the full geometry of those pairs."""
+    ap, bp, am, bm = (np.asarray(v, float) for v in (ap, bp, am, bm))
+    sp_ = np.asarray(s_plus, float)
+    e = bp - ap
+    d = bm - am
+    h = ap - am
+    if s_minus is None:
+        dd = np.einsum("pi,pi->p", d, d)
+        ddsafe = np.where(dd > 0, dd, 1.0)
+        # (p - a-).d = h.d + s+ e.d, linear in s+
+        hd = np.einsum("pi,pi->p", h, d)
+        ed = np.einsum("pi,pi->p", e, d)
+        s = np.clip((hd[:, None] + sp_ * ed[:, None]) / ddsafe[:, None], 0.0, 1.0)
+        s = np.where(dd[:, None] > 0, s, 0.0)
+    else:
+        s = np.asarray(s_minus, float)
+    j = h[:, None, :] + sp_[..., None] * e[:, None, :] - s[..., None] * d[:, None, :]
+    rho = np.sqrt(np.einsum("pgi,pgi->pg", j, j))
+    return np.asarray(gap_radius, float)[:, None] - rho
 
 
 def lagrange_at(order: int, s) -> tuple[np.ndarray, np.ndarray]:

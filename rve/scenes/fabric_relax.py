@@ -64,7 +64,7 @@ def build(cfg):
     c = cfg.contact
     params = ContactParams(penalty=c.penalty, heat_transfer=c.heat_transfer, conductance=c.conductance,
                            n_gp=c.n_gp, margin=c.margin, g_eps=c.g_eps, recompute_closest=c.recompute_closest,
-                           rebuild_every=cfg.relaxation.rebuild_every)
+                           rebuild_every=cfg.relaxation.rebuild_every, onset=c.onset)
     x0 = np.zeros(base.n)
     base.nodal(x0)[:, :9] = x0n
     system = ContactSystem(base, params, x0)
@@ -132,6 +132,36 @@ def stack_geometry(fab, mesh, xn) -> dict:
             "levels_histogram": {int(k): int(v) for k, v in zip(*np.unique(L, return_counts=True))}}
 
 
+def _settings(cfg, schedule=None) -> RelaxSettings:
+    r = cfg.relaxation
+    if schedule is None:
+        schedule = [float(v) for v in r.onset_continuation] + [float(cfg.contact.onset)]
+    return RelaxSettings(duration=r.duration, steps=r.steps, rebuild_every=r.rebuild_every,
+                         newton_rtol=r.newton_rtol, newton_max_iter=r.newton_max_iter,
+                         newton_atol=r.static_atol, static=r.static, static_atol=r.static_atol,
+                         static_rounds=r.static_rounds, static_max_iter=r.static_max_iter,
+                         method=r.method, onset_schedule=tuple(schedule), energy_max_iter=r.energy_max_iter,
+                         time_budget=r.wall_budget_s)
+
+
+def _coarse_stage(cfg, system):
+    """Mesh sequencing: relax on ``relaxation.coarse_elements`` with the whole onset
+    schedule, then interpolate the coarse minimum onto the target mesh (rve.fem.transfer).
+    Returns ``(x, RelaxResult, dofs)`` of the coarse stage."""
+    from ..config import config_as_dict
+    from ..fem.transfer import interpolate_nodal
+
+    data = config_as_dict(cfg)
+    data["mesh"]["elements"] = int(cfg.relaxation.coarse_elements)
+    ccfg = type(cfg).model_validate(data)
+    _, csys, cx0 = build(ccfg)
+    cres = relax_to_equilibrium(csys, cx0, np.zeros(csys.n), _settings(ccfg))
+    x = np.zeros(system.n)
+    xn = system.nodal(x)
+    xn[:, :9] = interpolate_nodal(csys.mesh, csys.nodal(cres.x)[:, :9], system.mesh)
+    return x, cres, int(csys.n)
+
+
 def solve(cfg, on_rebuild=None) -> dict:
     t_start = time.perf_counter()
     fab, system, x0 = build(cfg)
@@ -139,14 +169,26 @@ def solve(cfg, on_rebuild=None) -> dict:
     t_setup = time.perf_counter() - t_start
     st0 = system.contact_state(x0)
     r = cfg.relaxation
-    settings = RelaxSettings(duration=r.duration, steps=r.steps, rebuild_every=r.rebuild_every,
-                             newton_rtol=r.newton_rtol, newton_max_iter=r.newton_max_iter,
-                             newton_atol=r.static_atol, static=r.static, static_atol=r.static_atol,
-                             static_rounds=r.static_rounds, static_max_iter=r.static_max_iter)
-    res = relax_to_equilibrium(system, x0, np.zeros(system.n), settings, on_rebuild=on_rebuild)
+    settings = _settings(cfg)
+    history = []
+    xs = x0
+    coarse = None
+    if r.method == "energy" and r.coarse_elements and int(r.coarse_elements) != int(cfg.mesh.elements):
+        xs, cres, cdofs = _coarse_stage(cfg, system)
+        for h in cres.history:
+            history.append(dict(h, mesh_elements=int(r.coarse_elements)))
+        coarse = {"elements_per_fibril": int(r.coarse_elements), "dofs": cdofs,
+                  "converged": bool(cres.static_converged), "newton_iterations": int(cres.static_newton_iterations),
+                  "wall_s": float(cres.timings.get("total", 0.0))}
+        settings = _settings(cfg, [float(cfg.contact.onset)])
+        system.rebuild(xs)
+    res = relax_to_equilibrium(system, xs, np.zeros(system.n), settings, on_rebuild=on_rebuild)
+    for h in res.history:
+        history.append(dict(h, mesh_elements=int(cfg.mesh.elements)))
     st = system.contact_state(res.x)
     n_fixed = len(system.constraints(0.0)[0])
     xn0, xn = system.nodal(x0), system.nodal(res.x)
+    its = sum(int(h.get("newton_iterations", 0)) for h in history if h.get("phase") == "static")
     summary = {
         "fabric": fab.kind,
         "fibrils": int(mesh.n_fibrils),
@@ -154,6 +196,10 @@ def solve(cfg, on_rebuild=None) -> dict:
         "order": int(mesh.order),
         "dofs": int(system.n),
         "free_dofs": int(system.n - n_fixed),
+        "method": r.method,
+        "onset_schedule_over_R": [float(v) for v in settings.onset_schedule] if coarse is None else
+        [float(v) for v in r.onset_continuation] + [float(cfg.contact.onset)],
+        "coarse_stage": coarse,
         "contact_pairs": int(st["pairs"]),
         "active_contact_pairs": int(st["active_pairs"]),
         "initial_max_overlap_over_R": float(st0["max_overlap_over_R"]),
@@ -165,15 +211,29 @@ def solve(cfg, on_rebuild=None) -> dict:
         "static_converged": bool(res.static_converged),
         "dynamic_steps": int(res.dynamic_steps),
         "dynamic_newton_iterations": int(res.dynamic_newton_iterations),
-        "static_newton_iterations": int(res.static_newton_iterations),
+        "static_newton_iterations": int(its if r.method == "energy" else res.static_newton_iterations),
         "static_residuals": [float(v) for v in getattr(res.static_result, "residuals", [])],
         "map_rebuilds": int(system.stats["rebuilds"]),
         "min_det_F": float(system.base.basis.min_det_F(xn)),
         "wall_time_s": {"setup": t_setup, "dynamic": res.timings.get("dynamic", 0.0),
                         "static": res.timings.get("static", 0.0), "total": time.perf_counter() - t_start},
-        "history": res.history,
+        "history": history,
         "_state": {"fabric": fab, "system": system, "x0": x0, "x": res.x},
     }
+    if r.method == "energy":
+        sres = res.static_result
+        summary["energy_mJ"] = float(system.energy(res.x))  # N mm = mJ
+        summary["static_rates"] = [float(v) for v in getattr(sres, "rates", [])]
+    # stability: inertia of the static tangent at the result (0 negative pivots: a local
+    # minimum of the energy, not a saddle)
+    from ..contact.relax import factor_inertia
+    from ..solvers.static import StaticProblem
+
+    prob = StaticProblem(system, res.x, np.zeros(system.n), res.t)
+    _, J = prob(prob.u0())
+    _, neg = factor_inertia(J)
+    summary["negative_pivots"] = int(neg)
+    summary["stable"] = bool(neg == 0)
     return summary
 
 
