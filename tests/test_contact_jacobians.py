@@ -217,3 +217,76 @@ def test_contact_system_jacobians(order, recompute):
         wm[c] -= h
         fd = (sysm.evaluate(x, wp, 0, False)[0] - sysm.evaluate(x, wm, 0, False)[0]) / (2 * h)
         np.testing.assert_allclose(Fwd[:, c], fd, rtol=1e-5, atol=1e-7 * (1 + np.abs(Fwd).max()))
+
+
+def test_penalty_law_is_c2_and_linear_beyond_the_onset():
+    from rve.physics.contact_forms import penalty_law
+
+    P, eps = 50.0, 0.003
+    g = np.array([-1e-3, 0.0, 1e-12, eps * (1 - 1e-9), eps, eps * (1 + 1e-9), 0.02])
+    e, f, k = penalty_law(g, P, eps)
+    assert e[0] == f[0] == k[0] == 0.0 and e[1] == f[1] == k[1] == 0.0
+    np.testing.assert_allclose([e[3], f[3], k[3]], [e[5], f[5], k[5]], rtol=1e-6)  # C2 at g = eps
+    np.testing.assert_allclose(f[-1], P * (0.02 - eps / 2))  # linear law shifted by eps/2
+    # derivatives by central differences
+    gg = np.linspace(1e-4, 3 * eps, 17)
+    h = 1e-8
+    ep, fp, _ = penalty_law(gg + h, P, eps)
+    em, fm, _ = penalty_law(gg - h, P, eps)
+    _, f0, k0 = penalty_law(gg, P, eps)
+    np.testing.assert_allclose((ep - em) / (2 * h), f0, rtol=1e-6)
+    np.testing.assert_allclose((fp - fm) / (2 * h), k0, rtol=1e-5)
+    # onset 0 is the linear law
+    e0, f0, k0 = penalty_law(g, P, 0.0)
+    np.testing.assert_allclose(f0, P * np.maximum(g, 0))
+
+
+@pytest.mark.parametrize("frozen", [False, True])
+def test_penalty_with_onset_gradient_and_tangent(frozen):
+    from rve.physics.contact_forms import penalty_energy
+
+    X, sp = _pairs(overlap=0.004)  # overlaps around the onset width
+    w = np.full(X.shape[0], 0.1)
+    Ps, eps = 50.0, 0.005
+    sm = None
+    if frozen:
+        sm = chord_geometry(X[:, 0], X[:, 1], X[:, 2], X[:, 3], sp, np.full(len(X), R2)).s_minus
+
+    def res(Y, jac=False):
+        geo = chord_geometry(Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], sp, np.full(Y.shape[0], R2), sm)
+        return penalty_forces(geo, w, Ps, jac, eps)
+
+    R, K = res(X, True)
+    assert np.abs(R).max() > 1e-5
+    Kfd = _fd(lambda Y: res(Y)[0], X)
+    np.testing.assert_allclose(K, Kfd, atol=1e-5 * np.abs(K).max())
+    if not frozen:
+        def energy(Y):
+            geo = chord_geometry(Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], sp, np.full(Y.shape[0], R2))
+            return np.array([penalty_energy(geo.g[p:p + 1], w[p:p + 1], Ps, eps) for p in range(Y.shape[0])])
+
+        np.testing.assert_allclose(R, _fd(energy, X), atol=1e-7)  # residual = dE/dX
+
+
+def test_contact_system_energy_gradient():
+    """ContactSystem.energy (beam strain + penalty energy, with an onset) has the static
+    residual as its gradient: directional derivatives by central differences."""
+    from rve.contact.system import ContactParams, ContactSystem
+    from rve.fem.mesh import fibril_mesh, straight_fibril
+    from rve.model import BeamMaterial, BeamModel
+
+    R = 0.15
+    fibs = [straight_fibril([-1, 0, 0], [1, 0, 0], R, "a"), straight_fibril([0, -1, 0.27], [0, 1, 0.27], R, "b")]
+    mesh = fibril_mesh(fibs, 6, 1)
+    base = BeamModel(mesh, BeamMaterial(1.26))
+    x = np.zeros(base.n)
+    xn = base.nodal(x)
+    xn[:, :9] = mesh.X0 + RNG.normal(size=mesh.X0.shape) * 0.01
+    sysm = ContactSystem(base, ContactParams(penalty=50.0, onset=0.1), x)
+    assert sysm.contact_state(x)["active_points"] > 0
+    F, _, _ = sysm.evaluate(x, np.zeros(base.n), 0.0, jacobian=False)
+    for _ in range(3):
+        d = RNG.normal(size=base.n) * 1e-2
+        h = 1e-6
+        fd = (sysm.energy(x + h * d) - sysm.energy(x - h * d)) / (2 * h)
+        assert abs(fd - F @ d) <= 1e-6 * max(1.0, abs(F @ d))

@@ -123,3 +123,58 @@ def test_capped_newton_does_not_skip_contacts():
     mid_b = r[mesh.fibril_nodes(1), 2].min()
     assert mid_a > mid_b + 0.25  # a rests on b, not below it
     assert sysm.contact_state(xs)["max_overlap_over_R"] < 0.05
+
+
+def test_small_weave_energy_minimum_is_stable_and_quadratic(tmp_path):
+    """The default path (energy minimisation, onset continuation 0.05 R -> 0.01 R -> 0):
+    converged to 1e-9 N, a local minimum (no negative pivot of the tangent), the last
+    Newton iterations quadratic, energies decreasing in every stage."""
+    from rve.scenes import fabric_relax
+
+    cfg = _cfg(tmp_path, SMALL)
+    s = fabric_relax.solve(cfg)
+    s.pop("_state")
+    assert s["method"] == "energy" and s["static_converged"]
+    assert s["negative_pivots"] == 0 and s["stable"]
+    assert s["static_residuals"][-1] < 1e-9
+    assert max(s["static_rates"][-2:]) > 1.8
+    for h in s["history"]:
+        e = np.asarray(h["energies"])
+        assert np.all(np.diff(e) <= 1e-12 * abs(e[0]))
+    assert s["onset_schedule_over_R"] == [0.05, 0.01, 0.0]
+    assert s["max_overlap_over_R"] < 0.05
+
+
+def test_mesh_sequencing(tmp_path):
+    """relaxation.coarse_elements: relax on 6 elements, interpolate, finish on 12."""
+    from rve.scenes import fabric_relax
+
+    data = dict(SMALL, relaxation=dict(SMALL["relaxation"], coarse_elements=6))
+    s = fabric_relax.solve(_cfg(tmp_path, data))
+    s.pop("_state")
+    assert s["coarse_stage"]["elements_per_fibril"] == 6 and s["coarse_stage"]["converged"]
+    assert s["static_converged"] and s["static_residuals"][-1] < 1e-9 and s["stable"]
+    assert {h["mesh_elements"] for h in s["history"]} == {6, 12}
+
+
+def test_factor_inertia_counts_negative_eigenvalues():
+    import scipy.sparse as sp
+
+    from rve.contact.relax import factor_inertia
+
+    rng = np.random.default_rng(3)
+    A = sp.random(60, 60, density=0.1, random_state=3)
+    A = (A + A.T + sp.diags(rng.normal(size=60) * 2)).tocsc()
+    lu, neg = factor_inertia(A)
+    assert neg == int((np.linalg.eigvalsh(A.toarray()) < 0).sum())
+    b = rng.normal(size=60)
+    np.testing.assert_allclose(A @ lu.solve(b), b, atol=1e-8)
+
+
+def test_dynamic_method_still_available(tmp_path):
+    data = dict(SMALL, relaxation=dict(SMALL["relaxation"], method="dynamic"))
+    from rve.scenes import fabric_relax
+
+    s = fabric_relax.solve(_cfg(tmp_path, data))
+    s.pop("_state")
+    assert s["static_converged"] and s["max_overlap_over_R"] < 0.05

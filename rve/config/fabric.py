@@ -72,6 +72,9 @@ class FabricRelaxation(Section):
     coarse_elements: Optional[Integer] = Field(
         None, ge=1, description="energy: mesh sequencing, relax first on this many elements per fibril, "
                                 "interpolate, finish on mesh.elements (null: target mesh only)")
+    fine_onset_continuation: Optional[list[Dimensionless]] = Field(
+        None, description="energy + coarse_elements: onset stages on the target mesh before the final one "
+                          "(null: none, the target mesh starts from the interpolated coarse minimum with contact.onset)")
     energy_max_iter: Integer = Field(300, ge=1, description="energy: Newton iterations per stage")
     wall_budget_s: Optional[float] = Field(None, gt=0, description="energy: stop after this wall time (s)")
     damping: DampingCoefficient = Field("20 N*ms/mm^4", ge=0, description="volumetric damping gamma (heavy)")

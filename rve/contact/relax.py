@@ -411,6 +411,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     scale = float(dK / dM) if dM > 0 else 1.0  # sigma of the stiffest mode
     sig_floor = 1e-8 * scale
     sigma = 1e-6 * scale if sigma0 is None else float(sigma0)
+    sig_neg = 0.0
     it = 0
     while True:
         if rn <= atol or rn <= rtol * r0:
@@ -433,6 +434,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
                 out.negative_pivots = neg
             if neg == 0:
                 break
+            sig_neg = max(sig_neg, sigma)
             sigma = max(4.0 * sigma, sig_floor)
         else:
             out.reason = "no positive definite regularisation found"
@@ -479,14 +481,18 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
         out.energies.append(Pi)
         out.sigmas.append(sigma)
         out.steps.append(alpha)
-        if ratio > 0.75 and alpha == 1.0:
-            sigma = sigma / 8.0 if sigma / 8.0 > sig_floor else 0.0
-        elif ratio > 0.5 and alpha == 1.0:
-            sigma = sigma / 4.0 if sigma / 4.0 > sig_floor else 0.0
+        # lower sigma after a good full step, but not below twice the last sigma at which
+        # K + sigma M was indefinite (that memory fades by 4x per iteration): saves the
+        # factorisations the inertia check would reject
+        if ratio > 0.5 and alpha == 1.0:
+            sigma = max(sigma / (8.0 if ratio > 0.75 else 4.0), 2.0 * sig_neg)
+            if sigma <= sig_floor:
+                sigma = 0.0
         elif ratio < 0.25:
             sigma = max(4.0 * sigma, sig_floor)
         elif alpha < 1.0:
             sigma = max(2.0 * sigma, sig_floor)
+        sig_neg *= 0.25
         rates = convergence_rates(out.residuals)
         log.info("%s it=%d |F|=%.3e Pi=%.12e dPi=%.2e ratio=%.2f step=%.3g sigma=%.3g pairs=%d rate=%s wall=%.1f",
                  label, it, rn, Pi, dPi, ratio, alpha, out.sigmas[-1], system.map.n_pairs,

@@ -203,14 +203,26 @@ class ContactSystem:
         isc = np.zeros(b, bool)
         isc[ci] = True
         nkey = (local[:, :, None].astype(np.int64) * Nn + local[:, None, :]).ravel()  # (P m m)
-        ukey = np.unique(nkey)
         bkeys = self._base_nodekeys
-        pos = np.minimum(np.searchsorted(bkeys, ukey), bkeys.size - 1)
-        ckeys = ukey[bkeys[pos] != ukey]
-        keys = np.concatenate([bkeys, ckeys])
-        order = np.argsort(keys, kind="stable")
-        keys = keys[order]
-        isbase = order < bkeys.size
+        dense = Nn * Nn <= 2 ** 25  # node-pair bitmap (<= 32 MB) instead of sorting the keys
+        if dense:
+            mark = np.zeros(Nn * Nn, np.int8)
+            mark[nkey] = 2
+            mark[bkeys] = 1
+            keys = np.flatnonzero(mark)
+            isbase = mark[keys] == 1
+            lookup = np.empty(Nn * Nn, np.int32)
+            lookup[keys] = np.arange(keys.size, dtype=np.int32)
+            locate = lambda k: lookup[k]  # noqa: E731
+        else:
+            ukey = np.unique(nkey)
+            pos = np.minimum(np.searchsorted(bkeys, ukey), bkeys.size - 1)
+            ckeys = ukey[bkeys[pos] != ukey]
+            keys = np.concatenate([bkeys, ckeys])
+            order = np.argsort(keys, kind="stable")
+            keys = keys[order]
+            isbase = order < bkeys.size
+            locate = lambda k: np.searchsorted(keys, k)  # noqa: E731
         nodeI = keys // Nn
         wc = np.where(isbase, b, nC).astype(np.int64)  # columns in a contact-component row
         wo = np.where(isbase, b, 0).astype(np.int64)  # columns in another row
@@ -243,7 +255,7 @@ class ContactSystem:
         # base entries -> union positions: per base node pair (I, J), entries (c, c')
         bI, bJ = bkeys // Nn, bkeys % Nn
         kpos = np.arange(bkeys.size) - self._base_rowstart[bI]  # J's rank among I's base neighbours
-        mpos = np.searchsorted(keys, bkeys)
+        mpos = locate(bkeys)
         rows_b = bI[:, None] * b + np.arange(b)[None, :]  # (B, b)
         off_b = np.where(isc[None, :], offc[mpos][:, None], offo[mpos][:, None])  # (B, b)
         src_pos = (self._base_indptr[rows_b][:, :, None] + (kpos * b)[:, None, None]
@@ -253,13 +265,14 @@ class ContactSystem:
         base_map[src_pos.ravel()] = dst_pos.ravel()
         self._base_map = base_map
         # local slot layout (P, m, nC, m, nC): indptr[I b + c_i] + offset of block (I, J) + column
-        mp = np.searchsorted(keys, nkey).reshape(P, m, m)
+        mp = locate(nkey).reshape(P, m, m)
         rowstart = indptr[local[:, :, None].astype(np.int64) * b + ci[None, None, :]]  # (P, m, nC)
         colpos = np.where(isbase[mp][..., None], ci[None, None, None, :], np.arange(nC)[None, None, None, :])
         slots = (rowstart[:, :, :, None, None]
                  + (offc[mp][:, :, None, :, None] + colpos[:, :, None, :, :]))
         self._slots = slots.reshape(P, m * nC * m * nC)
         self._matcache = {}
+        self._fw_cache = None
         self._M = self._to_union(self.base.mass())
         self._x_rebuild = np.array(xn[:, :3], copy=True)
         self.stats["rebuilds"] += 1
@@ -302,6 +315,18 @@ class ContactSystem:
                 A = A.copy()
                 A.sum_duplicates()
             data[self._union_map(A)] = A.data
+        return data
+
+    def _union_add(self, data, A):
+        """``data[union positions of A] += A.data`` (A on the base or the union structure)."""
+        if A is None:
+            return data
+        A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
+        if A.nnz:
+            if not A.has_canonical_format:
+                A = A.copy()
+                A.sum_duplicates()
+            data[self._union_map(A)] += A.data
         return data
 
     def _to_union(self, A):
@@ -367,6 +392,12 @@ class ContactSystem:
         geo = self._geometry(x, act)
         Pa = act.size
         wgt = self._weight[act]
+        if not self.scalar:  # mechanics only: the local unknowns are the 4 chord ends x 3
+            Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
+            F += np.bincount(self._gdofs[act].ravel(), weights=Rm.ravel(), minlength=n)
+            if not jacobian:
+                return F, act, None, None
+            return F, act, Km.reshape(Pa, -1), None
         Rl = np.zeros((Pa, m, nC))
         Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
         Kw = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
@@ -410,14 +441,24 @@ class ContactSystem:
         if not jacobian:
             _timer(self.stats, "contact_s", t1)
             return F, None, None
-        dx = self._union_data(Fx)
-        dw = self._union_data(Fw)
         if act.size:
             s = self._slots[act].ravel()
-            dx += np.bincount(s, weights=Kx.ravel(), minlength=self._u_nnz)
-            if self.scalar:
+            dx = np.bincount(s, weights=Kx.ravel(), minlength=self._u_nnz)
+            self._union_add(dx, Fx)
+        else:
+            dx = self._union_data(Fx)
+        if not self.scalar and Fw is not None and Fw is getattr(self.base, "_C", None):
+            # Fw is the base's constant damping matrix (a mechanics-only model): its union
+            # copy is kept until the next rebuild (consumers do not modify matrices in place)
+            if self._fw_cache is None:
+                self._fw_cache = self._csr(self._union_data(Fw))
+            Fw_u = self._fw_cache
+        else:
+            dw = self._union_data(Fw)
+            if self.scalar and act.size:
                 dw += np.bincount(s, weights=Kw.ravel(), minlength=self._u_nnz)
-        out = F, self._csr(dx), self._csr(dw)
+            Fw_u = self._csr(dw)
+        out = F, self._csr(dx), Fw_u
         _timer(self.stats, "contact_s", t1)
         return out
 

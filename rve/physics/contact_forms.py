@@ -215,10 +215,16 @@ def penalty_forces(geo: ChordGeometry, weight, penalty, jacobian: bool = True, o
     fr = f / rho
     nn = geo.n[..., :, None] * geo.n[..., None, :]
     A = (k + fr)[..., None, None] * nn - fr[..., None, None] * np.eye(3)  # (P, G, 3, 3)
-    K = np.einsum("pgk,pgl,pgij->pkilj", geo.c, geo.c, A, optimize=True)
+    P_, G_ = geo.g.shape
+    # sum over points as batched matmuls: (c_k c_l) x A_ij and (beta ds_ki) x ds_lj
+    cc = (geo.c[..., :, None] * geo.c[..., None, :]).reshape(P_, G_, 16)
+    K = np.matmul(np.swapaxes(cc, 1, 2), A.reshape(P_, G_, 9)).reshape(P_, 4, 4, 3, 3).transpose(0, 1, 3, 2, 4)
     beta = fr * geo.dd[:, None]  # (P, G)
     if np.any(beta != 0.0):
-        K += np.einsum("pg,pgki,pglj->pkilj", beta, geo.ds, geo.ds, optimize=True)
+        D = geo.ds.reshape(P_, G_, 12)
+        K = K + np.matmul(np.swapaxes(D * beta[..., None], 1, 2), D).reshape(P_, 4, 3, 4, 3)
+    else:
+        K = np.ascontiguousarray(K)
     return R, K
 
 

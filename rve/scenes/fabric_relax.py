@@ -178,9 +178,10 @@ def solve(cfg, on_rebuild=None) -> dict:
         for h in cres.history:
             history.append(dict(h, mesh_elements=int(r.coarse_elements)))
         coarse = {"elements_per_fibril": int(r.coarse_elements), "dofs": cdofs,
+                  "onset_schedule_over_R": [float(v) for v in r.onset_continuation] + [float(cfg.contact.onset)],
                   "converged": bool(cres.static_converged), "newton_iterations": int(cres.static_newton_iterations),
                   "wall_s": float(cres.timings.get("total", 0.0))}
-        settings = _settings(cfg, [float(cfg.contact.onset)])
+        settings = _settings(cfg, [float(v) for v in (r.fine_onset_continuation or [])] + [float(cfg.contact.onset)])
         system.rebuild(xs)
     res = relax_to_equilibrium(system, xs, np.zeros(system.n), settings, on_rebuild=on_rebuild)
     for h in res.history:
@@ -197,8 +198,7 @@ def solve(cfg, on_rebuild=None) -> dict:
         "dofs": int(system.n),
         "free_dofs": int(system.n - n_fixed),
         "method": r.method,
-        "onset_schedule_over_R": [float(v) for v in settings.onset_schedule] if coarse is None else
-        [float(v) for v in r.onset_continuation] + [float(cfg.contact.onset)],
+        "onset_schedule_over_R": [float(v) for v in settings.onset_schedule],
         "coarse_stage": coarse,
         "contact_pairs": int(st["pairs"]),
         "active_contact_pairs": int(st["active_pairs"]),
