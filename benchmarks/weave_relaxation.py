@@ -48,7 +48,15 @@ def main(argv=None):
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
     ap.add_argument("--out", default=None, help="also write the scene outputs (netCDF, VTK, PNG) here")
     ap.add_argument("--json", default=None, help="write the figures as JSON here")
+    ap.add_argument("--log", default=None, help="write the solver log (every Newton iteration) to this file")
     args = ap.parse_args(argv)
+    if args.log:
+        import logging
+
+        logging.basicConfig(level=logging.INFO, filename=args.log, filemode="w",
+                            format="%(relativeCreated)9.0f ms %(name)s %(message)s")
+        for name in ("rve.newton", "rve.dirk"):
+            logging.getLogger(name).setLevel(logging.WARNING)
 
     import rve.scenes  # noqa: F401  (registers the scene config)
     from rve.config import load_config

@@ -3,7 +3,21 @@
 Contract
 --------
 ``relax_to_equilibrium(system, x, w, settings, on_rebuild=None) -> RelaxResult`` for a
-``ContactSystem``:
+``ContactSystem``; ``settings.method`` picks the path (docs/relaxation.md):
+
+* ``"energy"`` (the fabric scene's default): the static equilibrium as a **local minimum
+  of the potential** ``system.energy(x)`` (beam strain energy + penalty energy; the static
+  residual is its exact gradient), by ``minimize_energy``: Newton with a Levenberg-Marquardt
+  trust region ``(K + sigma M) du = -F``, sigma raised until the factorisation has no
+  negative pivot (``factor_inertia``: the tangent of a stack of frictionless fibrils is
+  indefinite on the way down), the energy as merit (with ``backtrack`` energy-only step
+  halvings), the centroid step capped at half the search margin and the map rebuilt
+  before a trial that leaves the guard (no contact jumped over). A continuation in the
+  penalty onset (``onset_schedule``, fractions of R, the C² onset of
+  ``contact_forms.penalty_law``; the last entry is the law of the result) smooths the
+  first stages; the last stage ends with sigma = 0, i.e. plain Newton, quadratically.
+  Velocities are zero throughout.
+* ``"dynamic"`` (the previous path):
 
 1. **Dynamic relaxation**: backward Euler (``rve.solvers.dirk.integrate``, step control)
    of the heavily damped dynamics over ``duration`` in ``steps`` nominal steps, the contact
@@ -22,9 +36,10 @@ Contract
    previous map missed. If it fails, pseudo-transient continuation takes over.
 
 ``RelaxResult``: final ``x``, ``w`` (zero velocities after the static phase), ``t``,
-``history`` (one dict per chunk/solve: time, Newton iterations, pairs, active pairs, max
-overlap / R, max speed, wall time), ``timings`` (seconds: dynamic, static, total),
-iteration counts, and the last static ``NewtonResult``.
+``history`` (one dict per chunk/solve/stage: iterations, factorisations, residuals,
+energies, pairs, active pairs, max overlap / R, wall time), ``timings`` (seconds:
+dynamic, static, total), iteration counts, and the last static ``NewtonResult``
+(``MinimizeResult`` for the energy path).
 """
 from __future__ import annotations
 
@@ -67,6 +82,9 @@ class RelaxSettings:
     onset_schedule: tuple = (0.0,)
     energy_max_iter: int = 300
     time_budget: Optional[float] = None
+    backtrack: int = 3
+    near: float = 0.0
+    reuse: int = 0
 
 
 @dataclass
@@ -203,12 +221,14 @@ def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:
         budget = None if s.time_budget is None else max(1.0, s.time_budget - (time.perf_counter() - t_start))
         xs, _, res = minimize_energy(system, x, t0, atol=s.static_atol, rtol=s.static_rtol,
                                      max_iter=s.energy_max_iter, step_cap=s.step_cap, label=f"onset={eps:g}R",
-                                     time_budget=budget, sigma0=None if k == 0 else 0.0)
+                                     time_budget=budget, sigma0=None if k == 0 else 0.0,
+                                     backtrack=s.backtrack, near=s.near, reuse=s.reuse)
         x = xs
         st = system.contact_state(x)
         rec = {"phase": "static", "stage": k + 1, "method": "minimize_energy", "onset_over_R": eps,
                "converged": bool(res.converged), "newton_iterations": int(res.iterations),
-               "factorizations": int(res.factorizations), "rejections": int(res.rejections),
+               "factorizations": int(res.factorizations), "reused_factorization_steps": int(res.reused),
+               "rejections": int(res.rejections),
                "map_rebuilds": int(res.rebuilds), "negative_pivots": int(res.negative_pivots),
                "residuals": [float(v) for v in res.residuals], "energies": [float(v) for v in res.energies],
                "sigmas": [float(v) for v in res.sigmas], "steps": [float(v) for v in res.steps],
@@ -357,13 +377,14 @@ class MinimizeResult(NewtonResult):
     sigmas: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     factorizations: int = 0
+    reused: int = 0
     rejections: int = 0
     rebuilds: int = 0
     negative_pivots: int = -1
 
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
-                    label="minimize", time_budget=None):
+                    label="minimize", time_budget=None, backtrack=0, near=0.0, reuse=0):
     """Static equilibrium of a mechanics-only ``ContactSystem`` as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
     with a Levenberg-Marquardt trust region, an inertia check and the energy as merit.
@@ -400,6 +421,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     x = np.array(x, float, copy=True)
     if system.max_displacement_since_rebuild(x) > 0.0:
         system.rebuild(x)
+    system.tangent_near = float(near)
     prob, cen, Mff = setup(x)
     u = prob.u0()
     r, J = prob(u)
@@ -457,6 +479,18 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
         ratio = (Pt - Pi) / pred if pred < 0 else -1.0
         noise = 1e-12 * max(1.0, abs(Pi))
         accept = Pt < Pi - noise
+        backtracked = 0
+        while backtrack and not accept and np.isfinite(Pi) and backtracked < backtrack and pred < -noise:
+            # a step into contacts the model does not hold (or past a curvature change):
+            # shorten it along the same direction, energies only (no new factorisation)
+            alpha *= 0.5
+            backtracked += 1
+            xt = prob.state(u + alpha * du)[0]
+            Pt = float(system.energy(xt))
+            pred = alpha * slope + 0.5 * alpha * alpha * quad
+            ratio = (Pt - Pi) / pred if pred < 0 else -1.0
+            accept = Pt < Pi + 1e-4 * alpha * slope
+        ut = u + alpha * du
         if rebuilt:
             prob, cen, Mff = setup(x_cur)
             u = prob.u0()
@@ -481,10 +515,46 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
         out.energies.append(Pi)
         out.sigmas.append(sigma)
         out.steps.append(alpha)
+        sigma_used = sigma
+        if reuse and sigma_used > 0.0 and ratio > 0.5 and not backtracked:
+            # modified-Newton steps with the same factorisation of K + sigma M (residual +
+            # energy + a triangular solve each, no assembly of K): while the regularised
+            # model is good, they buy most of a new factorisation's progress at a fraction
+            # of its cost. Never in the sigma = 0 phase (quadratic convergence untouched).
+            inner = 0
+            while inner < reuse and rn > atol and it < max_iter:
+                du2 = -lu.solve(r)
+                slope2 = float(r @ du2)
+                if not slope2 < 0.0:
+                    break
+                mv2 = float(np.abs(du2[cen]).max()) * np.sqrt(3.0) if cen.size else 0.0
+                a2 = min(1.0, cap / mv2) if mv2 > 0 else 1.0
+                u2 = u + a2 * du2
+                x2 = prob.state(u2)[0]
+                if system.max_displacement_since_rebuild(x2) > guard:
+                    break
+                P2 = float(system.energy(x2))
+                if not P2 < Pi + 1e-4 * a2 * slope2:
+                    break
+                F2, _, _ = system.evaluate(x2, w0, t, jacobian=False)
+                r2 = np.asarray(F2, float)[prob.free]
+                inner += 1
+                it += 1
+                u, r, rn, Pi = u2, r2, float(np.linalg.norm(r2)), P2
+                out.residuals.append(rn)
+                out.energies.append(Pi)
+                out.sigmas.append(sigma_used)
+                out.steps.append(a2)
+                out.reused += 1
+                log.info("%s it=%d |F|=%.3e Pi=%.12e step=%.3g (same factorisation)", label, it, rn, Pi, a2)
+            if inner:
+                r, J = prob(u)
         # lower sigma after a good full step, but not below twice the last sigma at which
         # K + sigma M was indefinite (that memory fades by 4x per iteration): saves the
         # factorisations the inertia check would reject
-        if ratio > 0.5 and alpha == 1.0:
+        if backtracked:
+            sigma = max(2.0 * sigma, sig_floor)
+        elif ratio > 0.5 and alpha == 1.0:
             sigma = max(sigma / (8.0 if ratio > 0.75 else 4.0), 2.0 * sig_neg)
             if sigma <= sig_floor:
                 sigma = 0.0
@@ -493,10 +563,17 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
         elif alpha < 1.0:
             sigma = max(2.0 * sigma, sig_floor)
         sig_neg *= 0.25
+        if system.tangent_near > 0.0 and not backtracked and alpha == 1.0 and (
+                alpha * move < 0.25 * system.tangent_near or rn < 1e-5):
+            # the motion is now small against the near band: exact tangent from here on
+            system.tangent_near = 0.0
+            r, J = prob(u)
+            log.info("%s it=%d: near-contact stiffness off (exact Newton from here)", label, it)
         rates = convergence_rates(out.residuals)
         log.info("%s it=%d |F|=%.3e Pi=%.12e dPi=%.2e ratio=%.2f step=%.3g sigma=%.3g pairs=%d rate=%s wall=%.1f",
                  label, it, rn, Pi, dPi, ratio, alpha, out.sigmas[-1], system.map.n_pairs,
                  f"{rates[-1]:.2f}" if rates else "-", time.perf_counter() - t0)
+    system.tangent_near = 0.0
     out.u = u
     out.iterations = it
     xs, ws = prob.state(u)

@@ -126,6 +126,10 @@ class ContactSystem:
         self.nC = len(self.comps)
         self.g_eps = float(params.g_eps) * float(mesh.radius.min())
         self.onset = float(params.onset) * float(mesh.radius.min())
+        #: > 0: the tangent (not the residual) also holds the normal penalty stiffness of the
+        #: points whose separation is below this (mm), ramped to 0 at it: a model for Newton
+        #: steps that close gaps (``minimize_energy`` sets it while far from the solution)
+        self.tangent_near = 0.0
         self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
         self.stats = {"rebuilds": 0, "evaluations": 0, "rebuild_s": 0.0, "contact_s": 0.0, "base_s": 0.0}
         self._b = b
@@ -386,7 +390,11 @@ class ContactSystem:
         F = np.zeros(n)
         if self.map.n_pairs == 0:
             return F, np.zeros(0, np.int64), None, None
-        act = self.active_pairs(x)
+        near = float(self.tangent_near) if (jacobian and not self.scalar) else 0.0
+        if near > 0.0:
+            act = np.flatnonzero((self.gaps(x) > -near).any(axis=1))
+        else:
+            act = self.active_pairs(x)
         if act.size == 0:
             return F, act, None, None
         geo = self._geometry(x, act)
@@ -397,6 +405,15 @@ class ContactSystem:
             F += np.bincount(self._gdofs[act].ravel(), weights=Rm.ravel(), minlength=n)
             if not jacobian:
                 return F, act, None, None
+            if near > 0.0:
+                # model stiffness of the points about to touch (separation < near): the
+                # normal penalty stiffness, ramped to 0 at the band's edge (tangent only)
+                pts = (geo.g <= 0.0) & (geo.g > -near) & (geo.rho > 1e-300)
+                kn = np.where(pts, wgt[:, None] * self.params.penalty * (1.0 + geo.g / near), 0.0)
+                if np.any(kn > 0):
+                    cn = geo.c[..., :, None] * geo.n[..., None, :]  # (Pa, G, 4, 3)
+                    cn = cn.reshape(Pa, -1, 12)
+                    Km = Km + np.matmul(np.swapaxes(cn * kn[..., None], 1, 2), cn).reshape(Km.shape)
             return F, act, Km.reshape(Pa, -1), None
         Rl = np.zeros((Pa, m, nC))
         Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
