@@ -145,7 +145,9 @@ def main(argv=None):
         if s0:
             print(f"  yarn stacks at the crossings: height {s0['height_mm']:.3f} -> {s1['height_mm']:.3f} mm, width "
                   f"{s0['width_mm']:.3f} -> {s1['width_mm']:.3f} mm, levels {s0['levels_mean']:.2f} -> "
-                  f"{s1['levels_mean']:.2f} (histogram relaxed {s1['levels_histogram']})")
+                  f"{s1['levels_mean']:.2f} (histogram relaxed {s1['levels_histogram']}); thickness "
+                  f"{s0['thickness_mm']:.3f} -> {s1['thickness_mm']:.3f} mm; rows from the width "
+                  f"{s0['rows_from_width']:.2f} -> {s1['rows_from_width']:.2f}")
         print(f"  peak memory (max RSS) {fig['peak_memory_mb']:.0f} MB")
     if args.json:
         Path(args.json).write_text(json.dumps(fig, indent=2, default=float) + "\n")

@@ -35,7 +35,8 @@ from ..contact.relax import RelaxSettings, relax_to_equilibrium
 from ..contact.system import ContactParams, ContactSystem
 from ..model import BeamMaterial, BeamModel, DirichletBC
 
-__all__ = ["build", "solve", "run", "make_fabric", "clamp_reactions", "stack_geometry", "write_state"]
+__all__ = ["build", "solve", "run", "make_fabric", "clamp_reactions", "stack_geometry", "write_state",
+           "plot_sections"]
 
 log = logging.getLogger("rve.scenes.fabric_relax")
 
@@ -115,21 +116,80 @@ def _levels(z, gap):
 
 
 def stack_geometry(fab, mesh, xn) -> dict:
-    """Yarn cross-sections at the crossings: mean stack height, width and number of
-    vertical levels (fibril rows; clusters of centroid heights more than R apart),
-    averaged over yarns and crossings. Weaves only (empty for knits)."""
+    """Yarn cross-sections at the crossings, averaged over yarns and crossings (weaves only;
+    empty for knits):
+
+    * ``height_mm``, ``width_mm``: extent of the fibril centroids along the vertical and the
+      lateral axis; ``levels_mean``/``levels_histogram``: clusters of centroid heights more
+      than R apart (a tilted or draped layer counts as one level);
+    * ``thickness_mm``: extent across the section's principal (widest) direction, i.e. the
+      thickness of the stack whatever its tilt, and ``layers_mean`` = 1 + thickness /
+      (√3/2 · d), the number of hexagonally packed rows that thickness holds (3 for the
+      designed 3-4-3 stack, 2 for a two-level stack, 1 for a single row);
+    * ``rows_from_width``: n / ((width − R)/d + 1), the number of rows of a staggered stack
+      of n fibrils whose centroid width is ``width`` (2.86 for the designed 3-4-3 stack of
+      width 3d, 2 for two staggered rows of five)."""
     if "weft_x" not in fab.params:
         return {}
     R = float(mesh.radius.min())
-    H, W, L = [], [], []
+    d = 2.0 * R
+    H, W, L, T = [], [], [], []
     for y in fab.yarns:
-        sec = _yarn_sections(fab, mesh, xn, y)
+        sec = _yarn_sections(fab, mesh, xn, y)  # (n_cut, n_fib, 2), centred
         H.append(sec[..., 1].max(axis=1) - sec[..., 1].min(axis=1))
         W.append(sec[..., 0].max(axis=1) - sec[..., 0].min(axis=1))
         L.append([_levels(s[:, 1], R) for s in sec])
-    H, W, L = np.concatenate(H), np.concatenate(W), np.concatenate(L)
+        cov = np.einsum("cfi,cfj->cij", sec, sec)
+        _, vec = np.linalg.eigh(cov)  # ascending: vec[..., 0] the thin direction
+        proj = np.einsum("cfi,ci->cf", sec, vec[:, :, 0])
+        T.append(proj.max(axis=1) - proj.min(axis=1))
+    H, W, L, T = np.concatenate(H), np.concatenate(W), np.concatenate(L), np.concatenate(T)
+    layers = 1.0 + T / (0.5 * np.sqrt(3.0) * d)
+    nf = np.mean([len(y.fibrils) for y in fab.yarns])
+    rows_w = nf / ((W - R) / d + 1.0)
     return {"height_mm": float(H.mean()), "width_mm": float(W.mean()), "levels_mean": float(L.mean()),
-            "levels_histogram": {int(k): int(v) for k, v in zip(*np.unique(L, return_counts=True))}}
+            "levels_histogram": {int(k): int(v) for k, v in zip(*np.unique(L, return_counts=True))},
+            "thickness_mm": float(T.mean()), "layers_mean": float(layers.mean()),
+            "rows_from_width": float(rows_w.mean()),
+            "layers_histogram": {int(k): int(v) for k, v in zip(*np.unique(np.rint(layers).astype(int),
+                                                                            return_counts=True))}}
+
+
+def plot_sections(path, fab, mesh, states, cuts=(-1.0, 1.0), titles=None):
+    """Cross-sections of the warp yarns at ``x = cuts`` (centroid circles of radius R,
+    coloured by yarn) for each state in ``states`` (nodal arrays): the thesis Fig. 7.4.2
+    view, initial vs relaxed. Weft centrelines near the cut are drawn as lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle
+
+    fig, axs = plt.subplots(len(states), len(cuts), figsize=(6.5 * len(cuts), 2.4 * len(states)), squeeze=False)
+    R = mesh.radius
+    for i, xn in enumerate(states):
+        for j, c in enumerate(cuts):
+            ax = axs[i, j]
+            for f in range(mesh.n_fibrils):
+                r = xn[mesh.fibril_nodes(f), :3]
+                yarn = fab.yarns[fab.fibril_yarn[f]]
+                if yarn.direction == "warp":
+                    o = np.argsort(r[:, 0])
+                    p = (np.interp(c, r[o, 0], r[o, 1]), np.interp(c, r[o, 0], r[o, 2]))
+                    ax.add_patch(Circle(p, R[f], color=f"C{fab.fibril_yarn[f] % 10}", alpha=0.75, lw=0))
+                elif abs(yarn.position - c) < 0.5:
+                    ax.plot(r[:, 1], r[:, 2], "-", lw=0.4, color="0.3")
+            h = fab.half_widths
+            ax.set_xlim(-h[1], h[1])
+            ax.set_ylim(-h[2] - 0.2, h[2] + 0.2)
+            ax.set_aspect("equal")
+            ax.set_title(f"{titles[i] if titles else ''} x = {c:g} mm", fontsize=9)
+            ax.set_xlabel("y (mm)", fontsize=8)
+            ax.set_ylabel("z (mm)", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
 
 
 def _settings(cfg, schedule=None) -> RelaxSettings:
@@ -319,6 +379,10 @@ def run(cfg, out_dir: Path) -> dict:
         files["vtk"] = [name for _, name in series]
         files["pvd"] = write_pvd(out_dir / "relaxation.pvd", series).name
     if o.png:
+        if "weft_x" in fab.params:
+            plot_sections(out_dir / "sections.png", fab, mesh, [system.nodal(x0), system.nodal(x)],
+                          titles=["initial", "relaxed"])
+            files["sections_png"] = "sections.png"
         surf = tube_surface(mesh, system.nodal(x), o.n_theta, {"yarn": yarn})
         files["png"] = "relaxed.png"
         summary["render"] = render_png(out_dir / "relaxed.png", surf, scalars="yarn",
