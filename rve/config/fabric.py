@@ -67,11 +67,14 @@ class FabricRelaxation(Section):
         "energy", description="energy: static energy minimisation (trust-region Newton with inertia check, "
                               "continuation in the penalty onset); dynamic: damped backward Euler + capped Newton")
     onset_continuation: list[Dimensionless] = Field(
-        [0.05, 0.01], description="energy: onset widths (fractions of R) of the stages before the final one, "
+        [0.05], description="energy: onset widths (fractions of R) of the stages before the final one, "
                                   "which uses contact.onset")
     coarse_elements: Optional[Integer] = Field(
         None, ge=1, description="energy: mesh sequencing, relax first on this many elements per fibril, "
                                 "interpolate, finish on mesh.elements (null: target mesh only)")
+    coarse_axial_points: Optional[Integer] = Field(
+        None, ge=1, description="energy + coarse_elements: Gauss points per element on the coarse mesh (null: as "
+                                "mesh.axial_points); 1 relieves the locking of coarse linear elements")
     fine_onset_continuation: Optional[list[Dimensionless]] = Field(
         None, description="energy + coarse_elements: onset stages on the target mesh before the final one "
                           "(null: none, the target mesh starts from the interpolated coarse minimum with contact.onset)")

@@ -510,6 +510,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
             continue
         it += 1
         dPi = Pt - Pi
+        rn_prev = rn
         u, r, J, rn, Pi = ut, rt, Jt, rtn, Pt
         out.residuals.append(rn)
         out.energies.append(Pi)
@@ -556,6 +557,10 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
             sigma = max(2.0 * sigma, sig_floor)
         elif ratio > 0.5 and alpha == 1.0:
             sigma = max(sigma / (8.0 if ratio > 0.75 else 4.0), 2.0 * sig_neg)
+            if ratio > 0.75:
+                # near the solution sigma also follows |F|^2 (Levenberg-Marquardt with
+                # sigma ~ |F|^2 keeps Newton's quadratic rate while it is still > 0)
+                sigma = min(sigma, sigma_used * (rn / rn_prev) ** 2)
             if sigma <= sig_floor:
                 sigma = 0.0
         elif ratio < 0.25:

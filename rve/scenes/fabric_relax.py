@@ -214,6 +214,8 @@ def _coarse_stage(cfg, system):
 
     data = config_as_dict(cfg)
     data["mesh"]["elements"] = int(cfg.relaxation.coarse_elements)
+    if cfg.relaxation.coarse_axial_points is not None:
+        data["mesh"]["axial_points"] = int(cfg.relaxation.coarse_axial_points)
     ccfg = type(cfg).model_validate(data)
     _, csys, cx0 = build(ccfg)
     cres = relax_to_equilibrium(csys, cx0, np.zeros(csys.n), _settings(ccfg))
@@ -239,6 +241,7 @@ def solve(cfg, on_rebuild=None) -> dict:
         for h in cres.history:
             history.append(dict(h, mesh_elements=int(r.coarse_elements)))
         coarse = {"elements_per_fibril": int(r.coarse_elements), "dofs": cdofs,
+                  "axial_points": r.coarse_axial_points,
                   "onset_schedule_over_R": [float(v) for v in r.onset_continuation] + [float(cfg.contact.onset)],
                   "converged": bool(cres.static_converged), "newton_iterations": int(cres.static_newton_iterations),
                   "wall_s": float(cres.timings.get("total", 0.0))}
