@@ -10,10 +10,12 @@ configfile: "configs/pipeline.yaml"
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/verification.smk"
+include: "workflow/rules/dynamic_wire.smk"
+include: "workflow/rules/rve.smk"
 
 
 rule all:
-    """The default targets (see DEFAULT_TARGETS in workflow/rules/common.smk)."""
+    """The default targets: the groups in config `default_targets` (rve_default_targets)."""
     input:
-        DEFAULT_TARGETS,
+        rve_default_targets(config, {"static_wire": STATIC_WIRE_OUTPUTS, "dynamic_wire": DYNAMIC_WIRE_OUTPUTS}),
     default_target: True

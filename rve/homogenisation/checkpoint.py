@@ -1,0 +1,237 @@
+"""Self-describing checkpoints of RVE states (netCDF via xarray), written atomically.
+
+The thesis saved the fabric after every stretching iteration "as a precaution against
+computer crashes and power outages and to enable further analysis" (§7.3). Every stage
+of the pipeline reads the state it starts from and writes the state it ends at as one
+file (format ``rve-state/1``); Snakemake's outputs are these files, so a killed run
+resumes from the last one written.
+
+Format ``rve-state/1``
+======================
+
+Dimensions: ``node``, ``component`` (9: r_x r_y r_z g1_x g1_y g1_z g2_x g2_y g2_z),
+``fibril``, ``element``, ``element_node``, ``yarn``, ``end`` (fibril ends), ``side``
+(x-, x+, y-, y+), ``xyz`` (3), ``pair`` (contact element pairs of the map at the state).
+
+==========================  ===========================  =======  ==========================
+variable                    dims                         units    meaning
+==========================  ===========================  =======  ==========================
+state                       node, component              mm       centroid r and directors
+velocity                    node, component              mm/ms    w (zero after a static solve)
+reference                   node, component              mm       natural configuration X0
+origin                      node, component              mm       start of the strain path
+                                                                  (the relaxed state): the
+                                                                  velocity field's X
+node_fibril, node_s         node                         -, mm    fibril, parameter s
+conn                        element, element_node        1        global nodes of elements
+radius                      fibril                       mm       section radius
+fibril_name, fibril_yarn    fibril                       1
+yarn_name, yarn_direction,  yarn                         1, mm    warp/weft/loop, position
+yarn_position
+end_fibril, end_node,       end                          1        fibril end tags (clamps,
+end_yarn, end_side,                                               probe terminals)
+end_which
+reaction_force              side, xyz                    N        clamp force on the fibrils
+                                                                  summed per side
+contact_element_plus/minus  pair                         1        element pairs of the map
+contact_active_points       pair                         1        overlapping points per pair
+==========================  ===========================  =======  ==========================
+
+Attributes: ``rve_state_format``, ``kind`` (initial | relaxed | strained), ``mode``,
+``step``, ``strain``, ``time`` (ms of simulated time), ``combo`` and ``params`` (JSON:
+the swept parameter values), ``config`` (JSON: the validated RVEConfig in internal
+units), ``fabric_kind``, ``elements``, ``order``, ``half_widths``, ``contact_count``
+(overlapping contact points), ``solver`` (JSON: convergence, iterations, wall times),
+``rve_version``.
+
+``write_state`` writes through ``rve.io.atomic.atomic_path`` (temporary file in the same
+directory, then a rename), so a file that exists is complete. ``load_state`` returns a
+:class:`State` with the flat dof vectors of the mechanics-only layout (9 per node).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+__all__ = ["STATE_FORMAT", "COMPONENTS", "SIDES", "State", "write_state", "load_state"]
+
+STATE_FORMAT = "rve-state/1"
+COMPONENTS = ("r_x", "r_y", "r_z", "g1_x", "g1_y", "g1_z", "g2_x", "g2_y", "g2_z")
+SIDES = ("x-", "x+", "y-", "y+")
+
+
+@dataclass
+class State:
+    """A stored state: nodal arrays (n_nodes, 9) and the metadata of the file."""
+
+    x: np.ndarray                  # (n_nodes, 9) positions r and directors g1, g2
+    w: np.ndarray                  # (n_nodes, 9) velocities
+    origin: np.ndarray             # (n_nodes, 9) the relaxed state (start of the strain path)
+    kind: str
+    mode: str = ""
+    step: int = 0
+    strain: float = 0.0
+    time: float = 0.0
+    combo: str = ""
+    params: dict = field(default_factory=dict)
+    config: dict = field(default_factory=dict)
+    reaction_force: dict = field(default_factory=dict)   # side -> [fx, fy, fz]
+    contact_count: int = 0
+    solver: dict = field(default_factory=dict)
+    reference: Optional[np.ndarray] = None
+
+    @property
+    def x_flat(self) -> np.ndarray:
+        return np.ascontiguousarray(self.x).reshape(-1)
+
+    @property
+    def w_flat(self) -> np.ndarray:
+        return np.ascontiguousarray(self.w).reshape(-1)
+
+
+def _jsonable(obj):
+    from ..io.atomic import to_jsonable
+
+    return to_jsonable(obj)
+
+
+def write_state(path, state: State, fabric, mesh, contact=None, version: Optional[str] = None) -> Path:
+    """Write ``state`` of ``fabric``/``mesh`` atomically as netCDF (module docstring).
+
+    ``contact``: a ``ContactSystem`` whose map (at ``state.x``) is stored, or None."""
+    import xarray as xr
+
+    from ..io.atomic import atomic_path
+    from ..tables import package_version
+
+    nn = mesh.n_nodes
+    for name in ("x", "w", "origin"):
+        arr = getattr(state, name)
+        if np.shape(arr) != (nn, 9):
+            raise ValueError(f"state.{name} must be (n_nodes, 9) = ({nn}, 9), got {np.shape(arr)}")
+    tags = fabric.end_tags
+    mm = {"units": "mm"}
+    reac = np.full((len(SIDES), 3), np.nan)
+    for i, s in enumerate(SIDES):
+        if s in state.reaction_force:
+            reac[i] = state.reaction_force[s]
+    data = {
+        "state": (("node", "component"), np.asarray(state.x, float),
+                  {"long_name": "beam state: centroid r and directors g1, g2", **mm}),
+        "velocity": (("node", "component"), np.asarray(state.w, float),
+                     {"long_name": "velocity of the beam state", "units": "mm/ms"}),
+        "reference": (("node", "component"), np.asarray(mesh.X0, float),
+                      {"long_name": "natural (stress-free) configuration", **mm}),
+        "origin": (("node", "component"), np.asarray(state.origin, float),
+                   {"long_name": "start of the strain path (relaxed state): X of the velocity field", **mm}),
+        "node_fibril": (("node",), mesh.node_fibril.astype(np.int32), {"long_name": "fibril of each node"}),
+        "node_s": (("node",), np.asarray(mesh.node_s, float),
+                   {"long_name": "reference parameter along the fibril", **mm}),
+        "conn": (("element", "element_node"), mesh.conn.astype(np.int32),
+                 {"long_name": "global node indices of each element, in axial order"}),
+        "radius": (("fibril",), np.asarray(mesh.radius, float), {"long_name": "fibril section radius", **mm}),
+        "fibril_name": (("fibril",), np.array(mesh.names, dtype=object), {"long_name": "fibril name"}),
+        "fibril_yarn": (("fibril",), np.asarray(fabric.fibril_yarn, np.int32), {"long_name": "yarn of each fibril"}),
+        "yarn_name": (("yarn",), np.array([y.name for y in fabric.yarns], dtype=object), {"long_name": "yarn name"}),
+        "yarn_direction": (("yarn",), np.array([y.direction for y in fabric.yarns], dtype=object),
+                           {"long_name": "yarn direction (warp, weft, loop)"}),
+        "yarn_position": (("yarn",), np.array([y.position for y in fabric.yarns], float),
+                          {"long_name": "yarn position across the fabric (warp: y, weft: x, loop: y)", **mm}),
+        "end_fibril": (("end",), np.array([t.fibril for t in tags], np.int32), {"long_name": "fibril of the end"}),
+        "end_node": (("end",), np.array([t.node(mesh) for t in tags], np.int32),
+                     {"long_name": "global node of the end"}),
+        "end_yarn": (("end",), np.array([t.yarn for t in tags], np.int32), {"long_name": "yarn of the end"}),
+        "end_side": (("end",), np.array([t.side for t in tags], dtype=object), {"long_name": "box side of the end"}),
+        "end_which": (("end",), np.array([t.end for t in tags], dtype=object),
+                      {"long_name": "start (s = 0) or end (s = length) of the fibril"}),
+        "reaction_force": (("side", "xyz"), reac,
+                           {"long_name": "force of the clamps on the fibril ends, summed per box side", "units": "N"}),
+    }
+    if contact is not None and contact.map is not None:
+        cmap = contact.map
+        xflat = np.ascontiguousarray(state.x).reshape(-1)
+        if cmap.n_pairs:
+            geo = contact._geometry(xflat)
+            act = geo.active.sum(axis=1).astype(np.int32)
+        else:
+            act = np.zeros(0, np.int32)
+        data["contact_element_plus"] = (("pair",), np.asarray(cmap.e_plus, np.int32),
+                                        {"long_name": "element (+ side) of each contact pair of the map"})
+        data["contact_element_minus"] = (("pair",), np.asarray(cmap.e_minus, np.int32),
+                                         {"long_name": "element (- side) of each contact pair of the map"})
+        data["contact_active_points"] = (("pair",), act,
+                                         {"long_name": "overlapping contact points of the pair at the state"})
+    attrs = {
+        "title": f"rve state: {fabric.kind} {state.kind}"
+                 + (f" {state.mode} step {state.step} (strain {state.strain:g})" if state.mode else ""),
+        "rve_state_format": STATE_FORMAT,
+        "kind": state.kind,
+        "mode": state.mode,
+        "step": int(state.step),
+        "strain": float(state.strain),
+        "time": float(state.time),
+        "combo": state.combo,
+        "params": json.dumps(_jsonable(state.params), sort_keys=True),
+        "config": json.dumps(_jsonable(state.config), sort_keys=True),
+        "fabric_kind": fabric.kind,
+        "elements": int(mesh.n_elements // max(1, mesh.n_fibrils)),
+        "order": int(mesh.order),
+        "half_widths": [float(v) for v in fabric.half_widths],
+        "contact_count": int(state.contact_count),
+        "solver": json.dumps(_jsonable(state.solver), sort_keys=True),
+        "rve_version": version or package_version(),
+        "conventions": "node-interleaved beam state (9 per node); internal units mm, ms, g, N, MPa, K, A, V",
+    }
+    ds = xr.Dataset(data, coords={"component": list(COMPONENTS), "side": list(SIDES), "xyz": ["x", "y", "z"]},
+                    attrs=attrs)
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+    return Path(path)
+
+
+def load_state(path) -> State:
+    """Read a checkpoint written by :func:`write_state` (raises ValueError on another format)."""
+    import xarray as xr
+
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no RVE state at {path}")
+    with xr.open_dataset(path, engine="netcdf4") as ds:
+        ds = ds.load()
+    fmt = ds.attrs.get("rve_state_format")
+    if fmt != STATE_FORMAT:
+        raise ValueError(f"{path}: not an rve state file (rve_state_format = {fmt!r}, expected {STATE_FORMAT!r})")
+    reac = {}
+    rf = ds["reaction_force"].values
+    for i, s in enumerate(ds["side"].values):
+        if np.all(np.isfinite(rf[i])):
+            reac[str(s)] = [float(v) for v in rf[i]]
+    a = ds.attrs
+    return State(
+        x=np.asarray(ds["state"].values, float),
+        w=np.asarray(ds["velocity"].values, float),
+        origin=np.asarray(ds["origin"].values, float),
+        kind=str(a["kind"]),
+        mode=str(a.get("mode", "")),
+        step=int(a.get("step", 0)),
+        strain=float(a.get("strain", 0.0)),
+        time=float(a.get("time", 0.0)),
+        combo=str(a.get("combo", "")),
+        params=json.loads(a.get("params", "{}")),
+        config=json.loads(a.get("config", "{}")),
+        reaction_force=reac,
+        contact_count=int(a.get("contact_count", 0)),
+        solver=json.loads(a.get("solver", "{}")),
+        reference=np.asarray(ds["reference"].values, float),
+    )
+
+
+def describe(path) -> dict[str, Any]:
+    """Short summary of a checkpoint (for logs and the CLI)."""
+    st = load_state(path)
+    return {"kind": st.kind, "mode": st.mode, "step": st.step, "strain": st.strain, "combo": st.combo,
+            "contact_count": st.contact_count, "reaction_force": st.reaction_force, "nodes": int(st.x.shape[0])}

@@ -1,0 +1,152 @@
+"""Config model of the RVE homogenisation run (``scene: rve``; thesis ch. 7, SPEC §5-§6).
+
+One validated :class:`RVEConfig` describes everything one combination of the pipeline
+computes: the fabric, material, contact law and mesh (the same sections as the
+relaxation scene ``fabric_relax``, ``rve.config.fabric``), the relaxation, the strain
+path of Algorithm 7.1 (``strain``), the probes (``probes``) and the probe solver
+(``probe_solver``). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
+V) or strings with units. Registered in ``rve.config.SCENE_MODELS`` on import, so
+``rve.config.load_config`` knows it once ``rve.homogenisation`` is imported.
+
+Parameter choices of the default (thesis Table 7.1) are documented in
+docs/rve_pipeline.md; the config files are configs/rve/*.yaml.
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from ..config.fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
+from ..config.models import (
+    DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, SceneConfig, Section, ThermalConductivity,
+    Time, Voltage, register_scene_model,
+)
+
+__all__ = ["RVEConfig", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
+
+#: deformation modes of the strain path (rve.tables.MODES)
+MODES = ("uniaxial", "shear")
+
+
+class RVEMaterial(FabricMaterial):
+    """Fibril material: mechanics (as the relaxation scene) + conduction of the probes."""
+
+    electrical_conductivity: ElectricConductivity = Field(
+        "10 S/mm", gt=0, description="sigma, reference configuration (Table 7.1)")
+    thermal_conductivity: ThermalConductivity = Field(
+        "1 W/(mm*K)", gt=0, description="k, reference configuration (Table 7.1)")
+    seebeck: Dimensionless = Field(
+        0.0, ge=0, le=0, description="S (V/K): must be 0 -- the probe solves are decoupled (thesis §7.3)")
+    alpha_mu: Dimensionless = Field(
+        0.0, ge=0, le=0, description="d mu/dT (MPa/K): must be 0 -- T does not feed back (thesis §7.3)")
+
+
+class Settle(Section):
+    """A second, moderately damped dynamic phase after the relaxation scene's heavily damped
+    one (``relaxation``): the heavy damping resolves the initial interpenetrations but
+    relaxes the soft modes (fibril tension, bending) only on times ~ gamma / E; with a
+    tenth of the damping they settle within ~20 ms (docs/rve_pipeline.md)."""
+
+    damping: DampingCoefficient = Field("2 N*ms/mm^4", ge=0, description="volumetric damping gamma")
+    duration: Time = Field("0 ms", ge=0, description="duration (0: no settling phase)")
+    steps: Integer = Field(20, ge=1, description="backward-Euler steps")
+
+
+class StrainPath(Section):
+    """Algorithm 7.1: ``steps`` strain steps of ``total / steps`` per mode, each a driven
+    phase (velocity field for ``t_step``), a heavily damped relaxation (``t_relax``) and a
+    static solve."""
+
+    modes: list[Literal["uniaxial", "shear"]] = Field(
+        ["uniaxial", "shear"], min_length=1, description="deformation modes (each its own chain of steps)")
+    total: Dimensionless = Field(0.25, gt=0, le=1, description="final strain (engineering / shear)")
+    steps: Integer = Field(10, ge=1, le=99, description="strain steps per mode")
+    t_step: Time = Field("0.01 ms", gt=0, description="duration of the driven phase of a step (short: inertia "
+                         "carries the affine field)")
+    stretch_steps: Integer = Field(2, ge=1, description="backward-Euler steps of the driven phase")
+    damping: DampingCoefficient = Field(
+        "0.1 N*s/m^4", ge=0, description="gamma of the driven phase (Table 7.1's 0.1 N s/m as a volumetric density)")
+    t_relax: Time = Field("2 ms", gt=0, description="duration of the heavily damped relaxation of a step")
+    relax_steps: Integer = Field(2, ge=1, description="backward-Euler steps of the damped relaxation")
+    relax_damping: DampingCoefficient = Field(
+        "20 N*ms/mm^4", ge=0, description="damping of the relaxation phase (heavy, as the relaxation scene)")
+    rebuild_every: Integer = Field(2, ge=1, description="contact map rebuilt every k time steps")
+    newton_rtol: Dimensionless = Field(1e-3, gt=0, description="stage Newton relative tolerance (dynamic phases)")
+    newton_max_iter: Integer = Field(8, ge=1, description="stage Newton iterations (then the step is cut)")
+    static_method: Literal["energy", "newton"] = Field(
+        "energy", description="static solve of a step: energy minimisation (rve.contact.relax.minimize_energy) "
+                              "or the capped Newton of the dynamic relaxation path")
+    static_atol: Dimensionless = Field(1e-6, gt=0, description="static Newton tolerance on |F| (N)")
+    static_rounds: Integer = Field(1, ge=1, description="static solves, each after a map rebuild")
+    static_max_iter: Integer = Field(10, ge=1, description="Newton iterations per static solve")
+
+    @field_validator("modes")
+    @classmethod
+    def _unique_modes(cls, v):
+        if len(set(v)) != len(v):
+            raise ValueError(f"modes must be unique, got {v}")
+        return v
+
+
+class ProbeTerminal(Section):
+    """All fibril ends of one yarn on one side of the box: the yarn is picked by its
+    direction and position (warp: its y, weft: its x, knit course 'loop': its y)."""
+
+    yarn: Literal["warp", "weft", "loop"] = Field(description="yarn direction")
+    position: Length = Field(description="yarn position across the fabric (mm)")
+    end: Literal["x-", "x+", "y-", "y+"] = Field(description="box side of the yarn end")
+
+
+class ProbeSpec(Section):
+    """A probe: the test voltage on the first terminal ('+'), 0 V on the second ('-')."""
+
+    name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", description="probe name (table coordinate)")
+    terminals: list[ProbeTerminal] = Field(min_length=2, max_length=2, description="[+ terminal, - terminal]")
+
+
+class ProbeSolver(Section):
+    voltage: Voltage = Field("1 V", gt=0, description="test voltage across the terminals")
+    insulation_factor: Dimensionless = Field(
+        1e12, gt=1, description="weakened insulation: pull-down R_ext = factor x the fibril's own resistance")
+    insulation_ends: Literal["both", "start"] = Field("both", description="pull-down on both ends or the first")
+    temperature: bool = Field(True, description="Joule-heating temperature solve (T = 0 at every fibril end)")
+    newton_atol: Dimensionless = Field(1e-12, gt=0, description="absolute tolerance of the probe solves")
+    newton_rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance of the probe solves")
+
+
+def thesis_probes() -> list[dict]:
+    """The three probes of thesis Fig. 7.2.2 on the 4 x 4 plain weave (also valid on a 2 x 2
+    weave with yarns at -1 and +1)."""
+    return [
+        {"name": "probe1", "terminals": [{"yarn": "warp", "position": -1.0, "end": "x+"},
+                                         {"yarn": "warp", "position": -1.0, "end": "x-"}]},
+        {"name": "probe2", "terminals": [{"yarn": "warp", "position": -1.0, "end": "x+"},
+                                         {"yarn": "warp", "position": 1.0, "end": "x-"}]},
+        {"name": "probe3", "terminals": [{"yarn": "warp", "position": -1.0, "end": "x+"},
+                                         {"yarn": "weft", "position": -1.0, "end": "y+"}]},
+    ]
+
+
+@register_scene_model
+class RVEConfig(SceneConfig):
+    """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
+
+    scene: Literal["rve"] = Field(description="scene name")
+    fabric: FabricSpec = Field(default_factory=FabricSpec)
+    material: RVEMaterial = Field(default_factory=RVEMaterial)
+    contact: FabricContact = Field(default_factory=FabricContact)
+    mesh: FabricMesh = Field(default_factory=FabricMesh)
+    relaxation: FabricRelaxation = Field(default_factory=FabricRelaxation)
+    settle: Settle = Field(default_factory=Settle)
+    strain: StrainPath = Field(default_factory=StrainPath)
+    probes: list[ProbeSpec] = Field(default_factory=lambda: [ProbeSpec(**p) for p in thesis_probes()],
+                                    min_length=1, description="probes (thesis Fig. 7.2.2 by default)")
+    probe_solver: ProbeSolver = Field(default_factory=ProbeSolver)
+
+    @model_validator(mode="after")
+    def _unique_probe_names(self):
+        names = [p.name for p in self.probes]
+        if len(set(names)) != len(names):
+            raise ValueError(f"probe names must be unique, got {names}")
+        return self

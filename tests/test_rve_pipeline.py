@@ -1,0 +1,342 @@
+"""RVE pipeline (thesis ch. 7): the Snakemake DAG of the CI config (tiny 2 x 2 weave, 2 steps
+per mode), the acceptance checks on its table, the checkpoints, resume after a kill with an
+identical table, parameter sweeps, the dask path, config and schema."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from rve.homogenisation import pipeline as P
+
+ROOT = Path(__file__).resolve().parents[1]
+CI_CONFIG = "configs/tests/pipeline_ci.yaml"
+SCHEMA = ROOT / "workflow" / "schemas" / "pipeline.schema.yaml"
+RUN = "ci"
+TABLE = f"results/rve/{RUN}/table.nc"
+PLOTS = list(P.report_outputs(RUN).values())
+
+
+def _ci_spec():
+    return yaml.safe_load((ROOT / CI_CONFIG).read_text())["rve"]["runs"][RUN]
+
+
+def _workflow_copy(dest: Path) -> Path:
+    shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
+    shutil.copytree(ROOT / "workflow", dest / "workflow")
+    for rel in ("configs/pipeline.yaml", CI_CONFIG):
+        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / rel, dest / rel)
+    return dest
+
+
+def _snakemake_cmd(*targets: str, extra=()) -> list[str]:
+    # targets before --configfile (which takes several values)
+    return [sys.executable, "-m", "snakemake", "-j2", *targets, *extra, "--configfile", CI_CONFIG]
+
+
+def _run(cwd: Path, cmd: list[str], timeout: float = 600) -> subprocess.CompletedProcess:
+    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    if proc.returncode != 0:
+        logs = "\n".join(f"== {p}\n{p.read_text()[-3000:]}" for p in sorted(cwd.glob("results/logs/rve/**/*.log")))
+        pytest.fail(f"snakemake failed ({proc.returncode}):\n{proc.stderr[-5000:]}\n{logs}")
+    return proc
+
+
+@pytest.fixture(scope="module")
+def ci_run(tmp_path_factory):
+    """The whole RVE DAG of the CI config, uninterrupted (13 jobs)."""
+    pytest.importorskip("snakemake")
+    work = _workflow_copy(tmp_path_factory.mktemp("rve_ci"))
+    t0 = time.perf_counter()
+    _run(work, _snakemake_cmd(TABLE, *PLOTS))
+    work.joinpath("wall_s.txt").write_text(f"{time.perf_counter() - t0:.1f}\n")
+    return work
+
+
+@pytest.fixture(scope="module")
+def table(ci_run):
+    from rve.tables import open_table
+
+    return open_table(ci_run / TABLE)
+
+
+# --------------------------------------------------------------------------- DAG outputs
+def test_every_stage_wrote_outputs_logs_and_benchmarks(ci_run):
+    res = ci_run / "results"
+    spec = _ci_spec()
+    cfg = P.load_run_config(spec)
+    names = P.state_names(cfg)
+    assert names == ["relaxed", "uniaxial_01", "uniaxial_02", "shear_01", "shear_02"]
+    base = res / "rve" / RUN / "base"
+    for n in ["initial", *names]:
+        assert (base / "states" / f"{n}.nc").stat().st_size > 0, n
+    for n in names:
+        rec = json.loads((base / "probes" / f"{n}.json").read_text())
+        assert set(rec["probes"]) == {"probe1", "probe2", "probe3"}
+        assert (res / f"benchmarks/rve/{RUN}/base/probes/{n}.tsv").exists()
+        assert (res / f"logs/rve/{RUN}/base/probes/{n}.log").exists()
+    for n in names[1:]:
+        assert (res / f"benchmarks/rve/{RUN}/base/strain/{n}.tsv").exists()
+    for stage in ("fabric", "relax"):
+        assert (res / f"benchmarks/rve/{RUN}/base/{stage}.tsv").exists()
+        assert (res / f"logs/rve/{RUN}/base/{stage}.log").exists()
+    for stage in ("gather", "report"):
+        assert (res / f"benchmarks/rve/{RUN}/{stage}.tsv").exists()
+    for png in PLOTS:
+        assert (ci_run / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "probe_resistance" in (res / f"rve/{RUN}/table.csv").read_text()
+    assert "probe resistance" in (res / f"rve/{RUN}/summary.txt").read_text()
+    # no temporary files of the atomic writers are left behind
+    assert not list((res / "rve").rglob("*.tmp"))
+
+
+def test_checkpoints_are_self_describing_and_land_on_the_strain_path(ci_run):
+    from rve.homogenisation.checkpoint import STATE_FORMAT, load_state
+    from rve.homogenisation.strain import build_fabric, clamped_ends, strain_levels
+
+    spec = _ci_spec()
+    cfg = P.load_run_config(spec)
+    fab, mesh = build_fabric(cfg)
+    ends, _, _ = clamped_ends(fab, mesh)
+    levels = strain_levels(cfg)
+    base = ci_run / "results" / "rve" / RUN / "base" / "states"
+    relaxed = load_state(base / "relaxed.nc")
+    assert relaxed.kind == "relaxed" and relaxed.strain == 0.0
+    np.testing.assert_array_equal(relaxed.origin, relaxed.x)
+    assert relaxed.config["fabric"]["n_warp"] == 2 and relaxed.config["scene"] == "rve"
+    for mode, d in (("uniaxial", 0), ("shear", 1)):
+        for step in (1, 2):
+            st = load_state(base / f"{mode}_{step:02d}.nc")
+            assert (st.kind, st.mode, st.step) == ("strained", mode, step)
+            assert st.strain == pytest.approx(levels[step])
+            assert st.solver["converged"]
+            # ends at X + eps X1 e_d exactly (X: the relaxed state)
+            want = relaxed.x[ends, :3].copy()
+            want[:, d] += levels[step] * relaxed.x[ends, 0]
+            np.testing.assert_allclose(st.x[ends, :3], want, rtol=0, atol=1e-13)
+            assert set(st.reaction_force) == {"x-", "x+", "y-", "y+"}
+    import xarray as xr
+
+    with xr.open_dataset(base / "shear_02.nc") as ds:
+        assert ds.attrs["rve_state_format"] == STATE_FORMAT
+        assert ds["state"].attrs["units"] == "mm" and ds["reaction_force"].attrs["units"] == "N"
+        assert ds.sizes["component"] == 9 and ds.sizes["pair"] > 0
+        assert int(ds["contact_active_points"].sum()) == ds.attrs["contact_count"] > 0
+
+
+# --------------------------------------------------------------------------- table acceptance
+def test_table_has_both_modes_all_levels_and_probes(table):
+    assert list(table["mode"].values) == ["uniaxial", "shear"]
+    np.testing.assert_allclose(table["strain"].values, [0.0, 0.05, 0.1])
+    assert list(table["probe"].values) == ["probe1", "probe2", "probe3"]
+    for v in ("reaction_force", "probe_current", "probe_resistance", "temperature_rise_max",
+              "temperature_rise_mean", "contact_count"):
+        assert np.all(np.isfinite(table[v].values)), v
+    assert np.all(table["temperature_rise_max"].values > 0)
+    assert np.all(table["temperature_rise_max"] >= table["temperature_rise_mean"])
+
+
+def test_relaxed_cell_is_in_tension_at_the_clamps(table):
+    rf = table["reaction_force"].sel(strain=0.0)
+    for m in table["mode"].values:
+        f = rf.sel(mode=m)
+        assert float(f.sel(side="x-", component="x")) < 0 < float(f.sel(side="x+", component="x"))
+        assert float(f.sel(side="y-", component="y")) < 0 < float(f.sel(side="y+", component="y"))
+        # the clamps balance the fabric
+        assert np.abs(f.sum("side").values).max() < 1e-8
+
+
+def test_probe1_has_the_lowest_resistance_at_every_strain(table):
+    r = table["probe_resistance"]
+    p1 = r.sel(probe="probe1")
+    others = r.sel(probe=["probe2", "probe3"]).min("probe")
+    assert bool((p1 < others).all())
+
+
+def test_terminal_currents_are_equal_and_opposite(table):
+    i = table["probe_current"]
+    ip, im = i.sel(terminal="+"), i.sel(terminal="-")
+    assert bool((ip > 0).all())
+    assert float(np.abs((ip + im) / ip).max()) < 1e-9  # leak of the weakened insulation ~1e-11
+    assert table.attrs["max_charge_conservation_error"] < 1e-9  # I+ + I- + I_leak, solver tolerance
+
+
+def test_interpolation_at_stored_strains_returns_stored_values(table):
+    from rve.tables import interpolate
+
+    s = table["strain"].values
+    for m in table["mode"].values:
+        out = interpolate(table, s, mode=m)
+        for v in ("probe_resistance", "reaction_force", "temperature_rise_max"):
+            np.testing.assert_array_equal(out[v].values, table[v].sel(mode=m).values)
+    mid = interpolate(table, [0.025], mode="uniaxial")["probe_resistance"].values
+    lo, hi = (table["probe_resistance"].sel(mode="uniaxial", strain=v).values for v in (0.0, 0.05))
+    np.testing.assert_allclose(mid[0], 0.5 * (lo + hi))
+
+
+def test_cf_attributes(table):
+    assert table.attrs["Conventions"].startswith("CF-")
+    for name in list(table.data_vars) + list(table.coords):
+        attrs = table[name].attrs
+        assert "units" in attrs and "long_name" in attrs, name
+    assert table["probe_resistance"].attrs["units"] == "ohm"
+    assert table["reaction_force"].attrs["units"] == "N"
+    assert table["strain"].attrs["axis"] == "X"
+    cfg = json.loads(table.attrs["config"])
+    assert cfg["run"] == RUN and cfg["scene"]["scene"] == "rve"
+    probes = json.loads(table.attrs["probe_definitions"])
+    assert [p["name"] for p in probes] == ["probe1", "probe2", "probe3"]
+    assert list(table["probe_terminals"].values) == ["warp0+ | warp0-", "warp0+ | warp1-", "warp0+ | weft0+"]
+
+
+# --------------------------------------------------------------------------- resume
+def _data(ds):
+    return {k: ds[k].values for k in list(ds.data_vars) + list(ds.coords)}
+
+
+def test_killed_run_resumes_with_an_identical_table(ci_run, table, tmp_path):
+    """Kill the run (SIGKILL of the whole process group, as a power cut) once the first
+    strain step is on disk, unlock, re-run: it resumes from the stored states (the relax
+    is not redone) and the table is identical to the uninterrupted run's."""
+    from rve.tables import open_table
+
+    work = _workflow_copy(tmp_path)
+    states = work / "results" / "rve" / RUN / "base" / "states"
+    proc = subprocess.Popen(_snakemake_cmd(TABLE), cwd=work, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        t0 = time.time()
+        while not list(states.glob("*_01.nc")):
+            if proc.poll() is not None or time.time() - t0 > 300:
+                pytest.fail(f"snakemake ended ({proc.returncode}) before a strain step was written")
+            time.sleep(0.2)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert not (work / TABLE).exists()
+    relaxed_mtime = (states / "relaxed.nc").stat().st_mtime_ns
+    _run(work, [sys.executable, "-m", "snakemake", "--unlock", "--configfile", CI_CONFIG], timeout=120)
+    proc = _run(work, _snakemake_cmd(TABLE, extra=("--rerun-incomplete",)))
+    assert (states / "relaxed.nc").stat().st_mtime_ns == relaxed_mtime  # resumed, not redone
+    assert "rve_relax" not in proc.stdout + proc.stderr.split("Job stats")[-1].split("Reasons")[0]
+    resumed = open_table(work / TABLE)
+    a, b = _data(table), _data(resumed)
+    assert a.keys() == b.keys()
+    for k in a:
+        if a[k].dtype.kind == "f":
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)  # bit for bit (NaN where NaN)
+        else:
+            assert list(a[k].ravel()) == list(b[k].ravel()), k
+
+
+# --------------------------------------------------------------------------- sweeps, dask, in-process
+def _tiny_spec(**extra):
+    spec = {"scene": {"fabric": {"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]}, "mesh": {"elements": 6},
+                      "relaxation": {"duration": "2 ms", "steps": 4, "rebuild_every": 2},
+                      "strain": {"modes": ["uniaxial"], "total": 0.05, "steps": 1}}}
+    spec.update(extra)
+    return spec
+
+
+def test_combos_of_a_sweep():
+    spec = {"sweep": {"fibril.radius": [0.12, 0.15], "contact.sigma_c": [0.5, 1.0], "weave": ["plain", "twill_2_2"]}}
+    cs = P.combos(spec)
+    assert len(cs) == 8
+    assert cs[0].id == "fibril_radius-0.12__contact_conductance-0.5__weave-plain"
+    assert cs[0].params == {"fibril_radius": 0.12, "contact_conductance": 0.5, "weave": "plain"}
+    assert "fabric.fibril_diameter=0.24" in cs[0].overrides
+    assert P.swept_dims(spec) == {"fibril_radius": "mm", "contact_conductance": "A mm-2 V-1", "weave": "1"}
+    cfg = P.load_run_config({**_tiny_spec(), **spec}, cs[-1].id)
+    assert cfg.fabric.fibril_diameter == pytest.approx(0.3) and cfg.contact.conductance == 1.0
+    assert cfg.fabric.kind == "twill_2_2"
+    assert P.combos({"sweep": {"contact.penalty": ["40 N/mm^2"]}})[0].params == {"contact_penalty": 40.0}
+    with pytest.raises(ValueError, match="unknown sweep parameter"):
+        P.combos({"sweep": {"colour": [1]}})
+    assert P.combo_ids({}) == ["base"]
+
+
+def test_sweep_gathers_one_dimension_per_parameter(tmp_path):
+    spec = _tiny_spec(sweep={"contact_conductance": [0.5, 1.0]})
+    ds = P.run_local(spec, "sweep", root=tmp_path / "rve", log_dir=tmp_path / "logs")
+    assert ds["probe_resistance"].dims == ("mode", "strain", "contact_conductance", "probe")
+    np.testing.assert_allclose(ds["contact_conductance"].values, [0.5, 1.0])
+    assert ds["contact_conductance"].attrs["units"] == "A mm-2 V-1"
+    r = ds["probe_resistance"].sel(mode="uniaxial")
+    # the same mechanics; a better contact conductance lowers the resistance through contacts
+    assert bool((r.sel(contact_conductance=1.0, probe="probe3") < r.sel(contact_conductance=0.5, probe="probe3")).all())
+    np.testing.assert_array_equal(ds["reaction_force"].sel(contact_conductance=0.5).values,
+                                  ds["reaction_force"].sel(contact_conductance=1.0).values)
+    # re-running finds every output and only re-gathers
+    again = P.run_local(spec, "sweep", root=tmp_path / "rve")
+    np.testing.assert_array_equal(again["probe_resistance"].values, ds["probe_resistance"].values)
+
+
+def test_probes_through_dask_match_the_probe_records(ci_run):
+    spec = _ci_spec()
+    base = ci_run / "results" / "rve" / RUN / "base"
+    states = [base / "states" / f"{n}.nc" for n in ("relaxed", "shear_02")]
+    recs = P.run_probes_dask(states, spec, scheduler="synchronous")
+    for n, rec in zip(("relaxed", "shear_02"), recs):
+        stored = json.loads((base / "probes" / f"{n}.json").read_text())
+        for p in ("probe1", "probe2", "probe3"):
+            assert rec["probes"][p]["current"] == stored["probes"][p]["current"]
+
+
+# --------------------------------------------------------------------------- configs
+def test_configs_validate_and_default_target_is_the_plain_weave_table():
+    from snakemake.exceptions import WorkflowError
+    from snakemake.utils import validate
+
+    from rve.homogenisation.config import RVEConfig
+
+    cfg = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
+    validate(cfg, schema=str(SCHEMA))
+    assert P.default_targets(cfg)[0] == "results/rve/plain_weave/table.nc"
+    default = P.load_run_config(cfg["rve"]["runs"]["plain_weave"])
+    assert isinstance(default, RVEConfig)
+    # thesis Table 7.1 and Algorithm 7.1 / §7.4
+    assert default.fabric.fibril_diameter == pytest.approx(0.3)
+    assert default.material.youngs_modulus == pytest.approx(1.26)
+    assert default.material.electrical_conductivity == pytest.approx(10.0)
+    assert default.material.thermal_conductivity == pytest.approx(1.0)
+    assert default.contact.heat_transfer == pytest.approx(0.1) and default.contact.conductance == pytest.approx(1.0)
+    assert default.strain.modes == ["uniaxial", "shear"]
+    assert (default.strain.total, default.strain.steps) == (0.25, 10)
+    assert [p.name for p in default.probes] == ["probe1", "probe2", "probe3"]
+    assert len(P.state_names(default)) == 21
+    knit = P.load_run_config(cfg["rve"]["runs"]["knit"])
+    assert knit.fabric.kind == "knit" and knit.probes[0].terminals[0].yarn == "loop"
+    assert len(P.combos(cfg["rve"]["runs"]["weave_sweep"])) == 8
+    ci = yaml.safe_load((ROOT / CI_CONFIG).read_text())
+    validate(ci, schema=str(SCHEMA))
+    bad = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
+    bad["rve"]["runs"]["plain_weave"]["sweep"] = {"weave": []}
+    with pytest.raises(WorkflowError):
+        validate(bad, schema=str(SCHEMA))
+    bad = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
+    bad["rve"]["runs"]["plain_weave"]["colour"] = 1
+    with pytest.raises(WorkflowError):
+        validate(bad, schema=str(SCHEMA))
+
+
+def test_rve_config_rejects_bad_probes_and_modes():
+    from rve.config import ConfigError
+
+    with pytest.raises(ConfigError, match="terminals"):
+        P.load_run_config({"scene": {"probes": [{"name": "p", "terminals": [{"yarn": "warp", "position": 1,
+                                                                              "end": "x+"}]}]}})
+    with pytest.raises(ConfigError, match="modes"):
+        P.load_run_config({"scene": {"strain": {"modes": ["uniaxial", "uniaxial"]}}})
+    with pytest.raises(ConfigError, match="seebeck"):
+        P.load_run_config({"scene": {"material": {"seebeck": 1e-6}}})
