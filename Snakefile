@@ -1,5 +1,5 @@
 # rve pipeline (SPEC §6). Run from the repository root:
-#   snakemake -j2                      # the default targets (DEFAULT_TARGETS in common.smk)
+#   snakemake -j2                      # the default targets (config `default_targets`)
 #   snakemake -j2 --configfile configs/tests/pipeline_ci.yaml   # a quick small run
 #   snakemake --lint
 # Config: configs/pipeline.yaml, validated by workflow/schemas/pipeline.schema.yaml.
