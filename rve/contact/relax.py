@@ -397,11 +397,19 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     before a trial that would carry a centroid more than half the margin from where the map
     was built (no contact is jumped over; the energy does not depend on the map under that
     guard). A trial is accepted when the energy decreases (within rounding, the residual
-    must decrease); sigma follows the agreement ``ratio`` of the actual and the predicted
-    (quadratic model) energy change: /4 after a good full step, down to 0 (pure Newton,
-    quadratic convergence), x4 after a poor or rejected one; ``sigma0`` is the first sigma
-    (default 1e-6 of the stiffest mode's; 0 to start with plain Newton from a near solution). Converged when
-    ``|F_free| <= atol`` or ``<= rtol |F_0|``.
+    must decrease); before a rejection the step is halved up to ``backtrack`` times
+    (energy evaluations only). sigma follows the agreement ``ratio`` of the actual and the
+    predicted (quadratic model) energy change: /8 (/4) after a very good (good) full step,
+    and then at most sigma |F_new / F_old|^2, but not below twice the last sigma at which
+    the factor was indefinite (a memory fading x1/4 per iteration); x2 after a shortened
+    step, x4 after a poor or rejected one; below 1e-8 of the stiffest mode's sigma it is 0:
+    plain Newton, quadratic convergence. ``sigma0`` is the first sigma (default 1e-6 of the
+    stiffest mode's; 0 to start with plain Newton from a near solution). Options measured
+    without gain on the weave (docs/relaxation.md): ``near`` (mm; while steps are large the
+    tangent also holds the normal penalty stiffness of points closer than this,
+    ``ContactSystem.tangent_near``) and ``reuse`` (modified-Newton steps with the same
+    factorisation while sigma > 0). Converged when ``|F_free| <= atol`` or
+    ``<= rtol |F_0|``.
 
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.contact.relax``.
     """
