@@ -17,7 +17,8 @@ Contract
   ``output.vtk_every``) and ``relaxation.pvd`` (Appendix D tube meshes), ``relaxed.png``
   (headless render), and returns the summary (``rve run`` writes it to summary.json):
   dofs, contact pairs, max overlap / R, clamp reactions per box side (3 components, N),
-  yarn stack geometry before/after (``stack``), wall times, Newton iterations.
+  yarn stack geometry before/after (``stack``), wall times, Newton iterations, energy,
+  negative pivots of the final tangent (``stable``), peak RSS (``peak_rss_mb``).
 
 ``solve(cfg)`` does the same without writing files and returns the summary with the
 state under ``"_state"``. ``build(cfg)`` returns ``(fabric, system, x0)``.
@@ -298,6 +299,12 @@ def solve(cfg, on_rebuild=None) -> dict:
     _, neg = factor_inertia(J)
     summary["negative_pivots"] = int(neg)
     summary["stable"] = bool(neg == 0)
+    try:
+        import resource
+
+        summary["peak_rss_mb"] = float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+    except (ImportError, OSError):  # pragma: no cover - non-POSIX
+        pass
     return summary
 
 
