@@ -91,32 +91,8 @@ SWEEP_ALIASES: dict[str, tuple[str, str, Optional[float]]] = {
 
 
 # ============================================================================ logging
-@contextlib.contextmanager
-def logging_to(log_path: Optional[PathLike], level: int = logging.INFO) -> Iterator[None]:
-    """Send the ``rve`` loggers (and Python warnings) to ``log_path`` for the block."""
-    if log_path is None:
-        yield
-        return
-    Path(log_path).parent.mkdir(parents=True, exist_ok=True)
-    handler = logging.FileHandler(log_path, mode="w", encoding="utf-8")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
-    logger = logging.getLogger("rve")
-    old = logger.level
-    logger.addHandler(handler)
-    logger.setLevel(level)
-    logging.captureWarnings(True)
-    logging.getLogger("py.warnings").addHandler(handler)
-    try:
-        yield
-    except Exception:
-        logger.exception("job failed")
-        raise
-    finally:
-        logging.captureWarnings(False)
-        logging.getLogger("py.warnings").removeHandler(handler)
-        logger.removeHandler(handler)
-        logger.setLevel(old)
-        handler.close()
+# one implementation for every rule body: rve.studies.static_wire.logging_to
+from ..studies.static_wire import logging_to  # noqa: E402
 
 
 # ============================================================================ runs, combos
