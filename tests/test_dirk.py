@@ -286,7 +286,9 @@ def test_dirk_step_matches_integrate_single_step():
 class Rigged:
     """y' = λ(y − t) + 1 (exact y = t). For stage times in (t_on, t_off] the residual is NaN
     whenever |w − t| > δ: a stage whose Newton starts from the previous step value fails
-    iff the step h exceeds δ (backward Euler), i.e. Newton 'fails for large h'."""
+    iff the step h exceeds δ (backward Euler), i.e. Newton 'fails for large h'. The runs use
+    ``predictor_degree=0`` (start from the previous value): the extrapolating predictor
+    would hit the linear exact solution and never fail."""
 
     n = 1
     mech = np.array([False])
@@ -312,7 +314,7 @@ class Rigged:
 
 def test_step_is_cut_and_run_finishes_exactly_at_t_end():
     calls = []
-    out = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=3, progress=True,
+    out = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=3, progress=True, predictor_degree=0,
                     on_step=lambda t, x, w, info: calls.append((t, w[0], info.h)))
     assert out.t == 1.0 and calls[-1][0] == 1.0
     assert out.rejected >= 2 and out.steps > 10
@@ -330,7 +332,8 @@ def test_step_is_cut_and_run_finishes_exactly_at_t_end():
 
 def test_fixed_step_raises_immediately():
     with pytest.raises(IntegrationFailure) as ei:
-        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, fixed_step=True)
+        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, fixed_step=True,
+                  predictor_degree=0)
     e = ei.value
     assert e.t == pytest.approx(0.5) and e.h == pytest.approx(0.1)
     assert e.result.rejected == 1 and e.result.steps == 5
@@ -339,7 +342,7 @@ def test_fixed_step_raises_immediately():
 
 def test_integration_failure_after_max_cuts_reports_time_step_and_state():
     with pytest.raises(IntegrationFailure) as ei:
-        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=1)
+        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=1, predictor_degree=0)
     e = ei.value
     msg = str(e)
     assert "t = 0.5" in msg and "h = 0.05" in msg and "residuals [" in msg and "nan" in msg
@@ -377,3 +380,61 @@ def test_stage_newton_converges_quadratically(s):
     for res in info.stage_residuals:
         rates = [q for q, r in zip(convergence_rates(res), res[2:]) if r > 1e-10]
         assert len(res) <= 7 and rates and max(rates) > 1.8, (res, rates)
+
+
+# ----------------------------------------------------------------------------- predictor, lazy Jacobian
+def test_extrapolate_is_exact_for_polynomials_of_its_degree():
+    from rve.solvers.dirk import extrapolate
+
+    ts = [0.0, 0.3, 0.7]
+    p = lambda t: np.array([1.0 - 2.0 * t + 3.0 * t * t, 5.0 * t])  # noqa: E731
+    np.testing.assert_allclose(extrapolate([(t, p(t)) for t in ts], 1.4), p(1.4), rtol=1e-13)
+    # degree 1 through the last two points misses the curvature by 3 (1.4-0.3)(1.4-0.7)
+    lin = extrapolate([(t, p(t)) for t in ts[1:]], 1.4)
+    assert lin[0] == pytest.approx(p(1.4)[0] - 3.0 * 1.1 * 0.7, rel=1e-13)
+
+
+@pytest.mark.parametrize("s", [1, 2, 3])
+def test_stage_predictor_saves_newton_iterations_without_changing_the_solution(s):
+    """Extrapolating the stage values in time (degree 2) instead of starting from the previous
+    stage value: the same solution to the Newton tolerance, fewer iterations."""
+    sysm = Manufactured()
+    runs = {}
+    for deg in (0, 2):
+        x0, w0 = manufactured_initial()
+        runs[deg] = integrate(sysm, x0, w0, 0.0, 1.0, 40, stages=s, newton_opts=dict(atol=1e-10, rtol=1e-14),
+                              predictor_degree=deg)
+    np.testing.assert_allclose(runs[2].w, runs[0].w, atol=1e-9)
+    np.testing.assert_allclose(runs[2].x, runs[0].x, atol=1e-9)
+    assert runs[2].newton_iterations < 0.8 * runs[0].newton_iterations, (
+        runs[2].newton_iterations, runs[0].newton_iterations)
+
+
+def test_lazy_jacobian_skips_assembly_at_converged_points_only():
+    """newton(residual=...) assembles the Jacobian only where another iteration needs it:
+    same iterates, one Jacobian assembly fewer per solve (the converged point)."""
+    from rve.solvers.newton import newton
+
+    calls = {"full": 0, "residual": 0}
+
+    def r(u):
+        return np.array([u[0] ** 3 + u[0] - 2.0, u[1] - np.sin(u[0])])
+
+    def fun(u):
+        calls["full"] += 1
+        J = sp.csr_matrix(np.array([[3 * u[0] ** 2 + 1, 0.0], [-np.cos(u[0]), 1.0]]))
+        return r(u), J
+
+    def resid(u):
+        calls["residual"] += 1
+        return r(u)
+
+    eager = newton(fun, np.array([2.0, 0.0]), atol=1e-13)
+    n_eager = calls["full"]
+    calls.update(full=0, residual=0)
+    lazy = newton(fun, np.array([2.0, 0.0]), atol=1e-13, residual=resid)
+    assert eager.converged and lazy.converged
+    np.testing.assert_array_equal(lazy.u, eager.u)
+    assert lazy.residuals == eager.residuals
+    assert calls["full"] == n_eager - 1 == eager.iterations
+    assert calls["residual"] == eager.iterations

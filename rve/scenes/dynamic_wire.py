@@ -213,8 +213,12 @@ def _rates_summary(stage_residuals: list, floor: float = 1e-9) -> dict:
 
 
 def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_step: bool | None = None,
-             record: bool = True, progress: bool = False, keep_state: bool = False) -> dict:
-    """Run the scene in memory. Raises ``IntegrationFailure`` (carrying the last good state)."""
+             record: bool = True, progress: bool = False, keep_state: bool = False,
+             integrator_options: dict | None = None) -> dict:
+    """Run the scene in memory. Raises ``IntegrationFailure`` (carrying the last good state).
+    ``integrator_options`` go to ``rve.solvers.dirk.integrate`` (e.g. ``predictor_degree``,
+    ``lazy_jacobian``: the solver variants compared by benchmarks/dirk_stage_cost.py)."""
+    iopts = dict(integrator_options or {})
     t_start = time.perf_counter()
     stages = int(stages or cfg.time.stages)
     steps = int(steps or cfg.time.steps)
@@ -261,7 +265,7 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
     try:
         res = integrate(system, x0, w0, 0.0, t_max, steps, stages=stages, newton_opts=nopts,
                         max_cuts=cfg.time.max_cuts, on_step=on_step, progress=progress, fixed_step=fixed,
-                        consistent=False)
+                        consistent=False, **iopts)
     except IntegrationFailure as exc:
         exc.history = hist
         exc.model = model
@@ -280,7 +284,7 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
         Tsc = RowScaledSystem(tsys, 1.0 / np.asarray(abs(tsys.mass()).sum(axis=1)).ravel())
         T0 = np.zeros(tsys.n)
         tres = integrate(Tsc, np.zeros(tsys.n), T0, 0.0, t_max, steps, stages=stages, newton_opts=nopts,
-                         max_cuts=cfg.time.max_cuts, fixed_step=fixed, consistent=False)
+                         max_cuts=cfg.time.max_cuts, fixed_step=fixed, consistent=False, **iopts)
         out_probes["T_half"] = float(probe.q_w @ tres.w[probe.q_nodes])
         dofs["thermal_post_solve"] = {"T": int(tsys.n), "total": int(tsys.n)}
         post = {"steps": tres.steps, "newton_iterations": tres.newton_iterations, "T": tres.w}

@@ -9,6 +9,12 @@ the step is then halved (at most ``max_halvings`` times). With ``line_search=Tru
 that does not reduce ``|r|`` is halved too (backtracking), which is what rescues Newton far
 from the solution; near it the full step is always taken, so convergence stays quadratic.
 
+With ``residual(u) -> r`` given, trial points (the line search, and the point that turns
+out to be converged) are evaluated without the Jacobian, which is then assembled only if
+another iteration needs it: for stage solves that converge in one iteration this saves
+the Jacobian assembly at the converged point. ``residual`` must return the same ``r`` as
+``fun``.
+
 Returns a ``NewtonResult`` (never raises for non-convergence: the caller decides whether
 to cut a step or give up). Every iteration is logged at INFO on the ``rve.newton`` logger
 as ``it, |r|, |du|, rate`` where ``rate = log(r_k/r_k-1) / log(r_k-1/r_k-2)`` tends to 2
@@ -120,6 +126,7 @@ def newton(
     max_halvings: int = 12,
     label: str = "newton",
     divergence_factor: float = 1e8,
+    residual=None,
 ) -> NewtonResult:
     u = np.array(u0, dtype=float, copy=True)
     r, J = fun(u)
@@ -132,6 +139,8 @@ def newton(
     for it in range(1, max_iter + 1):
         if rn <= atol or rn <= rtol * r0:
             return NewtonResult(u, True, it - 1, res)
+        if J is None:  # accepted from a residual-only evaluation: the Jacobian is needed now
+            r, J = fun(u)
         try:
             du = -sparse_solve(J, r)
         except RuntimeError as exc:  # singular factor
@@ -144,7 +153,10 @@ def newton(
             if admissible is not None and not admissible(trial):
                 step *= 0.5
                 continue
-            rt, Jt = fun(trial)
+            if residual is not None:
+                rt, Jt = residual(trial), None
+            else:
+                rt, Jt = fun(trial)
             rtn = float(np.linalg.norm(rt))
             if not line_search or (np.isfinite(rtn) and rtn < rn) or step < 2.0 ** -max_halvings:
                 break
