@@ -314,6 +314,7 @@ def plot_work_precision(ds, out_png) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, axes = plt.subplots(2, 2, figsize=(9, 7), constrained_layout=True)
     for ax, k in zip(axes.ravel(), PROBE_NAMES):
@@ -323,6 +324,10 @@ def plot_work_precision(ds, out_png) -> None:
             ok = np.isfinite(e) & np.isfinite(t)
             ax.loglog(t[ok], e[ok], "o-", label=f"s = {int(s)}")
         ax.set_title(f"{k} ({_UNITS[k]})")
+        # plain numbers on the time axis (the default minor labels 2x10^0, 3x10^0 collide)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
         ax.set_xlabel("wall time (s)")
         ax.set_ylabel("|error| at t_max")
         ax.grid(True, which="both", alpha=0.3)
