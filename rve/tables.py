@@ -20,6 +20,7 @@ Input: a list of **records**, one per stored state (and per point of a parameter
           "warp+": {"x": .., "y": .., "z": ..},   # a list/tuple of 3 or a dict x/y/z
           ...},
       "contact_count": 412,               # active contact points of the state
+      "equilibrium_residual": 3e-10,      # N, |F| on the free dofs (or "state": {"residual_N": ..})
       "probes": {
           "probe1": {"voltage": 1.0,                  # V, + terminal; - terminal at 0 V
                      "current": {"+": 0.52, "-": -0.52},
@@ -41,6 +42,7 @@ Output of :func:`build_table`: an :class:`xarray.Dataset` with dimensions ``mode
 =========================  =====================================  ======
 reaction_force             (mode, strain, *swept, side, component)  N
 contact_count              (mode, strain, *swept)                  1
+equilibrium_residual       (mode, strain, *swept)                  N
 probe_voltage              (mode, strain, *swept, probe)           V
 probe_current              (mode, strain, *swept, probe, terminal) A
 probe_resistance           (mode, strain, *swept, probe)           ohm
@@ -144,6 +146,9 @@ _VARIABLES: dict[str, tuple[tuple[str, ...], str, str, dict]] = {
                        "total reaction force of the clamped fibril ends on one side of the RVE",
                        {}),
     "contact_count": ((), _DIMLESS, "number of active fibril-fibril contacts", {}),
+    "equilibrium_residual": ((), "N",
+                             "norm of the out-of-balance force on the free dofs of the stored "
+                             "state (static equilibrium: ~0; NaN if not recorded)", {}),
     "probe_voltage": (("probe",), "V", "test voltage applied across the probe terminals", {}),
     "probe_current": (("probe", "terminal"), "A",
                       "electric current into the fabric through the probe terminal", {}),
@@ -619,6 +624,9 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
             data["reaction_force"][idx + (sidx[str(side)],)] = _vector3(vec, f"{where}, side {side}")
         if rec.get("contact_count") is not None:
             data["contact_count"][idx] = float(rec["contact_count"])
+        resid = rec.get("equilibrium_residual", (rec.get("state") or {}).get("residual_N"))
+        if resid is not None:
+            data["equilibrium_residual"][idx] = float(resid)
         for pname, pr in (rec.get("probes") or {}).items():
             k = idx + (pidx[str(pname)],)
             pw = f"{where}, probe {pname}"
@@ -756,11 +764,20 @@ def _interp_axis(x: np.ndarray, y: np.ndarray, xq: np.ndarray, axis: int, method
     elif method == "linear" or n == 2:
         i = np.clip(np.searchsorted(x, xq, side="right") - 1, 0, n - 2)
         t = ((xq - x[i]) / (x[i + 1] - x[i])).reshape((-1,) + (1,) * (y.ndim - 1))
-        out[:] = (1.0 - t) * y[i] + t * y[i + 1]
+        with np.errstate(invalid="ignore"):  # 0 * inf at a stored point: overwritten below
+            out[:] = (1.0 - t) * y[i] + t * y[i + 1]
     elif method == "cubic":
         from scipy.interpolate import PchipInterpolator
 
-        out[:] = PchipInterpolator(x, y, axis=0, extrapolate=False)(xq)
+        # PCHIP needs finite samples: series with a NaN or inf (a quantity not recorded, an
+        # open circuit's infinite resistance) are interpolated linearly instead
+        y2 = y.reshape(n, -1)
+        o2 = out.reshape(len(xq), -1)
+        ok = np.isfinite(y2).all(axis=0)
+        if ok.any():
+            o2[:, ok] = PchipInterpolator(x, y2[:, ok], axis=0, extrapolate=False)(xq)
+        if not ok.all():
+            o2[:, ~ok] = _interp_axis(x, y2[:, ~ok], xq, 0, "linear")
     else:
         raise ValueError(f"method must be 'linear' or 'cubic', got {method!r}")
     out[is_exact] = y[exact[is_exact]]
@@ -1116,6 +1133,9 @@ def summarize(ds: xr.Dataset) -> str:
                 f"{m} {_rng(ds[name].sel(mode=m).values)}" for m in ds["mode"].values))
     if "network_fit_residual" in ds:
         lines.append(f"  network fit residual (rms log): max {_rng(ds['network_fit_residual'].values).split(' .. ')[-1]}")
+    if "equilibrium_residual" in ds and np.isfinite(ds["equilibrium_residual"].values).any():
+        r = ds["equilibrium_residual"].values
+        lines.append(f"  equilibrium residual [N]: max {np.nanmax(r):.3g} over {int(np.isfinite(r).sum())} states")
     # reactions at the smallest |strain|
     k = int(np.argmin(np.abs(ds["strain"].values)))
     s0 = float(ds["strain"].values[k])

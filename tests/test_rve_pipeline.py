@@ -143,6 +143,9 @@ def test_table_has_both_modes_all_levels_and_probes(table):
               "temperature_rise_mean", "contact_count"):
         assert np.all(np.isfinite(table[v].values)), v
     assert np.all(table["temperature_rise_max"].values > 0)
+    # every stored state is a static equilibrium (the CI config's tolerance, 1e-9 N)
+    assert table["equilibrium_residual"].attrs["units"] == "N"
+    assert float(table["equilibrium_residual"].max()) <= 1e-9
     assert np.all(table["temperature_rise_max"] >= table["temperature_rise_mean"])
 
 

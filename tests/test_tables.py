@@ -560,3 +560,29 @@ def test_cli_table_export(table_file, table, tmp_path, capsys):
     np.testing.assert_array_equal(read_table_csv(out)["reaction_force"].values,
                                   table["reaction_force"].values)
     assert cli.main(["table", "summary", str(tmp_path / "nope.nc")]) == 2
+
+
+def test_cubic_interpolation_falls_back_to_linear_on_series_with_nan_or_inf():
+    """A series that is not recorded (NaN) or an open circuit (inf resistance) cannot be
+    PCHIP-interpolated: such series go linearly, the finite ones still by PCHIP; stored
+    strains return stored values."""
+    recs = []
+    for e in STRAINS:
+        r = record("uniaxial", e)
+        r["equilibrium_residual"] = 1e-10 * (1 + e)
+        if e < 0.1:  # probe3 open-circuited at the first strains (as the knit's outer probe)
+            r["probes"]["probe3"]["current"] = {"+": 0.0, "-": 0.0}
+        recs.append(r)
+    t = build_table(recs, fabric={"kind": "plain weave", "n_warp": 4, "n_weft": 4}, config=CONFIG)
+    assert np.isinf(t["probe_resistance"].sel(mode="uniaxial", probe="probe3", strain=0.05))
+    e = np.linspace(0.0, 0.25, 21)
+    out = interpolate(t, e, mode="uniaxial", method="cubic")
+    np.testing.assert_allclose(out["temperature_rise_max"].sel(probe="probe1").values,
+                               temp_max("uniaxial", e), rtol=1e-13)  # finite: PCHIP, exact on linear data
+    np.testing.assert_allclose(out["equilibrium_residual"].values, 1e-10 * (1 + e), rtol=1e-12)
+    r3 = out["probe_resistance"].sel(probe="probe3").values
+    assert np.isfinite(r3[e > 0.1 + 1e-9]).all()
+    s = t["strain"].values
+    at = interpolate(t, s, mode="uniaxial", method="cubic")
+    np.testing.assert_array_equal(at["probe_resistance"].values,
+                                  t["probe_resistance"].sel(mode="uniaxial").values)

@@ -510,6 +510,11 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
                          source="rve.homogenisation.pipeline.gather_job (Snakemake workflow/rules/rve.smk)")
         worst = max((p.get("conservation_error", 0.0) for r in records for p in r["probes"].values()), default=0.0)
         ds.attrs["max_charge_conservation_error"] = float(worst)
+        unconverged = [f"{r['mode']} strain {r['strain']:g}" for r in records
+                       if (r.get("state") or {}).get("converged") is False]
+        if unconverged:
+            log.warning("table %s: %d state(s) are not static equilibria (see equilibrium_residual): %s",
+                        out_table, len(unconverged), ", ".join(unconverged))
         ds.attrs["probe_definitions"] = json.dumps([p.model_dump() for p in first.probes])
         write_table(ds, out_table)
         export_table(ds, out_csv, "csv")
