@@ -1135,7 +1135,7 @@ def summarize(ds: xr.Dataset) -> str:
         lines.append(f"  network fit residual (rms log): max {_rng(ds['network_fit_residual'].values).split(' .. ')[-1]}")
     if "equilibrium_residual" in ds and np.isfinite(ds["equilibrium_residual"].values).any():
         r = ds["equilibrium_residual"].values
-        lines.append(f"  equilibrium residual [N]: max {np.nanmax(r):.3g} over {int(np.isfinite(r).sum())} states")
+        lines.append(f"  equilibrium residual [N]: max {np.nanmax(r):.3g} over {int(np.isfinite(r).sum())} table entries")
     # reactions at the smallest |strain|
     k = int(np.argmin(np.abs(ds["strain"].values)))
     s0 = float(ds["strain"].values[k])
