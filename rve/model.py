@@ -34,7 +34,7 @@ and ``ThermalPostSystem`` (the heat equation alone, driven by a stored Joule his
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -43,10 +43,10 @@ from .fem.assembly import DofLayout, ElementPattern
 from .fem.basis import BeamBasis
 from .fem.mesh import FibrilMesh
 from .physics.beam_forms import lorentz_force, mass_matrix
-from .physics.electric_forms import axial_current, coupled_forms, cross, emf, lorentz_force_field, potential_equation, section_ops
+from .physics.electric_forms import axial_current, coupled_forms, emf, potential_equation, section_ops
 from .physics.elasticity import lame
 from .physics.thermal_forms import (
-    capacity_matrix, conduction, joule_heating, joule_source, temperature_at_quadrature,
+    capacity_matrix, conduction, joule_source, temperature_at_quadrature,
 )
 
 __all__ = ["BeamMaterial", "DirichletBC", "PrescribedCurrent", "Couplings", "CircuitBC", "BeamModel",

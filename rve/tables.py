@@ -87,6 +87,7 @@ import numpy as np
 import xarray as xr
 
 from .io.atomic import atomic_path, atomic_write_text, to_jsonable
+from .io.provenance import package_version
 
 __all__ = [
     "MODES",
@@ -188,16 +189,6 @@ KNOWN_PARAMETERS: dict[str, tuple[str, str]] = {
     "amplitude": ("mm", "crimp amplitude"),
     "weave": (_DIMLESS, "weave pattern"),
 }
-
-
-def package_version() -> str:
-    """The installed ``rve`` distribution's version (importlib.metadata), else 'unknown'."""
-    try:
-        from importlib.metadata import version
-
-        return version("rve")
-    except Exception:  # noqa: BLE001 - running from a source tree without install
-        return "unknown"
 
 
 # ============================================================================= network

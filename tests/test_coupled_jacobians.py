@@ -10,7 +10,7 @@ import scipy.sparse as sp
 
 from rve.fem.mesh import fibril_mesh, straight_fibril
 from rve.testing import fd_jacobian, helix_fibril, rel_err
-from rve.model import BeamMaterial, BeamModel, CircuitBC, Couplings, DirichletBC, feedback_from_temperature
+from rve.model import BeamMaterial, BeamModel, CircuitBC, Couplings, feedback_from_temperature
 
 
 MAT = BeamMaterial(youngs_modulus=3.0, poisson_ratio=0.2, density=1.0, damping=0.3,
@@ -197,7 +197,6 @@ def test_fused_kernel_equals_the_separate_forms(back_emf):
     RJ, JJ = joule_heating(model.ops, m, 2.0)
     assert rel_err(R["V"], RV) < 1e-13 and rel_err(R["L"], RL) < 1e-13 and rel_err(R["T"], RJ) < 1e-13
     E, nn = RV.shape
-    naf = nn * 3
     assert rel_err(J["SV"][:, :nn], JV["V"]) < 1e-13 and rel_err(J["SV"][:, nn:], JJ["V"]) < 1e-13
     assert rel_err(J["Lx"], JL["x"]) < 1e-13 and rel_err(J["LV"], JL["V"]) < 1e-13
     if back_emf:

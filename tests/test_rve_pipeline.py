@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -15,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+
+from workflow_copy import workflow_copy
 
 from rve.homogenisation import pipeline as P
 
@@ -28,15 +29,6 @@ PLOTS = list(P.report_outputs(RUN).values())
 
 def _ci_spec():
     return yaml.safe_load((ROOT / CI_CONFIG).read_text())["rve"]["runs"][RUN]
-
-
-def _workflow_copy(dest: Path) -> Path:
-    shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
-    shutil.copytree(ROOT / "workflow", dest / "workflow")
-    for rel in ("configs/pipeline.yaml", CI_CONFIG):
-        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(ROOT / rel, dest / rel)
-    return dest
 
 
 def _snakemake_cmd(*targets: str, extra=()) -> list[str]:
@@ -56,7 +48,7 @@ def _run(cwd: Path, cmd: list[str], timeout: float = 600) -> subprocess.Complete
 def ci_run(tmp_path_factory):
     """The whole RVE DAG of the CI config, uninterrupted (13 jobs)."""
     pytest.importorskip("snakemake")
-    work = _workflow_copy(tmp_path_factory.mktemp("rve_ci"))
+    work = workflow_copy(tmp_path_factory.mktemp("rve_ci"))
     t0 = time.perf_counter()
     _run(work, _snakemake_cmd(TABLE, *PLOTS))
     work.joinpath("wall_s.txt").write_text(f"{time.perf_counter() - t0:.1f}\n")
@@ -213,7 +205,7 @@ def test_killed_run_resumes_with_an_identical_table(ci_run, table, tmp_path):
     is not redone) and the table is identical to the uninterrupted run's."""
     from rve.tables import open_table
 
-    work = _workflow_copy(tmp_path)
+    work = workflow_copy(tmp_path)
     states = work / "results" / "rve" / RUN / "base" / "states"
     proc = subprocess.Popen(_snakemake_cmd(TABLE), cwd=work, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
@@ -355,7 +347,7 @@ def test_sweep_runs_through_snakemake_with_one_dimension_per_parameter(tmp_path)
     conduct better with the larger sigma_C."""
     from rve.tables import open_table
 
-    work = _workflow_copy(tmp_path)
+    work = workflow_copy(tmp_path)
     target = "results/rve/ci_sweep/table.nc"
     _run(work, _snakemake_cmd(target))
     spec = yaml.safe_load((ROOT / CI_CONFIG).read_text())["rve"]["runs"]["ci_sweep"]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -13,22 +12,14 @@ import numpy as np
 import pytest
 import yaml
 
+from workflow_copy import workflow_copy
+
 from rve.studies import static_wire as study
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = ROOT / "workflow" / "schemas" / "pipeline.schema.yaml"
 CI_CONFIG = "configs/tests/pipeline_ci.yaml"
 ANALYTICAL = 0.71243  # chapter 3 centre displacement / L (SPEC §7)
-
-
-def _workflow_copy(dest: Path) -> Path:
-    """The workflow and the configs it reads, copied into ``dest`` (results go there)."""
-    shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
-    shutil.copytree(ROOT / "workflow", dest / "workflow")
-    for rel in ("configs/pipeline.yaml", CI_CONFIG, "configs/scenes/static_wire.yaml"):
-        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(ROOT / rel, dest / rel)
-    return dest
 
 
 def _snakemake(cwd: Path, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -40,7 +31,7 @@ def _snakemake(cwd: Path, *args: str, timeout: float = 600) -> subprocess.Comple
 def ci_run(tmp_path_factory):
     """Run the whole DAG of the CI config once (7 solves)."""
     pytest.importorskip("snakemake")
-    work = _workflow_copy(tmp_path_factory.mktemp("pipeline_ci"))
+    work = workflow_copy(tmp_path_factory.mktemp("pipeline_ci"))
     proc = _snakemake(work, "-j2", "--configfile", CI_CONFIG)
     if proc.returncode != 0:
         logs = "\n".join(f"== {p}\n{p.read_text()[-3000:]}" for p in sorted(work.glob("results/logs/**/*.log")))
@@ -235,7 +226,7 @@ def test_pipeline_configs_validate_against_schema():
 
 def test_snakemake_lint_is_clean(tmp_path):
     pytest.importorskip("snakemake")
-    work = _workflow_copy(tmp_path)
+    work = workflow_copy(tmp_path)
     proc = _snakemake(work, "--lint", timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Congratulations" in proc.stdout + proc.stderr

@@ -202,7 +202,6 @@ class ContactSystem:
         # (components `comps` x `comps`). In a row of a contact component every neighbour
         # contributes its block's columns; in the other rows only the base neighbours do.
         Nn = mesh.n_nodes
-        n = self.n
         ci = self.comps
         isc = np.zeros(b, bool)
         isc[ci] = True
@@ -257,7 +256,7 @@ class ContactSystem:
         self._u_nnz = total
         self._u_keys_cache = None
         # base entries -> union positions: per base node pair (I, J), entries (c, c')
-        bI, bJ = bkeys // Nn, bkeys % Nn
+        bI = bkeys // Nn
         kpos = np.arange(bkeys.size) - self._base_rowstart[bI]  # J's rank among I's base neighbours
         mpos = locate(bkeys)
         rows_b = bI[:, None] * b + np.arange(b)[None, :]  # (B, b)
@@ -310,16 +309,8 @@ class ContactSystem:
         return mp
 
     def _union_data(self, A):
-        data = np.zeros(self._u_nnz)
-        if A is None:
-            return data
-        A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
-        if A.nnz:
-            if not A.has_canonical_format:
-                A = A.copy()
-                A.sum_duplicates()
-            data[self._union_map(A)] = A.data
-        return data
+        """A's entries laid out on the union structure (zeros elsewhere)."""
+        return self._union_add(np.zeros(self._u_nnz), A)
 
     def _union_add(self, data, A):
         """``data[union positions of A] += A.data`` (A on the base or the union structure)."""

@@ -106,7 +106,7 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
     import xarray as xr
 
     from ..io.atomic import atomic_path
-    from ..tables import package_version
+    from ..io.provenance import package_version
 
     nn = mesh.n_nodes
     for name in ("x", "w", "origin"):

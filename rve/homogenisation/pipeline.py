@@ -42,16 +42,14 @@ identical table. ``run_local`` runs the same DAG in-process (no Snakemake);
 """
 from __future__ import annotations
 
-import contextlib
 import itertools
 import json
 import logging
-import math
 import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Mapping, Optional, Sequence, Union
+from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
@@ -91,8 +89,7 @@ SWEEP_ALIASES: dict[str, tuple[str, str, Optional[float]]] = {
 
 
 # ============================================================================ logging
-# one implementation for every rule body: rve.studies.static_wire.logging_to
-from ..studies.static_wire import logging_to  # noqa: E402
+from ..io.provenance import logging_to  # noqa: E402  (one implementation for every rule body)
 
 
 # ============================================================================ runs, combos

@@ -122,6 +122,19 @@ def _full_state(model, xn, V=None):
     return x, w
 
 
+def _frozen_solve(base, contact: Optional[ContactParams], x, w, what: str, newton_opts: Optional[dict]):
+    """The linear probe problem on the frozen state (mechanics constrained): the model with
+    the contact terms of ``contact`` (None: none), one tight Newton solve. Returns
+    ``(system, x, w, NewtonResult)``; raises RuntimeError naming ``what`` if it fails."""
+    system = ContactSystem(base, contact, x) if contact is not None else base
+    opts = {"atol": 1e-12, "rtol": 1e-12, "max_iter": 5, "label": f"probe {what}"}
+    opts.update(newton_opts or {})
+    xs, ws, res = static_solve(system, x, w, 0.0, opts)
+    if not res.converged:
+        raise RuntimeError(f"probe {what} solve did not converge: {res.reason}")
+    return system, xs, ws, res
+
+
 def electric_solve(mesh, xn, material: BeamMaterial, contact: Optional[ContactParams], groups, values,
                    insulation_factor: float = 1e12, insulation_ends: str = "both", disk_points: int = 4,
                    axial_points=None, newton_opts: Optional[dict] = None) -> ElectricSolution:
@@ -141,12 +154,7 @@ def electric_solve(mesh, xn, material: BeamMaterial, contact: Optional[ContactPa
     base = BeamModel(mesh, material, fields=("mech", "V"), couplings=Couplings(joule=False, **_NO_COUPLING),
                      disk_points=disk_points, axial_points=axial_points, bcs=bcs, circuits=circuits)
     x, w = _full_state(base, xn)
-    system = ContactSystem(base, contact, x) if contact is not None else base
-    opts = {"atol": 1e-12, "rtol": 1e-12, "max_iter": 5, "label": "probe V"}
-    opts.update(newton_opts or {})
-    xs, ws, res = static_solve(system, x, w, 0.0, opts)
-    if not res.converged:
-        raise RuntimeError(f"probe voltage solve did not converge: {res.reason}")
+    system, xs, ws, res = _frozen_solve(base, contact, x, w, "voltage", newton_opts)
     F, _, _ = system.evaluate(xs, ws, 0.0, jacobian=False)
     FV = base.nodal(F)[:, base.oV]
     currents = [float(FV[g].sum()) for g in groups]
@@ -169,12 +177,7 @@ def temperature_solve(mesh, xn, V, material: BeamMaterial, contact: Optional[Con
     base = BeamModel(mesh, material, fields=("mech", "T", "V"), couplings=Couplings(joule=True, **_NO_COUPLING),
                      disk_points=disk_points, axial_points=axial_points, bcs=bcs)
     x, w = _full_state(base, xn, V)
-    system = ContactSystem(base, contact, x) if contact is not None else base
-    opts = {"atol": 1e-12, "rtol": 1e-12, "max_iter": 5, "label": "probe T"}
-    opts.update(newton_opts or {})
-    xs, ws, res = static_solve(system, x, w, 0.0, opts)
-    if not res.converged:
-        raise RuntimeError(f"probe temperature solve did not converge: {res.reason}")
+    _, _, ws, res = _frozen_solve(base, contact, x, w, "temperature", newton_opts)
     return base.nodal(ws)[:, base.oT].copy(), res
 
 

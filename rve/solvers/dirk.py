@@ -15,6 +15,7 @@ Thesis §6.2 and Appendix C; see ``docs/time_integration.md``.
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass, field
@@ -323,27 +324,24 @@ class DirkStepper:
                 w[free] = u
                 return xhat + haii * mechf * w, w
 
-            def fun(u, ti=ti, haii=haii, rhs=rhs, fd=fd, state=state, cache=cache):
+            def stage_residual(u, jacobian, ti=ti, haii=haii, rhs=rhs, fd=fd, state=state, cache=cache):
+                """G(u) = M w + h a_ii F(x, w) - rhs on the free dofs, and with ``jacobian``
+                J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech) restricted to them."""
                 x, w = state(u)
-                F, Fx, Fw = sysm.evaluate(x, w, ti, jacobian=True)
+                F, Fx, Fw = sysm.evaluate(x, w, ti, jacobian=jacobian)
                 F = np.asarray(F, float)
                 cache["u"], cache["F"] = u.copy(), F
-                G = M @ w + haii * F - rhs
-                # J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech), restricted to the free dofs
-                J = fd.combine([(self.M, 1.0, None), (Fw, haii, None), (Fx, haii * haii, mechf)])
-                return G[fd.free], J
-
-            def resid(u, ti=ti, haii=haii, rhs=rhs, fd=fd, state=state, cache=cache):
-                x, w = state(u)
-                F = np.asarray(sysm.evaluate(x, w, ti, jacobian=False)[0], float)
-                cache["u"], cache["F"] = u.copy(), F
-                return (M @ w + haii * F - rhs)[fd.free]
+                G = (M @ w + haii * F - rhs)[fd.free]
+                if not jacobian:
+                    return G
+                return G, fd.combine([(self.M, 1.0, None), (Fw, haii, None), (Fx, haii * haii, mechf)])
 
             def adm(u, state=state):
                 return bool(sysm.admissible(state(u)[0]))
 
             label = f"dirk s{s} stage {i + 1} t={ti:.6g}"
-            res = newton(fun, wi[free], admissible=adm, label=label, residual=resid if self.lazy_jacobian else None,
+            res = newton(functools.partial(stage_residual, jacobian=True), wi[free], admissible=adm, label=label,
+                         residual=functools.partial(stage_residual, jacobian=False) if self.lazy_jacobian else None,
                          **self.newton_opts)
             its.append(res.iterations)
             ress.append(list(res.residuals))
@@ -376,10 +374,8 @@ class DirkStepper:
         else just [(t0, w0)]."""
         pts = self._points
         if pts and abs(pts[-1][0] - t0) <= 1e-12 * max(abs(t0), abs(h)) and np.array_equal(pts[-1][1], w0):
-            out = list(pts[:-1]) + [(t0, w0)]
-        else:
-            out = [(t0, w0)]
-        return out
+            return list(pts)
+        return [(t0, w0)]
 
     def _predict(self, pts: list, ti: float, w_prev, xhat, haii: float) -> np.ndarray:
         """Newton's start for the stage at ``ti`` (a fresh array)."""

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import time
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
@@ -30,6 +29,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
+from ..io.provenance import logging_to
 
 __all__ = ["DEFAULT_PLAN", "PROBE_NAMES", "load_scene_config", "run_point", "run_series", "run_reference",
            "run_study", "build_dataset", "fit_orders", "orders_table", "plot_errors", "plot_work_precision",
@@ -350,37 +350,18 @@ def write_study(ds, nc_path, orders_md=None, errors_png=None, work_png=None) -> 
 
 
 # --------------------------------------------------------------------------- Snakemake jobs
-def _logging_to(log_path):
-    if not log_path:
-        return None
-    Path(log_path).parent.mkdir(parents=True, exist_ok=True)
-    h = logging.FileHandler(log_path, mode="w")
-    h.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
-    logging.getLogger("rve").addHandler(h)
-    logging.getLogger("rve").setLevel(logging.INFO)
-    return h
-
-
 def series_job(out_json, log_path, scene_config, overrides, stages: int, steps: Sequence[int]) -> None:
     """Snakemake: all runs of one scheme -> JSON list of records."""
-    h = _logging_to(log_path)
-    try:
+    with logging_to(log_path):
         cfg = load_scene_config(scene_config, overrides)
         recs = run_series(cfg, int(stages), [int(n) for n in steps])
         atomic_write_json(out_json, recs)
-    finally:
-        if h:
-            logging.getLogger("rve").removeHandler(h)
 
 
 def reference_job(out_json, log_path, scene_config, overrides, stages: int, steps: int) -> None:
-    h = _logging_to(log_path)
-    try:
+    with logging_to(log_path):
         cfg = load_scene_config(scene_config, overrides)
         atomic_write_json(out_json, run_reference(cfg, int(stages), int(steps)))
-    finally:
-        if h:
-            logging.getLogger("rve").removeHandler(h)
 
 
 def gather_job(series_jsons, reference_json, nc_path, orders_md, errors_png, work_png, plan) -> None:

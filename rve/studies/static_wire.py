@@ -37,6 +37,7 @@ from typing import Any, Iterable, Iterator, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text, to_jsonable
+from ..io.provenance import logging_to, package_version
 
 __all__ = [
     "PARITIES",
@@ -239,21 +240,6 @@ def convergence_point(scene_config_path: PathLike, order: int, elements: int, ra
 
 
 # --------------------------------------------------------------------------- dataset
-def package_version() -> str:
-    """``rve.__version__`` if set, else the installed distribution's version."""
-    import rve
-
-    version = getattr(rve, "__version__", None)
-    if version:
-        return str(version)
-    try:
-        from importlib.metadata import version as _version
-
-        return _version("rve")
-    except Exception:  # noqa: BLE001 - not installed
-        return "unknown"
-
-
 def _git_revision() -> str:
     here = Path(__file__).resolve().parent
     try:
@@ -715,35 +701,6 @@ def plot_convergence(ds, out_png: PathLike):
 
 
 # --------------------------------------------------------------------------- rule bodies
-@contextlib.contextmanager
-def logging_to(log_path: Optional[PathLike], level: int = logging.INFO) -> Iterator[None]:
-    """Send the ``rve`` loggers and Python warnings to ``log_path`` for the block."""
-    if log_path is None:
-        yield
-        return
-    Path(log_path).parent.mkdir(parents=True, exist_ok=True)
-    handler = logging.FileHandler(log_path, mode="w", encoding="utf-8")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
-    logger = logging.getLogger("rve")
-    wlogger = logging.getLogger("py.warnings")
-    old_level = logger.level
-    logger.addHandler(handler)
-    wlogger.addHandler(handler)
-    logger.setLevel(min(level, old_level) if old_level else level)
-    logging.captureWarnings(True)
-    try:
-        yield
-    except Exception:
-        logger.exception("failed")
-        raise
-    finally:
-        logging.captureWarnings(False)
-        logger.removeHandler(handler)
-        wlogger.removeHandler(handler)
-        logger.setLevel(old_level)
-        handler.close()
-
-
 def point_job(record_path: PathLike, log_path: Optional[PathLike], scene_config: PathLike, point: Any,
               overrides: Sequence[str] = (), keep_failure: bool = False) -> dict:
     """Rule body of one solve: ``point`` has ``order``, ``elements`` and ``radius`` (mm)
