@@ -23,7 +23,8 @@ from typing import Callable, Optional, Sequence
 
 from .config import ConfigError, config_as_dict, config_units, json_schema, load_config
 from .config.models import SCENE_MODELS
-from .io.atomic import atomic_write_json, to_jsonable
+from .io.atomic import atomic_write_json
+from .io.provenance import to_jsonable
 
 __all__ = ["main", "build_parser", "format_config"]
 

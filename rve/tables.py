@@ -86,7 +86,8 @@ from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 import numpy as np
 import xarray as xr
 
-from .io.atomic import atomic_path, atomic_write_text, to_jsonable
+from .io.atomic import atomic_path, atomic_write_text
+from .io.provenance import to_jsonable
 from .io.provenance import package_version
 
 __all__ = [

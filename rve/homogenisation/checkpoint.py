@@ -94,7 +94,7 @@ class State:
 
 
 def _jsonable(obj):
-    from ..io.atomic import to_jsonable
+    from ..io.provenance import to_jsonable
 
     return to_jsonable(obj)
 

@@ -16,7 +16,9 @@ import tempfile
 from pathlib import Path
 from typing import Any, Iterator, Union
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_write_json", "to_jsonable"]
+from .provenance import to_jsonable
+
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_write_json"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -77,31 +79,6 @@ def atomic_write_bytes(path: PathLike, data: bytes) -> Path:
 def atomic_write_text(path: PathLike, text: str, encoding: str = "utf-8") -> Path:
     """Write ``text`` to ``path`` atomically."""
     return atomic_write_bytes(path, text.encode(encoding))
-
-
-def to_jsonable(obj: Any) -> Any:
-    """Convert numpy scalars/arrays, paths, sets and tuples to plain JSON types.
-    Non-finite floats are kept (written as NaN/Infinity, which Python's json reads)."""
-    if isinstance(obj, dict):
-        return {str(k): to_jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, set, frozenset)):
-        return [to_jsonable(v) for v in obj]
-    if isinstance(obj, (str, bool, int, type(None))):
-        return obj
-    if isinstance(obj, float):
-        return obj
-    if isinstance(obj, os.PathLike):
-        return os.fspath(obj)
-    tolist = getattr(obj, "tolist", None)  # numpy arrays and scalars
-    if callable(tolist):
-        return to_jsonable(tolist())
-    item = getattr(obj, "item", None)
-    if callable(item):
-        return to_jsonable(item())
-    dump = getattr(obj, "model_dump", None)  # pydantic models
-    if callable(dump):
-        return to_jsonable(dump(mode="json"))
-    raise TypeError(f"cannot write {type(obj).__name__} as JSON: {obj!r}")
 
 
 def atomic_write_json(path: PathLike, obj: Any, indent: int = 2, sort_keys: bool = False) -> Path:

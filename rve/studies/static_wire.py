@@ -36,7 +36,8 @@ from typing import Any, Iterable, Iterator, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text, to_jsonable
+from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
+from ..io.provenance import to_jsonable
 from ..io.provenance import logging_to, package_version
 
 __all__ = [
