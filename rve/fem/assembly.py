@@ -7,6 +7,11 @@ order given by ``fields`` (a subset of ``("mech", "T", "V")``; "mech" is the 9 c
 r, g1, g2). Global dof of (node, comp) = node * block + comp (SPEC §4: node-interleaved
 ordering keeps the bandwidth of the beam systems small).
 
+Dof indices are asked of the layout, never computed by hand: ``layout.dofs(name, nodes,
+comp)`` with ``name`` a field ("mech", "T", "V") or a part of the mechanical block ("r"
+the centroid, "g1", "g2" the directors), ``comp`` one component of it (0, 1, 2 = x, y, z)
+or all; ``layout.offset_of(name)`` is the position of that part within the node block.
+
 ``ElementPattern(layout, conn)`` precomputes, for element connectivity ``conn`` (E, nn),
 the CSR structure of the global matrix and the position of every element-matrix entry in
 its ``data`` array. ``assemble_matrix(Ke)`` with Ke (E, nn*block, nn*block) is then one
@@ -21,6 +26,8 @@ import scipy.sparse as sp
 __all__ = ["DofLayout", "ElementPattern"]
 
 _FIELD_SIZE = {"mech": 9, "T": 1, "V": 1}
+#: parts of the mechanical block: (offset within the block, size)
+_MECH_PARTS = {"r": (0, 3), "g1": (3, 3), "g2": (6, 3)}
 
 
 class DofLayout:
@@ -56,6 +63,26 @@ class DofLayout:
         o = self.offset[field]
         k = _FIELD_SIZE[field]
         return (nodes[:, None] * self.block + o + np.arange(k)[None, :]).ravel()
+
+    def offset_of(self, name: str) -> int:
+        """Position of field or mechanical part ``name`` within the node block."""
+        if name in _MECH_PARTS:
+            return _MECH_PARTS[name][0]
+        if name not in self.offset:
+            raise ValueError(f"the layout has no {name!r} dofs (fields {self.fields}; parts {sorted(_MECH_PARTS)})")
+        return self.offset[name]
+
+    def dofs(self, name: str, nodes=None, comp=None) -> np.ndarray:
+        """Global dofs of field or mechanical part ``name`` ("mech", "T", "V", "r", "g1",
+        "g2") at ``nodes`` (all nodes if None), node-major: all components of a node, or
+        only component ``comp`` (an int or a sequence of ints within the part)."""
+        o = self.offset_of(name)
+        size = _MECH_PARTS[name][1] if name in _MECH_PARTS else _FIELD_SIZE[name]
+        comps = np.arange(size) if comp is None else np.atleast_1d(np.asarray(comp, dtype=np.int64))
+        if comps.size and (comps.min() < 0 or comps.max() >= size):
+            raise ValueError(f"component {comp!r} out of range for {name!r} (0..{size - 1})")
+        nodes = np.arange(self.n_nodes) if nodes is None else np.atleast_1d(np.asarray(nodes, dtype=np.int64))
+        return (nodes[:, None] * self.block + o + comps[None, :]).ravel()
 
     def as_nodal(self, u: np.ndarray) -> np.ndarray:
         return u.reshape(self.n_nodes, self.block)
