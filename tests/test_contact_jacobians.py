@@ -165,7 +165,7 @@ def test_scalar_jump_jacobians(order, frozen):
 
 # ---------------------------------------------------------------------------- assembled
 def _crossed_system(order=1, fields=("mech", "T", "V"), overlap=0.04, ne=4, recompute=True):
-    from rve.contact.system import ContactParams, ContactSystem
+    from rve.model import ContactParams, ContactSystem
     from rve.fem.mesh import fibril_mesh, straight_fibril
     from rve.model import BeamMaterial, BeamModel
 
@@ -271,7 +271,7 @@ def test_penalty_with_onset_gradient_and_tangent(frozen):
 def test_contact_system_energy_gradient():
     """ContactSystem.energy (beam strain + penalty energy, with an onset) has the static
     residual as its gradient: directional derivatives by central differences."""
-    from rve.contact.system import ContactParams, ContactSystem
+    from rve.model import ContactParams, ContactSystem
     from rve.fem.mesh import fibril_mesh, straight_fibril
     from rve.model import BeamMaterial, BeamModel
 

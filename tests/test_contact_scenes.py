@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rve.contact.insulation import pull_down_circuits, unwired_fibrils
-from rve.contact.system import ContactParams, ContactSystem
+from rve.model import ContactParams, ContactSystem
 from rve.fem.mesh import fibril_mesh, straight_fibril
 from rve.model import BeamMaterial, BeamModel, DirichletBC
 from rve.solvers.static import static_solve
@@ -49,7 +49,7 @@ def test_pressed_crossed_fibrils():
 
     def spy(x, w, t, jacobian=True):
         out = evaluate(x, w, t, jacobian)
-        seen[float(np.linalg.norm(out[0][free]))] = frozenset(map(tuple, np.argwhere(sysm._geometry(x).active)))
+        seen[float(np.linalg.norm(out[0][free]))] = frozenset(map(tuple, np.argwhere(sysm.geometry(x).active)))
         return out
 
     sysm.evaluate = spy
@@ -66,9 +66,9 @@ def test_pressed_crossed_fibrils():
     np.testing.assert_allclose(clamp_a, -fc[0], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(clamp_b, -fc[1], rtol=1e-9, atol=1e-12)
     # overlap ~ force / P*: the integrated overlap (mm^2) times P* is the contact force
-    geo = sysm._geometry(xs)
+    geo = sysm.geometry(xs)
     g = np.where(geo.active, geo.g, 0.0)
-    int_g = float((sysm._weight[:, None] * g).sum())
+    int_g = float((sysm.term.weight[:, None] * g).sum())
     assert np.linalg.norm(fc[0]) == pytest.approx(PSTAR * int_g, rel=1e-2)
     assert 0 < g.max() < 0.05 * R
     # quadratic convergence once the active contact set no longer changes

@@ -164,7 +164,7 @@ def test_row_scaled_model_is_the_scaled_system():
 
 
 def test_fast_neo_hookean_matches_beam_forms():
-    from rve.model import neo_hookean_element_forces
+    from rve.physics.beam_forms import neo_hookean_element_forces
     from rve.physics.beam_forms import internal_force, internal_force_dmu
 
     rng = np.random.default_rng(5)

@@ -96,7 +96,7 @@ def test_vtk_files(tmp_path):
 def test_capped_newton_does_not_skip_contacts():
     """Two fibrils pulled straight through each other's path: the capped steps and map
     rebuilds stop them at contact instead of jumping through."""
-    from rve.contact.system import ContactParams, ContactSystem
+    from rve.model import ContactParams, ContactSystem
     from rve.fem.mesh import fibril_mesh, straight_fibril
     from rve.model import BeamMaterial, BeamModel, DirichletBC
 

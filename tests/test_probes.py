@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rve.contact.system import ContactParams
+from rve.model import ContactParams
 from rve.fem.mesh import fibril_mesh, straight_fibril
 from rve.homogenisation.probes import electric_solve, temperature_solve
 from rve.model import BeamMaterial

@@ -15,15 +15,23 @@ or all; ``layout.offset_of(name)`` is the position of that part within the node 
 ``ElementPattern(layout, conn)`` precomputes, for element connectivity ``conn`` (E, nn),
 the CSR structure of the global matrix and the position of every element-matrix entry in
 its ``data`` array. ``assemble_matrix(Ke)`` with Ke (E, nn*block, nn*block) is then one
-``np.bincount``; ``assemble_vector(Re)`` likewise. Entries of several patterns (beam
-elements, contact pairs) are combined by ``add_matrices``.
+``np.bincount``; ``assemble_vector(Re)`` likewise; ``assemble_csr(Ke)`` returns the same
+matrix as a shallow copy of a template (no structure validation per call: the model's fast
+path, every call's matrices share the pattern's index arrays).
+
+``UnionPattern(pattern, local, comps)``: the union CSR structure of an element pattern (full
+node blocks) and a second group of "pair elements" ``local`` (P, m) nodes whose entries
+touch only the components ``comps`` of each node (the contact pairs). ``base_map`` places
+the pattern's data in the union, ``slots`` (P, (m nC)^2) and ``gdofs`` (P, m nC) the pair
+elements' entries; ``add(data, A)`` adds a CSR matrix on the pattern (or the union) into
+union data; ``csr(data)`` wraps union data. Used by ``rve.model.assembler`` (docs/contact.md).
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["DofLayout", "ElementPattern"]
+__all__ = ["DofLayout", "ElementPattern", "UnionPattern"]
 
 _FIELD_SIZE = {"mech": 9, "T": 1, "V": 1}
 #: parts of the mechanical block: (offset within the block, size)
@@ -93,6 +101,9 @@ class ElementPattern:
         conn = np.asarray(conn)
         E, nn = conn.shape
         b = layout.block
+        self.conn = conn
+        self.block = b
+        self.n_nodes = layout.n_nodes
         self.n = layout.n
         self.nloc = nn * b
         edofs = (conn[:, :, None] * b + np.arange(b)[None, None, :]).reshape(E, nn * b)
@@ -109,6 +120,7 @@ class ElementPattern:
         self.indptr = np.zeros(self.n + 1, np.int64)
         np.add.at(self.indptr, ur + 1, 1)
         self.indptr = np.cumsum(self.indptr)
+        self._template = None
 
     def assemble_vector(self, Re: np.ndarray) -> np.ndarray:
         return np.bincount(self.edofs.ravel(), weights=Re.reshape(-1), minlength=self.n)
@@ -116,3 +128,157 @@ class ElementPattern:
     def assemble_matrix(self, Ke: np.ndarray) -> sp.csr_matrix:
         data = np.bincount(self.slot, weights=Ke.reshape(-1), minlength=self.nnz)
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+
+    def assemble_csr(self, Ke: np.ndarray) -> sp.csr_matrix:
+        """``assemble_matrix(Ke)`` as a shallow copy of a template CSR matrix with new data
+        (building a csr_matrix validates its structure every time, which costs more than the sum)."""
+        import copy
+
+        if self._template is None:
+            self._template = self.assemble_matrix(np.zeros(self.slot.size))
+        data = np.bincount(self.slot, weights=Ke.reshape(-1), minlength=self.nnz)
+        A = copy.copy(self._template)
+        A.data = data
+        return A
+
+    def node_keys(self):
+        """(sorted node-pair keys I * n_nodes + J of the pattern, first key of every node row)."""
+        if getattr(self, "_node_keys", None) is None:
+            Nn, b = self.n_nodes, self.block
+            conn = self.conn
+            keys = np.unique((conn[:, :, None].astype(np.int64) * Nn + conn[:, None, :]).ravel())
+            if keys.size * b * b != self.nnz:  # pragma: no cover - an ElementPattern has full blocks
+                raise ValueError("the pattern is not made of full node blocks")
+            self._node_keys = keys, np.searchsorted(keys, np.arange(Nn, dtype=np.int64) * Nn)
+        return self._node_keys
+
+
+class UnionPattern:
+    """Union CSR structure of an ``ElementPattern`` and pair elements (module docstring)."""
+
+    def __init__(self, pattern: ElementPattern, local: np.ndarray, comps: np.ndarray):
+        b, Nn = pattern.block, pattern.n_nodes
+        self.n = n = pattern.n
+        self.pattern = pattern
+        local = np.asarray(local)
+        ci = np.asarray(comps, dtype=np.int64)
+        nC = ci.size
+        P, m = local.shape
+        self.gdofs = (local[:, :, None] * b + ci[None, None, :]).reshape(P, m * nC)
+        # union CSR built at the node-block level (no global sort of the entries).
+        # Node pairs: the base element blocks (full b x b) and the pair-only blocks
+        # (components `comps` x `comps`). In a row of a pair component every neighbour
+        # contributes its block's columns; in the other rows only the base neighbours do.
+        bkeys, base_rowstart = pattern.node_keys()
+        isc = np.zeros(b, bool)
+        isc[ci] = True
+        nkey = (local[:, :, None].astype(np.int64) * Nn + local[:, None, :]).ravel()  # (P m m)
+        dense = Nn * Nn <= 2 ** 25  # node-pair bitmap (<= 32 MB) instead of sorting the keys
+        if dense:
+            mark = np.zeros(Nn * Nn, np.int8)
+            mark[nkey] = 2
+            mark[bkeys] = 1
+            keys = np.flatnonzero(mark)
+            isbase = mark[keys] == 1
+            lookup = np.empty(Nn * Nn, np.int32)
+            lookup[keys] = np.arange(keys.size, dtype=np.int32)
+            locate = lambda k: lookup[k]  # noqa: E731
+        else:
+            ukey = np.unique(nkey)
+            pos = np.minimum(np.searchsorted(bkeys, ukey), bkeys.size - 1)
+            ckeys = ukey[bkeys[pos] != ukey]
+            keys = np.concatenate([bkeys, ckeys])
+            order = np.argsort(keys, kind="stable")
+            keys = keys[order]
+            isbase = order < bkeys.size
+            locate = lambda k: np.searchsorted(keys, k)  # noqa: E731
+        nodeI = keys // Nn
+        wc = np.where(isbase, b, nC).astype(np.int64)  # columns in a pair-component row
+        wo = np.where(isbase, b, 0).astype(np.int64)  # columns in another row
+        first = np.searchsorted(nodeI, np.arange(Nn + 1, dtype=np.int64))  # node -> merged range
+        cwc = np.concatenate([[0], np.cumsum(wc)])
+        cwo = np.concatenate([[0], np.cumsum(wo)])
+        offc = cwc[:-1] - cwc[first[nodeI]]  # column offset of the block in its row
+        offo = cwo[:-1] - cwo[first[nodeI]]
+        lenc = cwc[first[1:]] - cwc[first[:-1]]  # (Nn,) row lengths
+        leno = cwo[first[1:]] - cwo[first[:-1]]
+        rowlen = np.where(isc[None, :], lenc[:, None], leno[:, None]).ravel()  # (n,)
+        indptr = np.concatenate([[0], np.cumsum(rowlen)]).astype(np.int64)
+        total = int(indptr[-1])
+        # column patterns of one pair-component row / one other row of every node
+        nodeJ = keys % Nn
+        colc = np.where(isbase[:, None], nodeJ[:, None] * b + np.arange(b)[None, :],
+                        np.pad(nodeJ[:, None] * b + ci[None, :], ((0, 0), (0, b - nC)), constant_values=-1))
+        Qc = colc.ravel()[(np.arange(b)[None, :] < wc[:, None]).ravel()]
+        Qo = (nodeJ[isbase, None] * b + np.arange(b)[None, :]).ravel()
+        startc = cwc[first[:-1]]
+        starto = cwo[first[:-1]] + Qc.size
+        src = np.where(isc[None, :], startc[:, None], starto[:, None]).ravel()
+        Q = np.concatenate([Qc, Qo])
+        rep = np.repeat(src - indptr[:-1], rowlen)
+        self.indices = Q[np.arange(total, dtype=np.int64) + rep].astype(np.int32)
+        self.indptr = indptr.astype(np.int32) if total < 2**31 - 1 else indptr
+        self.nnz = total
+        # base entries -> union positions: per base node pair (I, J), entries (c, c')
+        bI = bkeys // Nn
+        kpos = np.arange(bkeys.size) - base_rowstart[bI]  # J's rank among I's base neighbours
+        mpos = locate(bkeys)
+        rows_b = bI[:, None] * b + np.arange(b)[None, :]  # (B, b)
+        off_b = np.where(isc[None, :], offc[mpos][:, None], offo[mpos][:, None])  # (B, b)
+        src_pos = (pattern.indptr[rows_b][:, :, None] + (kpos * b)[:, None, None]
+                   + np.arange(b)[None, None, :])
+        dst_pos = indptr[rows_b][:, :, None] + off_b[:, :, None] + np.arange(b)[None, None, :]
+        base_map = np.empty(pattern.nnz, dtype=np.int64)
+        base_map[src_pos.ravel()] = dst_pos.ravel()
+        self.base_map = base_map
+        # local slot layout (P, m, nC, m, nC): indptr[I b + c_i] + offset of block (I, J) + column
+        mp = locate(nkey).reshape(P, m, m)
+        rowstart = indptr[local[:, :, None].astype(np.int64) * b + ci[None, None, :]]  # (P, m, nC)
+        colpos = np.where(isbase[mp][..., None], ci[None, None, None, :], np.arange(nC)[None, None, None, :])
+        slots = (rowstart[:, :, :, None, None]
+                 + (offc[mp][:, :, None, :, None] + colpos[:, :, None, :, :]))
+        self.slots = slots.reshape(P, m * nC * m * nC)
+        self._matcache: dict = {}
+        self._keys = None
+
+    def csr(self, data) -> sp.csr_matrix:
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+
+    def positions(self, A) -> np.ndarray:
+        """Positions of the entries of CSR ``A`` (on the pattern or any sub-structure of the
+        union) in the union data array (cached per structure)."""
+        pat = self.pattern
+        if A.indptr is pat.indptr or (
+                A.nnz == pat.nnz and np.array_equal(A.indptr, pat.indptr) and np.array_equal(A.indices, pat.indices)):
+            return self.base_map
+        key = (A.nnz, hash(A.indptr.tobytes()), hash(A.indices.tobytes()))
+        mp = self._matcache.get(key)
+        if mp is None:
+            rows = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(A.indptr))
+            k = rows * self.n + A.indices
+            if self._keys is None:
+                self._keys = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.indptr)) * self.n + self.indices
+            uk = self._keys
+            mp = np.searchsorted(uk, k)
+            if np.any(uk[np.minimum(mp, self.nnz - 1)] != k):
+                raise ValueError("a matrix has entries outside the union pattern")
+            if len(self._matcache) > 8:
+                self._matcache.clear()
+            self._matcache[key] = mp
+        return mp
+
+    def add(self, data, A):
+        """``data[union positions of A] += A.data`` (A on the pattern or the union structure)."""
+        if A is None:
+            return data
+        A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
+        if A.nnz:
+            if not A.has_canonical_format:
+                A = A.copy()
+                A.sum_duplicates()
+            data[self.positions(A)] += A.data
+        return data
+
+    def data_of(self, A) -> np.ndarray:
+        """A's entries laid out on the union structure (zeros elsewhere)."""
+        return self.add(np.zeros(self.nnz), A)

@@ -26,6 +26,7 @@ import numpy as np
 from .disk_quadrature import disk_rule
 from .lagrange import lagrange_basis
 from .mesh import FibrilMesh
+from .small_matrix import det3
 
 __all__ = ["BeamBasis"]
 
@@ -102,6 +103,4 @@ class BeamBasis:
         return np.swapaxes(np.matmul(self.D, U[:, None, :, :]), -1, -2)
 
     def min_det_F(self, x: np.ndarray) -> float:
-        from ..physics.elasticity import det_inv
-
-        return float(det_inv(self.deformation_gradient(x))[0].min())
+        return float(det3(self.deformation_gradient(x)).min())

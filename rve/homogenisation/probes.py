@@ -39,7 +39,7 @@ from typing import Optional
 import numpy as np
 
 from ..contact.insulation import pull_down_circuits
-from ..contact.system import ContactParams, ContactSystem
+from ..model import ContactParams, ContactSystem
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, Couplings, DirichletBC
 from ..solvers.static import static_solve

@@ -47,7 +47,7 @@ import time
 import numpy as np
 
 from ..contact.relax import RelaxSettings, capped_newton, minimize_energy, relax_to_equilibrium
-from ..contact.system import ContactParams, ContactSystem
+from ..model import ContactParams, ContactSystem
 from ..model import BeamMaterial, BeamModel, DirichletBC
 
 __all__ = ["build_fabric", "clamped_ends", "mech_system", "relax_fabric", "strain_step", "strain_levels",

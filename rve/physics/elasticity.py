@@ -1,14 +1,17 @@
-"""Compressible Neo-Hookean material (SPEC §2): psi = mu/2 (tr C - 3) - mu ln J + lam/2 (ln J)^2.
+"""Compressible Neo-Hookean material (docs/coupled_fields.md): psi = mu/2 (tr C - 3) - mu ln J + lam/2 (ln J)^2.
 
 Contract: pure functions of batched deformation gradients F (..., 3, 3).
 ``neo_hookean_stress(F, mu, lam)`` -> first Piola-Kirchhoff P (..., 3, 3);
 ``neo_hookean_tangent(F, mu, lam)`` -> (P, A) with A[..., i, J, k, L] = dP_iJ / dF_kL;
 ``dP_dmu(F)`` -> dP/dmu (for mu(T) = mu0 + alpha_mu T). ``mu`` and ``lam`` broadcast
-against the batch shape. ``lame(E, nu)`` converts Young's modulus and Poisson's ratio.
+against the batch shape. ``lame(E, nu)`` converts Young's modulus and Poisson's ratio; ``neo_hookean_energy(F, mu,
+lam)`` -> psi (...,). Batched det / inverse: ``rve.fem.small_matrix``.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from ..fem.small_matrix import det3, inv_det3
 
 __all__ = ["lame", "neo_hookean_energy", "neo_hookean_stress", "neo_hookean_tangent", "dP_dmu"]
 
@@ -21,43 +24,20 @@ def lame(E, nu):
     return mu, lam
 
 
-def det_inv(F):
-    """Determinant and inverse of batched 3x3 matrices by cofactors (vectorised; much
-    cheaper than np.linalg on many tiny matrices)."""
-    a, b, c = F[..., 0, 0], F[..., 0, 1], F[..., 0, 2]
-    d, e, f = F[..., 1, 0], F[..., 1, 1], F[..., 1, 2]
-    g, h, i = F[..., 2, 0], F[..., 2, 1], F[..., 2, 2]
-    A = e * i - f * h
-    B = f * g - d * i
-    C = d * h - e * g
-    det = a * A + b * B + c * C
-    inv = np.empty_like(F)
-    inv[..., 0, 0] = A
-    inv[..., 1, 0] = B
-    inv[..., 2, 0] = C
-    inv[..., 0, 1] = c * h - b * i
-    inv[..., 1, 1] = a * i - c * g
-    inv[..., 2, 1] = b * g - a * h
-    inv[..., 0, 2] = b * f - c * e
-    inv[..., 1, 2] = c * d - a * f
-    inv[..., 2, 2] = a * e - b * d
-    inv /= det[..., None, None]
-    return det, inv
-
-
 def _b(a, F):
     return np.asarray(a, float)[..., None, None] * np.ones(F.shape[:-2] + (1, 1))
 
 
-def neo_hookean_energy(F, mu, lam):
-    J = det_inv(F)[0]
-    lnJ = np.log(J)
-    trC = np.einsum("...ij,...ij->...", F, F)
-    return 0.5 * mu * (trC - 3.0) - mu * lnJ + 0.5 * lam * lnJ**2
+def neo_hookean_energy(F, mu, lam, det=None):
+    """Strain energy density psi (...,) of F (..., 3, 3); ``det`` = det F if already known.
+    The one Neo-Hookean energy of the package (``rve.model.beam_strain_energy`` sums it)."""
+    a = F.reshape(F.shape[:-2] + (9,))
+    lnJ = np.log(det3(F) if det is None else det)
+    return 0.5 * mu * ((a * a).sum(axis=-1) - 3.0) - mu * lnJ + 0.5 * lam * lnJ * lnJ
 
 
 def neo_hookean_stress(F, mu, lam):
-    J, Finv = det_inv(F)
+    Finv, J = inv_det3(F)
     lnJ = np.log(J)
     FinvT = np.swapaxes(Finv, -1, -2)
     mu_ = _b(mu, F)
@@ -66,7 +46,7 @@ def neo_hookean_stress(F, mu, lam):
 
 
 def neo_hookean_tangent(F, mu, lam):
-    J, Finv = det_inv(F)
+    Finv, J = inv_det3(F)
     lnJ = np.log(J)
     FinvT = np.swapaxes(Finv, -1, -2)
     mu_ = _b(mu, F)
@@ -83,7 +63,7 @@ def neo_hookean_tangent(F, mu, lam):
 
 
 def dP_dmu(F):
-    return F - np.swapaxes(det_inv(F)[1], -1, -2)
+    return F - np.swapaxes(inv_det3(F)[0], -1, -2)
 
 
 _IDENTITY4 = np.einsum("ik,JL->iJkL", np.eye(3), np.eye(3))

@@ -18,20 +18,17 @@ the section by the disk quadrature because e varies across it). In the residual
 * ``joule_heating(ops, emf, sigma0)`` -> (R (E, nn), J): R = -int N_a sigma0 e^2 dV0 and its
   partial Jacobians 'V', 'T' (E, nn, nn), 'x', 'v' (E, nn, nn*3, 3) (None when zero);
 * ``joule_source(ops, emf, sigma0)`` -> (E, nn): the heat input int N_a sigma0 e^2 dV0 (W);
-* ``thermal_softening(basis, U, alpha_mu, ops)`` -> (E, nn*3, 3, nn): d R_int / d T_b of the
-  Neo-Hookean internal force with mu(T) = mu0 + alpha_mu T (T interpolated at every
-  quadrature point).
+* ``temperature_at_quadrature(ops, Te)`` -> (E, nq). (The tangent of the thermal softening
+  mu(T) comes from ``beam_forms.neo_hookean_element_forces(..., want_dmu=True)``.)
 All functions work on all elements at once.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..fem.basis import BeamBasis
-from .beam_forms import F_from_U
 from .electric_forms import EMF, SectionOps, _outer_q, _sig
 
-__all__ = ["capacity_matrix", "conduction", "joule_heating", "joule_source", "thermal_softening",
+__all__ = ["capacity_matrix", "conduction", "joule_heating", "joule_source",
            "temperature_at_quadrature"]
 
 
@@ -77,19 +74,3 @@ def joule_heating(ops: SectionOps, m: EMF, sigma0, want_tangent: bool = True):
 def temperature_at_quadrature(ops: SectionOps, Te) -> np.ndarray:
     """T at every quadrature point (E, nq)."""
     return np.einsum("qn,en->eq", ops.Nq, Te)
-
-
-def thermal_softening(basis: BeamBasis, U, alpha_mu: float, ops: SectionOps, F=None) -> np.ndarray:
-    """d R_int / d T_b = alpha_mu sum_q (dR_int/dmu_q) N_b(q): (E, nn*3, 3, nn).
-
-    dR_int/dmu_q[(a,f), i] = W_q sum_j D[j, (a,f)] dP/dmu[i, j] with dP/dmu = F - F^-T (the
-    same as ``beam_forms.internal_force_dmu``, done here as batched matmuls)."""
-    if F is None:
-        F = F_from_U(basis, U)
-    dP = F - np.swapaxes(np.linalg.inv(F), -1, -2)  # (E, nq, i, j)
-    E, nq, _, naf = basis.D.shape
-    # G[e, q, af, i] = sum_j D[e,q,j,af] dP[e,q,i,j]
-    G = np.matmul(np.swapaxes(basis.D, 2, 3), np.swapaxes(dP, 2, 3))  # (E, nq, af, i)
-    G = G * (alpha_mu * basis.W)[:, :, None, None]
-    K = np.matmul(G.reshape(E, nq, naf * 3).transpose(0, 2, 1), np.broadcast_to(ops.Nq, (E, nq, ops.nn)))
-    return K.reshape(E, naf, 3, ops.nn)

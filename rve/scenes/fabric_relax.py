@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..contact.relax import RelaxSettings, relax_to_equilibrium
-from ..contact.system import ContactParams, ContactSystem
+from ..model import ContactParams, ContactSystem
 from ..model import BeamMaterial, BeamModel, DirichletBC
 
 __all__ = ["build", "solve", "run", "make_fabric", "clamp_reactions", "stack_geometry", "write_state",

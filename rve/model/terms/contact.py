@@ -1,0 +1,262 @@
+"""Contact term: penalty between fibril chords and the thermal / electrical contact
+conductance h_C a [[T]], sigma_C a [[V]] through the Hertz width a(g), on pair elements
+(thesis §4.3, §4.4.6, Algorithm 5.1; choices and figures: docs/contact.md).
+
+Contract
+--------
+``ContactParams``: the contact law and map settings (validated). ``ContactTerm(mesh, layout,
+params, E_star)``: a term of *pair elements*, not of beam elements:
+
+* ``rebuild(x)`` builds the contact map (``rve.contact.build_contact_map``: KD-tree
+  candidates within ``cutoff = 2 max R + params.margin``, ``n_gp`` points per pair) and
+  returns the pair connectivity ``local`` (P, m) (m = 4 chord end nodes for mechanics
+  only, both elements' nodes with T/V); ``comps`` are the node components a pair touches
+  (centroid r, and T / V when their coefficient is > 0);
+* ``forms(x, w, jacobian)`` -> ``(act, R, Kx, Kw)`` on the active pairs (local arrays laid
+  out as ``UnionPattern.gdofs`` / ``slots``; assembled by ``rve.model.assembler.ContactAssembler``);
+* diagnostics: ``geometry(x)``, ``gaps(x)``, ``active_pairs(x)``, ``energy(x)`` (penalty
+  energy, the potential of the mechanical residual), ``contact_state(x)``,
+  ``conductance_by_pair(x, field)``; ``onset`` / ``set_onset`` (C² onset of the penalty
+  law), ``tangent_near`` (model stiffness of points about to touch, tangent only).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from ...contact.search import ContactMap, build_contact_map
+from ...physics.contact_forms import (
+    chord_gaps, chord_geometry, effective_radius, hertz_kappa, hertz_width, penalty_energy,
+    penalty_forces, penalty_law, scalar_jump,
+)
+
+__all__ = ["ContactParams", "ContactTerm"]
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Contact law and map settings (units: mm, N, MPa, W, A, V).
+
+    ``penalty`` P*: line load per unit overlap (N/mm per mm = N/mm^2); the penalty force
+    per unit length is P* g. ``youngs_modulus`` E* of the Hertz width (None: from the base
+    material, 1/E* = 2 (1 - nu^2)/E). ``heat_transfer`` h_C (W/(mm^2 K)) and
+    ``conductance`` sigma_C (A/(mm^2 V)) of the jump terms. ``n_gp`` points per pair;
+    ``margin`` added to R+ + R- for the search cutoff (covers motion between rebuilds);
+    ``g_eps`` the Hertz regularisation as a fraction of the smallest radius;
+    ``recompute_closest`` recomputes s- at every evaluation (else frozen per rebuild);
+    ``rebuild_every`` is advisory (drivers read it); ``onset`` the width of the C² onset
+    of the penalty law as a fraction of the smallest radius (0: the linear law P* g)."""
+
+    penalty: float
+    youngs_modulus: Optional[float] = None
+    heat_transfer: float = 0.0
+    conductance: float = 0.0
+    n_gp: int = 4
+    margin: float = 0.1
+    g_eps: float = 1e-3
+    recompute_closest: bool = True
+    rebuild_every: int = 5
+    onset: float = 0.0
+
+    def __post_init__(self):
+        if not self.penalty > 0:
+            raise ValueError(f"contact penalty must be > 0, got {self.penalty}")
+        if self.heat_transfer < 0 or self.conductance < 0:
+            raise ValueError("contact heat_transfer and conductance must be >= 0")
+        if int(self.n_gp) < 1:
+            raise ValueError(f"n_gp must be >= 1, got {self.n_gp}")
+        if not self.margin >= 0:
+            raise ValueError(f"margin must be >= 0, got {self.margin}")
+        if not self.g_eps >= 0:
+            raise ValueError(f"g_eps must be >= 0, got {self.g_eps}")
+        if not self.onset >= 0:
+            raise ValueError(f"onset must be >= 0, got {self.onset}")
+
+
+class ContactTerm:
+    name = "contact"
+
+    def __init__(self, mesh, layout, params: ContactParams, E_star: float):
+        self.mesh, self.layout, self.params = mesh, layout, params
+        self.E_star = float(E_star)
+        self.use_T = layout.has("T") and params.heat_transfer > 0
+        self.use_V = layout.has("V") and params.conductance > 0
+        self.scalar = [f for f, on in (("T", self.use_T), ("V", self.use_V)) if on]
+        self.comps = np.array([0, 1, 2] + [layout.offset[f] for f in self.scalar], dtype=np.int64)
+        self.nC = len(self.comps)
+        self.g_eps = float(params.g_eps) * float(mesh.radius.min())
+        self.onset = float(params.onset) * float(mesh.radius.min())
+        #: > 0: the tangent (not the residual) also holds the normal penalty stiffness of the
+        #: points whose separation is below this (mm), ramped to 0 at it: a model for Newton
+        #: steps that close gaps (``minimize_energy`` sets it while far from the solution)
+        self.tangent_near = 0.0
+        self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
+        self.map: Optional[ContactMap] = None
+
+    def rebuild(self, x) -> np.ndarray:
+        """Contact map at state ``x``; returns the pair connectivity (P, m)."""
+        mesh = self.mesh
+        xn = self.layout.as_nodal(np.asarray(x, float))
+        cmap = build_contact_map(xn[:, :3], mesh, self.cutoff, self.params.n_gp)
+        self.map = cmap
+        conn = mesh.conn
+        nn = conn.shape[1]
+        ep, em = cmap.e_plus, cmap.e_minus
+        if self.scalar:
+            local = np.concatenate([conn[ep], conn[em]], axis=1)  # (P, 2nn)
+            self.endpos = np.array([0, nn - 1, nn, 2 * nn - 1])
+        else:
+            local = np.concatenate([cmap.nodes_plus, cmap.nodes_minus], axis=1)  # (P, 4)
+            self.endpos = np.arange(4)
+        self.m = local.shape[1]
+        fp, fm = cmap.fibril_plus, cmap.fibril_minus
+        R = mesh.radius
+        self.gap_radius = R[fp] + R[fm]
+        self.weight = mesh.elem_length[ep] / cmap.n_gp
+        self.kappa = hertz_kappa(effective_radius(R[fp], R[fm]), self.params.penalty, self.E_star)
+        return local
+
+    def set_onset(self, fraction: float) -> None:
+        """Onset width of the penalty law as a fraction of the smallest radius (0: linear)."""
+        if not fraction >= 0:
+            raise ValueError(f"onset must be >= 0, got {fraction}")
+        self.onset = float(fraction) * float(self.mesh.radius.min())
+
+    def ends(self, x, sel=None):
+        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        npl, nmi = self.map.nodes_plus, self.map.nodes_minus
+        if sel is not None:
+            npl, nmi = npl[sel], nmi[sel]
+        return r[npl[:, 0]], r[npl[:, 1]], r[nmi[:, 0]], r[nmi[:, 1]]
+
+    def geometry(self, x, sel=None):
+        cmap = self.map
+        sp_, sm, gr = cmap.s_plus, None if self.params.recompute_closest else cmap.s_minus, self.gap_radius
+        if sel is not None:
+            sp_, gr = sp_[sel], gr[sel]
+            sm = None if sm is None else sm[sel]
+        return chord_geometry(*self.ends(x, sel), sp_, gr, sm)
+
+    def gaps(self, x) -> np.ndarray:
+        """Overlaps g (n_pairs, n_gp) of every point of the map at ``x`` (no tangent data)."""
+        cmap = self.map
+        sm = None if self.params.recompute_closest else cmap.s_minus
+        return chord_gaps(*self.ends(x), cmap.s_plus, self.gap_radius, sm)
+
+    def active_pairs(self, x) -> np.ndarray:
+        """Indices of the map's pairs with at least one overlapping point at ``x``."""
+        if self.map.n_pairs == 0:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero((self.gaps(x) > 0.0).any(axis=1))
+
+    def energy(self, x) -> float:
+        """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x``."""
+        if self.map.n_pairs == 0:
+            return 0.0
+        return penalty_energy(self.gaps(x), self.weight, self.params.penalty, self.onset)
+
+    def forms(self, x, w, jacobian: bool = True):
+        """Local residuals and tangents of the active pairs: ``(act, R, Kx, Kw)``, ``act`` the
+        active pair indices, ``R`` (len(act), m*nC) laid out as the pair dofs, ``Kx``/``Kw``
+        (len(act), (m*nC)^2) (None without jacobian; Kw None for mechanics only)."""
+        m, nC = self.m, self.nC
+        none = np.zeros(0, np.int64), np.zeros(0), None, None
+        if self.map.n_pairs == 0:
+            return none
+        near = float(self.tangent_near) if (jacobian and not self.scalar) else 0.0
+        if near > 0.0:
+            act = np.flatnonzero((self.gaps(x) > -near).any(axis=1))
+        else:
+            act = self.active_pairs(x)
+        if act.size == 0:
+            return none
+        geo = self.geometry(x, act)
+        Pa = act.size
+        wgt = self.weight[act]
+        if not self.scalar:  # mechanics only: the local unknowns are the 4 chord ends x 3
+            Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
+            if not jacobian:
+                return act, Rm, None, None
+            if near > 0.0:
+                # model stiffness of the points about to touch (separation < near): the
+                # normal penalty stiffness, ramped to 0 at the band's edge (tangent only)
+                pts = (geo.g <= 0.0) & (geo.g > -near) & (geo.rho > 1e-300)
+                kn = np.where(pts, wgt[:, None] * self.params.penalty * (1.0 + geo.g / near), 0.0)
+                if np.any(kn > 0):
+                    cn = geo.c[..., :, None] * geo.n[..., None, :]  # (Pa, G, 4, 3)
+                    cn = cn.reshape(Pa, -1, 12)
+                    Km = Km + np.matmul(np.swapaxes(cn * kn[..., None], 1, 2), cn).reshape(Km.shape)
+            return act, Rm, Km.reshape(Pa, -1), None
+        Rl = np.zeros((Pa, m, nC))
+        Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
+        Kw = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
+        Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
+        ep = self.endpos
+        Rl[:, ep, 0:3] += Rm
+        if jacobian:
+            for k in range(4):
+                for l in range(4):
+                    Kx[:, ep[k], 0:3, ep[l], 0:3] += Km[:, k, :, l, :]
+        if self.scalar:
+            wn = self.layout.as_nodal(np.asarray(w, float))
+            conn = self.mesh.conn
+            epair, mpair = self.map.e_plus[act], self.map.e_minus[act]
+            for ic, f in enumerate(self.scalar):
+                c = 3 + ic
+                off = self.layout.offset[f]
+                coef = self.params.heat_transfer if f == "T" else self.params.conductance
+                u = wn[:, off]
+                R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u[conn[mpair]], wgt, coef,
+                                        self.kappa[act], self.g_eps, jacobian)
+                Rl[:, :, c] += R
+                if jacobian:
+                    Kw[:, :, c, :, c] += Ju
+                    for k in range(4):
+                        Kx[:, :, c, ep[k], 0:3] += JX[:, :, k, :]
+        if not jacobian:
+            return act, Rl, None, None
+        return act, Rl, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
+
+    def contact_state(self, x) -> dict:
+        """Overlap statistics of the current map at ``x``.
+
+        ``max_overlap`` (mm) and ``max_overlap_over_R`` (overlap / min(R+, R-)),
+        ``pairs``, ``active_pairs``, ``active_points``, ``max_width`` (Hertz a, mm),
+        ``total_normal_force`` (N; sum over points of w φ'(g), i.e. w P* g for the linear law)."""
+        out = {"pairs": int(self.map.n_pairs), "active_pairs": 0, "active_points": 0, "max_overlap": 0.0,
+               "max_overlap_over_R": 0.0, "max_width": 0.0, "total_normal_force": 0.0}
+        if self.map.n_pairs == 0:
+            return out
+        g = self.gaps(x)
+        active = g > 0.0
+        g = np.where(active, g, 0.0)
+        R = self.mesh.radius
+        rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])
+        a, _ = hertz_width(g, self.kappa[:, None], self.g_eps)
+        out.update(active_pairs=int(active.any(axis=1).sum()), active_points=int(active.sum()),
+                   max_overlap=float(g.max()), max_overlap_over_R=float((g / rmin[:, None]).max()),
+                   max_width=float(a.max()),
+                   total_normal_force=float((self.weight[:, None]
+                                             * penalty_law(g, self.params.penalty, self.onset)[1]).sum()))
+        return out
+
+    def conductance_by_pair(self, x, field: str = "V") -> dict:
+        """Discrete contact conductance between every pair of fibrils in contact:
+        ``{(f+, f-): sum_points w c_C a(g)}`` (A/V for V, W/K for T)."""
+        coef = self.params.conductance if field == "V" else self.params.heat_transfer
+        out: dict = {}
+        if self.map.n_pairs == 0:
+            return out
+        geo = self.geometry(x)
+        g = np.where(geo.active, geo.g, 0.0)
+        a, _ = hertz_width(g, self.kappa[:, None], self.g_eps)
+        Gp = (self.weight[:, None] * coef * a).sum(axis=1)
+        nf = self.mesh.n_fibrils
+        key = self.map.fibril_plus.astype(np.int64) * nf + self.map.fibril_minus
+        uk, inv = np.unique(key, return_inverse=True)
+        tot = np.bincount(inv, weights=Gp, minlength=uk.size)
+        return {(int(k // nf), int(k % nf)): float(v) for k, v in zip(uk, tot) if v > 0}
+
+
