@@ -1,6 +1,7 @@
 """The resistor-network model of a woven RVE and its fit to probe resistances.
 
-Thesis Fig. 7.2.1 as read in docs/lookup_tables.md ("Network model"): every yarn crossing
+Thesis Fig. 7.2.1 as read in docs/lookup_tables.md (§3 "Network model and the derivation
+of R_y and R_c"): every yarn crossing
 is a cell with one warp and one weft yarn resistor R_y and four warp-weft contact
 resistors R_c. This module owns the physics of that reading; the table builder
 (``rve.tables.build``) calls :func:`fit_network` once per stored state.

@@ -1,6 +1,6 @@
 """Exports of a lookup table for macroscale codes: csv, json, dat (``export_table``).
 
-docs/lookup_tables.md ("Exports") describes the three formats; ``read_table_csv`` reads
+docs/lookup_tables.md (§5 "Export formats") describes the three formats; ``read_table_csv`` reads
 the csv export back into a Dataset and ``to_json_dict`` is what the json export writes
 (NaN as null). Input: a table Dataset; output: the written paths (all atomic,
 ``rve.io.atomic``).

@@ -1,6 +1,6 @@
 """Table values between the stored strains (and numeric swept parameters): ``interpolate``.
 
-docs/lookup_tables.md ("Interpolation"): piecewise linear or monotone cubic (PCHIP) in
+docs/lookup_tables.md (§4 "Interpolation"): piecewise linear or monotone cubic (PCHIP) in
 strain, per mode over the strains at which that mode has a state; numeric swept
 parameters are interpolated the same way, string-valued ones selected. Stored points
 return the stored values exactly; a point outside the table raises ValueError naming the

@@ -1,6 +1,6 @@
 """netCDF storage of a lookup table: ``write_table`` (atomic, zlib) and ``open_table``.
 
-Format ``rve-lookup-table/1`` (docs/lookup_tables.md "Layout", ``rve.tables.schema``):
+Format ``rve-lookup-table/1`` (docs/lookup_tables.md §2, ``rve.tables.schema``):
 ``write_table(ds, path)`` writes netCDF-4 through ``rve.io.atomic.atomic_path`` (a file
 that exists is complete), zlib level 4 with shuffle on numeric variables, no fill value
 on coordinates (CF). ``open_table(path)`` reads any table written so far into memory (the

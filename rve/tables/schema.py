@@ -1,6 +1,6 @@
 """The lookup-table format ``rve-lookup-table/1``: dimensions, variables, attributes.
 
-docs/lookup_tables.md ("Layout") records the format; this module is where it is spelt:
+docs/lookup_tables.md (§2 "The table") records the format; this module is where it is spelt:
 the coordinate and variable metadata every module of ``rve.tables`` writes and reads, the
 known swept parameters with their units, and the one JSON-safe conversion of table
 metadata (``json_safe``, built on ``rve.io.provenance.to_jsonable``).
