@@ -1,4 +1,4 @@
-# rve pipeline (SPEC §6). Run from the repository root:
+# rve pipeline (docs/rve_pipeline.md). Run from the repository root:
 #   snakemake -j2                      # the default targets (config `default_targets`)
 #   snakemake -j2 --configfile configs/tests/pipeline_ci.yaml   # a quick small run
 #   snakemake --lint

@@ -116,7 +116,7 @@ def test_weakened_insulation_defines_floating_fibrils():
 
 @pytest.fixture(scope="module")
 def small_weave():
-    from rve.homogenisation.pipeline import load_run_config
+    from rve.homogenisation.sweeps import load_run_config
     from rve.homogenisation.strain import build_fabric, relax_fabric
 
     spec = {"scene": {"fabric": {"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]}, "mesh": {"elements": 8},

@@ -1,6 +1,6 @@
 """RVE pipeline (thesis ch. 7): the Snakemake DAG of the CI config (tiny 2 x 2 weave, 2 steps
 per mode), the acceptance checks on its table, the checkpoints, resume after a kill with an
-identical table, parameter sweeps, the dask path, config and schema."""
+identical table, parameter sweeps, config and schema."""
 from __future__ import annotations
 
 import json
@@ -17,14 +17,15 @@ import yaml
 
 from workflow_copy import workflow_copy
 
-from rve.homogenisation import pipeline as P
+from rve.homogenisation import layout as L
+from rve.homogenisation import sweeps as S
 
 ROOT = Path(__file__).resolve().parents[1]
 CI_CONFIG = "configs/tests/pipeline_ci.yaml"
 SCHEMA = ROOT / "workflow" / "schemas" / "pipeline.schema.yaml"
 RUN = "ci"
 TABLE = f"results/rve/{RUN}/table.nc"
-PLOTS = list(P.report_outputs(RUN).values())
+PLOTS = list(L.report_outputs(RUN).values())
 
 
 def _ci_spec():
@@ -66,8 +67,8 @@ def table(ci_run):
 def test_every_stage_wrote_outputs_logs_and_benchmarks(ci_run):
     res = ci_run / "results"
     spec = _ci_spec()
-    cfg = P.load_run_config(spec)
-    names = P.state_names(cfg)
+    cfg = S.load_run_config(spec)
+    names = L.state_names(cfg)
     assert names == ["relaxed", "uniaxial_01", "uniaxial_02", "shear_01", "shear_02"]
     base = res / "rve" / RUN / "base"
     for n in ["initial", *names]:
@@ -97,7 +98,7 @@ def test_checkpoints_are_self_describing_and_land_on_the_strain_path(ci_run):
     from rve.homogenisation.strain import build_fabric, clamped_ends, strain_levels
 
     spec = _ci_spec()
-    cfg = P.load_run_config(spec)
+    cfg = S.load_run_config(spec)
     fab, mesh = build_fabric(cfg)
     ends, _, _ = clamped_ends(fab, mesh)
     levels = strain_levels(cfg)
@@ -237,7 +238,7 @@ def test_killed_run_resumes_with_an_identical_table(ci_run, table, tmp_path):
             assert list(a[k].ravel()) == list(b[k].ravel()), k
 
 
-# --------------------------------------------------------------------------- sweeps, dask, in-process
+# --------------------------------------------------------------------------- sweeps
 def _tiny_spec(**extra):
     spec = {"scene": {"fabric": {"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]}, "mesh": {"elements": 6},
                       "relaxation": {"duration": "2 ms", "steps": 4, "rebuild_every": 2},
@@ -248,46 +249,19 @@ def _tiny_spec(**extra):
 
 def test_combos_of_a_sweep():
     spec = {"sweep": {"fibril.radius": [0.12, 0.15], "contact.sigma_c": [0.5, 1.0], "weave": ["plain", "twill_2_2"]}}
-    cs = P.combos(spec)
+    cs = S.combos(spec)
     assert len(cs) == 8
     assert cs[0].id == "fibril_radius-0.12__contact_conductance-0.5__weave-plain"
     assert cs[0].params == {"fibril_radius": 0.12, "contact_conductance": 0.5, "weave": "plain"}
     assert "fabric.fibril_diameter=0.24" in cs[0].overrides
-    assert P.swept_dims(spec) == {"fibril_radius": "mm", "contact_conductance": "A mm-2 V-1", "weave": "1"}
-    cfg = P.load_run_config({**_tiny_spec(), **spec}, cs[-1].id)
+    assert S.swept_dims(spec) == {"fibril_radius": "mm", "contact_conductance": "A mm-2 V-1", "weave": "1"}
+    cfg = S.load_run_config({**_tiny_spec(), **spec}, cs[-1].id)
     assert cfg.fabric.fibril_diameter == pytest.approx(0.3) and cfg.contact.conductance == 1.0
     assert cfg.fabric.kind == "twill_2_2"
-    assert P.combos({"sweep": {"contact.penalty": ["40 N/mm^2"]}})[0].params == {"contact_penalty": 40.0}
+    assert S.combos({"sweep": {"contact.penalty": ["40 N/mm^2"]}})[0].params == {"contact_penalty": 40.0}
     with pytest.raises(ValueError, match="unknown sweep parameter"):
-        P.combos({"sweep": {"colour": [1]}})
-    assert P.combo_ids({}) == ["base"]
-
-
-def test_sweep_gathers_one_dimension_per_parameter(tmp_path):
-    spec = _tiny_spec(sweep={"contact_conductance": [0.5, 1.0]})
-    ds = P.run_local(spec, "sweep", root=tmp_path / "rve", log_dir=tmp_path / "logs")
-    assert ds["probe_resistance"].dims == ("mode", "strain", "contact_conductance", "probe")
-    np.testing.assert_allclose(ds["contact_conductance"].values, [0.5, 1.0])
-    assert ds["contact_conductance"].attrs["units"] == "A mm-2 V-1"
-    r = ds["probe_resistance"].sel(mode="uniaxial")
-    # the same mechanics; a better contact conductance lowers the resistance through contacts
-    assert bool((r.sel(contact_conductance=1.0, probe="probe3") < r.sel(contact_conductance=0.5, probe="probe3")).all())
-    np.testing.assert_array_equal(ds["reaction_force"].sel(contact_conductance=0.5).values,
-                                  ds["reaction_force"].sel(contact_conductance=1.0).values)
-    # re-running finds every output and only re-gathers
-    again = P.run_local(spec, "sweep", root=tmp_path / "rve")
-    np.testing.assert_array_equal(again["probe_resistance"].values, ds["probe_resistance"].values)
-
-
-def test_probes_through_dask_match_the_probe_records(ci_run):
-    spec = _ci_spec()
-    base = ci_run / "results" / "rve" / RUN / "base"
-    states = [base / "states" / f"{n}.nc" for n in ("relaxed", "shear_02")]
-    recs = P.run_probes_dask(states, spec, scheduler="synchronous")
-    for n, rec in zip(("relaxed", "shear_02"), recs):
-        stored = json.loads((base / "probes" / f"{n}.json").read_text())
-        for p in ("probe1", "probe2", "probe3"):
-            assert rec["probes"][p]["current"] == stored["probes"][p]["current"]
+        S.combos({"sweep": {"colour": [1]}})
+    assert S.combo_ids({}) == ["base"]
 
 
 # --------------------------------------------------------------------------- configs
@@ -299,8 +273,8 @@ def test_configs_validate_and_default_target_is_the_plain_weave_table():
 
     cfg = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
     validate(cfg, schema=str(SCHEMA))
-    assert P.default_targets({**cfg, "default_targets": ["rve"]})[0] == "results/rve/plain_weave/table.nc"
-    default = P.load_run_config(cfg["rve"]["runs"]["plain_weave"])
+    assert L.default_targets({**cfg, "default_targets": ["rve"]})[0] == "results/rve/plain_weave/table.nc"
+    default = S.load_run_config(cfg["rve"]["runs"]["plain_weave"])
     assert isinstance(default, RVEConfig)
     # thesis Table 7.1 and Algorithm 7.1 / §7.4
     assert default.fabric.fibril_diameter == pytest.approx(0.3)
@@ -311,10 +285,10 @@ def test_configs_validate_and_default_target_is_the_plain_weave_table():
     assert default.strain.modes == ["uniaxial", "shear"]
     assert (default.strain.total, default.strain.steps) == (0.25, 10)
     assert [p.name for p in default.probes] == ["probe1", "probe2", "probe3"]
-    assert len(P.state_names(default)) == 21
-    knit = P.load_run_config(cfg["rve"]["runs"]["knit"])
+    assert len(L.state_names(default)) == 21
+    knit = S.load_run_config(cfg["rve"]["runs"]["knit"])
     assert knit.fabric.kind == "knit" and knit.probes[0].terminals[0].yarn == "loop"
-    assert len(P.combos(cfg["rve"]["runs"]["weave_sweep"])) == 8
+    assert len(S.combos(cfg["rve"]["runs"]["weave_sweep"])) == 8
     ci = yaml.safe_load((ROOT / CI_CONFIG).read_text())
     validate(ci, schema=str(SCHEMA))
     bad = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
@@ -331,12 +305,12 @@ def test_rve_config_rejects_bad_probes_and_modes():
     from rve.config import ConfigError
 
     with pytest.raises(ConfigError, match="terminals"):
-        P.load_run_config({"scene": {"probes": [{"name": "p", "terminals": [{"yarn": "warp", "position": 1,
+        S.load_run_config({"scene": {"probes": [{"name": "p", "terminals": [{"yarn": "warp", "position": 1,
                                                                               "end": "x+"}]}]}})
     with pytest.raises(ConfigError, match="modes"):
-        P.load_run_config({"scene": {"strain": {"modes": ["uniaxial", "uniaxial"]}}})
+        S.load_run_config({"scene": {"strain": {"modes": ["uniaxial", "uniaxial"]}}})
     with pytest.raises(ConfigError, match="seebeck"):
-        P.load_run_config({"scene": {"material": {"seebeck": 1e-6}}})
+        S.load_run_config({"scene": {"material": {"seebeck": 1e-6}}})
 
 
 def test_sweep_runs_through_snakemake_with_one_dimension_per_parameter(tmp_path):
@@ -351,7 +325,7 @@ def test_sweep_runs_through_snakemake_with_one_dimension_per_parameter(tmp_path)
     target = "results/rve/ci_sweep/table.nc"
     _run(work, _snakemake_cmd(target))
     spec = yaml.safe_load((ROOT / CI_CONFIG).read_text())["rve"]["runs"]["ci_sweep"]
-    ids = P.combo_ids(spec)
+    ids = S.combo_ids(spec)
     assert len(ids) == 2
     for cid in ids:
         states = work / "results" / "rve" / "ci_sweep" / cid / "states"
@@ -359,6 +333,7 @@ def test_sweep_runs_through_snakemake_with_one_dimension_per_parameter(tmp_path)
         assert (work / f"results/benchmarks/rve/ci_sweep/{cid}/relax.tsv").exists(), cid
     t = open_table(work / target)
     assert t.sizes["contact_conductance"] == 2
+    assert t["probe_resistance"].dims == ("mode", "strain", "contact_conductance", "probe")
     np.testing.assert_allclose(t["contact_conductance"].values, [0.5, 2.0])
     assert t["contact_conductance"].attrs["units"] and t["contact_conductance"].attrs["long_name"]
     rf = t["reaction_force"]

@@ -57,7 +57,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["STATE_FORMAT", "COMPONENTS", "SIDES", "State", "write_state", "load_state"]
+from ..io.provenance import package_version, to_jsonable
+
+__all__ = ["STATE_FORMAT", "COMPONENTS", "SIDES", "State", "write_state", "load_state", "describe"]
 
 STATE_FORMAT = "rve-state/1"
 COMPONENTS = ("r_x", "r_y", "r_z", "g1_x", "g1_y", "g1_z", "g2_x", "g2_y", "g2_z")
@@ -93,12 +95,6 @@ class State:
         return np.ascontiguousarray(self.w).reshape(-1)
 
 
-def _jsonable(obj):
-    from ..io.provenance import to_jsonable
-
-    return to_jsonable(obj)
-
-
 def write_state(path, state: State, fabric, mesh, contact=None, version: Optional[str] = None) -> Path:
     """Write ``state`` of ``fabric``/``mesh`` atomically as netCDF (module docstring).
 
@@ -106,7 +102,6 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
     import xarray as xr
 
     from ..io.atomic import atomic_path
-    from ..io.provenance import package_version
 
     nn = mesh.n_nodes
     for name in ("x", "w", "origin"):
@@ -175,14 +170,14 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
         "strain": float(state.strain),
         "time": float(state.time),
         "combo": state.combo,
-        "params": json.dumps(_jsonable(state.params), sort_keys=True),
-        "config": json.dumps(_jsonable(state.config), sort_keys=True),
+        "params": json.dumps(to_jsonable(state.params), sort_keys=True),
+        "config": json.dumps(to_jsonable(state.config), sort_keys=True),
         "fabric_kind": fabric.kind,
         "elements": int(mesh.n_elements // max(1, mesh.n_fibrils)),
         "order": int(mesh.order),
         "half_widths": [float(v) for v in fabric.half_widths],
         "contact_count": int(state.contact_count),
-        "solver": json.dumps(_jsonable(state.solver), sort_keys=True),
+        "solver": json.dumps(to_jsonable(state.solver), sort_keys=True),
         "rve_version": version or package_version(),
         "conventions": "node-interleaved beam state (9 per node); internal units mm, ms, g, N, MPa, K, A, V",
     }

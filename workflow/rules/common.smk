@@ -50,4 +50,4 @@ def resource_mem_mb(key):
 # lookup tables and figures of the runs in rve.default_runs (workflow/rules/rve.smk),
 # static_wire / dynamic_wire = the verification studies. The `all` rule in the Snakefile
 # resolves them once every rule file is included.
-from rve.homogenisation.pipeline import default_targets as rve_default_targets
+from rve.homogenisation.layout import default_targets as rve_default_targets

@@ -1,15 +1,15 @@
-# RVE homogenisation (thesis ch. 7, Algorithm 7.1; SPEC §5-§6; docs/rve_pipeline.md).
-# Each rule is a thin call into rve.homogenisation.pipeline. Per run (config rve.runs) and
-# per sweep combination ({combo}, "base" without a sweep):
+# RVE homogenisation (thesis ch. 7, Algorithm 7.1; docs/rve_pipeline.md). Each rule is a
+# thin call into the package: rve.homogenisation.jobs (the states and probe records) and
+# rve.tables.jobs (the table and its figures); every path comes from the run layout
+# rve.homogenisation.layout (the one place the files of a run are named). Per run (config
+# rve.runs) and per sweep combination ({combo}, "base" without a sweep):
 #   rve_fabric -> rve_relax -> rve_strain_step (step i from step i-1, per mode)
 #   -> rve_probes (one job per stored state, independent) -> rve_gather -> rve_report
 # Every output is written atomically, so a killed run resumes from the last complete step.
 # The strain steps (the critical path: two chains) have priority; the probe jobs fill in.
+# The job modules are imported in the rule bodies: parsing the workflow stays cheap.
 
-from rve.homogenisation import pipeline as rve_pipeline
-
-
-RVE_DIR = rve_pipeline.RVE_DIR
+from rve.homogenisation import layout as rve_layout
 
 
 wildcard_constraints:
@@ -23,49 +23,53 @@ wildcard_constraints:
 rule rve_fabric:
     """Generate the fabric and its mesh; write the designed initial state."""
     output:
-        state=f"{RVE_DIR}/{{run}}/{{combo}}/states/initial.nc",
+        state=rve_layout.state_path("{run}", "{combo}", "initial"),
     log:
-        "results/logs/rve/{run}/{combo}/fabric.log",
+        rve_layout.log_path("{run}", "fabric", "{combo}"),
     benchmark:
-        "results/benchmarks/rve/{run}/{combo}/fabric.tsv"
+        rve_layout.benchmark_path("{run}", "fabric", "{combo}")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
     run:
-        rve_pipeline.fabric_job(output.state, log[0], params.spec, wildcards.combo)
+        from rve.homogenisation.jobs import fabric_job
+
+        fabric_job(output.state, log[0], params.spec, wildcards.combo)
 
 
 rule rve_relax:
     """Relax the initial state to static equilibrium under contact (strain 0)."""
     input:
-        state=f"{RVE_DIR}/{{run}}/{{combo}}/states/initial.nc",
+        state=rve_layout.state_path("{run}", "{combo}", "initial"),
     output:
-        state=f"{RVE_DIR}/{{run}}/{{combo}}/states/relaxed.nc",
+        state=rve_layout.state_path("{run}", "{combo}", "relaxed"),
     log:
-        "results/logs/rve/{run}/{combo}/relax.log",
+        rve_layout.log_path("{run}", "relax", "{combo}"),
     benchmark:
-        "results/benchmarks/rve/{run}/{combo}/relax.tsv"
+        rve_layout.benchmark_path("{run}", "relax", "{combo}")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
     run:
-        rve_pipeline.relax_job(input.state, output.state, log[0], params.spec, wildcards.combo)
+        from rve.homogenisation.jobs import relax_job
+
+        relax_job(input.state, output.state, log[0], params.spec, wildcards.combo)
 
 
 rule rve_strain_step:
     """Strain step {step} of {mode} (Algorithm 7.1) from the previous stored state."""
     input:
-        state=lambda w: rve_pipeline.previous_state(w.run, w.combo, w.mode, int(w.step), RVE_DIR),
+        state=lambda w: rve_layout.previous_state(w.run, w.combo, w.mode, int(w.step)),
     output:
-        state=f"{RVE_DIR}/{{run}}/{{combo}}/states/{{mode}}_{{step}}.nc",
+        state=rve_layout.state_path("{run}", "{combo}", "{mode}_{step}"),
     log:
-        "results/logs/rve/{run}/{combo}/strain/{mode}_{step}.log",
+        rve_layout.log_path("{run}", "strain", "{combo}", "{mode}_{step}"),
     benchmark:
-        "results/benchmarks/rve/{run}/{combo}/strain/{mode}_{step}.tsv"
+        rve_layout.benchmark_path("{run}", "strain", "{combo}", "{mode}_{step}")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
     threads: 1
@@ -73,7 +77,9 @@ rule rve_strain_step:
         mem_mb=config["resources"]["rve_mem_mb"],
     priority: 10
     run:
-        rve_pipeline.strain_job(
+        from rve.homogenisation.jobs import strain_job
+
+        strain_job(
             input.state,
             output.state,
             log[0],
@@ -87,41 +93,43 @@ rule rve_strain_step:
 rule rve_probes:
     """Decoupled probe solves (voltage, terminal currents, Joule temperature) on one state."""
     input:
-        state=f"{RVE_DIR}/{{run}}/{{combo}}/states/{{state}}.nc",
+        state=rve_layout.state_path("{run}", "{combo}", "{state}"),
     output:
-        record=f"{RVE_DIR}/{{run}}/{{combo}}/probes/{{state}}.json",
+        record=rve_layout.record_path("{run}", "{combo}", "{state}"),
     log:
-        "results/logs/rve/{run}/{combo}/probes/{state}.log",
+        rve_layout.log_path("{run}", "probes", "{combo}", "{state}"),
     benchmark:
-        "results/benchmarks/rve/{run}/{combo}/probes/{state}.tsv"
+        rve_layout.benchmark_path("{run}", "probes", "{combo}", "{state}")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
     run:
-        rve_pipeline.probe_job(input.state, output.record, log[0], params.spec, wildcards.combo)
+        from rve.homogenisation.jobs import probe_job
+
+        probe_job(input.state, output.record, log[0], params.spec, wildcards.combo)
 
 
 rule rve_gather:
     """All probe records of a run -> the lookup table (netCDF, CSV, text summary)."""
     input:
-        records=lambda w: rve_pipeline.run_record_paths(config["rve"]["runs"][w.run], w.run, RVE_DIR),
+        records=lambda w: rve_layout.run_record_paths(config["rve"]["runs"][w.run], w.run),
     output:
-        table=f"{RVE_DIR}/{{run}}/table.nc",
-        csv=f"{RVE_DIR}/{{run}}/table.csv",
-        summary=f"{RVE_DIR}/{{run}}/summary.txt",
+        **rve_layout.table_outputs("{run}"),
     log:
-        "results/logs/rve/{run}/gather.log",
+        rve_layout.log_path("{run}", "gather"),
     benchmark:
-        "results/benchmarks/rve/{run}/gather.tsv"
+        rve_layout.benchmark_path("{run}", "gather")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
     run:
-        rve_pipeline.gather_job(
+        from rve.tables.jobs import gather_job
+
+        gather_job(
             input.records,
             output.table,
             output.csv,
@@ -135,19 +143,19 @@ rule rve_gather:
 rule rve_report:
     """Figures of the table: reaction forces, probe resistances, temperature rises."""
     input:
-        table=f"{RVE_DIR}/{{run}}/table.nc",
+        table=rve_layout.table_outputs("{run}")["table"],
     output:
-        reaction_force=f"{RVE_DIR}/{{run}}/plots/table_reaction_force.png",
-        probe_resistance=f"{RVE_DIR}/{{run}}/plots/table_probe_resistance.png",
-        temperature_rise=f"{RVE_DIR}/{{run}}/plots/table_temperature_rise.png",
+        **rve_layout.report_outputs("{run}"),
     log:
-        "results/logs/rve/{run}/report.log",
+        rve_layout.log_path("{run}", "report"),
     benchmark:
-        "results/benchmarks/rve/{run}/report.tsv"
+        rve_layout.benchmark_path("{run}", "report")
     params:
-        prefix=lambda w: f"{RVE_DIR}/{w.run}/plots/table",
+        prefix=lambda w: rve_layout.report_prefix(w.run),
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
     run:
-        rve_pipeline.report_job(input.table, params.prefix, log[0])
+        from rve.tables.jobs import report_job
+
+        report_job(input.table, params.prefix, log[0])

@@ -1,0 +1,161 @@
+"""The run layout of the RVE pipeline: every file path of a run, defined once.
+
+docs/rve_pipeline.md ("Files"). The package (job bodies, tests, benchmarks) and the
+Snakemake rules (workflow/rules/rve.smk) both take their paths from here. Every function
+is a plain format of its arguments, so called with wildcard placeholders it returns the
+rule's pattern: ``state_path("{run}", "{combo}", "{state}")`` ->
+``results/rve/{run}/{combo}/states/{state}.nc``.
+
+======================================================  =================================
+``{RVE_DIR}/{run}/{combo}/states/initial.nc``           generated fabric (rve_fabric)
+``{RVE_DIR}/{run}/{combo}/states/relaxed.nc``           relaxed state = step 0 (rve_relax)
+``{RVE_DIR}/{run}/{combo}/states/{mode}_{step:02d}.nc`` after strain step i (rve_strain_step)
+``{RVE_DIR}/{run}/{combo}/probes/{state}.json``         probe record of a state (rve_probes)
+``{RVE_DIR}/{run}/table.nc``, ``table.csv``,            lookup table (rve_gather)
+``summary.txt``
+``{RVE_DIR}/{run}/plots/table_*.png``                   figures (rve_report)
+``{LOG_DIR}/{run}/{job}.log``                           log of a job (every rule)
+``{BENCHMARK_DIR}/{run}/{job}.tsv``                     benchmark of a job (every rule)
+======================================================  =================================
+
+``{job}`` (``job_name``): ``{combo}/fabric``, ``{combo}/relax``,
+``{combo}/strain/{state}``, ``{combo}/probes/{state}``, ``gather``, ``report``.
+``RVE_DIR`` = results/rve, ``LOG_DIR`` = results/logs/rve, ``BENCHMARK_DIR`` =
+results/benchmarks/rve; every function takes ``root`` to place a run elsewhere.
+
+Also here: the state names (``state_name``, ``state_names``: ``relaxed``, then
+``{mode}_{step:02d}``), the input of a strain step (``previous_state``), every record of a
+run (``run_record_paths``) and the default targets of ``snakemake -j2``
+(``default_targets``). Cheap to import (the Snakefile imports it at parse time).
+"""
+from __future__ import annotations
+
+import os
+from typing import Mapping, Optional, Sequence, Union
+
+from .sweeps import combos, load_run_config
+
+__all__ = [
+    "RVE_DIR", "LOG_DIR", "BENCHMARK_DIR", "STAGES", "state_name", "state_names", "state_path", "record_path",
+    "previous_state", "run_record_paths", "table_outputs", "report_prefix", "report_outputs", "job_name",
+    "log_path", "benchmark_path", "default_targets",
+]
+
+PathLike = Union[str, os.PathLike]
+
+RVE_DIR = "results/rve"
+LOG_DIR = "results/logs/rve"
+BENCHMARK_DIR = "results/benchmarks/rve"
+
+#: the jobs of a run, in DAG order (one Snakemake rule each)
+STAGES = ("fabric", "relax", "strain", "probes", "gather", "report")
+
+
+# ============================================================================ state names
+def state_name(mode: Optional[str], step: int) -> str:
+    """``relaxed`` for step 0, ``{mode}_{step:02d}`` after."""
+    return "relaxed" if step == 0 else f"{mode}_{int(step):02d}"
+
+
+def state_names(cfg) -> list[str]:
+    """Stored states of a config after relaxation: relaxed + every step of every mode."""
+    names = ["relaxed"]
+    for m in cfg.strain.modes:
+        names += [state_name(m, i) for i in range(1, cfg.strain.steps + 1)]
+    return names
+
+
+# ============================================================================ data files
+def state_path(run: str, combo: str, name: str, root: PathLike = RVE_DIR) -> str:
+    """Checkpoint of state ``name`` (``initial``, ``relaxed``, ``{mode}_{step:02d}``)."""
+    return f"{root}/{run}/{combo}/states/{name}.nc"
+
+
+def record_path(run: str, combo: str, name: str, root: PathLike = RVE_DIR) -> str:
+    """Probe record (JSON) of state ``name``."""
+    return f"{root}/{run}/{combo}/probes/{name}.json"
+
+
+def previous_state(run: str, combo: str, mode: str, step: int, root: PathLike = RVE_DIR) -> str:
+    """Input of strain step ``step`` of ``mode``: the relaxed state or the previous step."""
+    step = int(step)
+    if step < 1:
+        raise ValueError(f"strain steps start at 1, got {step}")
+    return state_path(run, combo, state_name(mode, step - 1), root)
+
+
+def run_record_paths(spec: Mapping, run: str, root: PathLike = RVE_DIR) -> list[str]:
+    """Every probe record of a run (all combinations, all stored states)."""
+    out = []
+    for c in combos(spec):
+        cfg = load_run_config(spec, c.id)
+        out += [record_path(run, c.id, n, root) for n in state_names(cfg)]
+    return out
+
+
+def table_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
+    """The gather's outputs: ``table`` (netCDF), ``csv``, ``summary``."""
+    return {"table": f"{root}/{run}/table.nc", "csv": f"{root}/{run}/table.csv",
+            "summary": f"{root}/{run}/summary.txt"}
+
+
+def report_prefix(run: str, root: PathLike = RVE_DIR) -> str:
+    """Path prefix of the report's figures (``rve.tables.plot_table``)."""
+    return f"{root}/{run}/plots/table"
+
+
+def report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
+    """The report's figures: ``reaction_force``, ``probe_resistance``, ``temperature_rise``."""
+    pre = report_prefix(run, root)
+    return {"reaction_force": f"{pre}_reaction_force.png", "probe_resistance": f"{pre}_probe_resistance.png",
+            "temperature_rise": f"{pre}_temperature_rise.png"}
+
+
+# ============================================================================ logs, benchmarks
+def job_name(stage: str, combo: Optional[str] = None, state: Optional[str] = None) -> str:
+    """Name of a job within its run (the relative path of its log and benchmark):
+    ``{combo}/fabric``, ``{combo}/relax``, ``{combo}/strain/{state}``,
+    ``{combo}/probes/{state}``, ``gather``, ``report``."""
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r} (have {', '.join(STAGES)})")
+    if stage in ("gather", "report"):
+        return stage
+    if combo is None:
+        raise ValueError(f"stage {stage!r}: a job of one combination needs its combo")
+    if stage in ("fabric", "relax"):
+        return f"{combo}/{stage}"
+    if state is None:
+        raise ValueError(f"stage {stage!r}: a job of one state needs its state name")
+    return f"{combo}/{stage}/{state}"
+
+
+def log_path(run: str, stage: str, combo: Optional[str] = None, state: Optional[str] = None,
+             root: PathLike = LOG_DIR) -> str:
+    """Log file of a job (``job_name``)."""
+    return f"{root}/{run}/{job_name(stage, combo, state)}.log"
+
+
+def benchmark_path(run: str, stage: str, combo: Optional[str] = None, state: Optional[str] = None,
+                   root: PathLike = BENCHMARK_DIR) -> str:
+    """Snakemake benchmark file of a job (``job_name``)."""
+    return f"{root}/{run}/{job_name(stage, combo, state)}.tsv"
+
+
+# ============================================================================ targets
+def default_targets(config: Mapping, extra: Optional[Mapping[str, Sequence[str]]] = None) -> list[str]:
+    """Targets of ``snakemake -j2``: the table and figures of every run in
+    ``rve.default_runs`` when ``default_targets`` lists ``rve`` (the default), plus the
+    outputs of the other names ``default_targets`` lists (``extra``: name -> files)."""
+    names = list(config.get("default_targets") or ["rve"])
+    extra = dict(extra or {})
+    out: list[str] = []
+    for name in names:
+        if name == "rve":
+            rve = config.get("rve") or {}
+            for run in rve.get("default_runs") or []:
+                out += list(table_outputs(run).values()) + list(report_outputs(run).values())
+        elif name in extra:
+            out += list(extra[name])
+        else:
+            raise ValueError(f"default_targets: unknown target group {name!r} (have rve, {', '.join(extra)})")
+    return out
