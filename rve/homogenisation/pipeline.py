@@ -209,8 +209,6 @@ def load_run_config(spec: Mapping, combo_id: str = BASE_COMBO):
     from ..config import apply_overrides, read_config_source, validate_config
     from ..config.loader import _deep_merge
 
-    from . import config as _cfg  # noqa: F401  (registers the scene)
-
     path = spec.get("scene_config")
     raw = read_config_source(path) if path else {}
     inline = spec.get("scene") or {}
@@ -322,7 +320,7 @@ def network_probes(cfg, fab) -> dict:
 
 # ============================================================================ stages
 def _fabric_mesh(cfg):
-    from .strain import build_fabric
+    from ..fabrics.setup import fabric_and_mesh as build_fabric
 
     return build_fabric(cfg)
 
@@ -368,7 +366,8 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
     """Relax the initial state (damped dynamics + static Newton); write step 0 (clamp
     reactions and the contact map included)."""
     from .checkpoint import State, load_state
-    from .strain import reactions, relax_fabric
+    from ..fabrics.setup import clamp_reactions as reactions
+    from .strain import relax_fabric
 
     with logging_to(log_path):
         cfg = load_run_config(spec, combo)
@@ -392,7 +391,8 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
                combo: str, mode: str, step: int):
     """One strain step (Algorithm 7.1) from ``in_state``; write the new state."""
     from .checkpoint import State, load_state
-    from .strain import reactions, strain_step
+    from ..fabrics.setup import clamp_reactions as reactions
+    from .strain import strain_step
 
     step = int(step)
     with logging_to(log_path):
