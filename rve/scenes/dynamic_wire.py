@@ -262,7 +262,8 @@ def solve(cfg, *, stages: int | None = None, steps: int | None = None, fixed_ste
             phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
             state={"x": exc.x, "w": exc.w}, model=model,
             details={"h": exc.h, "residuals": [float(r) for r in exc.residuals], "history": hist,
-                     "temperature_mode": mode}) from exc
+                     "temperature_mode": mode,
+                     "reason": exc.step_failure.reason if exc.step_failure is not None else str(exc)}) from exc
     t2 = time.perf_counter()
     x, w = res.x, res.w
     out_probes = probe(x, w)
