@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from rve.scenes.dynamic_wire import build, simulate
+from rve.scenes.dynamic_wire import setup, solve
 from rve.studies.dynamic_wire import PROBE_NAMES, load_scene_config
 
 VARIANTS = {
@@ -56,7 +56,7 @@ def evaluation_cost(cfg, repeats: int = 5, calls: int = 200) -> dict:
     generic state of the dynamic wire (451 dofs)."""
     from rve.scenes.dynamic_wire import initial_state
 
-    model = build(cfg)
+    model = setup(cfg)
     x, w = initial_state(model)
     w = w + 1e-3 * np.random.default_rng(0).random(model.n)
     out = {}
@@ -80,7 +80,7 @@ def main() -> None:
     cost = evaluation_cost(cfg)
     print("one evaluation of the dynamic wire (451 dofs), median of 5 x 200 calls: "
           + ", ".join(f"{k} {v:.2f} ms" for k, v in cost.items()))
-    counts = _counting(type(build(cfg)))
+    counts = _counting(type(setup(cfg)))
     runs = [tuple(int(v) for v in r.split(":")) for r in args.runs.split(",")]
     load0 = os.getloadavg()[0]
     for s, n in runs:
@@ -89,7 +89,7 @@ def main() -> None:
             for name, opts in VARIANTS.items():
                 counts.update(jacobian=0, residual=0)
                 t0 = time.perf_counter()
-                out = simulate(cfg, stages=s, steps=n, fixed_step=True, record=False, integrator_options=opts)
+                out = solve(cfg, stages=s, steps=n, fixed_step=True, record=False, integrator_options=opts).summary
                 rec[name]["wall"].append(time.perf_counter() - t0)
                 rec[name].update(its=out["newton_iterations_per_stage"], jac=counts["jacobian"] / (s * n),
                                  res=counts["residual"] / (s * n), probes=out["probes"])

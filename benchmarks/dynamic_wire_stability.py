@@ -21,8 +21,8 @@ import argparse
 import resource
 import time
 
-from rve.scenes.dynamic_wire import simulate
-from rve.solvers.dirk import IntegrationFailure
+from rve.scenes.dynamic_wire import solve
+from rve.scenes.protocol import SceneFailure
 from rve.studies.dynamic_wire import load_scene_config
 
 
@@ -33,12 +33,12 @@ def peak_mb() -> float:
 def attempt(cfg, s, n, fixed):
     t0 = time.perf_counter()
     try:
-        out = simulate(cfg, stages=s, steps=n, fixed_step=fixed, record=False)
+        out = solve(cfg, stages=s, steps=n, fixed_step=fixed, record=False).summary
         return {"ok": True, "wall": time.perf_counter() - t0, "accepted": out["steps_accepted"],
                 "rejected": out["steps_rejected"], "h_min": out["h_min"], "probes": out["probes"]}
-    except IntegrationFailure as exc:
-        reason = exc.step_failure.reason if exc.step_failure is not None else str(exc)
-        return {"ok": False, "wall": time.perf_counter() - t0, "t": exc.t, "h": exc.h, "reason": reason}
+    except SceneFailure as exc:
+        return {"ok": False, "wall": time.perf_counter() - t0, "t": exc.time, "h": exc.details["h"],
+                "reason": exc.details["reason"]}
 
 
 def main() -> None:

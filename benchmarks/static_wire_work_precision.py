@@ -67,9 +67,8 @@ def run_point(scene, path, p, n, radius, repeats):
     times, result = [], None
     for _ in range(repeats):
         t0 = time.perf_counter()
-        result = solve(cfg)
+        result = solve(cfg).summary
         times.append(time.perf_counter() - t0)
-        result.pop("_state", None)
     return statistics.median(times), min(times), result
 
 

@@ -66,7 +66,7 @@ def main(argv=None):
     from rve.solvers.static import StaticProblem
 
     cfg = load_config(args.config, [f"mesh.elements={args.elements}", *args.set])
-    fab, system, x0 = fabric_relax.build(cfg)
+    fab, system, x0 = fabric_relax.setup(cfg)
     w0 = np.zeros(system.n)
     n_fixed = len(system.constraints(0.0)[0])
     fig = {"fibrils": int(system.mesh.n_fibrils), "elements_per_fibril": int(args.elements),
@@ -111,8 +111,7 @@ def main(argv=None):
 
             summary = run_scene(cfg, args.out)
         else:
-            summary = fabric_relax.solve(cfg)
-            summary.pop("_state")
+            summary = fabric_relax.solve(cfg).summary
         wall = time.perf_counter() - t0
         fig["relaxation_wall_s"] = wall
         keys = ("method", "onset_schedule_over_R", "coarse_stage", "static_converged", "dynamic_steps",

@@ -1,13 +1,17 @@
 """The ``rve`` command line.
 
     rve run CONFIG [--set KEY=VALUE ...] [--out DIR] [-v]   run a scene, write DIR/summary.json
+                                                             (a pipeline scene: print its snakemake command)
     rve validate CONFIG [--set KEY=VALUE ...] [--json]       print the resolved config (internal units)
     rve schema SCENE                                         print the JSON schema of a scene's input
     rve scenes                                               list the known scenes
     rve table summary|interpolate|export|plot PATH ...       work with an RVE lookup table
 
-Exit codes: 0 success, 2 invalid configuration or usage (messages on stderr, no
-traceback). A new subcommand is a function ``_add_<name>(subparsers)`` that adds its
+Every scene name comes from the one registry, ``rve.scenes.registry``. Exit codes: 0
+success (also ``rve run`` of a pipeline scene, which prints the command that builds it),
+1 the scene failed (``SceneFailure``: one message, the last good state saved under
+DIR), 2 invalid configuration or usage, also a pipeline config given where a scene config
+is expected (messages on stderr, no traceback); docs/configuration.md. A new subcommand is a function ``_add_<name>(subparsers)`` that adds its
 parser with ``set_defaults(func=...)``, listed in ``_SUBCOMMANDS``.
 """
 from __future__ import annotations
@@ -21,26 +25,19 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
-from .config import ConfigError, config_as_dict, config_units, json_schema, load_config
-from .config.models import SCENE_MODELS
+from .config import ConfigError, NotASceneConfig, config_as_dict, config_units, json_schema, load_config
 from .io.atomic import atomic_write_json
-from .io.provenance import to_jsonable
+from .io.provenance import package_version, to_jsonable
+from .scenes.protocol import SceneFailure
+from .scenes.registry import SCENES, get_scene, run_scene
 
 __all__ = ["main", "build_parser", "format_config"]
 
 log = logging.getLogger("rve.cli")
 
 EXIT_OK = 0
+EXIT_SCENE_FAILED = 1
 EXIT_CONFIG = 2
-
-
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("rve")
-    except Exception:  # not installed (running from a source tree)
-        return "unknown"
 
 
 def _setup_logging(verbosity: int) -> None:
@@ -52,6 +49,9 @@ def _setup_logging(verbosity: int) -> None:
 
 
 def _config_error(exc: ConfigError, source: Optional[str] = None) -> int:
+    if isinstance(exc, NotASceneConfig):
+        print(f"rve: {source or 'config'}: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
     head = f"rve: invalid configuration{f' {source}' if source else ''}:"
     print(head, file=sys.stderr)
     for line in exc.errors:
@@ -98,19 +98,23 @@ def format_config(cfg) -> str:
 
 # --------------------------------------------------------------------------- subcommands
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .scenes import SCENES, run_scene
-
     try:
         cfg = load_config(args.config, args.overrides)
     except ConfigError as exc:
         return _config_error(exc, args.config)
-    if cfg.scene not in SCENES:
-        print(f"rve: scene {cfg.scene!r} has a config model but no implementation "
-              f"(known: {', '.join(SCENES)})", file=sys.stderr)
-        return EXIT_CONFIG
+    scene = get_scene(cfg.scene)
+    if scene.kind == "pipeline":
+        print(f"rve: {args.config}: scene {scene.name!r} is a pipeline scene (Snakemake jobs, not run in-process); "
+              f"build it with:", file=sys.stderr)
+        print(scene.module.snakemake_command(args.config, args.overrides))
+        return EXIT_OK
     out_dir = Path(args.out) if args.out else Path("results") / "runs" / Path(args.config).stem
     log.info("running scene %s -> %s", cfg.scene, out_dir)
-    summary = run_scene(cfg, out_dir)
+    try:
+        summary = run_scene(cfg, out_dir)
+    except SceneFailure as failure:
+        print(f"rve: {failure}", file=sys.stderr)
+        return EXIT_SCENE_FAILED
     resolved = config_as_dict(cfg)
     record = dict(summary)
     record.setdefault("provenance", {
@@ -118,7 +122,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         "config_file": str(args.config),
         "overrides": list(args.overrides),
         "config": resolved,
-        "rve_version": _version(),
+        "rve_version": package_version(),
         "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     })
     atomic_write_json(out_dir / "config.json", resolved)
@@ -151,13 +155,8 @@ def _cmd_schema(args: argparse.Namespace) -> int:
 
 
 def _cmd_scenes(args: argparse.Namespace) -> int:
-    from .scenes import SCENES
-
-    for name in sorted(set(SCENE_MODELS) | set(SCENES)):
-        model = SCENE_MODELS.get(name)
-        doc = (model.__doc__ or "").strip().splitlines()[0] if model and model.__doc__ else ""
-        impl = SCENES.get(name, "(no implementation)")
-        print(f"{name:20s} {impl:32s} {doc}")
+    for scene in SCENES.values():
+        print(f"{scene.name:14s} {scene.kind:9s} {scene.runner:26s} {scene.title}")
     return EXIT_OK
 
 
@@ -176,7 +175,9 @@ def _common(config: bool) -> argparse.ArgumentParser:
 def _add_run(sub) -> None:
     p = sub.add_parser("run", parents=[_common(True)], help="run a scene and write its summary",
                        description="Validate CONFIG, run its scene and write DIR/summary.json "
-                                   "(plus DIR/config.json, the resolved config in internal units).")
+                                   "(plus DIR/config.json, the resolved config in internal units). "
+                                   "A pipeline scene (rve) is not run: the exact snakemake command that "
+                                   "builds its table is printed (exit 0). A scene failure exits 1.")
     p.add_argument("--out", metavar="DIR", help="output directory (default: results/runs/<config stem>)")
     p.set_defaults(func=_cmd_run)
 
@@ -191,12 +192,14 @@ def _add_validate(sub) -> None:
 def _add_schema(sub) -> None:
     p = sub.add_parser("schema", parents=[_common(False)], help="print the JSON schema of a scene's config",
                        description="Print the JSON schema of the raw input of SCENE (for Snakemake's validate).")
-    p.add_argument("scene", metavar="SCENE", help=f"scene name ({', '.join(SCENE_MODELS)})")
+    p.add_argument("scene", metavar="SCENE", help=f"scene name ({', '.join(SCENES)})")
     p.set_defaults(func=_cmd_schema)
 
 
 def _add_scenes(sub) -> None:
-    p = sub.add_parser("scenes", parents=[_common(False)], help="list the known scenes")
+    p = sub.add_parser("scenes", parents=[_common(False)], help="list the known scenes",
+                       description="List the scenes of the registry (rve.scenes.registry): name, kind "
+                                   "(scene: run in-process; pipeline: built by Snakemake), runner module, title.")
     p.set_defaults(func=_cmd_scenes)
 
 
@@ -314,7 +317,7 @@ _SUBCOMMANDS: list[Callable] = [_add_run, _add_validate, _add_schema, _add_scene
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rve", description="Fibril-level textile simulation: scenes, configs and lookup tables.")
-    parser.add_argument("--version", action="version", version=f"rve {_version()}")
+    parser.add_argument("--version", action="version", version=f"rve {package_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in _SUBCOMMANDS:
         add(sub)

@@ -9,10 +9,12 @@ import pytest
 from pydantic import Field
 
 from rve import cli
-from rve.config import SCENE_MODELS, load_config
-from rve.config.models import Length, SceneConfig, Section
+from rve.config import load_config
+from rve.config.fields import Length, SceneConfig, Section
 from rve.io.atomic import atomic_path, atomic_write_json, atomic_write_text
 import rve.scenes as scenes
+from rve.scenes import SceneFailure
+from rve.scenes.registry import SCENES, Scene
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT / "configs" / "scenes" / "static_wire.yaml"
@@ -98,9 +100,9 @@ def fake_scene(monkeypatch):
                 "iterations": np.int64(3)}
 
     module.run = run
+    module.FakeConfig = FakeConfig
     monkeypatch.setitem(sys.modules, module.__name__, module)
-    monkeypatch.setitem(SCENE_MODELS, "fake", FakeConfig)
-    monkeypatch.setitem(scenes.SCENES, "fake", module.__name__)
+    monkeypatch.setitem(SCENES, "fake", Scene("fake", f"{module.__name__}:FakeConfig", module.__name__))
     return calls
 
 
@@ -169,8 +171,52 @@ def test_run_scene_api(fake_scene, tmp_path):
 
 
 def test_static_wire_is_registered():
-    assert scenes.SCENES["static_wire"] == "rve.scenes.static_wire"
-    assert SCENE_MODELS["static_wire"].__name__ == "StaticWireConfig"
+    assert scenes.SCENES["static_wire"].runner == "rve.scenes.static_wire"
+    assert scenes.SCENES["static_wire"].model.__name__ == "StaticWireConfig"
+
+
+def test_scene_failure_is_one_message_and_exit_1(fake_scene, tmp_path, capsys):
+    module = sys.modules["rve_fake_scene_for_tests"]
+
+    def run(cfg, out_dir):
+        failure = SceneFailure("fake", "Newton did not converge", phase="static", time=0.5, step=3,
+                               state={"x": [1.0, 2.0]})
+        failure.save(out_dir / "last.npz")
+        raise failure
+
+    module.run = run
+    config = tmp_path / "tiny.yaml"
+    config.write_text("scene: fake\n")
+    assert cli.main(["run", str(config), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "phase 'static', t = 0.5 ms, step 3: Newton did not converge" in err[0]
+    assert "last good state saved to" in err[0] and (tmp_path / "o" / "last.npz").is_file()
+    assert not (tmp_path / "o" / "summary.json").exists()
+
+
+def test_run_pipeline_scene_prints_the_snakemake_command(capsys, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    assert cli.main(["run", "configs/rve/plain_weave.yaml"]) == 0
+    cap = capsys.readouterr()
+    assert cap.out.strip() == "snakemake -j2 results/rve/plain_weave/table.nc"
+    assert len(cap.err.strip().splitlines()) == 1 and "pipeline scene" in cap.err
+    assert cli.main(["run", "configs/rve/knit.yaml"]) == 0
+    assert capsys.readouterr().out.strip() == "snakemake -j2 results/rve/knit/table.nc"
+    # overrides: a run of its own, added with --config (plain_weave is taken: a hashed name)
+    assert cli.main(["run", "configs/rve/plain_weave.yaml", "--set", "mesh.elements=12"]) == 0
+    out = capsys.readouterr().out.strip()
+    assert out.startswith("snakemake -j2 results/rve/plain_weave_")
+    assert "--config 'rve={runs: {plain_weave_" in out
+    assert '{scene_config: "configs/rve/plain_weave.yaml", overrides: ["mesh.elements=12"]}' in out
+
+
+def test_pipeline_config_is_refused_in_one_line(capsys):
+    for path in ("configs/pipeline.yaml", "configs/tests/pipeline_ci.yaml"):
+        for cmd in ("validate", "run"):
+            assert cli.main([cmd, str(ROOT / path)]) == 2
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and "a pipeline config" in err[0] and "not a scene config" in err[0]
 
 
 # --------------------------------------------------------------------------- atomic IO

@@ -7,15 +7,15 @@ from typing import Literal
 import pytest
 
 from rve.config import (
-    SCENE_MODELS,
     ConfigError,
-    StaticWireConfig,
     config_as_dict,
     json_schema,
     load_config,
     to_internal,
 )
-from rve.config.models import Length, MagneticField, SceneConfig, Section
+from rve.config.fields import Length, MagneticField, SceneConfig, Section
+from rve.config.static_wire import StaticWireConfig
+from rve.scenes.registry import SCENES, Scene
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT / "configs" / "scenes" / "static_wire.yaml"
@@ -163,8 +163,8 @@ def test_config_as_dict_roundtrip_and_json():
         (wire(geometry={"colour": "red"}),
          "geometry.colour: unknown key (allowed: half_length, clamp_half_distance)"),
         (wire(colour=1), "colour: unknown key (allowed: scene, geometry"),
-        ({"mesh": {"order": 2}}, "scene missing (allowed: static_wire"),
-        ({"scene": "nope"}, "scene = 'nope': unknown scene (allowed: static_wire"),
+        ({"mesh": {"order": 2}}, "scene missing (allowed: static_wire, dynamic_wire, fabric_relax, rve)"),
+        ({"scene": "nope"}, "scene = 'nope': unknown scene (allowed: static_wire, dynamic_wire, fabric_relax, rve)"),
         (wire(load={"field_magnitude": "1 m"}),
          "load.field_magnitude = '1 m': wrong dimension, expected magnetic field (kT)"),
         (wire(load={"field_angle": "1 m"}), "load.field_angle = '1 m': wrong dimension, expected angle (rad)"),
@@ -222,7 +222,13 @@ def test_missing_required_key_in_a_new_scene(monkeypatch):
         scene: Literal["needs"]
         mesh: Needs
 
-    monkeypatch.setitem(SCENE_MODELS, "needs", NewScene)
+    import sys
+    import types
+
+    module = types.ModuleType("rve_needs_scene_for_tests")
+    module.NewScene = NewScene
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    monkeypatch.setitem(SCENES, "needs", Scene("needs", f"{module.__name__}:NewScene", module.__name__))
     assert "mesh.elements missing" in error_of({"scene": "needs", "mesh": {}})
     assert "mesh missing" in error_of({"scene": "needs"})
 

@@ -5,9 +5,9 @@ import logging
 import numpy as np
 import pytest
 
-import rve.config.dynamic_wire  # noqa: F401  (registers the scene model)
 from rve.config.dynamic_wire import DynamicWireConfig
-from rve.scenes.dynamic_wire import SimulationAborted, build, initial_state, run, simulate
+from rve.scenes.dynamic_wire import initial_state, run, setup, solve
+from rve.scenes.protocol import SceneFailure
 from rve.solvers.dirk import consistent_initialization
 
 
@@ -22,13 +22,13 @@ def config(**sections):
 def test_voltage_divider_at_rest():
     """t = 0, wire at rest, T = 0: V is linear, V(l = 1/2) = 2/5 * 3/4 - 1/5 = 0.1 V."""
     cfg = config()
-    model = build(cfg)
+    model = setup(cfg)
     x, w = initial_state(model)
     w, _ = consistent_initialization(model, x, w, 0.0, {"atol": 1e-14, "rtol": 1e-14})
     V = model.nodal(w)[:, model.oV]
     s = model.mesh.node_s
     assert np.allclose(V, -0.2 + 0.4 * s / 2.0, atol=1e-13)
-    out = simulate(cfg, steps=2, record=False, stages=1)
+    out = solve(cfg, steps=2, record=False, stages=1).summary
     assert abs(out["V_half_initial"] - 0.1) < 1e-12
 
 
@@ -45,9 +45,8 @@ def heated_rod_config():
 
 def test_resistively_heated_rod_reaches_the_parabola_and_ohms_law():
     cfg = heated_rod_config()
-    out = simulate(cfg, keep_state=True, record=False)
-    st = out["_state"]
-    model, x, w = st["model"], st["x"], st["w"]
+    result = solve(cfg, record=False)
+    model, x, w = result.model, result.state["x"], result.state["w"]
     m = cfg.material
     Lw = 2.0 * cfg.geometry.half_length
     A = np.pi * cfg.fibril.radius**2
@@ -77,9 +76,9 @@ def test_current_in_equals_current_out_at_steady_state_with_a_circuit():
     # near-critical damping of the swing (gamma / rho ~ 2 omega_1) and L-stable steps
     cfg = config(load__circuit_resistance=R, material__damping=5e-5, time__stages=1, time__steps=60)
     cfg.time.t_max = 0.015
-    out = simulate(cfg, keep_state=True, record=False)
-    st = out["_state"]
-    model, x, w = st["model"], st["x"], st["w"]
+    result = solve(cfg, record=False)
+    out = result.summary
+    model, x, w = result.model, result.state["x"], result.state["w"]
     assert np.abs(w[model.mech]).max() < 1e-4  # at rest (velocities while moving: ~100 mm/ms)
     m = cfg.material
     A = np.pi * cfg.fibril.radius**2
@@ -103,7 +102,7 @@ def test_newton_is_quadratic_within_a_stage(caplog):
     observed orders log(r_k/r_k-1)/log(r_k-1/r_k-2) above the rounding floor are ~2."""
     cfg = config()
     with caplog.at_level(logging.INFO, logger="rve.newton"):
-        out = simulate(cfg, stages=2, steps=6, record=False)
+        out = solve(cfg, stages=2, steps=6, record=False).summary
     nw = out["newton"]
     assert nw["rates_counted"] >= 5
     assert 1.7 < nw["observed_orders_median"] < 3.5
@@ -118,14 +117,14 @@ def test_decoupled_temperature_is_post_solved_with_fewer_dofs():
     kw = dict(material__alpha_mu=0.0, material__seebeck=0.0, time__steps=40)
     cfg = config(**kw)
     cfg.time.t_max = 1e-3
-    post = simulate(cfg, record=False)
+    post = solve(cfg, record=False).summary
     assert post["temperature_mode"] == "post"
     n = cfg.mesh.elements + 1
     assert post["dofs"]["coupled_solve"] == {"mech": 9 * n, "V": n, "total": 10 * n}
     assert post["dofs"]["thermal_post_solve"]["total"] == n
     cfg2 = config(**kw, couplings__temperature="coupled")
     cfg2.time.t_max = 1e-3
-    mono = simulate(cfg2, record=False)
+    mono = solve(cfg2, record=False).summary
     assert mono["dofs"]["coupled_solve"]["total"] == 11 * n
     for k in ("y0", "z_half", "V_half"):
         assert abs(post["probes"][k] - mono["probes"][k]) <= 1e-9 * max(1e-3, abs(mono["probes"][k]))
@@ -135,20 +134,20 @@ def test_decoupled_temperature_is_post_solved_with_fewer_dofs():
 def test_post_mode_refused_when_T_feeds_back():
     cfg = config(couplings__temperature="post")
     with pytest.raises(ValueError, match="feeds back"):
-        simulate(cfg, steps=1)
+        solve(cfg, steps=1).summary
 
 
 def test_failed_fixed_step_run_saves_last_good_state(tmp_path):
     # backward Euler with 6 fixed steps cannot start the swing (see the stability benchmark)
     cfg = config(time__stages=1, time__steps=6, time__step_control=False, load__field_ramp_time=0.0)
-    with pytest.raises(SimulationAborted) as info:
+    with pytest.raises(SceneFailure) as info:
         run(cfg, tmp_path)
     msg = str(info.value)
     assert "t = 0 ms" in msg and f"h = {cfg.time.t_max / 6:.6g} ms" in msg and "residual history" in msg
     data = np.load(tmp_path / "dynamic_wire_last_good_state.npz")
     assert data["x"].shape == data["w"].shape and float(data["t"]) == 0.0
     assert len(data["residuals"]) > 1
-    assert isinstance(info.value, SystemExit)
+    assert info.value.phase == "time integration" and info.value.saved.endswith("last_good_state.npz")
 
 
 def test_run_writes_history_and_summary(tmp_path):

@@ -27,7 +27,7 @@ def _cfg(tmp_path, data):
 
 
 def test_scene_registered():
-    assert SCENES["fabric_relax"] == "rve.scenes.fabric_relax"
+    assert SCENES["fabric_relax"].runner == "rve.scenes.fabric_relax"
 
 
 def test_small_weave_relaxes_without_overlap(tmp_path):
@@ -97,6 +97,7 @@ def test_capped_newton_does_not_skip_contacts():
     """Two fibrils pulled straight through each other's path: the capped steps and map
     rebuilds stop them at contact instead of jumping through."""
     from rve.model import ContactParams, ContactSystem
+    from rve.fem.assembly import DofLayout
     from rve.fem.mesh import fibril_mesh, straight_fibril
     from rve.model import BeamMaterial, BeamModel, DirichletBC
 
@@ -105,9 +106,10 @@ def test_capped_newton_does_not_skip_contacts():
     mesh = fibril_mesh(fibs, 10, 1)
     a0, a1 = mesh.end_nodes(0)
     b0, b1 = mesh.end_nodes(1)
-    pinned = np.array([n * 9 + k for n in (a0, a1, b0, b1) for k in range(3)])
+    layout = DofLayout(mesh.n_nodes)
+    pinned = layout.dofs("r", [a0, a1, b0, b1])
     base = BeamModel(mesh, BeamMaterial(1.26), bcs=[DirichletBC(pinned, 0.0),
-                                                   DirichletBC(np.array([a0 * 9 + 5, b0 * 9 + 5]), 0.0)])
+                                                   DirichletBC(layout.dofs("g1", [a0, b0], comp=2), 0.0)])
     x = np.zeros(base.n)
     xn = base.nodal(x)
     xn[:, :9] = mesh.X0
@@ -132,8 +134,7 @@ def test_small_weave_energy_minimum_is_stable_and_quadratic(tmp_path):
     from rve.scenes import fabric_relax
 
     cfg = _cfg(tmp_path, SMALL)
-    s = fabric_relax.solve(cfg)
-    s.pop("_state")
+    s = fabric_relax.solve(cfg).summary
     assert s["method"] == "energy" and s["static_converged"]
     assert s["negative_pivots"] == 0 and s["stable"]
     assert s["static_residuals"][-1] < 1e-9
@@ -150,8 +151,7 @@ def test_mesh_sequencing(tmp_path):
     from rve.scenes import fabric_relax
 
     data = dict(SMALL, relaxation=dict(SMALL["relaxation"], coarse_elements=6))
-    s = fabric_relax.solve(_cfg(tmp_path, data))
-    s.pop("_state")
+    s = fabric_relax.solve(_cfg(tmp_path, data)).summary
     assert s["coarse_stage"]["elements_per_fibril"] == 6 and s["coarse_stage"]["converged"]
     assert s["static_converged"] and s["static_residuals"][-1] < 1e-9 and s["stable"]
     assert {h["mesh_elements"] for h in s["history"]} == {6, 12}
@@ -175,6 +175,5 @@ def test_dynamic_method_still_available(tmp_path):
     data = dict(SMALL, relaxation=dict(SMALL["relaxation"], method="dynamic"))
     from rve.scenes import fabric_relax
 
-    s = fabric_relax.solve(_cfg(tmp_path, data))
-    s.pop("_state")
+    s = fabric_relax.solve(_cfg(tmp_path, data)).summary
     assert s["static_converged"] and s["max_overlap_over_R"] < 0.05

@@ -117,12 +117,13 @@ def test_weakened_insulation_defines_floating_fibrils():
 @pytest.fixture(scope="module")
 def small_weave():
     from rve.homogenisation.sweeps import load_run_config
-    from rve.homogenisation.strain import build_fabric, relax_fabric
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.strain import relax_fabric
 
     spec = {"scene": {"fabric": {"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]}, "mesh": {"elements": 8},
                       "relaxation": {"duration": "2 ms", "steps": 4, "rebuild_every": 2}}}
     cfg = load_run_config(spec)
-    fab, mesh = build_fabric(cfg)
+    fab, mesh = fabric_and_mesh(cfg)
     x, _, info = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
     assert info["converged"] and info["residual_N"] < 1e-8
     return cfg, fab, mesh, x

@@ -95,11 +95,12 @@ def test_every_stage_wrote_outputs_logs_and_benchmarks(ci_run):
 
 def test_checkpoints_are_self_describing_and_land_on_the_strain_path(ci_run):
     from rve.homogenisation.checkpoint import STATE_FORMAT, load_state
-    from rve.homogenisation.strain import build_fabric, clamped_ends, strain_levels
+    from rve.fabrics.setup import clamped_ends, fabric_and_mesh
+    from rve.homogenisation.strain import strain_levels
 
     spec = _ci_spec()
     cfg = S.load_run_config(spec)
-    fab, mesh = build_fabric(cfg)
+    fab, mesh = fabric_and_mesh(cfg)
     ends, _, _ = clamped_ends(fab, mesh)
     levels = strain_levels(cfg)
     base = ci_run / "results" / "rve" / RUN / "base" / "states"

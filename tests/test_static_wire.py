@@ -23,7 +23,7 @@ def test_static_newton_converges_quadratically_near_the_solution():
     # that the residual history shows a long pre-asymptotic phase (docs/static_solution_path.md)
     cfg = load_config(CONFIG, ["mesh.order=3", "mesh.elements=8", "fibril.radius=0.08 mm"])
     out = sw.solve(cfg)
-    model, x = out["_state"]["model"], out["_state"]["x"]
+    model, x = out.model, out.state["x"]
     rng = np.random.default_rng(1)
     xp = x.copy()
     free = np.setdiff1d(np.arange(model.n), model.constraints(0.0)[0])
@@ -38,20 +38,22 @@ def test_twist_gauge_does_not_change_the_answer(solved):
     # invariant that the uniform twist is a null mode; with the 4-point rule the gauge
     # moves the centre by ~3e-8 (measured), far below the discretisation error.
     cfg, out = solved
-    model = sw.build(cfg, gauge_end=1)
-    x = out["_state"]["x"].copy()
+    model = sw.setup(cfg, gauge_end=1)
+    x = out.state["x"].copy()
     # the other end's gauge value is whatever the first solution has there
     n1 = model.mesh.end_nodes(0)[1]
     model.bcs[2].value = 0.0
-    model.nodal(x)[n1, 5] = out["_state"]["model"].nodal(out["_state"]["x"])[n1, 5]
+    g1z = model.layout.dofs("g1", n1, comp=2)
+    x[g1z] = out.state["x"][g1z]
     x2, _, res = static_solve(model, x, np.zeros_like(x), 0.0, sw.newton_options(cfg, model))
     assert res.converged
     c2 = sw.centre_displacement(model, x2, cfg.geometry.half_length)
-    assert abs(c2 - out["centre_displacement"]) < 1e-10
+    assert abs(c2 - out.summary["centre_displacement"]) < 1e-10
 
 
 def test_summary_has_the_issue_keys_and_matches_the_helix(solved):
-    cfg, out = solved
+    cfg, result = solved
+    out = result.summary
     for key in ("centre_displacement", "analytical_centre_displacement", "newton_iterations", "wall_time_s", "dofs"):
         assert key in out
     assert out["fields"] == ["mech"]  # the static wire carries no T or V dofs

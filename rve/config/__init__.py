@@ -1,19 +1,12 @@
-"""Scene configuration: units (pint), pydantic models, YAML loading with overrides.
+"""Configuration: units (pint), field types and base models, YAML loading with overrides.
 
-See docs/configuration.md.
+This package holds what every config shares; the scene config models live in their own
+modules (``rve.config.static_wire``, ``rve.config.dynamic_wire``, ``rve.config.fabric``,
+``rve.homogenisation.config``), and the one list naming every scene with its model and
+runner is ``rve.scenes.registry``. Importing ``rve.config`` registers nothing and imports
+no scene. See docs/configuration.md.
 """
-from .loader import (
-    apply_overrides,
-    config_as_dict,
-    config_units,
-    json_schema,
-    load_config,
-    parse_override,
-    read_config_source,
-    validate_config,
-)
-from .models import (
-    SCENE_MODELS,
+from .fields import (
     Angle,
     Current,
     CurrentDensity,
@@ -26,19 +19,33 @@ from .models import (
     Quantity,
     SceneConfig,
     Section,
-    StaticWireConfig,
     Stress,
     Temperature,
     Time,
     Velocity,
     Voltage,
     cross_field_error,
-    register_scene_model,
+    scene_name,
+)
+from .loader import (
+    PIPELINE_KEYS,
+    NotASceneConfig,
+    apply_overrides,
+    config_as_dict,
+    config_units,
+    json_schema,
+    load_config,
+    parse_override,
+    read_config_source,
+    scene_models,
+    validate_config,
 )
 from .units import INTERNAL_UNITS, ConfigError, Q_, to_internal, ureg
 
 __all__ = [
     "ConfigError",
+    "NotASceneConfig",
+    "PIPELINE_KEYS",
     "INTERNAL_UNITS",
     "Q_",
     "ureg",
@@ -48,6 +55,7 @@ __all__ = [
     "apply_overrides",
     "parse_override",
     "validate_config",
+    "scene_models",
     "config_as_dict",
     "config_units",
     "json_schema",
@@ -68,8 +76,6 @@ __all__ = [
     "Dimensionless",
     "Section",
     "SceneConfig",
-    "StaticWireConfig",
-    "SCENE_MODELS",
-    "register_scene_model",
+    "scene_name",
     "cross_field_error",
 ]

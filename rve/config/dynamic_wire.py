@@ -1,8 +1,8 @@
 """Config model of the dynamic wire scene (thesis §6.4, Tables 6.3-6.4).
 
-Registered in ``rve.config.models.SCENE_MODELS`` under ``scene: dynamic_wire`` by
-``register_scene_model`` when this module is imported (``rve.config.models`` imports it at
-its end). Parameter choices for what Table 6.3 does not give: docs/coupled_fields.md.
+Contract: :class:`DynamicWireConfig` and its sections. Named in
+``rve.scenes.registry.SCENES``; the scene is ``rve.scenes.dynamic_wire``. Parameter
+choices for what Table 6.3 does not give: docs/coupled_fields.md.
 """
 from __future__ import annotations
 
@@ -10,10 +10,9 @@ from typing import Literal, Optional
 
 from pydantic import Field
 
-from .models import (
+from .fields import (
     Angle, DampingCoefficient, Density, Dimensionless, ElectricConductivity, Integer, Length, MagneticField,
     Quantity, SceneConfig, Section, SpecificHeat, Stress, Temperature, ThermalConductivity, Time, Voltage,
-    register_scene_model,
 )
 
 __all__ = ["DynamicWireConfig"]
@@ -99,7 +98,6 @@ class DynamicWireNewton(Section):
     max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
 
 
-@register_scene_model
 class DynamicWireConfig(SceneConfig):
     """The pinned wire with coupled current, heat and motion in a magnetic field (thesis §6.4)."""
 

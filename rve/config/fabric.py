@@ -1,8 +1,9 @@
 """Config model of the fabric relaxation scene (``scene: fabric_relax``; thesis §7.3-7.4).
 
-Registered in ``rve.config.models.SCENE_MODELS`` by ``register_scene_model`` when this
-module is imported (``rve.scenes`` imports it, so ``rve run`` and ``load_config`` after
-``import rve.scenes`` know the scene). Parameter choices: docs/relaxation.md.
+Contract: :class:`FabricRelaxConfig` and its sections (fabric, material, contact, mesh,
+relaxation, output); the RVE config (``rve.homogenisation.config.RVEConfig``) reuses the
+sections. Named in ``rve.scenes.registry.SCENES``; the scene is
+``rve.scenes.fabric_relax``. Parameter choices: docs/relaxation.md.
 """
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ from typing import Literal, Optional
 
 from pydantic import Field
 
-from .models import (
+from .fields import (
     ContactConductance, DampingCoefficient, Density, Dimensionless, HeatTransferCoefficient, Integer, Length,
-    Quantity, SceneConfig, Section, Stress, Time, register_scene_model,
+    Quantity, SceneConfig, Section, Stress, Time,
 )
 
 __all__ = ["FabricRelaxConfig"]
@@ -107,7 +108,6 @@ class FabricOutput(Section):
     vtk_every: Integer = Field(0, ge=0, description="also write the state every k map rebuilds (0: only start/end)")
 
 
-@register_scene_model
 class FabricRelaxConfig(SceneConfig):
     """Relax a generated fabric to static equilibrium under contact (thesis §7.3-7.4)."""
 

@@ -9,13 +9,18 @@ naming the full dotted key, the offending value and what is allowed::
     fibril.radius = -0.1 mm: must be > 0
     geometry.colour: unknown key (allowed: half_length, clamp_half_distance)
     load.field_magnitude = '1 m': wrong dimension, expected magnetic field (kT)
-    scene missing (allowed: static_wire)
+    scene missing (allowed: static_wire, dynamic_wire, fabric_relax, rve)
+
+The scene names and their models come from the one scene registry,
+``rve.scenes.registry`` (imported when a config is loaded, not when ``rve.config`` is
+imported: the registry sits above this package). A pipeline config (Snakemake's
+``configs/pipeline.yaml``: no ``scene`` key, top-level keys among ``PIPELINE_KEYS``) is
+refused with one :class:`NotASceneConfig` line (docs/configuration.md).
 """
 from __future__ import annotations
 
 import copy
 import json
-import math
 import os
 import types
 import typing
@@ -26,11 +31,14 @@ import yaml
 from annotated_types import Ge, Gt, Le, Lt
 from pydantic import BaseModel, ValidationError
 
-from .models import SCENE_MODELS, SceneConfig, UnitSpec, _iter_metadata
+from .fields import SceneConfig, UnitSpec, _iter_metadata
 from .units import ConfigError, format_value
 
 __all__ = [
     "ConfigError",
+    "NotASceneConfig",
+    "PIPELINE_KEYS",
+    "scene_models",
     "load_config",
     "read_config_source",
     "apply_overrides",
@@ -123,13 +131,41 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, parsed
 
 
+#: top-level keys of a pipeline config (workflow/schemas/pipeline.schema.yaml)
+PIPELINE_KEYS = ("verification", "rve", "default_targets", "resources")
+
+
+class NotASceneConfig(ConfigError):
+    """The mapping is a pipeline config (Snakemake), not a scene config. One line."""
+
+
+def scene_models() -> dict[str, type[SceneConfig]]:
+    """scene name -> config model, in the registry's order (``rve.scenes.registry``)."""
+    from ..scenes.registry import config_models  # the registry is above rve.config: import on use
+
+    return config_models()
+
+
+def _allowed_scenes() -> str:
+    return ", ".join(scene_models())
+
+
+def _check_not_pipeline(raw: Mapping) -> None:
+    if "scene" not in raw and raw and all(k in PIPELINE_KEYS for k in raw):
+        keys = ", ".join(k for k in PIPELINE_KEYS if k in raw)
+        raise NotASceneConfig(
+            f"a pipeline config (top-level {keys}), not a scene config: Snakemake reads it "
+            f"(snakemake -j2 --configfile FILE) and validates it against workflow/schemas/pipeline.schema.yaml")
+
+
 def _scene_model(name: Any, where: str = "scene") -> type[SceneConfig]:
-    allowed = ", ".join(SCENE_MODELS)
+    models = scene_models()
+    allowed = ", ".join(models)
     if name is None:
         raise ConfigError(f"{where} missing (allowed: {allowed})")
-    if not isinstance(name, str) or name not in SCENE_MODELS:
+    if not isinstance(name, str) or name not in models:
         raise ConfigError(f"{where} = {format_value(name)}: unknown scene (allowed: {allowed})")
-    return SCENE_MODELS[name]
+    return models[name]
 
 
 def apply_overrides(raw: dict, overrides: Iterable[str]) -> dict:
@@ -144,6 +180,7 @@ def apply_overrides(raw: dict, overrides: Iterable[str]) -> dict:
             raw["scene"] = value
     if not parsed:
         return raw
+    _check_not_pipeline(raw)
     model = _scene_model(raw.get("scene"))
     errors = []
     for key, value in parsed:
@@ -305,7 +342,7 @@ def _format_error(err: dict, model: type[BaseModel], raw: dict) -> str:
         return f"{key}: unknown key (allowed: {_allowed(parent)})"
     if etype == "missing":
         if loc == ("scene",):
-            return f"scene missing (allowed: {', '.join(SCENE_MODELS)})"
+            return f"scene missing (allowed: {_allowed_scenes()})"
         return f"{key} missing"
     if etype in ("model_type", "model_attributes_type", "dict_type"):
         section = _model_at(model, loc)
@@ -321,7 +358,7 @@ def _format_error(err: dict, model: type[BaseModel], raw: dict) -> str:
                 f"(which is {ctx['other_value']:.10g}{ctx['u']})")
     if etype == "literal_error":
         if loc == ("scene",):
-            return f"scene = {format_value(raw_value)}: unknown scene (allowed: {', '.join(SCENE_MODELS)})"
+            return f"scene = {format_value(raw_value)}: unknown scene (allowed: {_allowed_scenes()})"
         expected = err.get("ctx", {}).get("expected", "")
         expected = expected.replace(" or ", ", ")
         return f"{key} = {format_value(raw_value if raw_value is not _MISSING else validated)}: " \
@@ -349,6 +386,7 @@ def validate_config(raw: Mapping) -> SceneConfig:
     """Validate a raw mapping (after overrides) against the model of its ``scene``."""
     if not isinstance(raw, Mapping):
         raise ConfigError(f"the config must be a mapping, got {type(raw).__name__}")
+    _check_not_pipeline(raw)
     model = _scene_model(raw.get("scene"))
     try:
         return model.model_validate(dict(raw))
@@ -364,21 +402,12 @@ def load_config(source: Union[str, os.PathLike, Mapping], overrides: Iterable[st
     return validate_config(raw)
 
 
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return repr(obj)
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    return obj
-
-
 def config_as_dict(cfg: BaseModel) -> dict:
     """The validated config in internal units as plain JSON-serialisable data (provenance).
 
-    ``load_config(config_as_dict(cfg))`` gives back an equal config."""
-    return _jsonable(json.loads(cfg.model_dump_json()))
+    ``load_config(config_as_dict(cfg))`` gives back an equal config. (pydantic writes a
+    non-finite float as null, so the result holds only finite numbers.)"""
+    return json.loads(cfg.model_dump_json())
 
 
 def config_units(model: Union[BaseModel, type[BaseModel]]) -> dict:

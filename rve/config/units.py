@@ -1,6 +1,6 @@
 """The package's unit registry and the conversion of config values to internal units.
 
-Internally every number is a float in one consistent unit system (SPEC §1, thesis
+Internally every number is a float in one consistent unit system (docs/configuration.md "Internal units", thesis
 Table 2.3): mm, ms, g, N, MPa, K, A, mC, V, kT (1 T = 0.001 kT), S/mm, W, W/(mm K),
 W/(mm² K), A/(mm² V). Consistency means no conversion factor ever appears in the
 physics code: e.g. a current density (A/mm²) times a field (kT) is a force density

@@ -1,4 +1,4 @@
-"""Woven RVEs from an interlacing pattern (thesis ch. 7, §5.4; SPEC §5; docs/fabrics.md).
+"""Woven RVEs from an interlacing pattern (thesis ch. 7, §5.4; docs/fabrics.md).
 
 Layout (defaults = the thesis plain-weave RVE)
 ----------------------------------------------

@@ -1,12 +1,12 @@
-"""Config model of the RVE homogenisation run (``scene: rve``; thesis ch. 7, SPEC §5-§6).
+"""Config model of the RVE homogenisation run (``scene: rve``; thesis ch. 7, docs/rve_pipeline.md).
 
 One validated :class:`RVEConfig` describes everything one combination of the pipeline
 computes: the fabric, material, contact law and mesh (the same sections as the
 relaxation scene ``fabric_relax``, ``rve.config.fabric``), the relaxation, the strain
 path of Algorithm 7.1 (``strain``), the probes (``probes``) and the probe solver
 (``probe_solver``). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
-V) or strings with units. Registered in ``rve.config.SCENE_MODELS`` on import, so
-``rve.config.load_config`` knows it once ``rve.homogenisation`` is imported.
+V) or strings with units. Named in ``rve.scenes.registry.SCENES`` (a pipeline scene:
+``rve run`` prints the Snakemake command that builds its table, docs/configuration.md).
 
 Parameter choices of the default (thesis Table 7.1) are documented in
 docs/rve_pipeline.md; the config files are configs/rve/*.yaml.
@@ -18,9 +18,9 @@ from typing import Literal
 from pydantic import Field, field_validator, model_validator
 
 from ..config.fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
-from ..config.models import (
+from ..config.fields import (
     DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, SceneConfig, Section, ThermalConductivity,
-    Time, Voltage, register_scene_model,
+    Time, Voltage,
 )
 
 __all__ = ["RVEConfig", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
@@ -130,7 +130,6 @@ def thesis_probes() -> list[dict]:
     ]
 
 
-@register_scene_model
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 

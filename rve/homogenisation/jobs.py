@@ -38,9 +38,9 @@ PathLike = Union[str, os.PathLike]
 
 
 def _fabric_mesh(cfg):
-    from .strain import build_fabric
+    from ..fabrics.setup import fabric_and_mesh
 
-    return build_fabric(cfg)
+    return fabric_and_mesh(cfg)
 
 
 def _write(path, state, fab, mesh, system=None):
@@ -84,7 +84,8 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
     """Relax the initial state (damped dynamics + static Newton); write step 0 (clamp
     reactions and the contact map included)."""
     from .checkpoint import State, load_state
-    from .strain import reactions, relax_fabric
+    from ..fabrics.setup import clamp_reactions
+    from .strain import relax_fabric
 
     with logging_to(log_path):
         cfg = load_run_config(spec, combo)
@@ -92,7 +93,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
         st0 = load_state(in_state)
         _check_state(st0, mesh, in_state)
         x, system, info = relax_fabric(cfg, fab, mesh, st0.x)
-        reac = reactions(fab, system, x)
+        reac = clamp_reactions(fab, system, x)
         cstate = system.contact_state(x.reshape(-1))
         st = State(x=x, w=np.zeros_like(x), origin=x, kind="relaxed", step=0, strain=0.0,
                    time=float(cfg.relaxation.duration), combo=combo, params=combo_params(spec, combo),
@@ -108,7 +109,8 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
                combo: str, mode: str, step: int):
     """One strain step (Algorithm 7.1) from ``in_state``; write the new state."""
     from .checkpoint import State, load_state
-    from .strain import reactions, strain_step
+    from ..fabrics.setup import clamp_reactions
+    from .strain import strain_step
 
     step = int(step)
     with logging_to(log_path):
@@ -123,7 +125,7 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
             raise ValueError(f"{in_state}: expected the {expect} state before {mode} step {step}, got kind="
                              f"{prev.kind} mode={prev.mode!r} step={prev.step}")
         x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step)
-        reac = reactions(fab, system, x)
+        reac = clamp_reactions(fab, system, x)
         cstate = system.contact_state(x.reshape(-1))
         st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="strained", mode=mode, step=step,
                    strain=float(info["strain"]), time=prev.time + cfg.strain.t_step + cfg.strain.t_relax,

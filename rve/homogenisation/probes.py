@@ -40,6 +40,7 @@ import numpy as np
 
 from ..contact.insulation import pull_down_circuits
 from ..model import ContactParams, ContactSystem
+from ..fabrics.setup import contact_params, end_nodes
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, Couplings, DirichletBC
 from ..solvers.static import static_solve
@@ -148,9 +149,9 @@ def electric_solve(mesh, xn, material: BeamMaterial, contact: Optional[ContactPa
     circuits = pull_down_circuits(mesh, material.electrical_conductivity, wired, factor=insulation_factor,
                                   ends=insulation_ends)
     lay = DofLayout(mesh.n_nodes, ("mech", "V"))
-    bcs = [DirichletBC(lay.field_dofs("mech"), 0.0)]
+    bcs = [DirichletBC(lay.dofs("mech"), 0.0)]
     for g, v in zip(groups, values):
-        bcs.append(DirichletBC(lay.field_dofs("V", g), float(v)))
+        bcs.append(DirichletBC(lay.dofs("V", g), float(v)))
     base = BeamModel(mesh, material, fields=("mech", "V"), couplings=Couplings(joule=False, **_NO_COUPLING),
                      disk_points=disk_points, axial_points=axial_points, bcs=bcs, circuits=circuits)
     x, w = _full_state(base, xn)
@@ -172,8 +173,8 @@ def temperature_solve(mesh, xn, V, material: BeamMaterial, contact: Optional[Con
     (nodal, prescribed everywhere) and T = 0 at ``fixed_nodes``. Returns (T nodal, Newton result)."""
     lay = DofLayout(mesh.n_nodes, ("mech", "T", "V"))
     fixed = np.asarray(fixed_nodes, dtype=np.int64)
-    bcs = [DirichletBC(lay.field_dofs("mech"), 0.0), DirichletBC(lay.field_dofs("V"), np.asarray(V, float)),
-           DirichletBC(lay.field_dofs("T", fixed), 0.0)]
+    bcs = [DirichletBC(lay.dofs("mech"), 0.0), DirichletBC(lay.dofs("V"), np.asarray(V, float)),
+           DirichletBC(lay.dofs("T", fixed), 0.0)]
     base = BeamModel(mesh, material, fields=("mech", "T", "V"), couplings=Couplings(joule=True, **_NO_COUPLING),
                      disk_points=disk_points, axial_points=axial_points, bcs=bcs)
     x, w = _full_state(base, xn, V)
@@ -191,14 +192,12 @@ def _length_weights(mesh) -> np.ndarray:
 def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeResult:
     """One probe (``ProbeSpec``) on the frozen state ``xn`` (module docstring)."""
     ps = cfg.probe_solver
-    from .strain import contact_params
-
     t0 = time.perf_counter()
     plus, minus = (terminal_nodes(fab, mesh, t) for t in probe.terminals)
     if np.intersect1d(plus, minus).size:
         raise ValueError(f"probe {probe.name}: its terminals share fibril ends")
     mat = conduction_material(cfg)
-    cparams = contact_params(cfg, conduction=True)
+    cparams = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=True)
     opts = {"atol": ps.newton_atol, "rtol": ps.newton_rtol}
     el = electric_solve(mesh, xn, mat, cparams, [plus, minus], [ps.voltage, 0.0], ps.insulation_factor,
                         ps.insulation_ends, cfg.mesh.disk_points, cfg.mesh.axial_points, opts)
@@ -221,7 +220,7 @@ def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeRe
         res.V = el.V
     if ps.temperature:
         t1 = time.perf_counter()
-        ends = np.array([t.node(mesh) for t in fab.end_tags], dtype=np.int64)
+        ends = end_nodes(fab, mesh)
         T, tres = temperature_solve(mesh, xn, el.V, mat, cparams, ends, cfg.mesh.disk_points, cfg.mesh.axial_points,
                                     opts)
         wts = _length_weights(mesh)

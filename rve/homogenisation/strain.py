@@ -1,6 +1,6 @@
 """Mechanics of the RVE homogenisation: relaxation and the strain steps of Algorithm 7.1.
 
-Thesis §7.3-7.4 (Algorithm 7.1); SPEC §4-§5; docs/rve_pipeline.md.
+Thesis §7.3-7.4 (Algorithm 7.1); docs/rve_pipeline.md, docs/relaxation.md.
 
 Boundary conditions (§7.3)
 --------------------------
@@ -8,7 +8,9 @@ The centroid of every fibril end (every ``Fabric.end_tags`` entry) is pinned: it
 velocity is prescribed (zero, or the driving field during a driven phase); the directors
 are free (no applied torque). A twist gauge holds g1_z at each fibril's first node (the
 relaxation scene's choice, docs/relaxation.md): it removes only the free spin of a fibril
-about its own axis. Mechanics only (SPEC §4): no T or V dofs.
+about its own axis. Mechanics only (docs/relaxation.md): no T or V dofs. The fabric, the
+clamps, the contact law and the system come from ``rve.fabrics.setup``; the energy path
+of the relaxation is ``rve.fabrics.relaxation.relax`` (the relaxation scene's).
 
 One strain step (``strain_step``)
 ---------------------------------
@@ -32,7 +34,7 @@ From the stored state at strain eps_{n-1} to eps_n = eps_{n-1} + d with d = tota
    (``relax_to_equilibrium``'s static phase, docs/relaxation.md).
 
 Then (Algorithm 7.1, 2b) the reaction forces: the clamp forces summed per box side, 3
-components (``rve.scenes.fabric_relax.clamp_reactions``: the residual at the pinned
+components (``rve.fabrics.setup.clamp_reactions``: the residual at the pinned
 centroids, contact included).
 
 If the driven phase fails (step control exhausted), the remaining part of the field is
@@ -47,26 +49,16 @@ import time
 import numpy as np
 
 from ..contact.relax import RelaxSettings, capped_newton, minimize_energy, relax_to_equilibrium
-from ..model import ContactParams, ContactSystem
-from ..model import BeamMaterial, BeamModel, DirichletBC
+from ..model import ContactSystem
+from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 
-__all__ = ["build_fabric", "clamped_ends", "mech_system", "relax_fabric", "strain_step", "strain_levels",
-           "affine_velocity", "reactions", "contact_params", "free_residual", "static_polish", "static_minimize",
-           "MODE_DIRECTION"]
+__all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
+           "static_polish", "static_minimize", "MODE_DIRECTION"]
 
 log = logging.getLogger("rve.homogenisation.strain")
 
 #: component of the velocity field of each mode (e1 for uniaxial, e2 for shear)
 MODE_DIRECTION = {"uniaxial": 0, "shear": 1}
-
-
-def build_fabric(cfg):
-    """(fabric, mesh) of an RVEConfig (deterministic: same config, same mesh)."""
-    from ..scenes.fabric_relax import make_fabric
-
-    fab = make_fabric(cfg.fabric)
-    mesh = fab.mesh(cfg.mesh.elements, cfg.mesh.order)
-    return fab, mesh
 
 
 def strain_levels(cfg) -> np.ndarray:
@@ -75,48 +67,13 @@ def strain_levels(cfg) -> np.ndarray:
     return np.array([round(i * cfg.strain.total / n, 12) for i in range(n + 1)])
 
 
-def clamped_ends(fab, mesh, twist_gauge: str = "first"):
-    """(end nodes, pinned centroid dofs (end-major, 3 per end), twist-gauge dofs) in the
-    9-per-node mechanics layout. ``twist_gauge``: "first" holds g1_z at each fibril's
-    first node (the relaxation scene's gauge), "all" at every node (module docstring)."""
-    ends = np.array([t.node(mesh) for t in fab.end_tags], dtype=np.int64)
-    pinned = (ends[:, None] * 9 + np.arange(3)[None, :]).ravel()
-    if twist_gauge == "all":
-        nodes = np.arange(mesh.n_nodes, dtype=np.int64)
-    elif twist_gauge == "first":
-        nodes = mesh.node_offsets[:-1].astype(np.int64)
-    else:
-        raise ValueError(f"twist_gauge must be 'first' or 'all', got {twist_gauge!r}")
-    return ends, pinned, nodes * 9 + 5
-
-
-def contact_params(cfg, conduction: bool = False) -> ContactParams:
-    c = cfg.contact
-    return ContactParams(penalty=c.penalty, heat_transfer=c.heat_transfer if conduction else 0.0,
-                         conductance=c.conductance if conduction else 0.0, n_gp=c.n_gp, margin=c.margin,
-                         g_eps=c.g_eps, recompute_closest=c.recompute_closest,
-                         rebuild_every=cfg.strain.rebuild_every, onset=float(getattr(c, "onset", 0.0)))
-
-
 def mech_system(fab, mesh, cfg, damping: float, x, end_velocity=None, twist_gauge: str = "first") -> ContactSystem:
-    """Mechanics-only ``ContactSystem``: ends pinned (centroid velocity ``end_velocity``,
-    (n_ends, 3), default 0), twist gauge, volumetric damping ``damping``."""
-    m = cfg.material
-    ends, pinned, gauge = clamped_ends(fab, mesh, twist_gauge)
-    vel = np.zeros(pinned.size) if end_velocity is None else np.asarray(end_velocity, float).reshape(-1)
-    if vel.size != pinned.size:
-        raise ValueError(f"end_velocity must have {ends.size} x 3 values, got {vel.size}")
-    mat = BeamMaterial(m.youngs_modulus, m.poisson_ratio, m.density, damping=float(damping))
-    base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points,
-                     bcs=[DirichletBC(pinned, vel.copy()), DirichletBC(gauge, 0.0)])
-    return ContactSystem(base, contact_params(cfg), np.asarray(x, float).reshape(-1))
-
-
-def reactions(fab, system, x) -> dict:
-    """Clamp forces per box side (N): {side: [Fx, Fy, Fz]} (docs/relaxation.md)."""
-    from ..scenes.fabric_relax import clamp_reactions
-
-    return clamp_reactions(fab, system, np.asarray(x, float).reshape(-1))
+    """Mechanics-only ``ContactSystem`` of a strain-path phase (``rve.fabrics.setup.mechanics_system``):
+    ends pinned (centroid velocity ``end_velocity``, (n_ends, 3), default 0), twist gauge,
+    volumetric damping ``damping``, the contact law without conduction, the map rebuilt
+    every ``strain.rebuild_every`` steps."""
+    params = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False)
+    return mechanics_system(fab, mesh, cfg, params, damping, x, end_velocity=end_velocity, twist_gauge=twist_gauge)
 
 
 def _settings(duration, steps, k, rtol, max_iter, atol, static, static_rounds=4, static_max_iter=80):
@@ -233,22 +190,15 @@ def relax_fabric(cfg, fab, mesh, x0):
 
 
 def _relax_energy_scene(cfg, fab, mesh, x0, t0):
-    """The relaxation scene's energy path (``rve.scenes.fabric_relax.solve``: onset
+    """The relaxation scene's energy path (``rve.fabrics.relaxation.relax``: onset
     continuation, optional mesh sequencing), from the designed state ``x0``."""
-    from ..config.fabric import FabricRelaxConfig
-    from ..scenes.fabric_relax import solve
+    from ..fabrics.relaxation import relax
 
-    data = {"scene": "fabric_relax", "fabric": cfg.fabric.model_dump(),
-            "material": {k: getattr(cfg.material, k) for k in ("youngs_modulus", "poisson_ratio", "density")},
-            "contact": cfg.contact.model_dump(), "mesh": cfg.mesh.model_dump(),
-            "relaxation": cfg.relaxation.model_dump(),
-            "output": {"netcdf": False, "vtk": False, "png": False}}
-    rcfg = FabricRelaxConfig.model_validate(data)
-    summary = solve(rcfg)
-    state = summary.pop("_state")
-    if not np.array_equal(state["x0"].reshape(mesh.n_nodes, -1)[:, :9], np.asarray(x0).reshape(mesh.n_nodes, 9)):
-        raise ValueError("the relaxation scene started from another initial state than the fabric stage's")
-    system, x = state["system"], state["x"]
+    relaxed = relax(cfg)
+    summary = relaxed.summary
+    if not np.array_equal(relaxed.x0.reshape(mesh.n_nodes, -1)[:, :9], np.asarray(x0).reshape(mesh.n_nodes, 9)):
+        raise ValueError("the relaxation started from another initial state than the fabric stage's")
+    system, x = relaxed.system, relaxed.x
     if system.layout.block != 9:
         raise ValueError("relaxation system is not mechanics-only")
     x = np.asarray(x, float)

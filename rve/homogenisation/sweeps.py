@@ -178,8 +178,6 @@ def load_run_config(spec: Mapping, combo_id: str = BASE_COMBO):
     from ..config import apply_overrides, read_config_source, validate_config
     from ..config.loader import _deep_merge
 
-    from . import config as _cfg  # noqa: F401  (registers the scene)
-
     path = spec.get("scene_config")
     raw = read_config_source(path) if path else {}
     inline = spec.get("scene") or {}

@@ -1,20 +1,22 @@
 """Scene: the dynamic wire (thesis §6.4, Tables 6.3-6.4): current, heat and motion coupled.
 
-Contract
---------
-``run(cfg, out_dir) -> dict`` takes a validated ``DynamicWireConfig``, integrates from rest
-to ``t_max`` with the SDIRK scheme of ``cfg.time.stages`` and returns the summary: the probes
+Contract (the scene protocol, rve.scenes.protocol)
+--------------------------------------------------
+``setup(cfg, mode=None) -> BeamModel`` builds the wire of a validated ``DynamicWireConfig``
+(rve.config.dynamic_wire) with its boundary conditions; ``solve(cfg, ...) -> SceneResult``
+integrates from rest to ``t_max`` with the SDIRK scheme of ``cfg.time.stages`` in memory
+(``state``: ``x``, ``w`` at t_max and, with the temperature post-solved, ``T``; ``model``:
+the ``BeamModel``; ``summary``: the figures below, with the probe history under
+``"history"`` when ``record``); ``run(cfg, out_dir) -> dict`` returns the summary: the probes
 ``y0`` (centre centroid y), ``z_half``, ``T_half``, ``V_half`` (at l = 1/2, a quarter of the
 way from the +L end... i.e. X1 = L/2) at t_max, ``V_half_initial`` (t = 0, the voltage
 divider, 0.1 V for Table 6.3), the dofs per field (``dofs``) of each solve, Newton
 statistics (iterations, observed convergence rates of the stage solves), step-control
 statistics and wall times. It writes ``out_dir/dynamic_wire_history.nc`` (probe time
-history, netCDF, written atomically). On an ``IntegrationFailure`` it writes the last good
-state to ``out_dir/dynamic_wire_last_good_state.npz`` (and the history so far) and raises
-``SimulationAborted`` (a ``SystemExit`` carrying a message with the time, the step size and
-the Newton residual history).
-
-``simulate(cfg, ...)`` is the same run returning the numbers in memory (studies, tests).
+history, netCDF, written atomically). When the time integration gives up, ``solve`` raises
+``SceneFailure`` (phase "time integration", the time, the step size and the Newton
+residual history, the last good state); ``run`` then writes that state to
+``out_dir/dynamic_wire_last_good_state.npz`` (and the history so far) and re-raises.
 
 Set-up: the wire lies along e1 from -L to L (straight natural configuration, directors
 G1 = e2, G2 = e3), centroids pinned at both ends, the sections free to rotate;
@@ -37,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fem.assembly import DofLayout
 from ..fem.lagrange import lagrange_basis
 from ..fem.mesh import fibril_mesh, straight_fibril
 from ..model import (
@@ -44,9 +47,10 @@ from ..model import (
     feedback_from_temperature,
 )
 from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate
+from .protocol import SceneFailure, SceneResult
 
-__all__ = ["build", "initial_state", "probes", "simulate", "run", "SimulationAborted", "PROBES",
-           "newton_options"]
+__all__ = ["setup", "initial_state", "probes", "solve", "run", "PROBES", "newton_options", "temperature_mode",
+           "field_ramp", "history_dataset"]
 
 log = logging.getLogger("rve.scenes.dynamic_wire")
 
@@ -57,21 +61,6 @@ PROBES = {
     "T_half": ("temperature change at l = 1/2", "K"),
     "V_half": ("electric potential at l = 1/2", "V"),
 }
-
-
-class SimulationAborted(SystemExit):
-    """The time integration gave up; the last good state was saved. ``str()`` is the message."""
-
-    def __init__(self, message: str, path: Path, t: float, h: float, residuals):
-        super().__init__(message)
-        self.message = message
-        self.path = path
-        self.t = t
-        self.h = h
-        self.residuals = list(residuals)
-
-    def __str__(self) -> str:
-        return self.message
 
 
 def temperature_mode(cfg) -> str:
@@ -102,7 +91,7 @@ def _couplings(cfg, with_T: bool = True) -> Couplings:
                      seebeck=c.seebeck and with_T, thermal_softening=c.thermal_softening and with_T)
 
 
-def build(cfg, mode: str | None = None) -> BeamModel:
+def setup(cfg, mode: str | None = None) -> BeamModel:
     """The model of the scene; ``mode`` 'coupled' (T dofs) or 'post' (no T dofs)."""
     mode = mode or temperature_mode(cfg)
     L = cfg.geometry.half_length
@@ -111,19 +100,18 @@ def build(cfg, mode: str | None = None) -> BeamModel:
     with_T = mode == "coupled"
     fields = ("mech", "T", "V") if with_T else ("mech", "V")
     n0, n1 = mesh.end_nodes(0)
-    b = 9 + len(fields) - 1
-    bcs = [DirichletBC(np.array([n0 * b, n0 * b + 1, n0 * b + 2]), 0.0),
-           DirichletBC(np.array([n1 * b, n1 * b + 1, n1 * b + 2]), 0.0)]
-    oV = 9 + (1 if with_T else 0)
+    layout = DofLayout(mesh.n_nodes, fields)
+    bcs = [DirichletBC(layout.dofs("r", n0), 0.0),
+           DirichletBC(layout.dofs("r", n1), 0.0)]
     circuits = []
     if cfg.load.circuit_resistance is None:
-        bcs.append(DirichletBC(np.array([n0 * b + oV, n1 * b + oV]),
+        bcs.append(DirichletBC(layout.dofs("V", [n0, n1]),
                                np.array([cfg.load.voltage_left, cfg.load.voltage_right])))
     else:
-        bcs.append(DirichletBC(np.array([n0 * b + oV]), cfg.load.voltage_left))
+        bcs.append(DirichletBC(layout.dofs("V", n0), cfg.load.voltage_left))
         circuits.append(CircuitBC.resistor(n1, cfg.load.circuit_resistance, cfg.load.voltage_right, np.pi * R**2))
     if with_T:
-        bcs.append(DirichletBC(np.array([n0 * b + 9, n1 * b + 9]), cfg.load.end_temperature))
+        bcs.append(DirichletBC(layout.dofs("T", [n0, n1]), cfg.load.end_temperature))
     return BeamModel(mesh, _material(cfg), disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points,
                      fields=fields, bcs=bcs, couplings=_couplings(cfg, with_T), circuits=circuits,
                      field_ramp=field_ramp(cfg.load.field_ramp_time))
@@ -212,10 +200,9 @@ def _rates_summary(stage_residuals: list, floor: float = 1e-9) -> dict:
     }
 
 
-def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_step: bool | None = None,
-             record: bool = True, progress: bool = False, keep_state: bool = False,
-             integrator_options: dict | None = None) -> dict:
-    """Run the scene in memory. Raises ``IntegrationFailure`` (carrying the last good state).
+def solve(cfg, *, stages: int | None = None, steps: int | None = None, fixed_step: bool | None = None,
+          record: bool = True, progress: bool = False, integrator_options: dict | None = None) -> SceneResult:
+    """Run the scene in memory. Raises ``SceneFailure`` (carrying the last good state).
     ``integrator_options`` go to ``rve.solvers.dirk.integrate`` (e.g. ``predictor_degree``,
     ``lazy_jacobian``: the solver variants compared by benchmarks/dirk_stage_cost.py)."""
     iopts = dict(integrator_options or {})
@@ -224,7 +211,7 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
     steps = int(steps or cfg.time.steps)
     fixed = (not cfg.time.step_control) if fixed_step is None else bool(fixed_step)
     mode = temperature_mode(cfg)
-    model = build(cfg, mode)
+    model = setup(cfg, mode)
     L = cfg.geometry.half_length
     t_max = cfg.time.t_max
     h0 = t_max / steps
@@ -267,10 +254,16 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
                         max_cuts=cfg.time.max_cuts, on_step=on_step, progress=progress, fixed_step=fixed,
                         consistent=False, **iopts)
     except IntegrationFailure as exc:
-        exc.history = hist
-        exc.model = model
-        exc.mode = mode
-        raise
+        res = ", ".join(f"{r:.3e}" for r in exc.residuals)
+        raise SceneFailure(
+            "dynamic_wire",
+            f"time integration failed with step size h = {exc.h:.6g} ms; Newton residual history [{res}]. "
+            f"Cause: {exc}",
+            phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
+            state={"x": exc.x, "w": exc.w}, model=model,
+            details={"h": exc.h, "residuals": [float(r) for r in exc.residuals], "history": hist,
+                     "temperature_mode": mode,
+                     "reason": exc.step_failure.reason if exc.step_failure is not None else str(exc)}) from exc
     t2 = time.perf_counter()
     x, w = res.x, res.w
     out_probes = probe(x, w)
@@ -312,9 +305,10 @@ def simulate(cfg, *, stages: int | None = None, steps: int | None = None, fixed_
     }
     if record:
         out["history"] = {k: np.asarray(v, float) for k, v in hist.items()}
-    if keep_state:
-        out["_state"] = {"x": x, "w": w, "model": model, "post": post}
-    return out
+    state = {"x": x, "w": w}
+    if post is not None:
+        state["T"] = post["T"]
+    return SceneResult(state=state, model=model, summary=out)
 
 
 def history_dataset(hist: dict, attrs: dict | None = None):
@@ -349,25 +343,16 @@ def run(cfg, out_dir: Path) -> dict:
     out_dir = Path(out_dir)
     attrs = {"scene": "dynamic_wire", "source": "rve.scenes.dynamic_wire"}
     try:
-        out = simulate(cfg, record=True)
-    except IntegrationFailure as exc:
-        from ..io.atomic import atomic_path
-
-        path = out_dir / "dynamic_wire_last_good_state.npz"
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, x=exc.x, w=exc.w, t=exc.t, h=exc.h, residuals=np.asarray(exc.residuals, float),
-                         fields=np.array(exc.model.layout.fields))
-        hist = getattr(exc, "history", None)
+        out = solve(cfg, record=True).summary
+    except SceneFailure as failure:
+        failure.save(out_dir / "dynamic_wire_last_good_state.npz")
+        hist = failure.details.get("history")
         if hist is not None and len(hist["t"]) > 1:
-            hist = {k: v for k, v in hist.items() if k != "T_half" or exc.mode == "coupled"}
+            coupled = failure.details.get("temperature_mode") == "coupled"
+            hist = {k: v for k, v in hist.items() if k != "T_half" or coupled}
             _write_history(out_dir / "dynamic_wire_history.nc", hist, {**attrs, "status": "aborted"})
-        res = ", ".join(f"{r:.3e}" for r in exc.residuals)
-        msg = (f"rve dynamic_wire: time integration failed at t = {exc.t:.9g} ms with step size h = {exc.h:.6g} ms; "
-               f"Newton residual history [{res}]. Last good state (t = {exc.t:.9g} ms) saved to {path}. "
-               f"Cause: {exc}")
-        log.error(msg)
-        raise SimulationAborted(msg, path, exc.t, exc.h, exc.residuals) from exc
+        log.error("%s", failure)
+        raise
     hist = out.pop("history")
     if out["temperature_mode"] == "post":
         hist.pop("T_half", None)  # T is solved after the run; only its final value is known

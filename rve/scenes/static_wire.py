@@ -1,15 +1,21 @@
 """Scene: the current-carrying wire in a magnetic field, solved statically (thesis §6.3).
 
-Contract
---------
-``run(cfg, out_dir) -> dict`` takes a validated ``StaticWireConfig`` and returns the
-summary (also what ``rve run`` writes to summary.json): ``centre_displacement`` (the
-midpoint's distance from the support line, in units of L), ``analytical_centre_displacement``
-(chapter 3 helix, same units), ``newton_iterations`` (static phase), ``relaxation_steps``,
-``dofs``, ``wall_time_s`` per phase and in total, and the Newton residual history of the
-static phase. ``solve(cfg)`` returns the same plus the final state, for studies.
+Contract (the scene protocol, rve.scenes.protocol)
+--------------------------------------------------
+* ``setup(cfg, order=None, elements=None, gauge_end=0) -> BeamModel``: the wire of a
+  validated ``StaticWireConfig`` (rve.config.static_wire) on the configured mesh (or on
+  (order, elements)), with its boundary conditions;
+* ``solve(cfg) -> SceneResult``: relax (optionally on a coarse mesh), then static Newton
+  on the target mesh; ``state["x"]`` is the equilibrium, ``model`` the ``BeamModel``,
+  ``summary``: ``centre_displacement`` (the midpoint's distance from the support line, in
+  units of L), ``analytical_centre_displacement`` (chapter 3 helix, same units),
+  ``newton_iterations`` (static phase), ``relaxation_steps``, ``dofs``, ``wall_time_s`` per
+  phase and in total, and the Newton residual history of the static phase. A phase that
+  does not converge raises ``SceneFailure`` (phase named, the state it started from);
+* ``run(cfg, out_dir) -> dict``: the summary (``rve run`` writes summary.json); on a
+  failure the last good state goes to ``out_dir/static_wire_last_good_state.npz``.
 
-Set-up (SPEC §5, thesis §6.3): the wire lies along e1 from -L to L (straight natural
+Set-up (docs/static_solution_path.md, thesis §6.3): the wire lies along e1 from -L to L (straight natural
 configuration, directors G1 = e2, G2 = e3); B = |B| (cos phi, 0, sin phi); a current
 I = J pi R^2 flows along +e1; the centroid ends are pinned and moved from +-L e1 to
 +-Delta e1. Solution path ``dynamic_relaxation``: backward-Euler dynamics with damping
@@ -18,7 +24,7 @@ thesis), ends moving at constant speed for ``duration``, then static Newton from
 state with velocities zeroed. Path ``continuation``: pseudo-transient continuation
 (K + sigma M) from the same start with the ends already at +-Delta. A twist gauge fixes
 the z component of g1 at the first node (the uniform rotation of circular sections about
-the centroid is a zero-energy mode; SPEC §7).
+the centroid is a zero-energy mode; docs/static_solution_path.md).
 """
 from __future__ import annotations
 
@@ -29,19 +35,21 @@ from pathlib import Path
 import numpy as np
 
 from ..analytic.helix import static_wire_reference
+from ..fem.assembly import DofLayout
 from ..fem.lagrange import lagrange_basis
 from ..fem.mesh import fibril_mesh, straight_fibril
 from ..fem.transfer import interpolate_nodal
 from ..model import BeamMaterial, BeamModel, DirichletBC, PrescribedCurrent
 from ..solvers.dirk import integrate
 from ..solvers.static import static_solve
+from .protocol import SceneFailure, SceneResult
 
-__all__ = ["build", "solve", "run", "centre_displacement"]
+__all__ = ["setup", "solve", "run", "centre_displacement", "initial_state", "clamp_ends", "newton_options"]
 
 log = logging.getLogger("rve.scenes.static_wire")
 
 
-def build(cfg, order: int | None = None, elements: int | None = None, gauge_end: int = 0):
+def setup(cfg, order: int | None = None, elements: int | None = None, gauge_end: int = 0) -> BeamModel:
     """The wire model on the configured mesh, or on (order, elements) if given.
 
     ``gauge_end`` picks the end (0 or 1) whose g1_z component carries the twist gauge."""
@@ -69,10 +77,11 @@ def build(cfg, order: int | None = None, elements: int | None = None, gauge_end:
         # ending at T uses the velocity at its end (backward Euler), so T itself is inside.
         return lambda t: np.array([-sign * speed if t <= T * (1 + 1e-12) else 0.0, 0.0, 0.0])
 
+    layout = DofLayout(mesh.n_nodes, ("mech",))
     bcs_dyn = [
-        DirichletBC(np.array([n0 * 9 + 0, n0 * 9 + 1, n0 * 9 + 2]), end_velocity(-1)),
-        DirichletBC(np.array([n1 * 9 + 0, n1 * 9 + 1, n1 * 9 + 2]), end_velocity(+1)),
-        DirichletBC(np.array([(n0, n1)[gauge_end] * 9 + 5]), 0.0),  # twist gauge: g1_z at one end
+        DirichletBC(layout.dofs("r", n0), end_velocity(-1)),
+        DirichletBC(layout.dofs("r", n1), end_velocity(+1)),
+        DirichletBC(layout.dofs("g1", (n0, n1)[gauge_end], comp=2), 0.0),  # twist gauge: g1_z at one end
     ]
     model = BeamModel(
         mesh, mat,
@@ -160,32 +169,37 @@ def _relax(model, cfg, nopts):
         x, w = initial_state(model, cfg, ends_at_clamps=True)
         x, w, pres = pseudo_transient_solve(model, x, np.zeros_like(w), T, atol=nopts["atol"], rtol=nopts["rtol"])
         if not pres.converged:
-            raise RuntimeError(f"pseudo-transient continuation failed: {pres.reason}")
+            raise SceneFailure("static_wire", f"pseudo-transient continuation failed: {pres.reason}",
+                               phase="continuation", state={"x": x}, model=model)
         return x, pres.iterations, pres.iterations
     raise ValueError(f"solver.path = {cfg.solver.path!r}: must be 'dynamic_relaxation' or 'continuation'")
 
 
 def _static(model, x, T, nopts, what):
+    x_start = x
     x, w, nres = static_solve(model, x, np.zeros_like(x), T, nopts)
     if not nres.converged:
-        raise RuntimeError(
+        raise SceneFailure(
+            "static_wire",
             f"static Newton on the {what} did not converge after {nres.iterations} iterations: {nres.reason}; "
-            f"residuals {[f'{r:.3e}' for r in nres.residuals]}")
+            f"residuals {[f'{r:.3e}' for r in nres.residuals]}",
+            phase=f"static Newton ({what})", step=f"Newton iteration {nres.iterations}",
+            state={"x": x_start}, model=model, details={"residuals": [float(r) for r in nres.residuals]})
     return x, nres
 
 
-def solve(cfg) -> dict:
+def solve(cfg) -> SceneResult:
     """Relax (optionally on a coarse mesh), then static Newton on the target mesh."""
     t_start = time.perf_counter()
     timings = {}
-    model = build(cfg)
+    model = setup(cfg)
     L = cfg.geometry.half_length
     T = cfg.solver.relaxation.duration
     nopts = newton_options(cfg, model)
     rx = cfg.solver.relaxation
     coarse = rx.coarse_order is not None and rx.coarse_elements is not None and (
         (rx.coarse_order, rx.coarse_elements) != (cfg.mesh.order, cfg.mesh.elements))
-    relax_model = build(cfg, rx.coarse_order, rx.coarse_elements) if coarse else model
+    relax_model = setup(cfg, rx.coarse_order, rx.coarse_elements) if coarse else model
     timings["setup"] = time.perf_counter() - t_start
     t1 = time.perf_counter()
     x, relax_steps, relax_newton = _relax(relax_model, cfg, nopts)
@@ -214,7 +228,7 @@ def solve(cfg) -> dict:
         cfg.load.current_density * cfg.load.field_magnitude / cfg.material.youngs_modulus,
         cfg.geometry.clamp_half_distance / L, cfg.load.field_angle)
     n_fixed = len(model.constraints(0.0)[0])
-    return {
+    summary = {
         "centre_displacement": centre_displacement(model, x, L),
         "analytical_centre_displacement": float(ref.centre_displacement),
         "newton_iterations": int(nres.iterations),
@@ -233,11 +247,15 @@ def solve(cfg) -> dict:
         "radius": float(cfg.fibril.radius),
         "min_det_F": model.basis.min_det_F(model.nodal(x)),
         "wall_time_s": {k: float(v) for k, v in timings.items()},
-        "_state": {"x": x, "model": model},
     }
+    return SceneResult(state={"x": x}, model=model, summary=summary)
 
 
 def run(cfg, out_dir: Path) -> dict:
-    out = solve(cfg)
-    out.pop("_state")
-    return out
+    try:
+        return solve(cfg).summary
+    except SceneFailure as failure:
+        if failure.state is not None:
+            failure.save(Path(out_dir) / "static_wire_last_good_state.npz")
+        log.error("%s", failure)
+        raise

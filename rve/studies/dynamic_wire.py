@@ -75,7 +75,6 @@ def load_scene_config(path=None, overrides: Sequence[str] = ()):
     """The validated ``DynamicWireConfig`` of ``path`` (YAML) with ``overrides``; the
     built-in defaults (the same numbers as configs/scenes/dynamic_wire.yaml) when ``path``
     is None."""
-    from ..config import dynamic_wire as _register  # noqa: F401  (puts the model in SCENE_MODELS)
     from ..config.loader import load_config
 
     source = {"scene": "dynamic_wire"} if path is None else path
@@ -84,14 +83,13 @@ def load_scene_config(path=None, overrides: Sequence[str] = ()):
 
 def run_point(cfg, stages: int, steps: int) -> dict:
     """One fixed-step run -> record (probes at t_max, wall time, Newton iterations)."""
-    from ..scenes.dynamic_wire import simulate
-
-    from ..solvers.dirk import IntegrationFailure
+    from ..scenes.dynamic_wire import solve
+    from ..scenes.protocol import SceneFailure
 
     t0 = time.perf_counter()
     try:
-        out = simulate(cfg, stages=stages, steps=steps, fixed_step=True, record=True)
-    except IntegrationFailure as exc:  # a fixed-step run that cannot be done: recorded as NaN
+        out = solve(cfg, stages=stages, steps=steps, fixed_step=True, record=True).summary
+    except SceneFailure as exc:  # a fixed-step run that cannot be done: recorded as NaN
         log.warning("s = %d, N = %d failed: %s", stages, steps, exc)
         return {"stages": int(stages), "steps": int(steps), "failed": str(exc),
                 "probes": {k: float("nan") for k in PROBE_NAMES}, "wall_time_s": time.perf_counter() - t0,

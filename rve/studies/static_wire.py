@@ -208,7 +208,7 @@ def convergence_point(scene_config_path: PathLike, order: int, elements: int, ra
     }
     t0 = time.perf_counter()
     try:
-        result = solve(cfg)
+        result = solve(cfg).summary
     except Exception as exc:  # noqa: BLE001 - recorded, or re-raised below
         if not keep_failure:
             raise
@@ -224,7 +224,6 @@ def convergence_point(scene_config_path: PathLike, order: int, elements: int, ra
             "wall_time_s": {"total": time.perf_counter() - t0},
         })
     else:
-        result.pop("_state", None)
         for key in ("order", "elements", "radius"):
             result.pop(key, None)
         record.update(to_jsonable(result))

@@ -18,7 +18,7 @@ from typing import Iterable, Mapping, Optional, Sequence, Union
 
 from ..config import config_as_dict
 from ..homogenisation.network import network_probes
-from ..homogenisation.strain import build_fabric
+from ..fabrics.setup import fabric_and_mesh
 from ..homogenisation.sweeps import combos, load_run_config, swept_dims
 from ..io.atomic import atomic_write_text
 from ..io.provenance import logging_to
@@ -70,7 +70,7 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
     with logging_to(log_path):
         cfgs = {c.id: load_run_config(spec, c.id) for c in combos(spec)}
         first = next(iter(cfgs.values()))
-        fab, mesh = build_fabric(first)
+        fab, mesh = fabric_and_mesh(first)
         records = gather_records(record_files, first.strain.modes)
         kinds = {c.fabric.kind for c in cfgs.values()}
         net = network_probes(first, fab) if len(kinds) == 1 or "knit" not in kinds else {}

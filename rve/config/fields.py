@@ -1,4 +1,14 @@
-"""Pydantic models of the scene configurations.
+"""Field types and base sections of every config model (docs/configuration.md).
+
+Contract
+--------
+In: nothing but pydantic and the unit conversion of :mod:`rve.config.units`. Out: the
+annotated quantity types (``Length``, ``MagneticField``, ... or ``Quantity(unit)``), the
+strict ``Integer``, the base classes :class:`Section` and :class:`SceneConfig`,
+:func:`cross_field_error` and :func:`field_unit`. No scene model lives here: the scene
+models are in their own modules (``rve.config.static_wire``, ``rve.config.dynamic_wire``,
+``rve.config.fabric``, ``rve.homogenisation.config``) and the one list of scenes is
+``rve.scenes.registry``.
 
 Every model forbids unknown keys. Fields with a physical dimension are declared with the
 annotated quantity types below; they accept a bare number (already in internal units) or
@@ -12,8 +22,8 @@ a string with units, and store the converted internal-unit ``float`` after valid
 Constraints (``gt``, ``ge``, ``lt``, ``le``) apply to the converted value, in internal
 units. Defaults may carry units too (``"1 T"``): sections validate their defaults.
 
-A new scene is a subclass of :class:`SceneConfig` with ``scene: Literal["name"]``,
-registered in :data:`SCENE_MODELS` (``register_scene_model`` does both checks).
+A new scene is a subclass of :class:`SceneConfig` with ``scene: Literal["name"]``, named
+in ``rve.scenes.registry.SCENES`` (docs/configuration.md, "Adding a scene").
 """
 from __future__ import annotations
 
@@ -21,7 +31,7 @@ import typing
 import types
 from typing import Annotated, Any, Literal, Optional
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from pydantic_core import PydanticCustomError
 
 from .units import UnitConversionError, convert, dimension_name
@@ -57,17 +67,7 @@ __all__ = [
     "Section",
     "SceneConfig",
     "cross_field_error",
-    "Geometry",
-    "Fibril",
-    "Material",
-    "WireLoad",
-    "Mesh",
-    "Relaxation",
-    "NewtonSettings",
-    "StaticWireSolver",
-    "StaticWireConfig",
-    "SCENE_MODELS",
-    "register_scene_model",
+    "scene_name",
     "field_unit",
 ]
 
@@ -202,105 +202,10 @@ def cross_field_error(key: str, relation: str, other: str, value: float, other_v
     )
 
 
-# --------------------------------------------------------------------------- static wire
-class Geometry(Section):
-    half_length: Length = Field(1.0, gt=0, description="half length L of the wire (mm); reference X1 in [-L, L]")
-    clamp_half_distance: Length = Field(
-        0.5, ge=0, description="half distance Delta between the pinned ends (mm); must be < half_length")
-
-    @model_validator(mode="after")
-    def _clamp_inside(self):
-        if not self.clamp_half_distance < self.half_length:
-            raise cross_field_error("clamp_half_distance", "<", "half_length",
-                                    self.clamp_half_distance, self.half_length, "mm")
-        return self
-
-
-class Fibril(Section):
-    radius: Length = Field(0.02, gt=0, description="fibril radius R (mm)")
-
-
-class Material(Section):
-    youngs_modulus: Stress = Field(0.01, gt=0, description="Young's modulus E (MPa)")
-    poisson_ratio: Dimensionless = Field(0.0, ge=0, lt=0.5, description="Poisson ratio nu (0 in all thesis results)")
-    density: Density = Field(1e-3, gt=0, description="mass density rho (g/mm^3)")
-
-
-class WireLoad(Section):
-    current_density: CurrentDensity = Field(1.0, description="axial current density J (A/mm^2)")
-    field_magnitude: MagneticField = Field("1 T", ge=0, description="magnetic field magnitude |B| (kT)")
-    field_angle: Angle = Field(
-        "45 deg", description="angle phi between B and the line through the supports (rad)")
-
-
-class Mesh(Section):
-    order: Integer = Field(2, ge=1, le=4, description="Lagrange element order p along the fibril")
-    elements: Integer = Field(40, ge=1, description="number of elements along the fibril")
-    disk_points: Literal[4, 8, 16] = Field(4, description="points of the unit-disk rule across the section")
-    axial_points: Optional[Integer] = Field(
-        None, ge=1, description="Gauss-Legendre points per element along the axis; null = order + 1")
-
-    @property
-    def resolved_axial_points(self) -> int:
-        """``axial_points``, or ``order + 1`` when it is null."""
-        return self.order + 1 if self.axial_points is None else self.axial_points
-
-
-class Relaxation(Section):
-    duration: Time = Field(5.0, gt=0, description="dynamic relaxation time T_max (ms)")
-    steps: Integer = Field(50, ge=1, description="time steps of the dynamic relaxation")
-    damping: DampingCoefficient = Field(
-        2e-3, ge=0, description="volumetric damping coefficient gamma of f = -gamma v (g/(mm^3 ms) = N ms/mm^4)")
-    perturbation: Dimensionless = Field(
-        0.01, ge=0, description="amplitude of the initial cosine z-offset, as a fraction of half_length")
-    coarse_order: Optional[Integer] = Field(
-        2, ge=1, le=4, description="relax on a coarse mesh of this order, then prolong (null: relax on the target mesh)")
-    coarse_elements: Optional[Integer] = Field(
-        8, ge=1, description="elements of the coarse relaxation mesh (null: relax on the target mesh)")
-
-
-class NewtonSettings(Section):
-    atol: Dimensionless = Field(1e-10, gt=0, description="absolute tolerance on the residual norm")
-    rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance on the residual norm")
-    max_iter: Integer = Field(50, ge=1, description="maximum Newton iterations")
-
-
-class StaticWireSolver(Section):
-    path: Literal["dynamic_relaxation", "continuation"] = Field(
-        "dynamic_relaxation",
-        description="how the static solution is reached: dynamic relaxation then static Newton, or load continuation")
-    relaxation: Relaxation = Field(default_factory=Relaxation)
-    newton: NewtonSettings = Field(default_factory=NewtonSettings)
-
-
-class StaticWireConfig(SceneConfig):
-    """The pinned wire in a magnetic field (thesis ch. 3, §6.3, Tables 6.1-6.2)."""
-
-    scene: Literal["static_wire"] = Field(description="scene name")
-    geometry: Geometry = Field(default_factory=Geometry)
-    fibril: Fibril = Field(default_factory=Fibril)
-    material: Material = Field(default_factory=Material)
-    load: WireLoad = Field(default_factory=WireLoad)
-    mesh: Mesh = Field(default_factory=Mesh)
-    solver: StaticWireSolver = Field(default_factory=StaticWireSolver)
-
-
-# --------------------------------------------------------------------------- registry
-#: scene name -> config model
-SCENE_MODELS: dict[str, type[SceneConfig]] = {"static_wire": StaticWireConfig}
-
-
-def register_scene_model(model: type[SceneConfig]) -> type[SceneConfig]:
-    """Class decorator: add ``model`` to :data:`SCENE_MODELS` under the value of its
-    ``scene: Literal["name"]`` field."""
+def scene_name(model: type[SceneConfig]) -> str:
+    """The scene name a config model declares: the value of its ``scene: Literal["name"]``
+    field. Raises TypeError if ``scene`` is not a one-value ``Literal``."""
     ann = model.model_fields["scene"].annotation
     if typing.get_origin(ann) is not Literal or len(typing.get_args(ann)) != 1:
         raise TypeError(f"{model.__name__}.scene must be declared as Literal['<name>']")
-    (name,) = typing.get_args(ann)
-    SCENE_MODELS[name] = model
-    return model
-
-
-# Scene models that live in their own modules register themselves on import; importing
-# them here makes every scene known wherever SCENE_MODELS is (loader, CLI validate/schema).
-from . import dynamic_wire as _dynamic_wire  # noqa: E402,F401
+    return typing.get_args(ann)[0]
