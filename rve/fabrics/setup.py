@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..contact.system import ContactParams, ContactSystem
+from ..model import ContactParams, ContactSystem
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, DirichletBC
 from .fabric import Fabric

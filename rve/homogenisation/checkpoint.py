@@ -150,7 +150,7 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
         cmap = contact.map
         xflat = np.ascontiguousarray(state.x).reshape(-1)
         if cmap.n_pairs:
-            geo = contact._geometry(xflat)
+            geo = contact.geometry(xflat)
             act = geo.active.sum(axis=1).astype(np.int32)
         else:
             act = np.zeros(0, np.int32)

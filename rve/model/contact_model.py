@@ -124,7 +124,6 @@ class ContactSystem:
         """Chord geometry (``ChordGeometry``) of the map's pairs (or pairs ``sel``) at ``x``."""
         return self.term.geometry(x, sel)
 
-    _geometry = geometry  # read by rve/homogenisation/checkpoint.py (tables helper): rename the call there
 
     def gaps(self, x) -> np.ndarray:
         """Overlaps g (n_pairs, n_gp) of every point of the map at ``x`` (no tangent data)."""
