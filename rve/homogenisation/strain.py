@@ -46,7 +46,8 @@ import time
 
 import numpy as np
 
-from ..contact.relax import RelaxSettings, capped_newton, minimize_energy, relax_to_equilibrium
+from ..solvers.minimize import capped_newton, minimize_energy
+from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from ..contact.system import ContactParams, ContactSystem
 from ..model import BeamMaterial, BeamModel, DirichletBC
 

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..contact.relax import RelaxSettings, relax_to_equilibrium
+from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from ..contact.system import ContactParams, ContactSystem
 from ..model import BeamMaterial, BeamModel, DirichletBC
 
@@ -291,7 +291,7 @@ def solve(cfg, on_rebuild=None) -> dict:
         summary["static_rates"] = [float(v) for v in getattr(sres, "rates", [])]
     # stability: inertia of the static tangent at the result (0 negative pivots: a local
     # minimum of the energy, not a saddle)
-    from ..contact.relax import factor_inertia
+    from ..solvers.linear import factor_inertia
     from ..solvers.static import StaticProblem
 
     prob = StaticProblem(system, res.x, np.zeros(system.n), res.t)
