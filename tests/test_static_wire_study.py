@@ -19,7 +19,7 @@ from rve.studies import static_wire as study
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = ROOT / "workflow" / "schemas" / "pipeline.schema.yaml"
 CI_CONFIG = "configs/tests/pipeline_ci.yaml"
-ANALYTICAL = 0.71243  # chapter 3 centre displacement / L (SPEC §7)
+ANALYTICAL = 0.71243  # chapter 3 centre displacement / L (docs/verification_static_wire.md)
 
 
 def _snakemake(cwd: Path, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:

@@ -6,13 +6,14 @@ is hard-coded here):
 
 * **radius sweep** at fixed order p and N elements: the centre displacement approaches the
   chapter-3 string solution (0.71243 L) as the radius R -> 0 (J, B, E fixed, so k = JB/E
-  does not change; SPEC §7: the bending contribution falls like R^2);
+  does not change; the bending contribution falls like R^2, docs/verification_static_wire.md);
 * **convergence** at one radius: p = 1..4, a list of N per p. The error of the centre
   displacement is measured against the finest solution of the study (highest p, largest
   N), as in the thesis, and its order is fitted by least squares on log(error) vs log(h),
   h = 2L/N, over a stated asymptotic range of N, separately for odd and even N.
 
-Where the centre sits decides the rate (SPEC §7). Even N: the centre is an element end
+Where the centre sits decides the rate (docs/verification_static_wire.md, "Why odd and
+even N"). Even N: the centre is an element end
 node, where 1D Galerkin solutions superconverge toward O(h^2p). Odd N: the centre is the
 midpoint of an element, an interior Lobatto node for even p (O(h^(p+2))) and not a node at
 all for odd p (O(h^(p+1)), the thesis's p+1). :func:`expected_order` returns these.
