@@ -1,4 +1,4 @@
-"""How the contact-map build scales (SPEC §3: not O(N_fibril^2 N_elem^2)).
+"""How the contact-map build scales (not O(N_fibril^2 N_elem^2): docs/contact_search.md "Scaling").
 
 For a woven layout (``rve.fabrics.plain_weave``: n x n yarns of 10 fibrils in 3-4-3
 stacks, in their crimped initial state) and a random layout (straight fibrils of length

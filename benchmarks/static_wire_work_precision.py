@@ -7,7 +7,7 @@ phase, path to it, total), and the error of the centre displacement against the 
 solution (p = 4, N = 36 by default, solved once with the first path that works). It writes
 the work-precision plot (error vs wall time, one line per p and path) and a CSV next to it,
 prints the cheapest configuration reaching error <= --tol (target: < 0.5 s) and the peak
-memory (ru_maxrss). Speed targets are reported, never asserted (SPEC §8).
+memory (ru_maxrss). Speed targets are reported, never asserted (docs/verification_static_wire.md).
 
     python benchmarks/static_wire_work_precision.py            # full grid, ~5-10 min
     python benchmarks/static_wire_work_precision.py --quick    # a few points, 1 run each

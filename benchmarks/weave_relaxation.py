@@ -61,8 +61,8 @@ def main(argv=None):
     import rve.scenes  # noqa: F401  (registers the scene config)
     from rve.config import load_config
     from rve.scenes import fabric_relax
-    from rve.contact.relax import factor_inertia
-    from rve.solvers.newton import sparse_solve
+    from rve.solvers.linear import factor_inertia
+    from rve.solvers.linear import sparse_solve
     from rve.solvers.static import StaticProblem
 
     cfg = load_config(args.config, [f"mesh.elements={args.elements}", *args.set])

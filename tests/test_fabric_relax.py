@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rve.config import load_config
-from rve.contact.relax import capped_newton
+from rve.solvers.minimize import capped_newton
 from rve.io.vtk import tube_surface, write_pvd, write_tubes
 from rve.scenes import SCENES, run_scene
 
@@ -160,7 +160,7 @@ def test_mesh_sequencing(tmp_path):
 def test_factor_inertia_counts_negative_eigenvalues():
     import scipy.sparse as sp
 
-    from rve.contact.relax import factor_inertia
+    from rve.solvers.linear import factor_inertia
 
     rng = np.random.default_rng(3)
     A = sp.random(60, 60, density=0.1, random_state=3)

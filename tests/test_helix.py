@@ -122,7 +122,7 @@ def test_thesis_case_root_structure_and_reference_value():
     h = static_wire_reference(*THESIS_CASE)
     assert (h.omega, h.r) == (sols[-1].omega, sols[-1].r)
     assert round(h.U, 3) == 1.047  # printed in the thesis
-    assert round(h.centre_displacement, 5) == 0.71243  # Table 6.1 / SPEC
+    assert round(h.centre_displacement, 5) == 0.71243  # Table 6.1 (docs/analytic_helix.md)
     assert h.omega == pytest.approx(2.2202787605, abs=1e-9)
     assert h.centre_displacement == pytest.approx(0.7124254037, abs=1e-9)
 

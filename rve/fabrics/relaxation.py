@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact.relax import RelaxSettings, factor_inertia, relax_to_equilibrium
+from ..solvers.linear import factor_inertia
+from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .setup import clamp_reactions, contact_params, fabric_and_mesh, mechanics_system
 from .stack import stack_geometry
 

@@ -75,7 +75,7 @@ class StrainPath(Section):
     newton_rtol: Dimensionless = Field(1e-3, gt=0, description="stage Newton relative tolerance (dynamic phases)")
     newton_max_iter: Integer = Field(8, ge=1, description="stage Newton iterations (then the step is cut)")
     static_method: Literal["energy", "newton"] = Field(
-        "energy", description="static solve of a step: energy minimisation (rve.contact.relax.minimize_energy) "
+        "energy", description="static solve of a step: energy minimisation (rve.solvers.minimize.minimize_energy) "
                               "or the capped Newton of the dynamic relaxation path")
     static_atol: Dimensionless = Field(1e-9, gt=0, description="static solve tolerance on |F| (N)")
     static_rounds: Integer = Field(1, ge=1, description="static solves, each after a map rebuild ('newton')")

@@ -25,7 +25,7 @@ From the stored state at strain eps_{n-1} to eps_n = eps_{n-1} + d with d = tota
    ``t_step`` and is the initial velocity of every node (centroids and directors: the
    affine field of the material points r + xi_a g_a). X is the **origin** of the strain
    path, the relaxed state, so after n steps the ends sit exactly at X + eps_n X1 e_i.
-   Backward Euler (``integrate`` through ``rve.contact.relax.relax_to_equilibrium`` with
+   Backward Euler (``integrate`` through ``rve.solvers.relaxation.relax_to_equilibrium`` with
    ``static=False``: chunks of ``rebuild_every`` steps, the contact map rebuilt between)
    with the light damping ``strain.damping`` (Table 7.1's gamma).
 2. **heavily damped relaxation** (1c-1d): velocities set to zero, the ends held, damping
@@ -48,9 +48,10 @@ import time
 
 import numpy as np
 
-from ..contact.relax import RelaxSettings, capped_newton, minimize_energy, relax_to_equilibrium
-from ..model import ContactSystem
 from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
+from ..model import ContactSystem
+from ..solvers.minimize import capped_newton, minimize_energy
+from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION"]
@@ -83,7 +84,7 @@ def _settings(duration, steps, k, rtol, max_iter, atol, static, static_rounds=4,
 
 
 def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
-    """Static equilibrium as a local minimum of the potential (``rve.contact.relax.minimize_energy``:
+    """Static equilibrium as a local minimum of the potential (``rve.solvers.minimize.minimize_energy``:
     trust-region Newton with an inertia check, the energy as merit, centroid steps capped,
     map rebuilt as fibrils move; docs/relaxation.md), from a state near it (plain Newton
     first), then a map rebuild that must find no newly active pair. Returns ``(x, info)``."""
@@ -107,7 +108,7 @@ def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
 
 def static_polish(system, x, atol: float, rounds: int, max_iter: int) -> tuple:
     """Bounded static solve: up to ``rounds`` capped-step Newton solves
-    (``rve.contact.relax.capped_newton``: centroid moves capped at half the search margin,
+    (``rve.solvers.minimize.capped_newton``: centroid moves capped at half the search margin,
     map rebuilt as fibrils move, Levenberg-Marquardt safeguard, |F| never increases), each
     after a contact-map rebuild, until converged with no newly active pair. No
     pseudo-transient fallback: the iteration budget is ``rounds * max_iter``.

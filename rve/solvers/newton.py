@@ -18,7 +18,8 @@ the Jacobian assembly at the converged point. ``residual`` must return the same 
 Returns a ``NewtonResult`` (never raises for non-convergence: the caller decides whether
 to cut a step or give up). Every iteration is logged at INFO on the ``rve.newton`` logger
 as ``it, |r|, |du|, rate`` where ``rate = log(r_k/r_k-1) / log(r_k-1/r_k-2)`` tends to 2
-for quadratic convergence.
+for quadratic convergence. The linear solves are ``rve.solvers.linear.sparse_solve``
+(docs/engine.md).
 """
 from __future__ import annotations
 
@@ -26,11 +27,10 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-__all__ = ["NewtonResult", "newton", "convergence_rates", "sparse_solve"]
+from .linear import sparse_solve
+
+__all__ = ["NewtonResult", "newton", "convergence_rates"]
 
 log = logging.getLogger("rve.newton")
 
@@ -59,59 +59,6 @@ def convergence_rates(res) -> list:
         else:
             out.append(float("nan"))
     return out
-
-
-#: Our Jacobians are structurally symmetric with dominant diagonals (beam stiffness, mass,
-#: conduction, contact penalties). SuperLU in symmetric mode (minimum degree on A^T + A,
-#: diagonal pivots) fills about half as much as COLAMD with partial pivoting: measured on
-#: the 80-fibril weave (21,760 free dofs) 0.77 s vs 1.65 s per factorisation, 4.2 M vs
-#: 9.1 M factor entries (docs/engine.md). If a diagonal pivot breaks down or the solve is
-#: inaccurate, we fall back to COLAMD with partial pivoting.
-_SYMMETRIC = dict(permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
-_FALLBACK_RTOL = 1e-8
-
-
-#: Single fibrils (and anything else whose node-interleaved matrix is narrowly banded) go
-#: to LAPACK's banded LU: for the 451-dof dynamic wire ~10x cheaper than SuperLU.
-_BANDED_MAX_BANDWIDTH = 48
-
-
-def _banded_solve(J, r):
-    """Solve with LAPACK gbsv if J is narrowly banded; None otherwise."""
-    n = J.shape[0]
-    if J.nnz == 0 or n < 8:
-        return None
-    # J is CSC without duplicate entries: columns from indptr, rows in indices
-    cols = np.repeat(np.arange(n), np.diff(J.indptr))
-    d = cols - J.indices
-    lo, up = int(max(0, -d.min())), int(max(0, d.max()))
-    if max(lo, up) > _BANDED_MAX_BANDWIDTH:
-        return None
-    ab = np.zeros((lo + up + 1, n))
-    ab[up - d, cols] = J.data
-    try:
-        return scipy.linalg.solve_banded((lo, up), ab, r, check_finite=False)
-    except np.linalg.LinAlgError:
-        return None
-
-
-def sparse_solve(J, r):
-    """Direct sparse solve J du = r: banded LAPACK for narrow bands, else SuperLU in
-    symmetric mode, with COLAMD + partial pivoting as the fallback."""
-    J = sp.csc_matrix(J)
-    J.sum_duplicates()
-    r = np.asarray(r, float)
-    du = _banded_solve(J, r)
-    if du is not None and np.all(np.isfinite(du)):
-        return du
-    try:
-        du = spla.splu(J, **_SYMMETRIC).solve(r)
-        rn = np.linalg.norm(r)
-        if np.all(np.isfinite(du)) and np.linalg.norm(J @ du - r) <= _FALLBACK_RTOL * max(rn, 1e-300):
-            return du
-    except RuntimeError:  # exactly singular diagonal pivot
-        pass
-    return spla.spsolve(J, r, permc_spec="COLAMD")
 
 
 def newton(

@@ -32,7 +32,8 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .newton import NewtonResult, convergence_rates, newton, sparse_solve
+from .linear import sparse_solve
+from .newton import NewtonResult, convergence_rates, newton
 from .system import FreeDofs, mech_mask
 
 __all__ = ["static_solve", "pseudo_transient_solve", "StaticProblem"]

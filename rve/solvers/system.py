@@ -30,6 +30,27 @@ and a companion vector ``x`` of the *same* size and layout::
   May always return True.
 
 The solvers only call these members; they never mutate the system.
+
+``ContactRelaxable`` is the larger protocol the energy minimiser and the relaxation
+driver (``rve.solvers.minimize``, ``rve.solvers.relaxation``; docs/relaxation.md) need
+of a system with a contact map that is rebuilt as the fibrils move (the model with a
+contact term, e.g. ``ContactSystem``): a ``DynamicSystem`` plus
+
+* ``layout`` -- its ``DofLayout`` (``layout.dofs("r")``: the centroid dofs, whose motion
+  per step is capped);
+* ``params.margin`` -- the search margin of the contact map (mm): a map built at ``x0``
+  holds every pair that can touch while no centroid moved more than half of it;
+* ``rebuild(x)`` -- rebuild the contact map at ``x`` (changes the sparsity structure of
+  the Jacobians; the residual and energy at ``x`` do not change under the guard);
+  ``max_displacement_since_rebuild(x)`` -- the largest centroid motion since then;
+* ``energy(x)`` -- the potential whose gradient is the static residual ``F(x, 0, t)``;
+* ``set_onset(fraction)`` -- the penalty onset width (fraction of R) of the contact law;
+* ``tangent_near`` -- float attribute (mm), read and written by the minimiser: while > 0
+  the tangent also holds the normal penalty stiffness of points closer than it;
+* ``map`` (``n_pairs``, ``e_plus``, ``e_minus``), ``active_pairs(x)`` (indices of the
+  pairs in contact) and ``contact_state(x)`` (dict with ``pairs``, ``active_pairs``,
+  ``max_overlap_over_R``) -- for the records and the check that a final rebuild finds no
+  pair the map missed.
 """
 from __future__ import annotations
 
@@ -38,7 +59,7 @@ from typing import Protocol, Tuple, runtime_checkable
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["DynamicSystem", "FreeDofs", "massless_dofs", "mech_mask", "scale_columns"]
+__all__ = ["DynamicSystem", "ContactRelaxable", "FreeDofs", "massless_dofs", "mech_mask", "scale_columns"]
 
 
 @runtime_checkable
@@ -66,6 +87,35 @@ class DynamicSystem(Protocol):
 
     def admissible(self, x: np.ndarray) -> bool:
         """False if ``x`` is inadmissible (det F <= 0 somewhere)."""
+        ...
+
+
+@runtime_checkable
+class ContactRelaxable(DynamicSystem, Protocol):
+    """A ``DynamicSystem`` with a rebuildable contact map and a potential energy; see the
+    module docstring for the members the minimiser and the relaxation driver use."""
+
+    layout: object
+    params: object
+    map: object
+    tangent_near: float
+
+    def rebuild(self, x: np.ndarray) -> None:
+        ...
+
+    def max_displacement_since_rebuild(self, x: np.ndarray) -> float:
+        ...
+
+    def energy(self, x: np.ndarray) -> float:
+        ...
+
+    def set_onset(self, fraction: float) -> None:
+        ...
+
+    def active_pairs(self, x: np.ndarray) -> np.ndarray:
+        ...
+
+    def contact_state(self, x: np.ndarray) -> dict:
         ...
 
 

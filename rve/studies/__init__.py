@@ -10,4 +10,4 @@ Modules are imported on demand (``from rve.studies import static_wire``) so that
 """
 from __future__ import annotations
 
-__all__ = ["static_wire"]
+__all__ = ["static_wire", "dynamic_wire", "convergence"]

@@ -29,7 +29,8 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
-from ..io.provenance import logging_to
+from ..io.provenance import cf_attributes, logging_to, package_version
+from .convergence import fit_order, fit_points
 
 __all__ = ["DEFAULT_PLAN", "PROBE_NAMES", "load_scene_config", "run_point", "run_series", "run_reference",
            "run_study", "build_dataset", "fit_orders", "orders_table", "plot_errors", "plot_work_precision",
@@ -220,15 +221,17 @@ def build_dataset(points: Sequence[Mapping], reference: Mapping, plan: Mapping):
         "h": ("steps", t_max / np.array(steps, float), {"long_name": "time step h = t_max / N", "units": "ms"}),
     }
     ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update({
-        "title": "rve dynamic wire: SDIRK time convergence (thesis §6.4, Table 6.4)",
-        "t_max_ms": t_max,
-        "reference_stages": int(reference["stages"]),
-        "reference_steps": int(reference["steps"]),
-        "plan": json.dumps(plan, default=str),
-        "rve_version": _version(),
-        "V_half_initial": float(reference["V_half_initial"]),
-    })
+    ds.attrs.update(cf_attributes(
+        title="rve dynamic wire: SDIRK time convergence (thesis §6.4, Table 6.4)",
+        source=f"rve {package_version()} rve.scenes.dynamic_wire.simulate",
+        references="Queiruga (2015), section 6.4, Fig. 6.4.4, Table 6.4; docs/coupled_fields.md",
+        history="rve.studies.dynamic_wire.build_dataset",
+        t_max_ms=t_max,
+        reference_stages=int(reference["stages"]),
+        reference_steps=int(reference["steps"]),
+        plan=json.dumps(plan, default=str),
+        V_half_initial=float(reference["V_half_initial"]),
+    ))
     orders = fit_orders(ds, plan)
     orders_max = fit_orders(ds, plan, prefix="max_error_")
     for k in PROBE_NAMES:
@@ -240,33 +243,20 @@ def build_dataset(points: Sequence[Mapping], reference: Mapping, plan: Mapping):
     return ds
 
 
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("rve")
-    except Exception:  # pragma: no cover
-        return "unknown"
-
-
 def fit_orders(ds, plan: Mapping, prefix: str = "error_") -> dict:
     """{s: {probe: slope of log(error) vs log(h) over the plan's fit range}} for the error
-    variables ``<prefix><probe>`` (``error_``: at t_max; ``max_error_``: max over time)."""
+    variables ``<prefix><probe>`` (``error_``: at t_max; ``max_error_``: max over time);
+    the one least-squares fit of ``rve.studies.convergence.fit_order`` (NaN with fewer than
+    two finite, positive errors in range)."""
     plan = normalise_plan(plan)
     out = {}
     for s in ds.stages.values:
         ser = plan["series"].get(int(s), {})
         lo, hi = ser.get("fit", [min(ds.steps.values), max(ds.steps.values)])
-        sel = (ds.steps.values >= lo) & (ds.steps.values <= hi)
         out[int(s)] = {}
         for k in PROBE_NAMES:
-            e = ds[f"{prefix}{k}"].sel(stages=s).values[sel]
-            h = ds.h.values[sel]
-            ok = np.isfinite(e) & (e > 0)
-            if ok.sum() < 2:
-                out[int(s)][k] = float("nan")
-                continue
-            out[int(s)][k] = float(np.polyfit(np.log(h[ok]), np.log(e[ok]), 1)[0])
+            e = ds[f"{prefix}{k}"].sel(stages=s).values
+            out[int(s)][k] = fit_order(ds.h.values, e, fit_points(ds.steps.values, e, lo, hi))
     return out
 
 

@@ -6,13 +6,14 @@ is hard-coded here):
 
 * **radius sweep** at fixed order p and N elements: the centre displacement approaches the
   chapter-3 string solution (0.71243 L) as the radius R -> 0 (J, B, E fixed, so k = JB/E
-  does not change; SPEC §7: the bending contribution falls like R^2);
+  does not change; the bending contribution falls like R^2, docs/verification_static_wire.md);
 * **convergence** at one radius: p = 1..4, a list of N per p. The error of the centre
   displacement is measured against the finest solution of the study (highest p, largest
   N), as in the thesis, and its order is fitted by least squares on log(error) vs log(h),
   h = 2L/N, over a stated asymptotic range of N, separately for odd and even N.
 
-Where the centre sits decides the rate (SPEC §7). Even N: the centre is an element end
+Where the centre sits decides the rate (docs/verification_static_wire.md, "Why odd and
+even N"). Even N: the centre is an element end
 node, where 1D Galerkin solutions superconverge toward O(h^2p). Odd N: the centre is the
 midpoint of an element, an interior Lobatto node for even p (O(h^(p+2))) and not a node at
 all for odd p (O(h^(p+1)), the thesis's p+1). :func:`expected_order` returns these.
@@ -24,7 +25,6 @@ the fitted orders) and :func:`report_job` (netCDF -> PNG plots and the orders ta
 from __future__ import annotations
 
 import contextlib
-import datetime as _dt
 import json
 import logging
 import math
@@ -37,8 +37,8 @@ from typing import Any, Iterable, Iterator, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
-from ..io.provenance import to_jsonable
-from ..io.provenance import logging_to, package_version
+from ..io.provenance import cf_attributes, logging_to, package_version, to_jsonable
+from .convergence import fit_order, fit_points
 
 __all__ = [
     "PARITIES",
@@ -58,7 +58,6 @@ __all__ = [
     "write_orders_table",
     "plot_radius_sweep",
     "plot_convergence",
-    "package_version",
     "point_job",
     "gather_job",
     "report_job",
@@ -387,24 +386,20 @@ def build_dataset(records: Iterable[Union[Mapping, PathLike]], *, convergence_ra
                                   "flag_meanings": "failed converged"})
 
     n_failed = int(np.nansum(ds["converged"].values == 0))
-    ds.attrs.update({
-        "title": "Static wire verification study (thesis section 6.3): radius sweep and "
-                 "convergence of the centre displacement",
-        "Conventions": "CF-1.10",
-        "institution": "rve",
-        "source": f"rve {package_version()} rve.scenes.static_wire.solve",
-        "references": "Queiruga (2015), section 6.3, Figs. 6.3.2-6.3.3, Tables 6.1-6.2; "
-                      "docs/verification_static_wire.md",
-        "rve_version": package_version(),
-        "source_revision": _git_revision(),
-        "date_created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "reference_solution": f"p={ref_p}, N={ref_n}, R={radius_token(r_sel)} mm",
-        "convergence_radius_mm": r_sel,
-        "points": len(recs),
-        "failed_points": n_failed,
-        "length_unit": "displacements and h are divided by the half-length L of the wire",
-    })
-    ds.attrs["history"] = f"{ds.attrs['date_created']}: rve.studies.static_wire.build_dataset"
+    ds.attrs.update(cf_attributes(
+        title="Static wire verification study (thesis section 6.3): radius sweep and "
+              "convergence of the centre displacement",
+        source=f"rve {package_version()} rve.scenes.static_wire.solve",
+        references="Queiruga (2015), section 6.3, Figs. 6.3.2-6.3.3, Tables 6.1-6.2; "
+                   "docs/verification_static_wire.md",
+        history="rve.studies.static_wire.build_dataset",
+        source_revision=_git_revision(),
+        reference_solution=f"p={ref_p}, N={ref_n}, R={radius_token(r_sel)} mm",
+        convergence_radius_mm=r_sel,
+        points=len(recs),
+        failed_points=n_failed,
+        length_unit="displacements and h are divided by the half-length L of the wire",
+    ))
     # one config per dataset: the scene config of the first converged point without the
     # point's own order / elements / radius (those are coordinates)
     first = next((r for r in recs if r.get("config")), None)
@@ -442,25 +437,14 @@ def gather_static_wire(records: Iterable[Union[Mapping, PathLike]], out_nc: Path
 
 
 # --------------------------------------------------------------------------- fits
-def _slope(h: np.ndarray, e: np.ndarray) -> float:
-    """Least-squares slope of log(e) vs log(h)."""
-    x, y = np.log(h), np.log(e)
-    A = np.vstack([x, np.ones_like(x)]).T
-    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-    return float(coef[0])
-
-
 def _fit_selection(err_at_r, order: int, parity: str, lo: int, hi: int, ref_p, ref_n):
     """(N, error, mask) of the points of order p, given parity, N in [lo, hi], finite
-    positive error, the reference solution excluded."""
+    positive error, the reference solution excluded (``rve.studies.convergence.fit_points``)."""
     e = err_at_r.sel(order=order)
     Ns = np.asarray(e["elements"].values, dtype=int)
     vals = np.asarray(e.values, dtype=float)
-    keep = ((Ns >= lo) & (Ns <= hi) & (Ns % 2 == (1 if parity == "odd" else 0))
-            & np.isfinite(vals) & (vals > 0))
-    if ref_p is not None and int(ref_p) == int(order):
-        keep &= Ns != int(ref_n)
-    return Ns, vals, keep
+    exclude = int(ref_n) if ref_p is not None and int(ref_p) == int(order) else None
+    return Ns, vals, fit_points(Ns, vals, lo, hi, parity, exclude=exclude)
 
 
 def _error_at_reference_radius(ds):
@@ -482,7 +466,7 @@ def fit_orders(ds, ranges: Mapping):
     "max": hi}`` or per parity ``{"odd": (lo, hi), "even": (lo, hi)}``. The slope of
     log(error) vs log(h) is fitted by least squares over the points in range with a finite,
     positive error; the reference solution (``error`` attributes) is excluded. Needs 2
-    points, else NaN.
+    points, else NaN (``rve.studies.convergence.fit_order``: the one fit of both studies).
 
     Stores ``fitted_order`` (order x parity) with ``fit_elements_min/max`` and
     ``fit_points`` in ``ds`` (in place) and returns the table as a pandas DataFrame with
@@ -509,7 +493,7 @@ def fit_orders(ds, ranges: Mapping):
             Ns, vals, keep = _fit_selection(err, p, parity, lo, hi, ref_p, ref_n)
             npts[i, j] = int(keep.sum())
             if npts[i, j] >= 2:
-                fitted[i, j] = _slope(2.0 / Ns[keep], vals[keep])
+                fitted[i, j] = fit_order(2.0 / Ns, vals, keep)
             rows.append({
                 "order": p, "parity": parity, "elements_min": lo, "elements_max": hi,
                 "points": int(npts[i, j]),

@@ -1,261 +1,50 @@
-"""Relaxation of a fibril assembly in contact to static equilibrium (thesis §6.3, §7.3).
+"""Energy minimiser and capped Newton for static equilibria under contact (docs/relaxation.md).
 
 Contract
 --------
-``relax_to_equilibrium(system, x, w, settings, on_rebuild=None) -> RelaxResult`` for a
-``ContactSystem``; ``settings.method`` picks the path (docs/relaxation.md):
+Both work on a mechanics-only ``ContactRelaxable`` system (``rve.solvers.system``: a
+``DynamicSystem`` with a rebuildable contact map, ``energy(x)``, ``layout``,
+``params.margin``; e.g. ``rve.model.ContactSystem``) at zero velocities, on the
+free dofs of ``rve.solvers.static.StaticProblem``, and rebuild the system's contact map
+themselves (their one side effect on the system besides ``tangent_near``).
 
-* ``"energy"`` (the fabric scene's default): the static equilibrium as a **local minimum
-  of the potential** ``system.energy(x)`` (beam strain energy + penalty energy; the static
-  residual is its exact gradient), by ``minimize_energy``: Newton with a Levenberg-Marquardt
-  trust region ``(K + sigma M) du = -F``, sigma raised until the factorisation has no
-  negative pivot (``factor_inertia``: the tangent of a stack of frictionless fibrils is
-  indefinite on the way down), the energy as merit (with ``backtrack`` energy-only step
-  halvings), the centroid step capped at half the search margin and the map rebuilt
-  before a trial that leaves the guard (no contact jumped over). A continuation in the
-  penalty onset (``onset_schedule``, fractions of R, the C² onset of
-  ``contact_forms.penalty_law``; the last entry is the law of the result) smooths the
-  first stages; the last stage ends with sigma = 0, i.e. plain Newton, quadratically.
-  Velocities are zero throughout.
-* ``"dynamic"`` (the previous path):
+* ``minimize_energy(system, x, t=0, ...) -> (x, w, MinimizeResult)``: the static
+  equilibrium as a **local minimum** of ``system.energy(x)``: Newton with a
+  Levenberg-Marquardt shift ``(K + sigma M) du = -F``, sigma raised until the
+  factorisation has no negative pivot (the inertia check,
+  ``rve.solvers.linear.factor_inertia``), the energy as merit, the centroid step capped
+  at half the search margin and the contact map rebuilt before a trial that leaves that
+  guard. Ends with sigma = 0 (plain Newton, quadratic convergence).
+* ``capped_newton(system, x, t, ...) -> (x, w, NewtonResult)``: Newton on
+  ``F(x, 0, t) = 0`` with the centroid motion per iteration capped, the map rebuilt after
+  ``step_cap`` of motion and a Levenberg-Marquardt safeguard on rejected steps.
+* ``active_pair_keys(system, x) -> (e_plus, e_minus)``: the element pairs in contact.
 
-1. **Dynamic relaxation**: backward Euler (``rve.solvers.dirk.integrate``, step control)
-   of the heavily damped dynamics over ``duration`` in ``steps`` nominal steps, the contact
-   map rebuilt every ``rebuild_every`` steps (Algorithm 5.2, thesis k = 5). ``integrate``
-   is called once per chunk of ``rebuild_every`` steps because a rebuild changes the
-   sparsity structure the stepper caches (docs/contact.md). A safety rebuild happens after
-   any step that moved a centroid more than half the search margin since the last
-   rebuild. Stops early when the largest nodal speed falls below ``v_tol``.
-2. **Static Newton with a capped step** (``capped_newton``) from the relaxed state with
-   velocities zeroed: the Newton step is scaled so that no centroid moves more than
-   ``step_cap`` (default half the search margin) in one iteration, halved while it makes
-   det F <= 0, and the contact map is rebuilt whenever a centroid has moved more than
-   half the margin since the last rebuild. Contacts the map did not hold cannot be skipped
-   over this way, and near the solution the full step is taken (quadratic convergence).
-   Repeated (``static_rounds``) until a rebuild at the solution finds no active pair the
-   previous map missed. If it fails, pseudo-transient continuation takes over.
-
-``RelaxResult``: final ``x``, ``w`` (zero velocities after the static phase), ``t``,
-``history`` (one dict per chunk/solve/stage: iterations, factorisations, residuals,
-energies, pairs, active pairs, max overlap / R, wall time), ``timings`` (seconds:
-dynamic, static, total), iteration counts, and the last static ``NewtonResult``
-(``MinimizeResult`` for the energy path).
+Neither solver raises for non-convergence: the result says ``converged`` and why not
+(``reason``). Moved here from ``rve/contact/relax.py`` (issue 9), arithmetic unchanged.
 """
 from __future__ import annotations
 
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
 
 import numpy as np
 
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
+from .linear import factor_inertia, sparse_solve
+from .newton import NewtonResult, convergence_rates
+from .static import StaticProblem
 
-from ..solvers.dirk import IntegrationFailure, integrate
-from ..solvers.newton import NewtonResult, convergence_rates, sparse_solve
-from ..solvers.static import StaticProblem, pseudo_transient_solve
+__all__ = ["minimize_energy", "MinimizeResult", "capped_newton", "active_pair_keys"]
 
-__all__ = ["RelaxSettings", "RelaxResult", "relax_to_equilibrium", "capped_newton", "minimize_energy",
-           "MinimizeResult", "factor_inertia"]
-
-log = logging.getLogger("rve.contact.relax")
+log = logging.getLogger("rve.solvers.minimize")
 
 
-@dataclass
-class RelaxSettings:
-    duration: float
-    steps: int
-    rebuild_every: int = 5
-    newton_atol: float = 1e-9
-    newton_rtol: float = 1e-6
-    newton_max_iter: int = 25
-    v_tol: float = 0.0
-    static: bool = True
-    static_atol: float = 1e-9
-    static_rtol: float = 1e-12
-    static_rounds: int = 4
-    static_max_iter: int = 40
-    step_cap: Optional[float] = None
-    method: str = "dynamic"
-    onset_schedule: tuple = (0.0,)
-    energy_max_iter: int = 300
-    time_budget: Optional[float] = None
-    backtrack: int = 3
-    near: float = 0.0
-    reuse: int = 0
-
-
-@dataclass
-class RelaxResult:
-    x: np.ndarray
-    w: np.ndarray
-    t: float
-    history: list = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
-    dynamic_steps: int = 0
-    dynamic_newton_iterations: int = 0
-    static_newton_iterations: int = 0
-    static_converged: bool = False
-    static_result: object = None
-
-
-def _free_residual(system, x, t):
-    F, _, _ = system.evaluate(x, np.zeros(system.n), t, jacobian=False)
-    idx, _ = system.constraints(t)
-    F = np.array(F, copy=True)
-    F[np.asarray(idx, dtype=np.int64)] = 0.0
-    return float(np.linalg.norm(F))
-
-
-def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Optional[Callable] = None,
-                         t0: float = 0.0) -> RelaxResult:
-    if settings.method == "energy":
-        return _relax_energy(system, x, settings, on_rebuild, t0)
-    if settings.method != "dynamic":
-        raise ValueError(f"unknown relaxation method {settings.method!r} (energy, dynamic)")
-    s = settings
-    t_start = time.perf_counter()
-    x = np.array(x, float, copy=True)
-    w = np.array(w, float, copy=True)
-    t = float(t0)
-    out = RelaxResult(x, w, t)
-    h = s.duration / max(1, s.steps)
-    nopts = {"atol": s.newton_atol, "rtol": s.newton_rtol, "max_iter": s.newton_max_iter}
-    k = max(1, int(s.rebuild_every))
-    done = 0
-    chunk = 0
-    guard = 0.5 * float(system.params.margin)
-    extra = [0]
-
-    def on_step(t_, x_, w_, info):
-        # safety: fibrils moved more than half the search margin since the last rebuild
-        # -> rebuild now (the stepper then assembles through its general path for the
-        # rest of the chunk, still exact)
-        if guard > 0 and system.max_displacement_since_rebuild(x_) > guard:
-            system.rebuild(x_)
-            extra[0] += 1
-
-    while done < s.steps and s.duration > 0:
-        m = min(k, s.steps - done)
-        system.rebuild(x)
-        try:
-            res = integrate(system, x, w, t, t + m * h, m, stages=1, newton_opts=nopts, consistent=False,
-                            on_step=on_step)
-        except IntegrationFailure as exc:
-            log.warning("dynamic relaxation stopped at t = %.4g: %s", exc.t, exc)
-            x, w, t = exc.x, exc.w, exc.t
-            break
-        x, w, t = res.x, res.w, res.t
-        done += m
-        chunk += 1
-        out.dynamic_steps += res.steps
-        out.dynamic_newton_iterations += res.newton_iterations
-        st = system.contact_state(x)
-        vmax = float(np.abs(w[system.mech]).max()) if np.any(system.mech) else 0.0
-        rec = {"phase": "dynamic", "t": t, "steps": res.steps, "rejected": res.rejected, "extra_rebuilds": extra[0],
-               "newton_iterations": res.newton_iterations, "pairs": st["pairs"],
-               "active_pairs": st["active_pairs"], "max_overlap_over_R": st["max_overlap_over_R"],
-               "max_speed": vmax, "wall_s": time.perf_counter() - t_start}
-        out.history.append(rec)
-        log.info("relax chunk %d: %s", chunk, rec)
-        if on_rebuild is not None:
-            on_rebuild(chunk, t, x, w)
-        if s.v_tol > 0 and vmax < s.v_tol:
-            break
-    out.timings["dynamic"] = time.perf_counter() - t_start
-    t1 = time.perf_counter()
-    w = np.zeros_like(w)
-    if s.static:
-        cap = s.step_cap if s.step_cap is not None else 0.5 * float(system.params.margin)
-        for rnd in range(s.static_rounds):
-            system.rebuild(x)
-            xs, ws, nres = capped_newton(system, x, t, atol=s.static_atol, rtol=s.static_rtol,
-                                         max_iter=s.static_max_iter, step_cap=cap)
-            how = "capped newton"
-            if not nres.converged:
-                log.warning("static Newton failed (%s); pseudo-transient continuation", nres.reason)
-                system.rebuild(xs)
-                xs2, ws2, pres = pseudo_transient_solve(system, xs, w, t, atol=s.static_atol, rtol=s.static_rtol,
-                                                        max_iter=200)
-                how = "pseudo-transient"
-                nres = NewtonResult(pres.u, pres.converged, nres.iterations + pres.iterations,
-                                    nres.residuals + pres.residuals, pres.reason)
-                xs, ws = xs2, ws2
-            out.static_newton_iterations += nres.iterations
-            x, w = xs, ws
-            out.static_result = nres
-            out.static_converged = bool(nres.converged)
-            # a rebuild at the solution: did pairs the map missed come into contact?
-            before = set(zip(*_active_keys(system, x)))
-            system.rebuild(x)
-            after = set(zip(*_active_keys(system, x)))
-            st = system.contact_state(x)
-            rec = {"phase": "static", "round": rnd + 1, "method": how, "converged": bool(nres.converged),
-                   "newton_iterations": int(nres.iterations), "residuals": [float(r) for r in nres.residuals],
-                   "pairs": st["pairs"], "active_pairs": st["active_pairs"],
-                   "max_overlap_over_R": st["max_overlap_over_R"], "wall_s": time.perf_counter() - t_start}
-            out.history.append(rec)
-            log.info("static round %d: converged=%s its=%d", rnd + 1, nres.converged, nres.iterations)
-            if nres.converged and after <= before:
-                break
-    out.timings["static"] = time.perf_counter() - t1
-    out.timings["total"] = time.perf_counter() - t_start
-    out.x, out.w, out.t = x, w, t
-    return out
-
-
-def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:
-    """Continuation in the penalty onset: ``minimize_energy`` with the onset width set to
-    each entry of ``s.onset_schedule`` in turn (fractions of R; the last is the law of the
-    result), each stage from the previous one's minimum. A map rebuild at the end checks
-    that no pair came into contact unseen (cannot happen under the step guard; logged)."""
-    t_start = time.perf_counter()
-    x = np.array(x, float, copy=True)
-    out = RelaxResult(x, np.zeros(system.n), float(t0))
-    sched = [float(v) for v in s.onset_schedule] or [float(system.params.onset)]
-    system.rebuild(x)
-    for k, eps in enumerate(sched):
-        system.set_onset(eps)
-        budget = None if s.time_budget is None else max(1.0, s.time_budget - (time.perf_counter() - t_start))
-        xs, _, res = minimize_energy(system, x, t0, atol=s.static_atol, rtol=s.static_rtol,
-                                     max_iter=s.energy_max_iter, step_cap=s.step_cap, label=f"onset={eps:g}R",
-                                     time_budget=budget, sigma0=None if k == 0 else 0.0,
-                                     backtrack=s.backtrack, near=s.near, reuse=s.reuse)
-        x = xs
-        st = system.contact_state(x)
-        rec = {"phase": "static", "stage": k + 1, "method": "minimize_energy", "onset_over_R": eps,
-               "converged": bool(res.converged), "newton_iterations": int(res.iterations),
-               "factorizations": int(res.factorizations), "reused_factorization_steps": int(res.reused),
-               "rejections": int(res.rejections),
-               "map_rebuilds": int(res.rebuilds), "negative_pivots": int(res.negative_pivots),
-               "residuals": [float(v) for v in res.residuals], "energies": [float(v) for v in res.energies],
-               "sigmas": [float(v) for v in res.sigmas], "steps": [float(v) for v in res.steps],
-               "pairs": st["pairs"], "active_pairs": st["active_pairs"],
-               "max_overlap_over_R": st["max_overlap_over_R"], "wall_s": time.perf_counter() - t_start,
-               "reason": res.reason}
-        out.history.append(rec)
-        out.static_newton_iterations += res.iterations
-        out.static_result = res
-        out.static_converged = bool(res.converged)
-        log.info("onset stage %d (%gR): converged=%s its=%d factorizations=%d |F|=%.3e Pi=%.10g wall=%.1f s",
-                 k + 1, eps, res.converged, res.iterations, res.factorizations, res.residuals[-1],
-                 res.energies[-1], rec["wall_s"])
-        if on_rebuild is not None:
-            on_rebuild(k + 1, float(t0), x, np.zeros(system.n))
-        if not res.converged and res.reason.startswith("time budget"):
-            break
-    before = set(zip(*_active_keys(system, x)))
-    system.rebuild(x)
-    after = set(zip(*_active_keys(system, x)))
-    if not after <= before:
-        log.warning("final map rebuild found %d active pairs the map had missed", len(after - before))
-        out.static_converged = False
-    out.timings["dynamic"] = 0.0
-    out.timings["static"] = out.timings["total"] = time.perf_counter() - t_start
-    out.x, out.w = x, np.zeros(system.n)
-    return out
+def _free_centroids(prob, layout) -> np.ndarray:
+    """Positions in the free-dof vector of ``prob`` of the free centroid dofs (``r``)."""
+    is_r = np.zeros(prob.n, dtype=bool)
+    is_r[layout.dofs("r")] = True
+    return np.flatnonzero(prob.free_mech & is_r[prob.free])
 
 
 def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20,
@@ -270,8 +59,7 @@ def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.0
 
     def setup(xc):
         prob = StaticProblem(system, xc, w0, t)  # fresh restriction plans for the current structure
-        free = prob.free
-        cen = np.flatnonzero(prob.free_mech & np.isin(free % lay.block, (0, 1, 2)))
+        cen = _free_centroids(prob, lay)
         return prob, cen, prob.fd.matrix(system.mass())
 
     prob, cen_idx, Mff = setup(np.asarray(x, float))
@@ -340,30 +128,10 @@ def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.0
                                          f"no convergence in {max_iter} iterations (|r| = {res[-1]:.3e})"))
 
 
-def _active_keys(system, x):
+def active_pair_keys(system, x):
+    """``(e_plus, e_minus)``: the element pairs of the current map in contact at ``x``."""
     act = system.active_pairs(x)
     return system.map.e_plus[act], system.map.e_minus[act]
-
-
-# ----------------------------------------------------------------------------- energy minimiser
-#: SuperLU as a symmetric factorisation: minimum degree on A^T + A, diagonal pivots only.
-#: For a symmetric matrix the diagonal of U is then the D of A = L D L^T (up to rounding),
-#: so the number of negative entries is the number of negative eigenvalues (Sylvester).
-_SYM = dict(permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
-
-
-def factor_inertia(A):
-    """Factorise the symmetric sparse ``A`` (SuperLU, symmetric mode, diagonal pivots) and
-    count its negative eigenvalues from the pivots. Returns ``(lu, n_negative)``;
-    ``(None, -1)`` when a pivot is exactly zero."""
-    try:
-        lu = spla.splu(sp.csc_matrix(A), **_SYM)
-    except RuntimeError:
-        return None, -1
-    d = lu.U.diagonal()
-    if not np.all(np.isfinite(d)):
-        return None, -1
-    return lu, int(np.count_nonzero(d < 0.0))
 
 
 @dataclass
@@ -371,7 +139,8 @@ class MinimizeResult(NewtonResult):
     """``NewtonResult`` of ``minimize_energy`` plus its per-iteration record:
     ``energies`` (N mm), ``sigmas`` (regularisation used by each accepted step),
     ``steps`` (step fraction alpha), ``factorizations``, ``rejections``, ``rebuilds``,
-    ``negative_pivots`` (inertia of the last unregularised tangent; 0: a local minimum)."""
+    ``negative_pivots`` (inertia of the last unregularised tangent; 0: a local minimum),
+    ``reused`` (modified-Newton steps with a kept factorisation)."""
 
     energies: list = field(default_factory=list)
     sigmas: list = field(default_factory=list)
@@ -385,7 +154,8 @@ class MinimizeResult(NewtonResult):
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
                     label="minimize", time_budget=None, backtrack=0, near=0.0, reuse=0):
-    """Static equilibrium of a mechanics-only ``ContactSystem`` as a **local minimum** of its
+    """Static equilibrium of a mechanics-only ``ContactRelaxable`` system (e.g. a
+    ``ContactSystem``) as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
     with a Levenberg-Marquardt trust region, an inertia check and the energy as merit.
 
@@ -407,11 +177,11 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     stiffest mode's; 0 to start with plain Newton from a near solution). Options measured
     without gain on the weave (docs/relaxation.md): ``near`` (mm; while steps are large the
     tangent also holds the normal penalty stiffness of points closer than this,
-    ``ContactSystem.tangent_near``) and ``reuse`` (modified-Newton steps with the same
+    the system's ``tangent_near``) and ``reuse`` (modified-Newton steps with the same
     factorisation while sigma > 0). Converged when ``|F_free| <= atol`` or
     ``<= rtol |F_0|``.
 
-    Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.contact.relax``.
+    Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
     """
     t0 = time.perf_counter()
     w0 = np.zeros(system.n)
@@ -423,7 +193,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
 
     def setup(xc):
         prob = StaticProblem(system, xc, w0, t)
-        cen = np.flatnonzero(prob.free_mech & np.isin(prob.free % lay.block, (0, 1, 2)))
+        cen = _free_centroids(prob, lay)
         return prob, cen, prob.fd.matrix(system.mass())
 
     x = np.array(x, float, copy=True)
