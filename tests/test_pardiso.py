@@ -118,7 +118,7 @@ def test_analysis_reused_for_the_same_pattern_and_redone_for_a_new_one():
     assert (f.analyses, f.factorizations) == (1, 2)
     assert _rel_res(A2, f.solve(b), b) < 1e-10
     assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(A2.toarray()) < 0))
-    # explicit zeros are part of the pattern: an entry pair set to 0.0 needs no new analysis
+    # an entry pair set to 0.0: the default (drop_zeros) re-analyses, once
     A3 = A2.copy()
     rows = np.repeat(np.arange(A3.shape[0]), np.diff(A3.indptr))
     k = np.flatnonzero(rows < A3.indices)[0]
@@ -126,8 +126,22 @@ def test_analysis_reused_for_the_same_pattern_and_redone_for_a_new_one():
     kt = A3.indptr[j] + np.flatnonzero(A3.indices[A3.indptr[j]:A3.indptr[j + 1]] == i)[0]
     A3.data[[k, kt]] = 0.0
     f.factorize(A3)
-    assert (f.analyses, f.factorizations) == (1, 3)
+    assert (f.analyses, f.factorizations) == (2, 3)
     assert _rel_res(A3, f.solve(b), b) < 1e-10
+    A3b = A3.copy()
+    A3b.data = A3b.data * 0.9  # same zeros, new values: reused
+    f.factorize(A3b)
+    assert (f.analyses, f.factorizations) == (2, 4)
+    assert _rel_res(A3b, f.solve(b), b) < 1e-10
+    f.factorize(A2)  # the zeros become nonzeros again: analysed again
+    assert f.analyses == 3
+    # drop_zeros=False: explicit zeros are part of the (stored) pattern, no new analysis
+    g = pardiso.PardisoFactorization(drop_zeros=False)
+    g.factorize(A2)
+    g.factorize(A3)
+    assert (g.analyses, g.factorizations) == (1, 2)
+    assert _rel_res(A3, g.solve(b), b) < 1e-10
+    g.release()
     # a new pattern: one new analysis
     A4 = (A2 + sp.random(A.shape[0], A.shape[0], density=0.01, random_state=7) * 1e-3).tocsr()
     A4 = ((A4 + A4.T) * 0.5).tocsr()
