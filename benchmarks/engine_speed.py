@@ -20,6 +20,7 @@ pivots and refinement steps. Variants:
 * ``pardiso_dropzeros``: as ``pardiso_reuse`` with the backend's ``drop_zeros=True`` (the
   explicit zeros of inactive contact pairs dropped in every factorisation, the copy
   included in the time; only for the matrices holding explicit zeros).
+* ``pardiso_nomatch_drop``: both (no matching/scaling, zeros dropped).
   The other PARDISO variants run with ``drop_zeros=False`` (the stored pattern).
 
 The machine (2 cores) is usually shared: compare ratios within one run, not across runs.
@@ -40,7 +41,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-VARIANTS = ("superlu", "pardiso_fresh", "pardiso_reuse", "pardiso_nomatch", "pardiso_dropzeros")
+VARIANTS = ("superlu", "pardiso_fresh", "pardiso_reuse", "pardiso_nomatch", "pardiso_dropzeros",
+            "pardiso_nomatch_drop")
 DEFAULT_ORDER = ("min12_first", "min12_first_keep", "min12_K", "min12_pd", "driven12", "min30_first",
                  "min30_first_keep", "min30_pd", "damped30", "impact_stage_mech", "impact_stage")
 
@@ -81,11 +83,11 @@ def worker(path: str, variant: str, repeats: int) -> dict:
         if not pardiso.available():
             return {"variant": variant, "skipped": pardiso.unavailable_reason()}
         M = A
-        drop = variant == "pardiso_dropzeros"
+        drop = variant in ("pardiso_dropzeros", "pardiso_nomatch_drop")
         if drop:
             rec["nnz"] = int(np.count_nonzero(A.data))
         # the backend drops the zeros itself (its factorisation time includes that copy)
-        f = pardiso.PardisoFactorization(matching=variant != "pardiso_nomatch", drop_zeros=drop)
+        f = pardiso.PardisoFactorization(matching="nomatch" not in variant, drop_zeros=drop)
         t0 = time.perf_counter()
         f.analyse(M)
         rec["analyse_s"] = time.perf_counter() - t0
@@ -162,7 +164,7 @@ def main(argv=None) -> None:
         meta = json.loads((d / f"{name}.json").read_text()) if (d / f"{name}.json").exists() else {}
         recs = []
         for v in a.variants:
-            if v == "pardiso_dropzeros" and not meta.get("explicit_zeros"):
+            if v in ("pardiso_dropzeros", "pardiso_nomatch_drop") and not meta.get("explicit_zeros"):
                 continue
             r = run_variant(d / f"{name}.npz", v, max(a.repeats, 5))
             recs.append(r)
