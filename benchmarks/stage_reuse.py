@@ -192,7 +192,6 @@ def main(argv=None) -> None:
     ca_its = np.array([r["carried_its"] for r in rec])
     st_rates = np.concatenate([r["stage_rates"] for r in rec if r["stage_rates"]] or [np.zeros(0)])
     ca_rates = np.concatenate([r["carried_rates"] for r in rec if r["carried_rates"]] or [np.zeros(0)])
-    xn = system.nodal(res.x)
     print(f"# {a.n}x{a.n} single-fibril plain weave, {a.elements} el/fibril, n={system.n} dofs, SDIRK2, "
           f"h={a.h:g} ms, {a.steps} steps, v0={a.v0:g} mm/ms; run wall {wall:.1f} s (incl. the measurement)")
     print(f"# max |w_z| at the end {np.abs(system.nodal(res.w)[:, 2]).max():.3g} mm/ms, "

@@ -74,7 +74,6 @@ from __future__ import annotations
 
 import ctypes
 import logging
-import os
 import platform
 from typing import Optional
 
