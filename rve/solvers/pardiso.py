@@ -1,0 +1,380 @@
+"""PARDISO (Intel MKL) as a factorisation backend: supernodal LDLᵀ of real symmetric
+indefinite matrices (``mtype = -2``) with the fill-reducing analysis reused per sparsity
+pattern (issue 10; measurements in docs/engine.md, "Supernodal backend (measured)").
+
+Contract
+--------
+``available() -> bool`` and ``unavailable_reason() -> str``: whether MKL's ``pardiso`` can
+be called (``pypardiso`` installed and its ``mkl_rt`` loadable; never on aarch64, where
+there is no MKL wheel). Nothing is loaded at import of this module: the library is found
+on the first ``available()`` or the first ``PardisoFactorization()``.
+
+``PardisoFactorization(threads=1, matching=True, drop_zeros=True, refinement=0,
+check=False)``, a stateful
+backend (registry name ``"pardiso"``) with the interface of the linear-solver layer
+(``rve/solvers/linear.py``: analyse / factorize / solve / negative_pivots):
+
+* ``analyse(A)``: phase 11 (METIS nested dissection, symbolic factorisation; with
+  ``matching`` also the symmetric weighted matching and scaling, which read the values)
+  on the upper triangle of ``A`` (CSR: its upper triangle; CSC: its arrays read as the
+  CSR of Aᵀ, i.e. the lower triangle of A — the same for a symmetric matrix). Missing
+  diagonal entries are added to the pattern as zeros (PARDISO requires the diagonal of a
+  symmetric matrix to be stored). Returns ``self``.
+* ``factorize(A, inertia=False)``: phase 22 only, reusing the analysis while ``A`` has the
+  pattern (shape, indptr, indices) that was analysed; a new pattern is analysed first.
+  Returns ``self``. Raises ``PardisoError`` (a ``RuntimeError``) on an error code.
+  With ``drop_zeros`` (default) the explicit zeros of ``A`` (inactive candidate contact
+  pairs, uncoupled field blocks of the element pattern: 33-58 % of the stored entries of
+  the stage matrices) are dropped before the pattern comparison, so the analysis is reused
+  while the *nonzero* pattern (the active contact set) is unchanged and redone when it
+  changes; measured (docs/engine.md) the factor then has 36-45 % fewer entries and a
+  factorisation costs 1.4-3.5x less, while the nonzero pattern changed at about one
+  stage start in ten of a dynamic weave run. ``drop_zeros=False`` keeps the stored pattern
+  (one analysis per contact map).
+* ``solve(b)``: phase 33 (b of shape (n,) or (n, k)); ``refinement_steps`` is the number
+  of iterative refinement steps PARDISO performed (iparm(7)). ``refinement=0`` is MKL's
+  default: two steps automatically when pivots were perturbed, none otherwise.
+* ``negative_pivots`` / ``positive_pivots``: iparm(23) / iparm(22) after the last
+  factorisation, the numbers of negative / positive eigenvalues of the D of LDLᵀ, i.e.
+  (Sylvester) of A itself, for the minimiser's inertia check.
+* ``perturbed_pivots``: iparm(14). A pivot smaller than 1e-8 ||A|| is replaced by ±1e-8
+  ||A|| (iparm(10) = 8, MKL's default for symmetric indefinite): then the factorisation is
+  of a nearby matrix, the solve is refined, and a caller that needs accuracy (or an exact
+  inertia) checks the residual / treats it as a near-singular factor.
+* ``factor_nnz`` (iparm(18): entries of L incl. diagonal), ``memory_kb`` (peak of
+  analysis, iparm(15); permanent + factorisation, iparm(16) + iparm(17)).
+* counters ``analyses``, ``factorizations``, ``solves``.
+* ``release()``: phase -1 (all MKL memory of this instance); also in ``__del__``.
+
+Pivoting (MKL's recommendation for symmetric indefinite matrices): Bunch–Kaufman 1×1 and
+2×2 pivots within the supernodes (iparm(21) = 1) with pivot perturbation (iparm(10) = 8);
+with ``matching=True`` (default) also symmetric weighted matching and scaling
+(iparm(13) = 1, iparm(11) = 1), computed in the analysis from the values of the matrix
+analysed: when the analysis is reused for new values with the same pattern, that
+matching/scaling is the old matrix's, which stays valid (the factorisation still pivots)
+but may perturb more pivots — ``perturbed_pivots`` says so.
+
+Threads: one MKL thread by default, set for the PARDISO domain before every call
+(``MKL_Domain_Set_Num_Threads(threads, MKL_DOMAIN_PARDISO)``), so results are
+deterministic run to run and two Snakemake jobs do not oversubscribe the two cores (the
+Snakefile also runs jobs with ``MKL_NUM_THREADS=1``). ``threads=None`` leaves MKL's own
+setting (``MKL_NUM_THREADS`` / all cores).
+
+Why our own ctypes call instead of ``pypardiso.PyPardisoSolver``: pypardiso is used only to
+*find* ``mkl_rt`` (its constructor's search: ``PYPARDISO_MKL_RT``, ``find_library``, the
+venv's ``lib``). Its ``_call_pardiso`` is private, converts ``indptr``/``indices`` to
+1-based int32 copies on every call (O(nnz) per phase), keeps no reference to the arrays
+PARDISO reads again during the solve's iterative refinement, and its ``factorize``/``solve``
+compare the whole matrix (values too) to decide whether to refactorise. Here the 0-based
+int32 pattern of the upper triangle is built once per pattern (iparm(35) = 1), only the
+values are gathered per factorisation, and the arrays PARDISO was given are kept alive
+until the next factorisation or ``release``.
+"""
+from __future__ import annotations
+
+import ctypes
+import logging
+import platform
+from typing import Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
+
+log = logging.getLogger("rve.solvers.pardiso")
+
+#: MKL_DOMAIN_PARDISO of mkl_types.h
+_MKL_DOMAIN_PARDISO = 4
+
+_ERRORS = {
+    -1: "input inconsistent", -2: "not enough memory", -3: "reordering problem",
+    -4: "zero pivot, numerical factorization or iterative refinement problem",
+    -5: "unclassified (internal) error", -6: "reordering failed", -7: "diagonal matrix is singular",
+    -8: "32-bit integer overflow", -9: "not enough memory for out-of-core", -10: "error opening OOC files",
+    -11: "read/write error with OOC files", -12: "pardiso_64 called from 32-bit library",
+    -13: "interrupted", -15: "internal error",
+}
+
+_LIB = None          # (CDLL, pardiso function) once loaded
+_REASON: Optional[str] = None
+
+
+class PardisoError(RuntimeError):
+    """PARDISO returned a non-zero error code."""
+
+    def __init__(self, code: int, phase: int):
+        self.code, self.phase = int(code), int(phase)
+        super().__init__(f"PARDISO phase {phase} failed with error {code}: {_ERRORS.get(code, 'unknown')}")
+
+
+def _load():
+    """Find mkl_rt the way pypardiso does and bind ``pardiso``; sets the reason on failure."""
+    global _LIB, _REASON
+    if _LIB is not None or _REASON is not None:
+        return _LIB
+    if platform.machine().lower() not in ("x86_64", "amd64", "i386", "i686", "x86"):
+        _REASON = f"no MKL on {platform.machine()} (MKL is x86 only)"
+        return None
+    try:
+        from pypardiso.pardiso_wrapper import PyPardisoSolver
+    except Exception as exc:  # ImportError, or MKL missing at pypardiso's import
+        _REASON = f"pypardiso not importable: {exc}"
+        return None
+    try:
+        path = PyPardisoSolver().libmkl._name
+        lib = ctypes.CDLL(path)  # a fresh CDLL object: our own function prototypes
+        fn = lib.pardiso
+    except Exception as exc:
+        _REASON = f"mkl_rt not loadable: {exc}"
+        return None
+    i32p = ctypes.POINTER(ctypes.c_int32)
+    fn.argtypes = [ctypes.c_void_p, i32p, i32p, i32p, i32p, i32p, ctypes.c_void_p, ctypes.c_void_p,
+                   ctypes.c_void_p, ctypes.c_void_p, i32p, ctypes.c_void_p, i32p, ctypes.c_void_p,
+                   ctypes.c_void_p, i32p]
+    fn.restype = None
+    try:
+        lib.MKL_Domain_Set_Num_Threads.argtypes = [ctypes.c_int, ctypes.c_int]
+        lib.MKL_Domain_Set_Num_Threads.restype = ctypes.c_int
+    except AttributeError:
+        pass
+    _LIB = (lib, fn)
+    return _LIB
+
+
+def available() -> bool:
+    """True when MKL's PARDISO can be called (see ``unavailable_reason`` otherwise)."""
+    return _load() is not None
+
+
+def unavailable_reason() -> str:
+    """Why ``available()`` is False ("" when it is True)."""
+    _load()
+    return _REASON or ""
+
+
+def mkl_library() -> str:
+    """Path of the mkl_rt library in use ("" when unavailable)."""
+    lib = _load()
+    return "" if lib is None else lib[0]._name
+
+
+def _upper_plan(A):
+    """The upper-triangle CSR pattern of the square CSR/CSC matrix ``A`` (canonical) with
+    every diagonal entry present: ``(indptr, indices (int32, 0-based), src, n_inserted)``
+    where ``data_u = A.data[src]`` (src = -1 marks an inserted zero diagonal)."""
+    n = A.shape[0]
+    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
+    cols = A.indices.astype(np.int64)
+    keep = np.flatnonzero(cols >= rows)
+    r, c = rows[keep], cols[keep]
+    has_diag = np.zeros(n, dtype=bool)
+    has_diag[r[r == c]] = True
+    missing = np.flatnonzero(~has_diag)
+    if missing.size:
+        r = np.concatenate([r, missing])
+        c = np.concatenate([c, missing])
+        src = np.concatenate([keep, np.full(missing.size, -1, dtype=np.int64)])
+        order = np.lexsort((c, r))
+        r, c, src = r[order], c[order], src[order]
+    else:
+        src = keep
+    indptr = np.zeros(n + 1, dtype=np.int32)
+    np.cumsum(np.bincount(r, minlength=n), out=indptr[1:])
+    return indptr, np.ascontiguousarray(c, dtype=np.int32), src, int(missing.size)
+
+
+class PardisoFactorization:
+    """MKL PARDISO LDLᵀ of a real symmetric (indefinite) sparse matrix (module docstring)."""
+
+    name = "pardiso"
+    provides_inertia = True
+    reuses_analysis = True
+
+    def __init__(self, threads: Optional[int] = 1, matching: bool = True, drop_zeros: bool = True,
+                 refinement: int = 0, check: bool = False, ordering: int = 2):
+        lib = _load()
+        if lib is None:
+            raise RuntimeError(f"PARDISO is not available: {_REASON}")
+        self._lib, self._fn = lib
+        self.threads = None if threads is None else int(threads)
+        self.symmetric = True
+        self.mtype = -2
+        self.pt = np.zeros(64, dtype=np.int64)  # PARDISO's internal handle (opaque pointers)
+        self.iparm = np.zeros(64, dtype=np.int32)
+        ip = self.iparm
+        ip[0] = 1                        # iparm(1): no solver defaults, all set here
+        ip[1] = int(ordering)            # iparm(2): 2 = METIS nested dissection, 0 = minimum degree
+        ip[7] = int(refinement)          # iparm(8): max iterative refinement steps (0: auto, 2 if perturbed)
+        ip[9] = 8                        # iparm(10): pivot perturbation 1e-8
+        ip[10] = 1 if matching else 0    # iparm(11): scaling
+        ip[12] = 1 if matching else 0    # iparm(13): symmetric weighted matching
+        ip[17] = -1                      # iparm(18): report factor nonzeros
+        ip[20] = 1                       # iparm(21): Bunch-Kaufman 1x1 and 2x2 pivoting
+        ip[23] = 0                       # iparm(24): classic factorisation (one thread)
+        ip[26] = 1 if check else 0       # iparm(27): matrix checker
+        ip[34] = 1                       # iparm(35): zero-based indices
+        self.matching = bool(matching)
+        self.drop_zeros = bool(drop_zeros)
+        self.n = 0
+        self._pattern = None             # (shape, indptr, indices) of the analysed input
+        self._plan = None
+        self._a = None                   # values handed to PARDISO (kept alive for phase 33)
+        self._factored = False
+        self._alive = False
+        self.analyses = self.factorizations = self.solves = 0
+        self.refinement_steps = 0
+        self.inserted_diagonal = 0
+
+    # ------------------------------------------------------------------ helpers
+    def _call(self, phase: int, a=None, b=None, x=None, nrhs: int = 1) -> None:
+        if self.threads is not None:
+            try:
+                self._lib.MKL_Domain_Set_Num_Threads(self.threads, _MKL_DOMAIN_PARDISO)
+            except AttributeError:
+                pass
+        i32 = ctypes.c_int32
+        err = i32(0)
+        if self._plan is not None:
+            ia, ja = self._plan[0], self._plan[1]
+        else:
+            ia = ja = np.zeros(1, dtype=np.int32)
+        dummy = np.zeros(1)
+        ptr = lambda v: (dummy if v is None else v).ctypes.data  # noqa: E731
+        self._fn(self.pt.ctypes.data, ctypes.byref(i32(1)), ctypes.byref(i32(1)), ctypes.byref(i32(self.mtype)),
+                 ctypes.byref(i32(phase)), ctypes.byref(i32(self.n)), ptr(a if a is not None else self._a),
+                 ia.ctypes.data, ja.ctypes.data, ctypes.c_void_p(None), ctypes.byref(i32(nrhs)),
+                 self.iparm.ctypes.data, ctypes.byref(i32(0)), ptr(b), ptr(x), ctypes.byref(err))
+        if err.value != 0:
+            raise PardisoError(err.value, phase)
+
+    def _canonical(self, A):
+        if not sp.issparse(A):
+            raise TypeError(f"PARDISO needs a scipy sparse matrix, got {type(A).__name__}")
+        if A.format not in ("csr", "csc"):
+            A = A.tocsr()
+        if A.shape[0] != A.shape[1]:
+            raise ValueError(f"matrix must be square, got shape {A.shape}")
+        if not A.has_canonical_format:
+            A = A.copy()
+            A.sum_duplicates()
+        if self.drop_zeros and A.nnz and not np.all(A.data):
+            A = A.copy()
+            A.eliminate_zeros()
+        return A
+
+    def _same_pattern(self, A) -> bool:
+        p = self._pattern
+        if p is None or p[0] != A.shape:
+            return False
+        return ((A.indptr is p[1] or np.array_equal(A.indptr, p[1]))
+                and (A.indices is p[2] or np.array_equal(A.indices, p[2])))
+
+    def _values(self, A):
+        src = self._plan[2]
+        if self.inserted_diagonal:
+            a = np.where(src >= 0, A.data[np.maximum(src, 0)], 0.0)
+        else:
+            a = A.data[src]
+        return np.ascontiguousarray(a, dtype=np.float64)
+
+    # ------------------------------------------------------------------ interface
+    def analyse(self, A) -> "PardisoFactorization":
+        """Phase 11 on the pattern (and, with ``matching``, the values) of ``A``."""
+        A = self._canonical(A)
+        if self._alive:
+            self.release()
+        self.n = int(A.shape[0])
+        self._plan = _upper_plan(A)
+        self.inserted_diagonal = self._plan[3]
+        self._pattern = (A.shape, A.indptr.copy(), A.indices.copy())
+        self._a = self._values(A)
+        self._factored = False
+        self._alive = True
+        self._call(11)
+        self.analyses += 1
+        return self
+
+    def factorize(self, A, inertia: bool = False) -> "PardisoFactorization":
+        """Phase 22 of ``A`` (phase 11 first if its pattern is not the analysed one).
+        ``inertia`` is accepted for the layer's interface: the counts are always there."""
+        A = self._canonical(A)
+        if not (self._alive and self._same_pattern(A)):
+            self.analyse(A)
+        self._a = self._values(A)
+        self._factored = False
+        self._call(22)
+        self._factored = True
+        self.factorizations += 1
+        return self
+
+    def solve(self, b) -> np.ndarray:
+        """Phase 33: x with A x = b for b of shape (n,) or (n, k)."""
+        if not self._factored:
+            raise RuntimeError("solve before factorize")
+        b = np.asarray(b, dtype=np.float64)
+        if b.shape[0] != self.n:
+            raise ValueError(f"right-hand side has {b.shape[0]} rows, the matrix {self.n}")
+        bf = np.asfortranarray(b)
+        x = np.zeros_like(bf, order="F")
+        self._call(33, b=bf, x=x, nrhs=1 if b.ndim == 1 else int(b.shape[1]))
+        self.solves += 1
+        self.refinement_steps = int(self.iparm[6])
+        return np.ascontiguousarray(x)
+
+    @property
+    def negative_pivots(self) -> int:
+        """iparm(23): negative eigenvalues of the last factorised matrix."""
+        if not self._factored:
+            raise RuntimeError("no factorisation")
+        return int(self.iparm[22])
+
+    @property
+    def positive_pivots(self) -> int:
+        """iparm(22): positive eigenvalues of the last factorised matrix."""
+        if not self._factored:
+            raise RuntimeError("no factorisation")
+        return int(self.iparm[21])
+
+    @property
+    def perturbed_pivots(self) -> int:
+        """iparm(14): pivots perturbed by the last factorisation."""
+        return int(self.iparm[13])
+
+    @property
+    def factor_nnz(self) -> int:
+        """iparm(18): nonzeros of the factor L (incl. its diagonal)."""
+        return int(self.iparm[17])
+
+    @property
+    def memory_kb(self) -> dict:
+        """PARDISO's memory: peak of the analysis and permanent + factorisation (KiB)."""
+        return {"analysis_peak": int(self.iparm[14]), "factorization": int(self.iparm[15]) + int(self.iparm[16])}
+
+    def stats(self) -> dict:
+        return {"analyses": self.analyses, "factorizations": self.factorizations, "solves": self.solves,
+                "negative_pivots": int(self.iparm[22]), "perturbed_pivots": self.perturbed_pivots,
+                "refinement_steps": self.refinement_steps, "factor_nnz": self.factor_nnz, **self.memory_kb}
+
+    def release(self) -> None:
+        """Phase -1: free all of this instance's MKL memory."""
+        if self._alive:
+            self._alive = False
+            self._factored = False
+            try:
+                self._call(-1)
+            except PardisoError as exc:  # pragma: no cover
+                log.warning("PARDISO release failed: %s", exc)
+        self._pattern = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+    def __del__(self):
+        try:
+            self.release()
+        except Exception:  # interpreter shutdown
+            pass

@@ -1,0 +1,185 @@
+"""The PARDISO backend (rve/solvers/pardiso.py): accuracy against SuperLU / dense solves,
+inertia against eigvalsh, analysis reuse per sparsity pattern. Skipped without pypardiso
+(e.g. on aarch64, where MKL has no wheel)."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from rve.solvers import pardiso
+
+pytestmark = pytest.mark.skipif(not pardiso.available(),
+                                reason=f"PARDISO unavailable: {pardiso.unavailable_reason()}")
+
+
+def _rel_res(A, x, b):
+    return np.linalg.norm(A @ x - b) / np.linalg.norm(b)
+
+
+def random_pattern(n, density, seed):
+    """A random symmetric sparsity pattern with a full diagonal (values 1)."""
+    B = sp.random(n, n, density=density, random_state=seed, format="coo")
+    P = (B + B.T + sp.eye(n)).tocsr()
+    P.data[:] = 1.0
+    return P
+
+
+def spd(n=400, density=0.01, seed=0):
+    rng = np.random.default_rng(seed)
+    P = random_pattern(n, density, seed)
+    A = P.copy()
+    A.data = rng.standard_normal(A.nnz)
+    A = (A + A.T) * 0.5
+    A = A + sp.diags(np.asarray(abs(A).sum(axis=1)).ravel() + 1.0)  # diagonally dominant
+    return A.tocsr()
+
+
+def with_inertia(n=300, n_neg=37, density=0.02, seed=1):
+    """Symmetric indefinite sparse matrix with exactly ``n_neg`` negative eigenvalues:
+    a congruence S D Sᵀ of a diagonal D with n_neg negative entries, S sparse unit lower
+    triangular (Sylvester's law of inertia)."""
+    rng = np.random.default_rng(seed)
+    L = sp.tril(sp.random(n, n, density=density / 4, random_state=seed), k=-1)
+    S = (sp.eye(n) + L).tocsr()
+    d = rng.uniform(0.5, 2.0, n)
+    d[rng.choice(n, n_neg, replace=False)] *= -1.0
+    A = (S @ sp.diags(d) @ S.T).tocsr()
+    A = ((A + A.T) * 0.5).tocsr()
+    A.sum_duplicates()  # canonical: sorted indices
+    return A
+
+
+@pytest.mark.parametrize("matching", [True, False])
+def test_spd_solve_matches_superlu(matching):
+    A = spd()
+    b = np.random.default_rng(2).standard_normal(A.shape[0])
+    f = pardiso.PardisoFactorization(matching=matching, check=True).factorize(A)
+    x = f.solve(b)
+    ref = spla.splu(A.tocsc()).solve(b)
+    assert _rel_res(A, x, b) < 1e-10
+    assert np.linalg.norm(x - ref) <= 1e-9 * np.linalg.norm(ref)
+    assert f.negative_pivots == 0 and f.positive_pivots == A.shape[0]
+    assert f.factor_nnz >= A.shape[0]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("fmt", ["csr", "csc"])
+def test_indefinite_solve_and_inertia(seed, fmt):
+    n_neg = 10 + 13 * seed
+    A = with_inertia(n_neg=n_neg, seed=seed)
+    neg = int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
+    assert neg == n_neg  # the construction
+    b = np.random.default_rng(seed).standard_normal(A.shape[0])
+    f = pardiso.PardisoFactorization(check=True).factorize(A.asformat(fmt))
+    x = f.solve(b)
+    assert _rel_res(A, x, b) < 1e-10
+    assert np.allclose(x, np.linalg.solve(A.toarray(), b), rtol=0, atol=1e-8 * np.abs(x).max())
+    assert f.negative_pivots == neg
+    assert f.positive_pivots == A.shape[0] - neg
+
+
+def test_random_indefinite_inertia_eigvalsh():
+    rng = np.random.default_rng(5)
+    P = random_pattern(250, 0.03, 5)
+    A = P.copy()
+    A.data = rng.standard_normal(A.nnz)
+    A = ((A + A.T) * 0.5 + sp.diags(rng.uniform(-2, 2, 250))).tocsr()
+    ev = np.linalg.eigvalsh(A.toarray())
+    assert np.abs(ev).min() > 1e-6  # not near singular: the inertia is well defined
+    f = pardiso.PardisoFactorization().factorize(A)
+    b = rng.standard_normal(250)
+    assert _rel_res(A, f.solve(b), b) < 1e-10
+    assert f.negative_pivots == int(np.count_nonzero(ev < 0))
+
+
+def test_several_right_hand_sides():
+    A = with_inertia(seed=4)
+    B = np.random.default_rng(4).standard_normal((A.shape[0], 3))
+    f = pardiso.PardisoFactorization().factorize(A)
+    X = f.solve(B)
+    assert X.shape == B.shape
+    for k in range(3):
+        assert _rel_res(A, X[:, k], B[:, k]) < 1e-10
+
+
+def test_analysis_reused_for_the_same_pattern_and_redone_for_a_new_one():
+    A = with_inertia(n_neg=20, seed=6)
+    rng = np.random.default_rng(6)
+    b = rng.standard_normal(A.shape[0])
+    f = pardiso.PardisoFactorization()
+    f.factorize(A)
+    assert (f.analyses, f.factorizations) == (1, 1)
+    # same pattern, new values (a different inertia: shift)
+    A2 = A.copy()
+    A2.data = A2.data * 1.7
+    A2 = (A2 + 0.3 * sp.diags(np.ones(A.shape[0]))).tocsr()  # the diagonal is in the pattern
+    assert np.array_equal(A2.indptr, A.indptr) and np.array_equal(A2.indices, A.indices)
+    f.factorize(A2)
+    assert (f.analyses, f.factorizations) == (1, 2)
+    assert _rel_res(A2, f.solve(b), b) < 1e-10
+    assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(A2.toarray()) < 0))
+    # an entry pair set to 0.0: the default (drop_zeros) re-analyses, once
+    A3 = A2.copy()
+    rows = np.repeat(np.arange(A3.shape[0]), np.diff(A3.indptr))
+    k = np.flatnonzero(rows < A3.indices)[0]
+    i, j = rows[k], A3.indices[k]
+    kt = A3.indptr[j] + np.flatnonzero(A3.indices[A3.indptr[j]:A3.indptr[j + 1]] == i)[0]
+    A3.data[[k, kt]] = 0.0
+    f.factorize(A3)
+    assert (f.analyses, f.factorizations) == (2, 3)
+    assert _rel_res(A3, f.solve(b), b) < 1e-10
+    A3b = A3.copy()
+    A3b.data = A3b.data * 0.9  # same zeros, new values: reused
+    f.factorize(A3b)
+    assert (f.analyses, f.factorizations) == (2, 4)
+    assert _rel_res(A3b, f.solve(b), b) < 1e-10
+    f.factorize(A2)  # the zeros become nonzeros again: analysed again
+    assert f.analyses == 3
+    # drop_zeros=False: explicit zeros are part of the (stored) pattern, no new analysis
+    g = pardiso.PardisoFactorization(drop_zeros=False)
+    g.factorize(A2)
+    g.factorize(A3)
+    assert (g.analyses, g.factorizations) == (1, 2)
+    assert _rel_res(A3, g.solve(b), b) < 1e-10
+    g.release()
+    # a new pattern: one new analysis
+    A4 = (A2 + sp.random(A.shape[0], A.shape[0], density=0.01, random_state=7) * 1e-3).tocsr()
+    A4 = ((A4 + A4.T) * 0.5).tocsr()
+    n_before = f.analyses
+    f.factorize(A4)
+    assert f.analyses == n_before + 1
+    assert _rel_res(A4, f.solve(b), b) < 1e-10
+    f.release()
+
+
+def test_missing_diagonal_is_inserted():
+    # a saddle-point matrix [[K, B^T], [B, 0]] whose (2,2) block has no stored diagonal
+    K = spd(60, 0.05, 3)
+    B = sp.random(10, 60, density=0.2, random_state=3)
+    A = sp.bmat([[K, B.T], [B, None]]).tocsr()
+    assert np.count_nonzero(A.diagonal()) == 60
+    f = pardiso.PardisoFactorization().factorize(A)
+    assert f.inserted_diagonal > 0
+    b = np.random.default_rng(3).standard_normal(70)
+    assert _rel_res(A, f.solve(b), b) < 1e-10
+    assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
+
+
+def test_errors_and_release():
+    f = pardiso.PardisoFactorization()
+    with pytest.raises(RuntimeError):
+        f.solve(np.ones(3))
+    with pytest.raises(ValueError):
+        f.factorize(sp.random(3, 4, density=0.5, format="csr"))
+    f.factorize(spd(50, 0.1, 9))
+    with pytest.raises(ValueError):
+        f.solve(np.ones(7))
+    f.release()
+    with pytest.raises(RuntimeError):
+        f.solve(np.ones(50))
+    f.release()  # idempotent
+
+
+def test_unavailable_reason_is_empty_when_available():
+    assert pardiso.unavailable_reason() == ""
+    assert pardiso.mkl_library()
