@@ -10,7 +10,7 @@
 import numpy as np
 import pytest
 
-from rve.contact.insulation import pull_down_circuits, unwired_fibrils
+from rve.model.insulation import pull_down_circuits, unwired_fibrils
 from rve.model import ContactParams, ContactSystem
 from rve.fem.mesh import fibril_mesh, straight_fibril
 from rve.model import BeamMaterial, BeamModel, DirichletBC

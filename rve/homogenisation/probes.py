@@ -7,7 +7,7 @@ Mechanics frozen (every mechanical dof constrained at the stored state), for eac
    Hertz width a(g) of the frozen contact state; V = U (the test voltage) on every node
    of the '+' terminal, V = 0 on the '-' terminal (Dirichlet); every other fibril end is
    insulated (natural condition), and the fibrils with no terminal node get the
-   **weakened insulation** of thesis §8.2 (``rve.contact.insulation.pull_down_circuits``:
+   **weakened insulation** of thesis §8.2 (``rve.model.insulation.pull_down_circuits``:
    a pull-down resistor ``R_ext = insulation_factor x`` the fibril's own resistance to
    0 V), which keeps a fibril that touches nothing well defined.
 2. **terminal currents**: the current into the fabric through a terminal is the reaction
@@ -38,7 +38,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..contact.insulation import pull_down_circuits
+from ..model.insulation import pull_down_circuits
 from ..model import ContactParams, ContactSystem
 from ..fabrics.setup import contact_params, end_nodes
 from ..fem.assembly import DofLayout

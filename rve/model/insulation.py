@@ -1,4 +1,4 @@
-"""Weakened insulation (thesis §8.2, SPEC §2): pull-down resistors on unwired fibrils.
+"""Weakened insulation (thesis §8.2; docs/contact.md, "Weakened insulation"): pull-down resistors on unwired fibrils.
 
 A fibril that touches no Dirichlet potential and no circuit has an undetermined constant
 mode in the quasistatic potential whenever it is not in contact with a wired fibril: the
@@ -34,7 +34,7 @@ def unwired_fibrils(mesh, wired_nodes) -> np.ndarray:
 def pull_down_circuits(mesh, sigma0: float, wired_nodes=(), factor: float = 1e6, V_ref: float = 0.0,
                        ends: str = "both"):
     """``CircuitBC`` pull-downs for every unwired fibril (module docstring)."""
-    from ..model import CircuitBC
+    from .materials import CircuitBC
 
     if not sigma0 > 0:
         raise ValueError(f"sigma0 must be > 0, got {sigma0}")
