@@ -1,0 +1,9 @@
+"""rve: textiles simulated fibril by fibril, and the lookup tables built from them.
+
+The package is layered (docs/architecture.md): ``io``, ``fem``, ``physics``, ``contact``
+(search), ``model`` (the assembled system as a sum of terms), ``solvers``, ``fabrics``,
+``config``, ``scenes``, ``homogenisation``, ``tables``, ``studies``, and the ``rve``
+command (``rve.cli``). Subpackages are imported on demand; nothing is re-exported here.
+"""
+__all__ = ["io", "fem", "physics", "contact", "model", "solvers", "fabrics", "config", "scenes",
+           "homogenisation", "tables", "studies", "analytic", "cli"]
