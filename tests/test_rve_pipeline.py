@@ -314,6 +314,7 @@ def test_rve_config_rejects_bad_probes_and_modes():
         S.load_run_config({"scene": {"material": {"seebeck": 1e-6}}})
 
 
+@pytest.mark.slow
 def test_sweep_runs_through_snakemake_with_one_dimension_per_parameter(tmp_path):
     """The CI config's `ci_sweep` (two contact conductances) through Snakemake: every
     combination has its own chain of jobs; the gathered table has a `contact_conductance`
