@@ -365,3 +365,28 @@ def run(cfg, out_dir: Path) -> dict:
     files = write_outputs(cfg, res, hist, out_dir)
     summary["files"] = files
     return summary
+
+
+def orientation_job(config_path, orientation: str, out_dir, summary_path, log_path, overrides=()) -> dict:
+    """One Snakemake job (workflow/rules/induced_deformation.smk): the scene of ``config_path``
+    with ``field.orientation = orientation`` (+ ``overrides``), outputs under ``out_dir``,
+    the summary written (atomically) to ``summary_path``, the log to ``log_path``."""
+    import json
+
+    from ..config.loader import load_config
+    from ..io.atomic import atomic_write_text
+    from .registry import run_scene
+
+    handler = logging.FileHandler(log_path, mode="w")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    root = logging.getLogger("rve")
+    root.addHandler(handler)
+    root.setLevel(logging.INFO)
+    try:
+        cfg = load_config(config_path, [f"field.orientation={orientation}", *overrides])
+        summary = run_scene(cfg, out_dir)
+        atomic_write_text(Path(summary_path), json.dumps(summary, indent=2, default=str))
+        return summary
+    finally:
+        root.removeHandler(handler)
+        handler.close()
