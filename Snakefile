@@ -25,6 +25,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/verification.smk"
 include: "workflow/rules/dynamic_wire.smk"
 include: "workflow/rules/rve.smk"
+include: "workflow/rules/induced_deformation.smk"
 
 
 rule all:

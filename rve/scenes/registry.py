@@ -71,6 +71,8 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
     Scene("dynamic_wire", "rve.config.dynamic_wire:DynamicWireConfig", "rve.scenes.dynamic_wire"),
     Scene("fabric_relax", "rve.config.fabric:FabricRelaxConfig", "rve.scenes.fabric_relax"),
     Scene("rve", "rve.homogenisation.config:RVEConfig", "rve.scenes.rve_pipeline", kind="pipeline"),
+    Scene("induced_deformation", "rve.config.induced_deformation:InducedDeformationConfig",
+          "rve.scenes.induced_deformation"),
 )}
 
 

@@ -1,0 +1,162 @@
+"""Config model of the induced-deformation scene (thesis §8.3, Table 8.1, Appendix A).
+
+Contract: :class:`InducedDeformationConfig` and its sections. Named in
+``rve.scenes.registry.SCENES``; the scene is ``rve.scenes.induced_deformation``. The
+readings of Table 8.1 and the choices where the thesis is silent: docs/induced_deformation.md.
+"""
+from __future__ import annotations
+
+from typing import Literal, Optional, Union
+
+from pydantic import Field, field_validator, model_validator
+
+from .fields import (
+    ContactConductance, CurrentDensity, DampingCoefficient, Density, Dimensionless, ElectricConductivity,
+    HeatTransferCoefficient, Integer, Length, MagneticField, Quantity, SceneConfig, Section, SpecificHeat, Stress,
+    Temperature, ThermalConductivity, Time, cross_field_error,
+)
+
+__all__ = ["InducedDeformationConfig", "ORIENTATIONS"]
+
+SeebeckCoefficient = Quantity("V/K")
+SofteningRate = Quantity("MPa/K")
+#: r_bar of the mixed condition J_n = r_bar V + J_bar (current density per volt)
+CircuitConductance = Quantity("A/(mm^2*V)")
+Penalty = Quantity("N/mm^2")
+
+#: the three field orientations of §8.3 (unit vectors; B = |B| * orientation)
+ORIENTATIONS = {
+    "B1": (0.7071067811865476, 0.7071067811865476, 0.0),   # cos pi/4 e_x + sin pi/4 e_y: cork-screw
+    "B2": (0.0, 1.0, 0.0),                                  # e_y: current along x -> force along +z
+    "B3": (0.0, 0.7071067811865476, 0.7071067811865476),   # cos pi/4 e_y + sin pi/4 e_z: up and sideways
+}
+
+
+class InducedGeometry(Section):
+    n_warp: Integer = Field(4, ge=1, description="warp yarns (along x, single fibril each)")
+    n_weft: Integer = Field(4, ge=1, description="weft yarns (along y, single fibril each)")
+    span: Length = Field("10 mm", gt=0, description="L: distance between the pinned ends of every yarn; "
+                                                    "yarn spacing = span / count")
+    natural_length: Length = Field("12.5 mm", gt=0, description="L0: natural (reference) length of every fibril; "
+                                                                "L0 > L: the yarns start slack, crimped")
+
+    @model_validator(mode="after")
+    def _slack(self):
+        if not self.natural_length > self.span:
+            raise cross_field_error("geometry.natural_length", ">", "geometry.span", self.natural_length,
+                                    self.span, "mm")
+        return self
+
+
+class InducedYarn(Section):
+    radius: Length = Field(gt=0, description="fibril radius R (mm)")
+    r_bar: CircuitConductance = Field(description="r_bar of the mixed end condition J_n = r_bar V + J_bar")
+    J_bar: CurrentDensity = Field(description="J_bar of the mixed end condition (outward normal; negative = "
+                                              "current flows into the fibril)")
+
+
+def _warp():
+    return InducedYarn(radius="0.4 mm", r_bar="100 A/(mm^2*V)", J_bar="-1000 A/mm^2")
+
+
+def _weft():
+    return InducedYarn(radius="0.6 mm", r_bar="0.001 A/(mm^2*V)", J_bar="0 A/mm^2")
+
+
+class InducedMaterial(Section):
+    youngs_modulus: Stress = Field("1.26 MPa", gt=0, description="E")
+    poisson_ratio: Dimensionless = Field(0.0, ge=0, lt=0.5, description="nu")
+    density: Density = Field("0.00144 g/mm^3", gt=0, description="rho")
+    electrical_conductivity: ElectricConductivity = Field("10 S/mm", gt=0, description="sigma")
+    thermal_conductivity: ThermalConductivity = Field("1.0 W/(mm*K)", gt=0, description="k")
+    heat_capacity: SpecificHeat = Field("1000 J/(kg*K)", gt=0,
+                                        description="c_p: not in Table 8.1 (chosen, docs/induced_deformation.md)")
+    damping: DampingCoefficient = Field(
+        "0.1 N*s/m^4", ge=0, description="volumetric gamma; Table 8.1's '0.1 N s/m' read per volume as for the "
+                                         "dynamic wire (docs/coupled_fields.md); Appendix A's script has 0.01")
+    seebeck: SeebeckCoefficient = Field("0 V/K", description="S (0: T does not feed back)")
+    alpha_mu: SofteningRate = Field("0 MPa/K", description="d mu / d T (0: T does not feed back)")
+
+
+class InducedContact(Section):
+    penalty: Penalty = Field("500 N/mm^2", gt=0, description="P* (Table 8.1 '500 N/mm', per unit overlap)")
+    heat_transfer: HeatTransferCoefficient = Field("0.1 W/(mm^2*K)", ge=0, description="h_C")
+    conductance: ContactConductance = Field("1.0 A/(mm^2*V)", ge=0, description="sigma_C")
+    n_gp: Integer = Field(4, ge=1, description="contact points per element pair")
+    margin: Length = Field("0.3 mm", ge=0, description="search cutoff = 2 max R + margin (1.5 mm: Appendix A)")
+    g_eps: Dimensionless = Field(1e-3, ge=0, description="Hertz width regularisation, fraction of R")
+    rebuild_every: Integer = Field(5, ge=1, description="contact map rebuilt every k accepted steps (Appendix A)")
+
+
+class InducedField(Section):
+    magnitude: MagneticField = Field("0.005 kT", ge=0, description="|B|")
+    orientation: Union[Literal["B1", "B2", "B3"], list[float]] = Field(
+        "B2", description="B1, B2, B3 (§8.3) or any 3-vector (normalised)")
+    ramp_time: Time = Field("0 ms", ge=0, description="C2 switch-on of B over this time (0: a step, the thesis)")
+
+    @field_validator("orientation")
+    @classmethod
+    def _vector(cls, v):
+        if isinstance(v, list):
+            if len(v) != 3 or sum(c * c for c in v) == 0:
+                raise ValueError("orientation vector must have 3 components, not all 0")
+        return v
+
+
+class InducedCoupling(Section):
+    temperature: Literal["post", "monolithic"] = Field(
+        "post", description="post: T solved after every accepted step from the stage states (S = alpha_mu = 0); "
+                            "monolithic: T dofs inside every stage Newton")
+    lorentz: bool = Field(True, description="Lorentz force of the conduction current")
+    back_emf: bool = Field(True, description="motional EMF")
+
+
+class InducedMesh(Section):
+    elements: Integer = Field(30, ge=1, description="linear elements per fibril")
+    disk_points: Literal[4, 8, 16] = Field(4, description="unit-disk rule across the section")
+
+
+class InducedTime(Section):
+    t_end: Time = Field("15 ms", gt=0, description="horizon (Appendix A: 15 ms)")
+    steps: Integer = Field(3000, ge=1, description="nominal steps (Appendix A: 3000)")
+    stages: Literal[1, 2, 3] = Field(2, description="SDIRK stages (Appendix A: 2)")
+    step_control: bool = Field(True, description="halve and retry failed steps")
+    max_cuts: Integer = Field(8, ge=0, description="consecutive cuts before giving up")
+    store_every: Integer = Field(10, ge=1, description="store the state every k nominal chunks of steps "
+                                                       "(Appendix A outputs every 10 steps)")
+
+
+class InducedNewton(Section):
+    atol: Dimensionless = Field(1e-9, gt=0, description="absolute tolerance of the row-scaled stage residual")
+    rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance")
+    max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
+    integrator_options: dict = Field(
+        default_factory=dict, description="extra keyword options of rve.solvers.dirk.integrate (e.g. the "
+                                          "factorisation-reuse options of issue 10 once merged)")
+
+
+class InducedOutput(Section):
+    vtk: bool = Field(True, description="write the .pvd series of tube meshes")
+    vtk_every: Integer = Field(1, ge=1, description="every k-th stored state goes to the .pvd series")
+    png: bool = Field(True, description="render PNG frames (headless)")
+    frames: Integer = Field(4, ge=1, description="time frames in the PNG strip")
+    n_theta: Integer = Field(12, ge=3, description="points around a tube section")
+
+
+class InducedDeformationConfig(SceneConfig):
+    """A current-carrying plain weave moved by a magnetic field (thesis §8.3)."""
+
+    scene: Literal["induced_deformation"] = Field(description="scene name")
+    geometry: InducedGeometry = Field(default_factory=InducedGeometry)
+    warp: InducedYarn = Field(default_factory=_warp)
+    weft: InducedYarn = Field(default_factory=_weft)
+    material: InducedMaterial = Field(default_factory=InducedMaterial)
+    contact: InducedContact = Field(default_factory=InducedContact)
+    field: InducedField = Field(default_factory=InducedField)
+    coupling: InducedCoupling = Field(default_factory=InducedCoupling)
+    mesh: InducedMesh = Field(default_factory=InducedMesh)
+    time: InducedTime = Field(default_factory=InducedTime)
+    newton: InducedNewton = Field(default_factory=InducedNewton)
+    output: InducedOutput = Field(default_factory=InducedOutput)
+    end_temperature: Temperature = Field("0 K", description="T held at every fibril end")
+    label: Optional[str] = Field(None, description="free text for the outputs")

@@ -1,0 +1,235 @@
+"""Scene-level helpers of the induced-deformation scene: the thermal operators (conduction,
+capacity, contact heat transfer), the per-step temperature post-solve, and the charge and
+energy balance terms of a stored state (docs/induced_deformation.md "Balances").
+
+Contract
+--------
+* ``ThermalOperators(system, h_C)``: for a ``ContactSystem`` (mech + V, or mech + T + V):
+  ``M`` (capacity, W... mJ/K), ``K`` (conduction, W/K) on the nodes, ``contact(x)`` the
+  contact heat-transfer matrix ``h_C a [[T]]`` of the map's active pairs at x (exactly the
+  monolithic contact term's T block: ``rve.physics.contact_forms.scalar_jump``), ``joule(x,
+  w, t)`` the nodal Joule heat (W), ``fixed`` the T = 0 end nodes.
+* ``ThermalPostSolver(ops, tableau)``: ``step(T0, stages, t0, h) -> T1``: one SDIRK step of
+  the heat equation ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` with the stage states
+  ``[(x_i, w_i)]`` of the mechanical/electrical step: one sparse solve per stage (T does
+  not feed back: S = alpha_mu = 0), the same stage equations as the monolithic solve.
+* ``StateBalances(system, ops, circuits)``: ``__call__(x, w, t, T)`` -> dict of the charge
+  (currents in/out/leak, A), electrical (circuit power, Joule, contact Joule, Lorentz power,
+  W), mechanical (kinetic, strain, contact energy, mJ; damping power, W) and thermal (heat
+  content mJ, heat leaving through the ends W) terms of one state.
+* ``balance_errors(series)``: time integrals (trapezoid over the accepted steps) and the
+  relative errors of the charge, electrical, mechanical, thermal and total balances.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..model.assembler import ElementState
+from ..physics.contact_forms import scalar_jump
+from ..physics.thermal_forms import capacity_matrix, conduction, joule_source
+from ..model.terms.elasticity import beam_strain_energy
+
+__all__ = ["ThermalOperators", "ThermalPostSolver", "StateBalances", "balance_errors"]
+
+
+class ThermalOperators:
+    def __init__(self, system, h_C: float, fixed_nodes):
+        base = system.base
+        self.system, self.base = system, base
+        mesh, ops, mat = base.mesh, base.ops, base.material
+        self.n = mesh.n_nodes
+        nn = base.basis.nn
+        rows = np.repeat(mesh.conn, nn, axis=1).ravel()
+        cols = np.tile(mesh.conn, (1, nn)).ravel()
+        E = mesh.n_elements
+        Mc = capacity_matrix(ops, mat.density * mat.heat_capacity)
+        Kc = conduction(ops, mat.thermal_conductivity, np.zeros((E, nn)))[1]
+        self.M = sp.csr_matrix((Mc.ravel(), (rows, cols)), shape=(self.n, self.n))
+        self.K = sp.csr_matrix((Kc.ravel(), (rows, cols)), shape=(self.n, self.n))
+        self.h_C = float(h_C)
+        self.fixed = np.asarray(fixed_nodes, np.int64)
+        self.free = np.setdiff1d(np.arange(self.n), self.fixed)
+
+    def contact(self, x):
+        """Contact heat-transfer matrix (n_nodes, n_nodes) at x (the map's active pairs)."""
+        term = self.system.term
+        if self.h_C <= 0 or term.map is None or term.map.n_pairs == 0:
+            return sp.csr_matrix((self.n, self.n))
+        act = term.active_pairs(x)
+        if act.size == 0:
+            return sp.csr_matrix((self.n, self.n))
+        geo = term.geometry(x, act)
+        conn, cmap = self.base.mesh.conn, term.map
+        nn = conn.shape[1]
+        z = np.zeros((act.size, nn))
+        _, Ju, _ = scalar_jump(geo, self.base.mesh.order, z, z, term.weight[act], self.h_C, term.kappa[act],
+                               term.g_eps, True)
+        loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)  # (Pa, 2nn)
+        m = loc.shape[1]
+        r = np.repeat(loc, m, axis=1).ravel()
+        c = np.tile(loc, (1, m)).ravel()
+        return sp.csr_matrix((Ju.ravel(), (r, c)), shape=(self.n, self.n))
+
+    def joule(self, x, w, t):
+        """Nodal Joule heat (W) at the state."""
+        return self.base.joule_power(x, w, t)
+
+    def residual(self, T, x, w, t):
+        """F_T = (K + K_c(x)) T - Q (no capacity term)."""
+        return (self.K + self.contact(x)) @ T - self.joule(x, w, t)
+
+    def rate(self, T, x, w, t):
+        """dT/dt at the free nodes from the heat equation (0 at the fixed ends) and the heat
+        leaving through the fixed ends (W): q_out = -sum_fixed (M dT/dt + F_T)."""
+        F = self.residual(T, x, w, t)
+        fr = self.free
+        Tdot = np.zeros(self.n)
+        Tdot[fr] = spla.spsolve(self.M[fr][:, fr].tocsc(), -F[fr])
+        q_out = -float((self.M @ Tdot + F)[self.fixed].sum())
+        return Tdot, q_out
+
+
+class ThermalPostSolver:
+    """One SDIRK step of the heat equation from the mechanical/electrical stage states."""
+
+    def __init__(self, ops: ThermalOperators, tableau, T_fixed: float = 0.0):
+        self.ops, self.tab = ops, tableau
+        self.T_fixed = float(T_fixed)
+        self.solves = 0
+        self.wall = 0.0
+
+    def step(self, T0, stages, t0: float, h: float):
+        import time
+
+        w0 = time.perf_counter()
+        op, tab = self.ops, self.tab
+        fr = op.free
+        MT0 = op.M @ T0
+        Fs = []
+        T = T0
+        for i, (x, w) in enumerate(stages):
+            ti = t0 + tab.c[i] * h
+            haii = h * tab.A[i, i]
+            Kt = op.K + op.contact(x)
+            Q = op.joule(x, w, ti)
+            rhs = MT0 + haii * Q
+            for j in range(i):
+                rhs = rhs - h * tab.A[i, j] * Fs[j]
+            A = (op.M + haii * Kt).tocsr()
+            T = np.full(op.n, self.T_fixed)
+            rhs_f = rhs[fr] - A[fr][:, op.fixed] @ T[op.fixed]
+            T[fr] = spla.spsolve(A[fr][:, fr].tocsc(), rhs_f)
+            self.solves += 1
+            Fs.append(Kt @ T - Q)
+        self.wall += time.perf_counter() - w0
+        return T
+
+
+class StateBalances:
+    """The balance terms of one state (module docstring)."""
+
+    def __init__(self, system, thermal: ThermalOperators, circuit_in, circuit_leak, dirichlet_out):
+        self.system, self.base, self.thermal = system, system.base, thermal
+        base = self.base
+        self.mech = np.asarray(base.mech, bool)
+        M = sp.csr_matrix(base.assembler.mass())  # unscaled
+        self.Mm = M[self.mech][:, self.mech]
+        mat = base.material
+        self.damp = mat.damping / mat.density
+        self.oV = base.oV
+        self.circuit_in = list(circuit_in)        # CircuitBC at the warp terminals
+        self.circuit_leak = list(circuit_leak)    # CircuitBC pull-downs of the weft
+        self.dirichlet_out = np.asarray(dirichlet_out, np.int64)  # V dofs held at 0
+        self.em = base.assembler.term("electromagnetic")
+
+    def _circuit_current(self, circ, wn):
+        """Current leaving through each circuit end, A, and the power into the fibril (W)."""
+        I = np.array([c.area * (c.r_bar * wn[c.node, self.oV] + c.J_bar) for c in circ])
+        V = np.array([wn[c.node, self.oV] for c in circ])
+        return I, -(I * V)
+
+    def __call__(self, x, w, t, T) -> dict:
+        base, sysm = self.base, self.system
+        wn = base.nodal(w)
+        I_in_out, P_in = self._circuit_current(self.circuit_in, wn)
+        I_leak, P_leak = self._circuit_current(self.circuit_leak, wn) if self.circuit_leak else (np.zeros(0),) * 2
+        F = np.asarray(sysm.evaluate(x, w, t, jacobian=False)[0], float)
+        I_out = -F[self.dirichlet_out]
+        # Lorentz force on the nodes (minus the electromagnetic term's mech residual)
+        state = ElementState(base.basis, base.layout, x, w, t)
+        Bt = self.em.field(t)
+        m = self.em.emf(state, Bt)
+        res, _ = self.em.forms(state, False)
+        P_L = 0.0
+        if "mech" in res:
+            Rl = res["mech"].reshape(base.mesh.n_elements, -1, 9)
+            v = wn[:, :9][base.mesh.conn]  # (E, nn, 9)
+            P_L = -float((Rl * v).sum())
+        joule = float(joule_source(base.ops, m, base.material.electrical_conductivity).sum())
+        Fc, _, _, _ = sysm.contact_terms(x, w, jacobian=False)
+        P_cj = float(base.nodal(Fc)[:, self.oV] @ wn[:, self.oV]) if sysm.use_V else 0.0
+        vm = np.asarray(w, float)[self.mech]
+        Mv = self.Mm @ vm
+        kin = 0.5 * float(vm @ Mv)
+        strain = beam_strain_energy(base, x)
+        cen = float(sysm.contact_energy(x))
+        Tdot, q_out = self.thermal.rate(T, x, w, t)
+        heat = float((self.thermal.M @ T).sum())
+        return {
+            "current_in": float(-I_in_out.sum()), "current_out": float(I_out.sum()),
+            "current_leak": float(I_leak.sum()), "terminal_currents": -I_in_out,
+            "power_circuit": float(P_in.sum() + (P_leak.sum() if len(P_leak) else 0.0)),
+            "power_joule": joule, "power_contact_joule": P_cj, "power_lorentz": P_L,
+            "power_damping": float(self.damp * (vm @ Mv)),
+            "energy_kinetic": kin, "energy_strain": strain, "energy_contact": cen,
+            "heat_content": heat, "heat_out": q_out, "max_temperature": float(np.max(T)),
+        }
+
+
+def _cumtrapz(t, y):
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    return np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))])
+
+
+def balance_errors(s: dict) -> dict:
+    """Relative balance errors of a series of balance terms over the accepted steps ``s['t']``.
+
+    charge: max |I_in - I_out - I_leak| / max |I_in| (instantaneous);
+    electrical: max |P_circuit - (Joule + contact Joule + Lorentz power)| / max |P_circuit|;
+    mechanical: max |Δ(kin + strain + contact) + ∫P_damping - ∫P_Lorentz| / max(|∫P_L|, |ΔE_mech|);
+    thermal: max |ΔH + ∫q_out - ∫Joule| / max ∫Joule;
+    total: max |∫P_circuit - ΔE_mech - ∫P_damping - ∫Joule - ∫P_contact_joule| / max |∫P_circuit|."""
+    t = np.asarray(s["t"], float)
+    g = {k: np.asarray(v, float) for k, v in s.items() if k != "terminal_currents"}
+    I_in = g["current_in"]
+    charge = np.abs(I_in - g["current_out"] - g["current_leak"])
+    P_el = g["power_circuit"]
+    elec = np.abs(P_el - g["power_joule"] - g["power_contact_joule"] - g["power_lorentz"])
+    Em = g["energy_kinetic"] + g["energy_strain"] + g["energy_contact"]
+    dEm = Em - Em[0]
+    W_L = _cumtrapz(t, g["power_lorentz"])
+    W_d = _cumtrapz(t, g["power_damping"])
+    mech = np.abs(dEm + W_d - W_L)
+    Q_J = _cumtrapz(t, g["power_joule"])
+    Q_out = _cumtrapz(t, g["heat_out"])
+    dH = g["heat_content"] - g["heat_content"][0]
+    therm = np.abs(dH + Q_out - Q_J)
+    W_el = _cumtrapz(t, P_el)
+    W_cj = _cumtrapz(t, g["power_contact_joule"])
+    total = np.abs(W_el - dEm - W_d - Q_J - W_cj)
+    tiny = 1e-300
+    return {
+        "charge": float(charge.max() / max(np.abs(I_in).max(), tiny)),
+        "electrical": float(elec.max() / max(np.abs(P_el).max(), tiny)),
+        "mechanical": float(mech.max() / max(np.abs(W_L).max(), np.abs(dEm).max(), tiny)),
+        "thermal": float(therm.max() / max(np.abs(Q_J).max(), tiny)) if Q_J.max() > 0 else 0.0,
+        "total": float(total.max() / max(np.abs(W_el).max(), tiny)),
+        "work_lorentz_mJ": float(W_L[-1]), "work_circuit_mJ": float(W_el[-1]), "joule_heat_mJ": float(Q_J[-1]),
+        "damping_mJ": float(W_d[-1]), "delta_mechanical_energy_mJ": float(dEm[-1]),
+        "series": {"mechanical_residual": dEm + W_d - W_L, "thermal_residual": dH + Q_out - Q_J,
+                   "total_residual": W_el - dEm - W_d - Q_J - W_cj, "charge_residual": I_in - g["current_out"]
+                   - g["current_leak"], "electrical_residual": P_el - g["power_joule"] - g["power_contact_joule"]
+                   - g["power_lorentz"]},
+    }

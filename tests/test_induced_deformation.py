@@ -1,0 +1,158 @@
+"""Induced deformation (thesis §8.3) on a reduced case: 2 x 2 single-fibril yarns (span 5 mm,
+natural length 6.25 mm: the slack ratio of Table 8.1), 10 elements per fibril, a short
+horizon. Checks the physics directions of issue 11 against each other (B2 lifts, B3 lifts
+and pushes to -y, B1 coils, reversing the current reverses the force, B = 0 is the slack
+relaxation alone), the weft potential at the weakened reference until contact, the charge
+and electrical balances to solver tolerance, the thermal post-solve against the monolithic
+solve, and the order of the mechanical balance error in the step size."""
+import numpy as np
+import pytest
+
+from rve.config.induced_deformation import InducedDeformationConfig
+from rve.scenes.induced_deformation import setup, solve
+from rve.scenes.induced_fabric import crimp_amplitude, slack_weave
+
+T_SHORT, N_SHORT = 0.2, 20   # ms, steps (h = 10 us)
+
+
+def cfg(orientation="B2", **kw):
+    d = dict(scene="induced_deformation",
+             geometry=dict(n_warp=2, n_weft=2, span="5 mm", natural_length="6.25 mm"),
+             mesh=dict(elements=10), field=dict(orientation=orientation),
+             output=dict(vtk=False, png=False))
+    for k, v in kw.items():
+        d.setdefault(k, {})
+        d[k] = {**d[k], **v} if isinstance(v, dict) else v
+    return InducedDeformationConfig(**d)
+
+
+_cache = {}
+
+
+def run(key, c, t_end=T_SHORT, steps=N_SHORT, **kw):
+    if key not in _cache:
+        _cache[key] = solve(c, t_end=t_end, steps=steps, **kw)
+    return _cache[key]
+
+
+def warp_xyz(res):
+    m = res.model
+    st = res.summary["history"]["stored"]
+    nodes = np.concatenate([m.mesh.fibril_nodes(f) for f in (0, 1)])
+    return st["t"], st["x"][:, nodes, :3]
+
+
+def nonplanarity(res) -> np.ndarray:
+    """rms distance of each warp centre line from its best-fit plane, per stored time (mm)."""
+    m = res.model
+    X = res.summary["history"]["stored"]["x"]
+    out = np.zeros(X.shape[0])
+    for f in (0, 1):
+        P = X[:, m.mesh.fibril_nodes(f), :3]
+        P = P - P.mean(axis=1, keepdims=True)
+        out += np.linalg.svd(P, compute_uv=False)[:, -1] / np.sqrt(P.shape[1])
+    return out / 2
+
+
+def test_slack_geometry():
+    A = crimp_amplitude(10.0, 12.5, 4)
+    w = slack_weave(4, 4, 10.0, 12.5, 0.4, 0.6, 200)
+    assert w.amplitude_warp == pytest.approx(A)
+    r = w.x0[w.mesh.fibril_nodes(0), :3]
+    assert np.linalg.norm(np.diff(r, axis=0), axis=1).sum() == pytest.approx(12.5, rel=1e-4)
+    assert r[0, 0] == pytest.approx(-5.0) and r[-1, 0] == pytest.approx(5.0)
+    assert w.clearance > 0  # the yarns start apart (thesis: first frame, no contact)
+    g1, g2 = w.x0[:, 3:6], w.x0[:, 6:9]
+    assert np.allclose((g1 * g2).sum(1), 0, atol=1e-12) and np.allclose(np.linalg.norm(g1, axis=1), 1)
+
+
+def test_setup_circuit_and_dofs():
+    p = setup(cfg())
+    assert p.model.layout.fields == ("mech", "V")
+    assert len(p.circuit_in) == 2 and len(p.circuit_leak) == 2
+    assert all(c.J_bar < 0 for c in p.circuit_in)
+    assert setup(cfg(), "monolithic").model.layout.fields == ("mech", "T", "V")
+
+
+def test_B2_lifts_and_balances():
+    r = run("B2", cfg("B2"))
+    s = r.summary
+    d = s["mean_displacement_mm"]
+    assert d[2] > 0.05 and abs(d[0]) < 0.05 * d[2] and abs(d[1]) < 0.05 * d[2]
+    assert s["charge_balance_error"] <= 1e-8
+    assert s["balance_errors"]["electrical"] <= 1e-7
+    assert s["terminal_current_A"] > 0
+    assert s["max_temperature_K"] > 0
+
+
+def test_B3_up_and_minus_y():
+    d = run("B3", cfg("B3")).summary["mean_displacement_mm"]
+    assert d[2] > 0.05 and d[1] < -0.02
+
+
+def test_B1_coils_the_warp():
+    p1 = nonplanarity(run("B1", cfg("B1")))
+    p2 = nonplanarity(run("B2", cfg("B2")))
+    assert p1[0] < 1e-12 and p1[-1] > 10 * max(p2[-1], 1e-6)
+    assert np.all(np.diff(p1[1:]) > 0)  # grows
+
+
+def test_reversing_current_reverses_force():
+    d = np.array(run("B2", cfg("B2")).summary["mean_displacement_mm"])
+    rev = cfg("B2", warp={"radius": "0.4 mm", "r_bar": "100 A/(mm^2*V)", "J_bar": "1000 A/mm^2"})
+    dr = np.array(run("B2rev", rev).summary["mean_displacement_mm"])
+    d0 = np.array(run("B0", cfg("B2", field={"magnitude": "0 kT"})).summary["mean_displacement_mm"])
+    assert dr[2] < 0
+    # what the field adds is odd in the current: (d - d0) = -(dr - d0) to first order
+    assert (dr - d0)[2] == pytest.approx(-(d - d0)[2], rel=0.15)
+
+
+def test_no_field_only_slack_relaxation():
+    r0 = run("B0", cfg("B2", field={"magnitude": "0 kT"}))
+    off = cfg("B2", field={"magnitude": "0 kT"},
+              warp={"radius": "0.4 mm", "r_bar": "100 A/(mm^2*V)", "J_bar": "0 A/mm^2"})
+    rn = run("B0_nocurrent", off)
+    x0 = r0.model.nodal(r0.state["x"])[:, :3]
+    xn = rn.model.nodal(rn.state["x"])[:, :3]
+    assert np.abs(x0 - xn).max() < 1e-8  # the current alone moves nothing
+    d0 = r0.summary["mean_displacement_mm"][2]
+    d2 = run("B2", cfg("B2")).summary["mean_displacement_mm"][2]
+    assert abs(d0) < 0.2 * abs(d2)
+    assert rn.summary["terminal_current_A"] == 0.0 or abs(rn.summary["terminal_current_A"]) < 1e-9
+
+
+def test_weft_potential_weakened_until_contact():
+    r = run("B3long", cfg("B3"), t_end=1.0, steps=100)
+    h = r.summary["history"]
+    b, st = h["balances"], h["stored"]
+    m = r.model
+    weft_nodes = np.concatenate([m.mesh.fibril_nodes(f) for f in (2, 3)])
+    warp_nodes = np.concatenate([m.mesh.fibril_nodes(f) for f in (0, 1)])
+    Vw = np.array([m.nodal(w)[weft_nodes, m.oV] for w in st["w"]])
+    Vwarp = np.array([m.nodal(w)[warp_nodes, m.oV] for w in st["w"]])
+    contact_t = b["t"][np.flatnonzero(b["contact_active_pairs"] > 0)]
+    assert contact_t.size, "no contact within the horizon"
+    before = st["t"] < contact_t[0]
+    assert before.sum() >= 2
+    # isolated: at the pull-down reference (0 V) up to the motional EMF, tiny next to the warp
+    assert np.abs(Vw[before]).max() < 1e-2 * np.abs(Vwarp).max()
+    # in contact: the weft takes the potential of the warp it touches
+    last = np.abs(Vw[-1]).max()
+    assert last > 0.05 * np.abs(Vwarp[-1]).max() and last <= np.abs(Vwarp[-1]).max() * (1 + 1e-6)
+    assert r.summary["charge_balance_error"] <= 1e-8
+
+
+def test_post_temperature_equals_monolithic():
+    rp = run("B2", cfg("B2"))
+    rm = run("B2mono", cfg("B2"), mode="monolithic")
+    Tp, Tm = rp.state["T"], rm.state["T"]
+    assert np.abs(Tp - Tm).max() <= 1e-6 * np.abs(Tm).max()
+    assert rm.summary["dofs"]["total"] > rp.summary["dofs"]["total"]
+
+
+def test_mechanical_balance_order():
+    errs = []
+    for n in (10, 20, 40):
+        errs.append(solve(cfg("B2"), t_end=0.05, steps=n, record=False).summary["balance_errors"]["mechanical"])
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all(orders >= 1.7), (errs, orders)
