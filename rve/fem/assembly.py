@@ -24,7 +24,7 @@ node blocks) and a second group of "pair elements" ``local`` (P, m) nodes whose 
 touch only the components ``comps`` of each node (the contact pairs). ``base_map`` places
 the pattern's data in the union, ``slots`` (P, (m nC)^2) and ``gdofs`` (P, m nC) the pair
 elements' entries; ``add(data, A)`` adds a CSR matrix on the pattern (or the union) into
-union data; ``csr(data)`` wraps union data. Used by ``rve.model.assembler`` (docs/contact.md).
+union data; ``csr(data)`` wraps union data (every matrix shares the union's index arrays). Used by ``rve.model.assembler`` (docs/contact.md).
 """
 from __future__ import annotations
 
@@ -256,9 +256,20 @@ class UnionPattern:
         self.slots = slots.reshape(P, m * nC * m * nC)
         self._matcache: dict = {}
         self._keys = None
+        self._template = None
 
     def csr(self, data) -> sp.csr_matrix:
-        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+        """Union ``data`` as a CSR matrix sharing the union's index arrays (a shallow copy of
+        a template: no structure validation per call, and every matrix on the union has the
+        very same ``indices``/``indptr`` objects, which solvers compare by identity first)."""
+        import copy
+
+        if self._template is None:
+            self._template = sp.csr_matrix((np.zeros(self.nnz), self.indices, self.indptr), shape=(self.n, self.n))
+            self.indices, self.indptr = self._template.indices, self._template.indptr
+        A = copy.copy(self._template)
+        A.data = np.asarray(data, dtype=float)
+        return A
 
     def positions(self, A) -> np.ndarray:
         """Positions of the entries of CSR ``A`` (on the pattern or any sub-structure of the
