@@ -29,11 +29,15 @@ def _kernel(D, W, U, mu, lam, want_tangent, want_dmu, R, K, dR):
     DD = np.empty((naf, naf))
     F = np.empty((3, 3))
     Fi = np.empty((3, 3))
+    Ke = np.empty((nA, nA))
     for e in range(E):
         if want_tangent:
             for a in range(naf):
                 for b in range(naf):
                     DD[a, b] = 0.0
+            for A in range(nA):
+                for B in range(nA):
+                    Ke[A, B] = 0.0
         for q in range(nq):
             # F[i, J] = sum_a D[J, a] U[a, i]
             for i in range(3):
@@ -80,22 +84,27 @@ def _kernel(D, W, U, mu, lam, want_tangent, want_dmu, R, K, dR):
                         for J in range(3):
                             s += D[e, q, J, a] * D[e, q, J, b]
                         DD[a, b] += wmu * s
-                for A in range(nA):
-                    a = A // 3
-                    i = A - 3 * a
-                    for B in range(A, nA):
-                        b = B // 3
-                        k = B - 3 * b
-                        K[e, A, B] += wc1 * G[a, k] * G[b, i] + wl * G[a, i] * G[b, k]
+                for a in range(naf):
+                    for i in range(3):
+                        A = 3 * a + i
+                        ga0, ga1, ga2 = wc1 * G[a, 0], wc1 * G[a, 1], wc1 * G[a, 2]
+                        gai = wl * G[a, i]
+                        for b in range(a, naf):
+                            gbi = G[b, i]
+                            k0 = i if b == a else 0  # upper triangle: B = 3 b + k >= A
+                            for k in range(k0, 3):
+                                gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
+                                Ke[A, 3 * b + k] += gak * gbi + gai * G[b, k]
         if want_tangent:
             for a in range(naf):
-                for b in range(naf):
+                for b in range(a, naf):
                     for i in range(3):
-                        if a * 3 + i <= b * 3 + i:
-                            K[e, a * 3 + i, b * 3 + i] += DD[a, b]
+                        Ke[a * 3 + i, b * 3 + i] += DD[a, b]
             for A in range(nA):
+                K[e, A, A] = Ke[A, A]
                 for B in range(A + 1, nA):
-                    K[e, B, A] = K[e, A, B]
+                    K[e, A, B] = Ke[A, B]
+                    K[e, B, A] = Ke[A, B]
 
 
 def neo_hookean_element_forces(D, W, U, mu, lam, want_tangent: bool = True, want_dmu: bool = False):
@@ -107,7 +116,7 @@ def neo_hookean_element_forces(D, W, U, mu, lam, want_tangent: bool = True, want
     mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, float), (E, nq)))
     lam = np.ascontiguousarray(np.broadcast_to(np.asarray(lam, float), (E, nq)))
     R = np.zeros((E, naf, 3))
-    K = np.zeros((E, naf * 3, naf * 3)) if want_tangent else np.zeros((0, 0, 0))
+    K = np.empty((E, naf * 3, naf * 3)) if want_tangent else np.zeros((0, 0, 0))
     dR = np.empty((E, nq, naf, 3)) if want_dmu else np.zeros((0, 0, 0, 0))
     with np.errstate(invalid="ignore", divide="ignore"):
         _kernel(D, W, U, mu, lam, bool(want_tangent), bool(want_dmu), R, K, dR)

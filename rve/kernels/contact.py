@@ -27,7 +27,7 @@ __all__ = ["chord_gaps", "penalty_forms"]
 _TINY = 1e-300
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _gap_point(r, npl, nmi, sp, gr, sm, recompute, p, k):
     ap0, ap1, ap2 = r[npl[p, 0], 0], r[npl[p, 0], 1], r[npl[p, 0], 2]
     am0, am1, am2 = r[nmi[p, 0], 0], r[nmi[p, 0], 1], r[nmi[p, 0], 2]
