@@ -235,8 +235,8 @@ def main(argv=None) -> None:
     import numba
 
     t_import = time.perf_counter() - t0
-    print(f"numba {numba.__version__} (import {t_import:.2f} s), NUMBA_CACHE_DIR={os.environ.get('NUMBA_CACHE_DIR', '-')}, "
-          f"repeat {args.repeat}, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(f"numba {numba.__version__} (import {t_import:.2f} s), "
+          f"NUMBA_CACHE_DIR={os.environ.get('NUMBA_CACHE_DIR', '-')}, repeat {args.repeat}, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     ref = _load_reference(args.reference) if args.reference else None
     jit: dict = {}
     for i, e in enumerate(args.elements):

@@ -121,17 +121,6 @@ def test_contact_kernel_matches_numpy(recompute, onset, near):
 
 
 # ---------------------------------------------------------------------------- EMF kernel
-def _wire_state(order=1, ne=6, fields=("mech", "T", "V"), seed=2):
-    from rve.fem.mesh import fibril_mesh, straight_fibril
-    from rve.model import BeamMaterial, BeamModel
-    from rve.model.materials import Couplings
-
-    mesh = fibril_mesh([straight_fibril([-1, 0, 0], [1, 0.1, 0], 0.15, "w")], ne, order)
-    mat = BeamMaterial(1.26, density=1e-3, damping=0.01, electrical_conductivity=10.0, heat_capacity=1.0,
-                       thermal_conductivity=1.0)
-    return mesh, mat, Couplings
-
-
 @needs_numba
 @pytest.mark.parametrize("order", [1, 2])
 @pytest.mark.parametrize("back_emf,lorentz,joule,seebeck", [

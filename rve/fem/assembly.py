@@ -24,7 +24,8 @@ node blocks) and a second group of "pair elements" ``local`` (P, m) nodes whose 
 touch only the components ``comps`` of each node (the contact pairs). ``base_map`` places
 the pattern's data in the union, ``slots`` (P, (m nC)^2) and ``gdofs`` (P, m nC) the pair
 elements' entries; ``add(data, A)`` adds a CSR matrix on the pattern (or the union) into
-union data; ``csr(data)`` wraps union data (every matrix shares the union's index arrays). Used by ``rve.model.assembler`` (docs/contact.md).
+union data; ``csr(data)`` wraps union data (every matrix shares the union's index
+arrays). Used by ``rve.model.assembler`` (docs/contact.md).
 """
 from __future__ import annotations
 

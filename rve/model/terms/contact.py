@@ -14,6 +14,9 @@ params, E_star)``: a term of *pair elements*, not of beam elements:
   (centroid r, and T / V when their coefficient is > 0);
 * ``forms(x, w, jacobian)`` -> ``(act, R, Kx, Kw)`` on the active pairs (local arrays laid
   out as ``UnionPattern.gdofs`` / ``slots``; assembled by ``rve.model.assembler.ContactAssembler``);
+  a mechanics-only term takes the compiled kernel ``rve.kernels.contact.penalty_forms`` (and
+  ``gaps`` its ``chord_gaps``) when ``rve.kernels.use_numba()``, the numpy forms of
+  ``rve.physics.contact_forms`` otherwise (the reference; T/V terms always; docs/kernels.md);
 * diagnostics: ``geometry(x)``, ``gaps(x)``, ``active_pairs(x)``, ``energy(x)`` (penalty
   energy, the potential of the mechanical residual), ``contact_state(x)``,
   ``conductance_by_pair(x, field)``; ``onset`` / ``set_onset`` (C² onset of the penalty
