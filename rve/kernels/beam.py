@@ -92,9 +92,14 @@ def _kernel(D, W, U, mu, lam, want_tangent, want_dmu, R, K, dR):
                         for b in range(a, naf):
                             gbi = G[b, i]
                             k0 = i if b == a else 0  # upper triangle: B = 3 b + k >= A
-                            for k in range(k0, 3):
-                                gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
-                                Ke[A, 3 * b + k] += gak * gbi + gai * G[b, k]
+                            if wl != 0.0:
+                                for k in range(k0, 3):
+                                    gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
+                                    Ke[A, 3 * b + k] += gak * gbi + gai * G[b, k]
+                            else:  # lam = 0 (nu = 0): the reference skips the lam term too
+                                for k in range(k0, 3):
+                                    gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
+                                    Ke[A, 3 * b + k] += gak * gbi
         if want_tangent:
             for a in range(naf):
                 for b in range(a, naf):
