@@ -257,7 +257,9 @@ class ContactAssembler:
         if ev.fw_constant and Kw is None:
             # a constant Fw (the damping operator, or none): its union copy is kept until
             # the next rebuild (consumers do not modify matrices in place)
-            if self._fw_cache is None or self._fw_cache[0] is not ev.Fw:
+            hit = self._fw_cache is not None and (
+                self._fw_cache[0] is ev.Fw or (ev.Fw.nnz == 0 and self._fw_cache[0].nnz == 0))
+            if not hit:
                 self._fw_cache = (ev.Fw, u.csr(u.data_of(ev.Fw)))
             Fw = self._fw_cache[1]
         else:
