@@ -24,7 +24,8 @@ node blocks) and a second group of "pair elements" ``local`` (P, m) nodes whose 
 touch only the components ``comps`` of each node (the contact pairs). ``base_map`` places
 the pattern's data in the union, ``slots`` (P, (m nC)^2) and ``gdofs`` (P, m nC) the pair
 elements' entries; ``add(data, A)`` adds a CSR matrix on the pattern (or the union) into
-union data; ``csr(data)`` wraps union data. Used by ``rve.model.assembler`` (docs/contact.md).
+union data; ``csr(data)`` wraps union data (every matrix shares the union's index
+arrays). Used by ``rve.model.assembler`` (docs/contact.md).
 """
 from __future__ import annotations
 
@@ -156,6 +157,10 @@ class ElementPattern:
 class UnionPattern:
     """Union CSR structure of an ``ElementPattern`` and pair elements (module docstring)."""
 
+    #: node-pair tables (int8 + 2 int32 per node pair, allocated lazily: only the touched
+    #: pages cost) while n_nodes^2 <= this; beyond, sorted keys and binary search
+    dense_limit = 2 ** 25
+
     def __init__(self, pattern: ElementPattern, local: np.ndarray, comps: np.ndarray):
         b, Nn = pattern.block, pattern.n_nodes
         self.n = n = pattern.n
@@ -173,13 +178,21 @@ class UnionPattern:
         isc = np.zeros(b, bool)
         isc[ci] = True
         nkey = (local[:, :, None].astype(np.int64) * Nn + local[:, None, :]).ravel()  # (P m m)
-        dense = Nn * Nn <= 2 ** 25  # node-pair bitmap (<= 32 MB) instead of sorting the keys
+        dense = Nn * Nn <= self.dense_limit  # node-pair tables instead of searching sorted keys
         if dense:
+            # O(P) de-duplication on lazily zeroed node-pair tables (no O(Nn^2) scan): the
+            # pair-only keys are those not in the base pattern, first occurrences kept
             mark = np.zeros(Nn * Nn, np.int8)
-            mark[nkey] = 2
             mark[bkeys] = 1
-            keys = np.flatnonzero(mark)
-            isbase = mark[keys] == 1
+            extra = nkey[mark[nkey] == 0]
+            first = np.empty(Nn * Nn, np.int32)
+            rank = np.arange(extra.size, dtype=np.int32)
+            first[extra] = rank  # one of the repeated writes wins: exactly one copy matches
+            extra = np.sort(extra[first[extra] == rank])
+            keys = np.concatenate([bkeys, extra])
+            order = np.argsort(keys, kind="stable")
+            keys = keys[order]
+            isbase = order < bkeys.size
             lookup = np.empty(Nn * Nn, np.int32)
             lookup[keys] = np.arange(keys.size, dtype=np.int32)
             locate = lambda k: lookup[k]  # noqa: E731
@@ -234,15 +247,30 @@ class UnionPattern:
         # local slot layout (P, m, nC, m, nC): indptr[I b + c_i] + offset of block (I, J) + column
         mp = locate(nkey).reshape(P, m, m)
         rowstart = indptr[local[:, :, None].astype(np.int64) * b + ci[None, None, :]]  # (P, m, nC)
-        colpos = np.where(isbase[mp][..., None], ci[None, None, None, :], np.arange(nC)[None, None, None, :])
-        slots = (rowstart[:, :, :, None, None]
-                 + (offc[mp][:, :, None, :, None] + colpos[:, :, None, :, :]))
+        # column of (J, c') within row (I, c): offset of block (I, J) + c' (pair-only block)
+        # or + comps[c'] (base block); one broadcast sum into the (P, m, nC, m, nC) slots
+        idx = np.int32 if total < 2**31 - 1 else np.int64
+        shift = np.stack([np.arange(nC), ci]).astype(idx)  # [isbase, c']
+        colpos = offc.astype(idx)[mp][..., None] + shift[isbase.astype(np.int8)[mp]]  # (P, m, m, nC)
+        slots = np.empty((P, m, nC, m, nC), idx)
+        np.add(rowstart.astype(idx)[:, :, :, None, None], colpos[:, :, None, :, :], out=slots)
         self.slots = slots.reshape(P, m * nC * m * nC)
         self._matcache: dict = {}
         self._keys = None
+        self._template = None
 
     def csr(self, data) -> sp.csr_matrix:
-        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+        """Union ``data`` as a CSR matrix sharing the union's index arrays (a shallow copy of
+        a template: no structure validation per call, and every matrix on the union has the
+        very same ``indices``/``indptr`` objects, which solvers compare by identity first)."""
+        import copy
+
+        if self._template is None:
+            self._template = sp.csr_matrix((np.zeros(self.nnz), self.indices, self.indptr), shape=(self.n, self.n))
+            self.indices, self.indptr = self._template.indices, self._template.indptr
+        A = copy.copy(self._template)
+        A.data = np.asarray(data, dtype=float)
+        return A
 
     def positions(self, A) -> np.ndarray:
         """Positions of the entries of CSR ``A`` (on the pattern or any sub-structure of the

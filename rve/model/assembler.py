@@ -20,7 +20,9 @@ only when a term asks: ``U`` (E, nn*3, 3) positions, ``Uv`` velocities, ``T`` / 
 
 ``ContactAssembler(elements, term)``: the element group of ``elements`` (an ``Assembler``)
 and the pair group of a contact term on the union CSR structure of the two
-(``rve.fem.assembly.UnionPattern``); ``rebuild(x)`` rebuilds the pairs and the union,
+(``rve.fem.assembly.UnionPattern``); ``rebuild(x)`` rebuilds the pairs and the union (the
+union object, its index arrays and the union copies of M and of a constant Fw are kept
+when the pair connectivity did not change: ``reused`` counts those rebuilds),
 ``evaluate`` adds the pair group to the element group's evaluation: F = F_elements + F_pairs,
 union data = pair bincount + element data (two partial sums, so the order of every
 floating-point sum is that of the element and pair groups assembled apart).
@@ -199,22 +201,36 @@ class ContactAssembler:
         self.union: UnionPattern | None = None
         self._fw_cache = None
         self._M = None
+        self._local = self._comps = None
+        #: rebuilds that kept the union structure (unchanged pair connectivity)
+        self.reused = 0
 
     @property
     def n(self):
         return self.elements.pattern.n
 
-    def rebuild(self, x):
-        """Rebuild the contact term's pairs at ``x`` and the union structure."""
+    def rebuild(self, x) -> bool:
+        """Rebuild the contact term's pairs at ``x`` and the union structure; the union (and
+        the matrices cached on it) is kept when the pair connectivity is unchanged, so every
+        matrix keeps the very same index arrays (a solver's analysis of the pattern stays
+        valid). Returns True when the structure changed."""
         local = self.term.rebuild(x)
-        self.union = UnionPattern(self.elements.pattern, local, self.term.comps)
+        comps = np.asarray(self.term.comps)
+        u = self.union
+        if (u is not None and self._local is not None and self._local.shape == local.shape
+                and np.array_equal(self._local, local) and np.array_equal(self._comps, comps)):
+            self.reused += 1
+            return False
+        self._local, self._comps = np.array(local, copy=True), comps.copy()
+        self.union = UnionPattern(self.elements.pattern, local, comps)
         self._fw_cache = None
         self._M = None
+        return True
 
     def mass(self, M_elements):
-        if self._M is None:
-            self._M = self.union.csr(self.union.data_of(M_elements))
-        return self._M
+        if self._M is None or self._M[0] is not M_elements:
+            self._M = (M_elements, self.union.csr(self.union.data_of(M_elements)))
+        return self._M[1]
 
     def evaluate(self, x, w, t, jacobian: bool = True, scale: RowScale | None = None, on_elements=None):
         """F, Fx, Fw on the union; ``on_elements`` (optional) is called with the elements'
@@ -241,9 +257,11 @@ class ContactAssembler:
         if ev.fw_constant and Kw is None:
             # a constant Fw (the damping operator, or none): its union copy is kept until
             # the next rebuild (consumers do not modify matrices in place)
-            if self._fw_cache is None:
-                self._fw_cache = u.csr(u.data_of(ev.Fw))
-            Fw = self._fw_cache
+            hit = self._fw_cache is not None and (
+                self._fw_cache[0] is ev.Fw or (ev.Fw.nnz == 0 and self._fw_cache[0].nnz == 0))
+            if not hit:
+                self._fw_cache = (ev.Fw, u.csr(u.data_of(ev.Fw)))
+            Fw = self._fw_cache[1]
         else:
             dw = u.data_of(ev.Fw)
             if Kw is not None and act.size:

@@ -12,7 +12,9 @@ element group), ``params`` a ``ContactParams`` (the ``ContactTerm``'s law); impl
   the element pattern and every candidate pair's blocks (``rve.fem.assembly.UnionPattern``).
   Until the next ``rebuild``, ``evaluate`` returns ``Fx``, ``Fw`` and ``mass()`` returns
   ``M`` on that one structure, so the solvers' restriction fast path applies. ``rebuild``
-  changes the structure: a solver that cached ``mass()`` must be restarted after it.
+  changes the structure (a solver that cached ``mass()`` must be restarted after it) unless
+  the pair connectivity is unchanged: then the union, its index arrays and ``mass()`` are
+  kept (``assembler.reused`` counts those rebuilds).
 * Between rebuilds the *pairs* are fixed; on each pair the closest points are recomputed at
   every evaluation (``params.recompute_closest``, default) with their tangent, or frozen.
 * ``evaluate(x, w, t, jacobian)``: the base terms + penalty + ``h_C a [[T]]`` (T and

@@ -14,6 +14,9 @@ params, E_star)``: a term of *pair elements*, not of beam elements:
   (centroid r, and T / V when their coefficient is > 0);
 * ``forms(x, w, jacobian)`` -> ``(act, R, Kx, Kw)`` on the active pairs (local arrays laid
   out as ``UnionPattern.gdofs`` / ``slots``; assembled by ``rve.model.assembler.ContactAssembler``);
+  a mechanics-only term takes the compiled kernel ``rve.kernels.contact.penalty_forms`` (and
+  ``gaps`` its ``chord_gaps``) when ``rve.kernels.use_numba()``, the numpy forms of
+  ``rve.physics.contact_forms`` otherwise (the reference; T/V terms always; docs/kernels.md);
 * diagnostics: ``geometry(x)``, ``gaps(x)``, ``active_pairs(x)``, ``energy(x)`` (penalty
   energy, the potential of the mechanical residual), ``contact_state(x)``,
   ``conductance_by_pair(x, field)``; ``onset`` / ``set_onset`` (C² onset of the penalty
@@ -27,6 +30,7 @@ from typing import Optional
 import numpy as np
 
 from ...contact.search import ContactMap, build_contact_map
+from ...kernels import use_numba
 from ...physics.contact_forms import (
     chord_gaps, chord_geometry, effective_radius, hertz_kappa, hertz_width, penalty_energy,
     penalty_forces, penalty_law, scalar_jump,
@@ -143,6 +147,12 @@ class ContactTerm:
         """Overlaps g (n_pairs, n_gp) of every point of the map at ``x`` (no tangent data)."""
         cmap = self.map
         sm = None if self.params.recompute_closest else cmap.s_minus
+        if use_numba():
+            from ...kernels.contact import chord_gaps as compiled
+
+            r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+            return compiled(r, cmap.nodes_plus, cmap.nodes_minus, cmap.s_plus, self.gap_radius, sm,
+                            bool(self.params.recompute_closest))
         return chord_gaps(*self.ends(x), cmap.s_plus, self.gap_radius, sm)
 
     def active_pairs(self, x) -> np.ndarray:
@@ -166,6 +176,8 @@ class ContactTerm:
         if self.map.n_pairs == 0:
             return none
         near = float(self.tangent_near) if (jacobian and not self.scalar) else 0.0
+        if not self.scalar and use_numba():
+            return self._forms_compiled(x, near, jacobian)
         if near > 0.0:
             act = np.flatnonzero((self.gaps(x) > -near).any(axis=1))
         else:
@@ -218,6 +230,20 @@ class ContactTerm:
         if not jacobian:
             return act, Rl, None, None
         return act, Rl, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
+
+    def _forms_compiled(self, x, near: float, jacobian: bool):
+        """``forms`` of a mechanics-only term by the compiled kernel (rve.kernels.contact)."""
+        from ...kernels.contact import penalty_forms as compiled
+
+        cmap = self.map
+        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        rec = bool(self.params.recompute_closest)
+        act, Rm, Km = compiled(r, cmap.nodes_plus, cmap.nodes_minus, cmap.s_plus, self.gap_radius,
+                               None if rec else cmap.s_minus, rec, self.weight, float(self.params.penalty),
+                               self.onset, near, jacobian)
+        if act.size == 0:
+            return np.zeros(0, np.int64), np.zeros(0), None, None
+        return act, Rm, (Km.reshape(act.size, -1) if jacobian else None), None
 
     def contact_state(self, x) -> dict:
         """Overlap statistics of the current map at ``x``.

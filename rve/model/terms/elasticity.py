@@ -6,7 +6,8 @@ Contract
 ``Elasticity(basis, mu, lam, alpha_mu=0.0, ops=None)``: residual block "mech", tangent
 blocks ("mech", "mech", "x") and, with softening (alpha_mu != 0, needs the T field and
 ``ops``), ("mech", "T", "w") = alpha_mu sum_q dR/dmu_q N_b(q). Kernel:
-``rve.physics.beam_forms.neo_hookean_element_forces`` (exact tangent).
+``rve.physics.beam_forms.neo_hookean_element_forces`` (exact tangent; the reference), or its
+compiled twin ``rve.kernels.beam`` when ``rve.kernels.use_numba()`` (docs/kernels.md).
 
 ``beam_strain_energy(model, x)``: the strain energy sum_q W psi(F) (N mm) whose gradient is
 the elasticity residual; +inf where det F <= 0 (psi: ``rve.physics.elasticity.neo_hookean_energy``).
@@ -16,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...fem.small_matrix import det3
+from ...kernels import use_numba
 from ...physics.beam_forms import neo_hookean_element_forces
 from ...physics.elasticity import neo_hookean_energy
 from ...physics.thermal_forms import temperature_at_quadrature
@@ -37,7 +39,12 @@ class Elasticity(Term):
     def forms(self, state, jacobian: bool):
         soft = self.alpha_mu != 0.0
         mu = self.mu + self.alpha_mu * temperature_at_quadrature(self.ops, state.T) if soft else self.mu
-        Rm, Km, dRdmu = neo_hookean_element_forces(self.basis, state.U, mu, self.lam, jacobian, soft and jacobian)
+        if use_numba():
+            from ...kernels.beam import neo_hookean_element_forces as compiled
+
+            Rm, Km, dRdmu = compiled(self.basis.D, self.basis.W, state.U, mu, self.lam, jacobian, soft and jacobian)
+        else:
+            Rm, Km, dRdmu = neo_hookean_element_forces(self.basis, state.U, mu, self.lam, jacobian, soft and jacobian)
         if not jacobian:
             return {"mech": Rm}, {}
         K = {("mech", "mech", "x"): Km}

@@ -1,7 +1,8 @@
 """Electromagnetic term: current conservation (V) with back-EMF and Seebeck EMF, the Lorentz
 force of the conduction current (mech) and its Joule heat (T), from ONE fused kernel
-(``rve.physics.electric_forms.coupled_forms``, the fast path; derivation and tangents:
-docs/coupled_fields.md).
+(``rve.physics.electric_forms.coupled_forms``, the reference; its compiled twin
+``rve.kernels.electric`` when ``rve.kernels.use_numba()``, docs/kernels.md; derivation and
+tangents: docs/coupled_fields.md).
 
 Contract
 --------
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...kernels import use_numba
 from ...physics.electric_forms import coupled_forms, emf
 from .base import Term
 
@@ -58,9 +60,17 @@ class Electromagnetic(Term):
     def forms(self, state, jacobian: bool):
         a = self.active
         Bt = self.field(state.t)
-        m = self.emf(state, Bt)
-        R, J = coupled_forms(self.ops, m, self.sigma0, Bt, lorentz=a["lorentz"], joule=a["joule"],
-                             want_tangent=jacobian)
+        if use_numba():
+            from ...kernels.electric import coupled_forms as compiled
+
+            S = self.seebeck if a["seebeck"] else 0.0
+            R, J = compiled(self.ops, state.U, state.Uv if a["back_emf"] else None, state.T, state.V, Bt,
+                            self.sigma0, S, a["back_emf"], a["lorentz"], a["joule"], jacobian)
+        else:
+            m = self.emf(state, Bt)
+            S = m.seebeck
+            R, J = coupled_forms(self.ops, m, self.sigma0, Bt, lorentz=a["lorentz"], joule=a["joule"],
+                                 want_tangent=jacobian)
         res = {"V": R["V"]}
         if a["joule"]:
             res["T"] = R["T"]
@@ -69,7 +79,6 @@ class Electromagnetic(Term):
         if not jacobian:
             return res, {}
         nn = self.ops.nn
-        S = m.seebeck
         K = {}
         rows = [("V", slice(0, nn))]
         if a["joule"]:
