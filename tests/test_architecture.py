@@ -22,7 +22,7 @@ ALLOWED = {
     "fem": set(),
     "physics": {"fem"},
     "contact": {"fem", "physics"},
-    "model": {"fem", "physics", "contact"},
+    "model": {"fem", "physics", "contact", "kernels"},
     "solvers": set(),
     "testing": {"fem"},
     "config": {"io"},
