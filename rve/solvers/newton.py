@@ -35,7 +35,9 @@ iteration the factorisation is dropped (the next iteration assembles and factori
 fresh Jacobian) when ``θ > reuse.contraction``, or when at the observed rate the tolerance
 would not be reached within ``max_iter`` iterations, or (``reuse.cost_aware``) when the
 measured cost of the remaining modified iterations exceeds that of a fresh factorisation.
-The residual tolerance decides convergence exactly as without reuse. The result counts
+The residual tolerance decides convergence exactly as without reuse; ``max_iter`` bounds
+the fresh-Jacobian (Newton) iterations and, separately, the modified ones, so reuse never
+makes a stage fail the iteration limit that Newton alone would meet. The result counts
 Jacobian evaluations, factorisations, reused iterations and the contractions; iterations
 log ``θ`` and whether the factorisation was fresh (``J``) or reused (``J~``).
 """
@@ -334,7 +336,8 @@ def _modified_newton(fun, u0, *, atol, rtol, max_iter, admissible, line_search, 
     if not np.isfinite(rn):
         return result(False, 0, "non-finite residual at the initial state")
     it = 0
-    while it < max_iter:
+    n_fresh = n_modified = 0           # each kind is limited to max_iter iterations
+    while n_fresh < max_iter and n_modified < max_iter:
         if rn <= atol or rn <= rtol * r0:
             return result(True, it)
         fresh = not reuse.usable
@@ -388,6 +391,10 @@ def _modified_newton(fun, u0, *, atol, rtol, max_iter, admissible, line_search, 
             st["reuses"] += 1
             reuse.reuses += 1
         it += 1
+        if fresh:
+            n_fresh += 1
+        else:
+            n_modified += 1
         theta = rtn / max(rn, 1e-300)
         thetas.append(theta)
         u, r, J, rn = trial, rt, Jt, rtn
@@ -397,8 +404,9 @@ def _modified_newton(fun, u0, *, atol, rtol, max_iter, admissible, line_search, 
         if not np.isfinite(rn) or rn > divergence_factor * r0:
             reuse.invalidate("diverged")
             return result(False, it, f"diverged (|r| = {rn:.3e})")
-        why = reuse.drop_reason(theta, rn, target, max_iter - it)
+        why = reuse.drop_reason(theta, rn, target, max_iter - n_modified)
         if why is not None:
             reuse.invalidate(why)
     converged = rn <= atol or rn <= rtol * r0
-    return result(converged, it, "" if converged else f"no convergence in {max_iter} iterations (|r| = {rn:.3e})")
+    return result(converged, it, "" if converged else
+                  f"no convergence in {n_fresh} Newton + {n_modified} modified iterations (|r| = {rn:.3e})")
