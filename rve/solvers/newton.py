@@ -34,7 +34,8 @@ fresh Jacobian and the line search (counted as ``rejected_reuses``). After any a
 iteration the factorisation is dropped (the next iteration assembles and factorises a
 fresh Jacobian) when ``θ > reuse.contraction``, or when at the observed rate the tolerance
 would not be reached within ``max_iter`` iterations, or (``reuse.cost_aware``) when the
-measured cost of the remaining modified iterations exceeds that of a fresh factorisation.
+measured cost of the remaining modified iterations exceeds that of a fresh factorisation
+(also checked at a solve's start, predicted from the latest modified contraction).
 The residual tolerance decides convergence exactly as without reuse; ``max_iter`` bounds
 the fresh-Jacobian (Newton) iterations and, separately, the modified ones, so reuse never
 makes a stage fail the iteration limit that Newton alone would meet. The result counts
@@ -161,6 +162,7 @@ class JacobianReuse:
         self.factor: Optional[StageFactorisation] = None
         self.key = None
         self.refactor_reasons: Counter = Counter()
+        self.last_theta: Optional[float] = None   # contraction of the latest modified iteration
         self.jacobians = self.factorizations = self.reuses = self.rejected_reuses = self.linear_solves = 0
         # running mean wall times (s): Jacobian part of fun, factorisation, residual, solve
         self.cost = {"jacobian": None, "factorize": None, "residual": None, "solve": None}
@@ -196,6 +198,21 @@ class JacobianReuse:
         self.linear_solves += 1
         return du
 
+    def _costs(self):
+        """(one modified iteration, one fresh Jacobian + factorisation) in s, or None."""
+        if not self.cost_aware or None in self.cost.values():
+            return None
+        return self.cost["residual"] + self.cost["solve"], self.cost["jacobian"] + self.cost["factorize"]
+
+    def worth_starting(self, rn: float, target: float) -> bool:
+        """``cost_aware``: at a solve's start with ``|r| = rn``, is the held factorisation
+        predicted (at the latest modified contraction) to be cheaper than a fresh one?"""
+        costs = self._costs()
+        if costs is None or self.last_theta is None or rn <= target or not 0.0 < self.last_theta < 1.0:
+            return True
+        needed = math.ceil(math.log(target / rn) / math.log(self.last_theta))
+        return (needed - 1) * costs[0] <= costs[1]
+
     def drop_reason(self, theta: float, rn: float, target: float, iterations_left: int) -> Optional[str]:
         """After an accepted iteration with contraction ``theta`` ending at ``|r| = rn``:
         why the factorisation should not serve the next iteration (None: keep it)."""
@@ -206,12 +223,10 @@ class JacobianReuse:
         needed = math.ceil(math.log(target / rn) / math.log(max(theta, 1e-300)))
         if needed > iterations_left:
             return "slow"
-        if self.cost_aware and None not in self.cost.values():
-            c_it = self.cost["residual"] + self.cost["solve"]
-            c_fresh = self.cost["jacobian"] + self.cost["factorize"]
-            # a fresh factorisation converges (quadratically) in about one iteration
-            if (needed - 1) * c_it > c_fresh:
-                return "cost"
+        costs = self._costs()
+        # a fresh factorisation converges (quadratically) in about one iteration
+        if costs is not None and (needed - 1) * costs[0] > costs[1]:
+            return "cost"
         return None
 
 
@@ -335,6 +350,8 @@ def _modified_newton(fun, u0, *, atol, rtol, max_iter, admissible, line_search, 
 
     if not np.isfinite(rn):
         return result(False, 0, "non-finite residual at the initial state")
+    if reuse.usable and not reuse.worth_starting(rn, target):
+        reuse.invalidate("cost")
     it = 0
     n_fresh = n_modified = 0           # each kind is limited to max_iter iterations
     while n_fresh < max_iter and n_modified < max_iter:
@@ -390,6 +407,7 @@ def _modified_newton(fun, u0, *, atol, rtol, max_iter, admissible, line_search, 
                 continue
             st["reuses"] += 1
             reuse.reuses += 1
+            reuse.last_theta = rtn / max(rn, 1e-300)
         it += 1
         if fresh:
             n_fresh += 1
