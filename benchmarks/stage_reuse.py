@@ -17,7 +17,8 @@ Variants (each run from the same initial state, interleaved A B C A B C ... so a
 machine load hits them alike): ``off`` = full Newton (one factorisation per iteration,
 today's default), ``on`` = ``jacobian_reuse=True``, ``auto`` = ``jacobian_reuse="auto"``
 (also the measured cost rule). Printed per variant: median wall time and its ratio to
-``off`` measured in the same run, Newton iterations, Jacobian evaluations, factorisations,
+``off`` measured in the same run (``full``: full Newton on ``--backend``, for the ratio at
+equal linear solver), Newton iterations, Jacobian evaluations, factorisations,
 reused iterations, rejected modified steps, full-Newton stage retries, the contractions and
 why factorisations were dropped; then the final-state difference of each variant against
 full Newton, next to the difference between full Newton at the default tolerance and at a
@@ -82,7 +83,24 @@ def build(n: int, elements: int, v0: float):
     return system, x, w
 
 
-VARIANTS = {"off": dict(jacobian_reuse=False), "on": dict(jacobian_reuse=True), "auto": dict(jacobian_reuse="auto")}
+VARIANTS = {"off": dict(jacobian_reuse=False), "on": dict(jacobian_reuse=True), "auto": dict(jacobian_reuse="auto"),
+            # full Newton through the reuse machinery (every factorisation dropped after its
+            # iteration): the same linear backend as the reuse variants, for a like-for-like ratio
+            "full": dict(jacobian_reuse=True, reuse_contraction=1e-300)}
+
+
+def _register_pardiso() -> None:
+    """Make ``get_backend("pardiso")`` work in this process if the linear layer does not
+    register it yet (rve/solvers/pardiso.py is usable as a backend instance)."""
+    from rve.solvers import linear
+
+    if "pardiso" in linear.BACKENDS:
+        return
+    from rve.solvers.pardiso import PardisoFactorization, available
+
+    if not available():
+        raise SystemExit("pardiso is not available here")
+    linear.register_backend("pardiso", lambda symmetric=True: PardisoFactorization())
 
 
 def run(system, x0, w0, steps, h, newton_opts=None, **opts):
@@ -238,6 +256,8 @@ def main(argv=None) -> None:
     ap.add_argument("--strain-fabric", type=int, default=2, help="warp (= weft) yarns of the strain-step weave")
     ap.add_argument("--cache", default=str(ROOT / "results" / "bench_cache"))
     a = ap.parse_args(argv)
+    if a.backend == "pardiso":
+        _register_pardiso()
     if a.strain:
         return main_strain(a)
     names = [v for v in a.variants.split(",") if v]
@@ -249,15 +269,16 @@ def main(argv=None) -> None:
         for v in names:
             opts = dict(VARIANTS[v])
             if opts["jacobian_reuse"]:
-                opts.update(reuse_contraction=a.contraction, linear_backend=a.backend)
+                opts.setdefault("reuse_contraction", a.contraction)
+                opts.update(linear_backend=a.backend)
             res, wall = run(system, x0, w0, a.steps, a.h, **opts)
             walls[v].append(wall)
             results[v] = res
             print(f"  repeat {rep + 1} {v:>4}: {wall:7.2f} s", flush=True)
     tight_opts = dict(atol=1e-12, rtol=1e-14)
     tight, _ = run(system, x0, w0, a.steps, a.h, newton_opts=tight_opts)
-    tight_reuse = {v: run(system, x0, w0, a.steps, a.h, newton_opts=tight_opts, **VARIANTS[v])[0]
-                   for v in names if v != "off"}
+    tight_reuse = {v: run(system, x0, w0, a.steps, a.h, newton_opts=tight_opts, linear_backend=a.backend,
+                          **VARIANTS[v])[0] for v in names if v != "off"}
     load1 = os.getloadavg()
     print(f"# {a.n}x{a.n} single-fibril plain weave, {a.elements} el/fibril, n={system.n} dofs, SDIRK2, h={a.h:g} ms, "
           f"{a.steps} steps ({2 * a.steps} stage solves), v0={a.v0:g} mm/ms, reuse threshold {a.contraction}, "

@@ -216,10 +216,10 @@ class JacobianReuse:
     def drop_reason(self, theta: float, rn: float, target: float, iterations_left: int) -> Optional[str]:
         """After an accepted iteration with contraction ``theta`` ending at ``|r| = rn``:
         why the factorisation should not serve the next iteration (None: keep it)."""
-        if rn <= target:
-            return None
         if not theta <= self.contraction:
             return "contraction"
+        if rn <= target:
+            return None
         needed = math.ceil(math.log(target / rn) / math.log(max(theta, 1e-300)))
         if needed > iterations_left:
             return "slow"
