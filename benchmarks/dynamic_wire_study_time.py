@@ -98,7 +98,8 @@ def compare(plan, args) -> None:
             finally:
                 scene.integrate = integrate
             data[v] = (ds, timing)
-            print(f"  repeat {rep + 1} {v:>4}: study {walls[v][-1]:7.2f} s, sum of runs {timing['sum_of_run_walls_s']:7.2f} s",
+            print(f"  repeat {rep + 1} {v:>4}: study {walls[v][-1]:7.2f} s, "
+                  f"sum of runs {timing['sum_of_run_walls_s']:7.2f} s",
                   flush=True)
     load1 = os.getloadavg()
     print(f"machine: {os.cpu_count()} cores; load average before {load0[0]:.2f}, after {load1[0]:.2f}")
@@ -114,7 +115,8 @@ def compare(plan, args) -> None:
         line += f", Newton iterations over the series {its:.0f}"
         if ref is not None and v != "off":
             diffs = {p: float(np.nanmax(np.abs(ds[p].values - ref[0][p].values))) for p in PROBE_NAMES}
-            line += "\nmax probe difference to off over all (s, N): " + ", ".join(f"{k} {d:.1e}" for k, d in diffs.items())
+            line += ("\nmax probe difference to off over all (s, N): "
+                     + ", ".join(f"{k} {d:.1e}" for k, d in diffs.items()))
         print(line)
         print(orders_table(ds))
 

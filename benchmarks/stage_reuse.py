@@ -120,8 +120,6 @@ def _rel(a, b) -> float:
 def strain_phases(cfg, fab, mesh, x_rel, integrate_opts):
     """Driven + damped phases of uniaxial strain step 1 (``strain_step`` up to its static
     solve) with ``integrate_opts`` passed to every ``integrate`` call -> (x, w, stats)."""
-    import functools
-
     import rve.solvers.dirk as dirk
     import rve.solvers.relaxation as relaxation
     from rve.homogenisation.strain import _settings, affine_velocity, clamped_ends, mech_system, strain_levels
@@ -206,8 +204,9 @@ def main_strain(a) -> None:
             results[v] = out
             print(f"  repeat {rep + 1} {v:>4}: {walls[v][-1]:7.2f} s (t reached {out[3]})", flush=True)
     load1 = os.getloadavg()
-    print(f"# strain step 1 (uniaxial) dynamic phases, {n}x{n} plain weave ({fab.n_fibrils if hasattr(fab, 'n_fibrils') else '?'} "
-          f"fibrils), {cfg.mesh.elements} el/fibril, {x_rel.size} dofs; driven: BE {cfg.strain.stretch_steps} x "
+    n_fib = fab.n_fibrils if hasattr(fab, "n_fibrils") else "?"
+    print(f"# strain step 1 (uniaxial) dynamic phases, {n}x{n} plain weave ({n_fib} fibrils), "
+          f"{cfg.mesh.elements} el/fibril, {x_rel.size} dofs; driven: BE {cfg.strain.stretch_steps} x "
           f"{cfg.strain.t_step / cfg.strain.stretch_steps:g} ms, damped: BE {cfg.strain.relax_steps} x "
           f"{cfg.strain.t_relax / cfg.strain.relax_steps:g} ms; Newton rtol {cfg.strain.newton_rtol}, max "
           f"{cfg.strain.newton_max_iter}; load average {load0[0]:.2f} -> {load1[0]:.2f} on {os.cpu_count()} cores")
@@ -224,14 +223,15 @@ def main_strain(a) -> None:
               f"{r.stage_retries:5d} {r.rejected:4d} {th}  {r.refactor_reasons}")
     print("(ratio = median wall of 'off' / median wall of the variant: > 1 means faster)")
     if "off" in results:
-        xr, wr = results["off"][0], results["off"][1]
+        xr = results["off"][0]
         for v in names:
             if v != "off":
                 print(f"   {v:>4} vs off, state after the damped phase: x {_rel(results[v][0], xr):.1e} (relative), "
                       f"max |dx| {np.abs(results[v][0] - xr).max():.1e} mm")
         # the difference is the loose stage tolerance's: both at a 1e5x tighter rtol
-        tight = load_config(ROOT / "configs/rve/plain_weave.yaml", [f"fabric.n_warp={n}", f"fabric.n_weft={n}",
-                                                                     "strain.newton_rtol=1e-8", "strain.newton_max_iter=40"])
+        tight = load_config(ROOT / "configs/rve/plain_weave.yaml",
+                            [f"fabric.n_warp={n}", f"fabric.n_weft={n}", "strain.newton_rtol=1e-8",
+                             "strain.newton_max_iter=40"])
         t_off = strain_phases(tight, fab, mesh, x_rel, dict(VARIANTS["off"]))
         for v in names:
             if v != "off":

@@ -149,8 +149,9 @@ def test_chain_protocol_and_exact_jacobians():
 @pytest.mark.parametrize("s", [1, 2, 3])
 def test_default_off_is_bit_identical_to_the_code_before_reuse(s):
     old = _load_before_reuse()["dirk"]
-    cases = [(Manufactured, manufactured_initial, 16), (lambda: ProtheroRobinson(-5.0), lambda: (np.zeros(1), np.zeros(1)), 20),
-             (Chain, lambda: Chain().initial(), 20), (Rigged, lambda: (np.zeros(1), np.zeros(1)), 10)]
+    zeros = lambda: (np.zeros(1), np.zeros(1))  # noqa: E731
+    cases = [(Manufactured, manufactured_initial, 16), (lambda: ProtheroRobinson(-5.0), zeros, 20),
+             (Chain, lambda: Chain().initial(), 20), (Rigged, zeros, 10)]
     for make, init, n in cases:
         kw = dict(stages=s, newton_opts=dict(atol=1e-12, rtol=1e-14), max_cuts=4)
         if make is Rigged:

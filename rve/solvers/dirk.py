@@ -33,7 +33,7 @@ from typing import Callable, Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .newton import JacobianReuse, NewtonResult, newton
+from .newton import JacobianReuse, newton
 from .system import FreeDofs, massless_dofs, mech_mask
 
 __all__ = [
