@@ -15,7 +15,8 @@ assemblies and residual-only evaluations per stage, ms per stage, the wall-time 
 baseline (0, off) measured in the same run, and the largest probe difference to the baseline
 (the variants only change where Newton starts: differences stay at the Newton tolerance).
 First it prints what one model evaluation costs with and without the Jacobian; last, peak
-RSS. Run: ``python benchmarks/dirk_stage_cost.py [--repeats 3] [--runs 3:600,3:75,1:150]``.
+RSS. Run: ``python benchmarks/dirk_stage_cost.py [--repeats 3] [--runs 3:600,3:75,1:150] [--reuse]``
+(``--reuse``: the default against factorisation reuse on / auto instead).
 """
 from __future__ import annotations
 
@@ -35,6 +36,15 @@ VARIANTS = {
     "extrapolated, eager J": dict(predictor_degree=2, lazy_jacobian=False),
     "linear extrapolation, lazy J": dict(predictor_degree=1, lazy_jacobian=True),
     "extrapolated, lazy J (default)": dict(predictor_degree=2, lazy_jacobian=True),
+}
+
+#: ``--reuse``: the default against factorisation reuse (docs/time_integration.md
+#: "Factorisation reuse (modified Newton)"), with the baseline for the ratios
+REUSE_VARIANTS = {
+    "previous value, eager J": VARIANTS["previous value, eager J"],
+    "extrapolated, lazy J (default)": VARIANTS["extrapolated, lazy J (default)"],
+    "default + reuse on": dict(predictor_degree=2, lazy_jacobian=True, jacobian_reuse=True),
+    "default + reuse auto": dict(predictor_degree=2, lazy_jacobian=True, jacobian_reuse="auto"),
 }
 
 
@@ -75,7 +85,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--runs", default="3:600,3:75,1:150", help="comma-separated s:N")
+    ap.add_argument("--reuse", action="store_true", help="compare the default with factorisation reuse on / auto")
     args = ap.parse_args()
+    variants = REUSE_VARIANTS if args.reuse else VARIANTS
     cfg = load_scene_config("configs/scenes/dynamic_wire.yaml")
     cost = evaluation_cost(cfg)
     print("one evaluation of the dynamic wire (451 dofs), median of 5 x 200 calls: "
@@ -84,9 +96,9 @@ def main() -> None:
     runs = [tuple(int(v) for v in r.split(":")) for r in args.runs.split(",")]
     load0 = os.getloadavg()[0]
     for s, n in runs:
-        rec = {k: {"wall": [], "its": 0, "jac": 0, "res": 0, "probes": None} for k in VARIANTS}
+        rec = {k: {"wall": [], "its": 0, "jac": 0, "res": 0, "probes": None} for k in variants}
         for _ in range(args.repeats):
-            for name, opts in VARIANTS.items():
+            for name, opts in variants.items():
                 counts.update(jacobian=0, residual=0)
                 t0 = time.perf_counter()
                 out = solve(cfg, stages=s, steps=n, fixed_step=True, record=False, integrator_options=opts).summary

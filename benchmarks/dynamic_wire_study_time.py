@@ -14,15 +14,24 @@ the reference (s = 3, N = 1500 fixed steps) and every (s, N) of the series on a 
 
 Writes the dataset to ``--out`` (default: a temporary file) when given. Never fails on a
 slow machine; it only prints. Run: ``python benchmarks/dynamic_wire_study_time.py``.
+
+``--variants off,on,auto [--repeats 2]``: the whole study once per factorisation-reuse
+variant of ``rve.solvers.dirk.integrate`` (``jacobian_reuse`` False / True / "auto";
+``rve.scenes.dynamic_wire.integrate`` patched in this process before the pool forks),
+interleaved (A B C A B C ...); then per variant the median study wall time and its ratio
+to ``off`` measured in the same run, the fitted orders, and the largest probe difference
+to ``off`` over every (s, N) (docs/time_integration.md "Factorisation reuse").
 """
 from __future__ import annotations
 
 import argparse
-import json
+import functools
 import os
 import time
 
-from rve.studies.dynamic_wire import DEFAULT_PLAN, normalise_plan, orders_table, run_study, write_study
+import numpy as np
+
+from rve.studies.dynamic_wire import PROBE_NAMES, normalise_plan, orders_table, run_study, write_study
 
 QUICK = {"reference": {"stages": 3, "steps": 1500},
          "series": {1: {"steps": [200, 400], "fit": [200, 400]}, 2: {"steps": [50, 100], "fit": [50, 100]},
@@ -34,8 +43,12 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--plan", choices=["default", "quick"], default="default")
     ap.add_argument("--out", default=None, help="write the study netCDF here")
+    ap.add_argument("--variants", default=None, help="compare factorisation-reuse variants, e.g. off,on,auto")
+    ap.add_argument("--repeats", type=int, default=1)
     args = ap.parse_args()
     plan = normalise_plan(QUICK if args.plan == "quick" else None)
+    if args.variants:
+        return compare(plan, args)
     load0 = os.getloadavg()
     t0 = time.perf_counter()
     ds, timing = run_study(plan, workers=args.workers)
@@ -62,6 +75,50 @@ def main() -> None:
     if args.out:
         write_study(ds, args.out)
         print(f"wrote {args.out}")
+
+
+REUSE = {"off": False, "on": True, "auto": "auto"}
+
+
+def compare(plan, args) -> None:
+    import rve.scenes.dynamic_wire as scene
+    from rve.solvers.dirk import integrate
+
+    names = [v for v in args.variants.split(",") if v]
+    load0 = os.getloadavg()
+    walls = {v: [] for v in names}
+    data = {}
+    for rep in range(args.repeats):
+        for v in names:
+            scene.integrate = functools.partial(integrate, jacobian_reuse=REUSE[v])
+            try:
+                t0 = time.perf_counter()
+                ds, timing = run_study(plan, workers=args.workers)
+                walls[v].append(time.perf_counter() - t0)
+            finally:
+                scene.integrate = integrate
+            data[v] = (ds, timing)
+            print(f"  repeat {rep + 1} {v:>4}: study {walls[v][-1]:7.2f} s, "
+                  f"sum of runs {timing['sum_of_run_walls_s']:7.2f} s",
+                  flush=True)
+    load1 = os.getloadavg()
+    print(f"machine: {os.cpu_count()} cores; load average before {load0[0]:.2f}, after {load1[0]:.2f}")
+    ref = data.get("off")
+    t_ref = float(np.median(walls["off"])) if "off" in walls else None
+    for v in names:
+        ds, timing = data[v]
+        wm = float(np.median(walls[v]))
+        its = float(np.nansum(ds.newton_iterations.values))
+        line = f"\n=== {v}: study wall median {wm:.2f} s"
+        if t_ref:
+            line += f" (ratio off/{v} {t_ref / wm:.2f})"
+        line += f", Newton iterations over the series {its:.0f}"
+        if ref is not None and v != "off":
+            diffs = {p: float(np.nanmax(np.abs(ds[p].values - ref[0][p].values))) for p in PROBE_NAMES}
+            line += ("\nmax probe difference to off over all (s, N): "
+                     + ", ".join(f"{k} {d:.1e}" for k, d in diffs.items()))
+        print(line)
+        print(orders_table(ds))
 
 
 if __name__ == "__main__":

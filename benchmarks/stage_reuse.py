@@ -1,45 +1,48 @@
-"""Modified Newton in the SDIRK stage solves: how many iterations does a stage need when
-the factorisation is reused (from the stage start, or carried over from earlier stages and
-steps) instead of refactorised every iteration? (issue 10, item 2; the measurement only.)
+"""Factorisation reuse (adaptive modified Newton, ``integrate(jacobian_reuse=...)``) in a
+mass-dominated, impact-like SDIRK2 run: does it pay? (issue 10, item 2; docs/time_integration.md
+"Factorisation reuse (modified Newton)".)
 
     python benchmarks/stage_reuse.py [--n 8] [--elements 20] [--steps 40] [--h 5e-4] [--v0 10]
+                                     [--repeats 3] [--variants off,on,auto] [--backend NAME]
+    python benchmarks/stage_reuse.py --strain [--strain-fabric 2] [--repeats 3]
 
 A real dynamic run: an n × n plain weave of single-fibril yarns (d = 0.3 mm, spacing 1 mm,
 crimp amplitude R, the RVE material of configs/rve/plain_weave.yaml, no damping), linear
 elements, fibril ends pinned, directors free with a twist gauge, contact on; initial
 velocity -v0 e_z (mm/ms) on the centroids of the warp fibrils' nodes within 2 mm of the
-centre (|x|, |y| < 2), which drives them into the weft fibrils under them; SDIRK2 (rve.solvers.dirk.integrate, fixed step h, ms).
+centre (|x|, |y| < 2), which drives them into the weft fibrils under them; SDIRK2
+(rve.solvers.dirk.integrate, fixed step h, ms, default Newton tolerances).
 
-The integration itself runs with today's Newton (one factorisation per iteration). Each
-stage Newton call is intercepted (``rve.solvers.dirk.newton`` is wrapped *in this process
-only*; dirk.py and newton.py are not edited) and, from the same starting point and with the
-same tolerances (the residual decides: ``|G| <= atol`` or ``<= rtol |G_0|``), the stage is
-solved again by:
+Variants (each run from the same initial state, interleaved A B C A B C ... so a drifting
+machine load hits them alike): ``off`` = full Newton (one factorisation per iteration,
+today's default), ``on`` = ``jacobian_reuse=True``, ``auto`` = ``jacobian_reuse="auto"``
+(also the measured cost rule). Printed per variant: median wall time and its ratio to
+``off`` measured in the same run (``full``: full Newton on ``--backend``, for the ratio at
+equal linear solver), Newton iterations, Jacobian evaluations, factorisations,
+reused iterations, rejected modified steps, full-Newton stage retries, the contractions and
+why factorisations were dropped; then the final-state difference of each variant against
+full Newton, next to the difference between full Newton at the default tolerance and at a
+100× tighter one (the scale of "equal to the Newton tolerance"), and the same difference
+with both runs at the tighter tolerance (it shrinks with the tolerance: the difference is
+the tolerance's, not the method's).
 
-* ``stage``: modified Newton with the Jacobian factorised once at the stage start;
-* ``carried``: modified Newton with a factorisation carried across stages and steps (SDIRK2
-  has one diagonal coefficient, so every stage matrix is M + h a C + (h a)² K), refactorised
-  only when the observed contraction |G_k+1| / |G_k| exceeds ``--kappa`` (default 0.5) or
-  the stage does not converge in ``--max-reuse`` iterations (then restarted from the stage
-  start with a fresh factorisation);
-
-and the iteration counts, contraction rates, factorisations and the distance of the
-modified-Newton stage value from the full-Newton one are printed. It also counts how often
-the stage matrix's stored pattern (explicit zeros kept) and its nonzero pattern (zeros
-dropped) change from one stage to the next, which decides how often a reused analysis
-(rve/solvers/pardiso.py) must be redone.
+``--strain``: the two dynamic phases of one RVE strain step instead (rve.homogenisation.strain,
+configs/rve/plain_weave.yaml with ``--strain-fabric`` warp/weft yarns of 10 fibrils each,
+12 el/fibril; uniaxial step 1 from the relaxed state, relaxed once by the scene's energy
+path and cached under ``--cache``): the driven phase (backward Euler, 2 steps of 5 µs,
+loose stage Newton rtol 1e-3, max 8 iterations) and the heavily damped relaxation (2 steps
+of 1 ms), ``rve.solvers.relaxation.integrate`` patched in this process only to pass the
+variant's options. Same table; the final state is the damped phase's.
 """
 from __future__ import annotations
 
 import argparse
-import hashlib
+import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -48,7 +51,7 @@ sys.path.insert(0, str(ROOT))
 def build(n: int, elements: int, v0: float):
     import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
     from rve.config.loader import load_config
-    from rve.contact.system import ContactParams, ContactSystem
+    from rve.model.contact_model import ContactParams, ContactSystem
     from rve.fabrics import weave
     from rve.model import BeamMaterial, BeamModel, DirichletBC
 
@@ -80,41 +83,162 @@ def build(n: int, elements: int, v0: float):
     return system, x, w
 
 
-class Factor:
-    """SuperLU as today (symmetric mode) — the backend does not change iteration counts."""
-
-    def __init__(self, J):
-        from rve.solvers.newton import _SYMMETRIC
-
-        self.lu = spla.splu(sp.csc_matrix(J), **_SYMMETRIC)
-
-    def solve(self, r):
-        return self.lu.solve(r)
+VARIANTS = {"off": dict(jacobian_reuse=False), "on": dict(jacobian_reuse=True), "auto": dict(jacobian_reuse="auto"),
+            # full Newton through the reuse machinery (every factorisation dropped after its
+            # iteration): the same linear backend as the reuse variants, for a like-for-like ratio
+            "full": dict(jacobian_reuse=True, reuse_contraction=1e-300)}
 
 
-def modified_newton(residual, u0, lu, atol, rtol, max_iter):
-    """u_k+1 = u_k - LU⁻¹ G(u_k) with a fixed factorisation; returns (u, converged, norms)."""
-    u = np.array(u0, float, copy=True)
-    G = residual(u)
-    res = [float(np.linalg.norm(G))]
-    r0 = max(res[0], 1e-300)
-    for _ in range(max_iter):
-        if res[-1] <= atol or res[-1] <= rtol * r0:
-            return u, True, res
-        u = u - lu.solve(G)
-        G = residual(u)
-        res.append(float(np.linalg.norm(G)))
-        if not np.isfinite(res[-1]) or res[-1] > 1e3 * r0:
-            break
-    return u, bool(res[-1] <= atol or res[-1] <= rtol * r0), res
+def _register_pardiso() -> None:
+    """Make ``get_backend("pardiso")`` work in this process if the linear layer does not
+    register it yet (rve/solvers/pardiso.py is usable as a backend instance)."""
+    from rve.solvers import linear
+
+    if "pardiso" in linear.BACKENDS:
+        return
+    from rve.solvers.pardiso import PardisoFactorization, available
+
+    if not available():
+        raise SystemExit("pardiso is not available here")
+    linear.register_backend("pardiso", lambda symmetric=True: PardisoFactorization())
 
 
-def _key(A, drop: bool) -> str:
-    A = sp.csc_matrix(A)
-    if drop:
-        A = A.copy()
-        A.eliminate_zeros()
-    return hashlib.sha1(A.indptr.tobytes() + A.indices.tobytes()).hexdigest()
+def run(system, x0, w0, steps, h, newton_opts=None, **opts):
+    from rve.solvers.dirk import integrate
+
+    system.rebuild(x0)  # the same contact map at the start of every run
+    t0 = time.perf_counter()
+    res = integrate(system, x0, w0, 0.0, steps * h, steps, stages=2, fixed_step=True, consistent=False,
+                    newton_opts=newton_opts, **opts)
+    return res, time.perf_counter() - t0
+
+
+def _rel(a, b) -> float:
+    return float(np.linalg.norm(a - b) / max(np.linalg.norm(b), 1e-300))
+
+
+def strain_phases(cfg, fab, mesh, x_rel, integrate_opts):
+    """Driven + damped phases of uniaxial strain step 1 (``strain_step`` up to its static
+    solve) with ``integrate_opts`` passed to every ``integrate`` call -> (x, w, stats)."""
+    import rve.solvers.dirk as dirk
+    import rve.solvers.relaxation as relaxation
+    from rve.homogenisation.strain import _settings, affine_velocity, clamped_ends, mech_system, strain_levels
+
+    sp_ = cfg.strain
+    levels = strain_levels(cfg)
+    rate = float(levels[1] - levels[0]) / sp_.t_step
+    nn = mesh.n_nodes
+    x = np.array(x_rel, float).reshape(nn, 9)
+    ends, _, _ = clamped_ends(fab, mesh)
+    w_aff = affine_velocity(x, "uniaxial", rate)
+    calls = []
+    real = relaxation.integrate
+
+    def patched(*args, **kw):
+        res = dirk.integrate(*args, **kw, **integrate_opts)
+        calls.append(res)
+        return res
+
+    relaxation.integrate = patched
+    try:
+        sys1 = mech_system(fab, mesh, cfg, sp_.damping, x, end_velocity=w_aff[ends, :3])
+        s1 = _settings(sp_.t_step, sp_.stretch_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
+                       sp_.static_atol, static=False)
+        res1 = relaxation.relax_to_equilibrium(sys1, x.reshape(-1), w_aff.reshape(-1), s1)
+        x1 = res1.x.reshape(nn, 9).copy()
+        sys2 = mech_system(fab, mesh, cfg, sp_.relax_damping, x1)
+        s2 = _settings(sp_.t_relax, sp_.relax_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
+                       sp_.static_atol, static=False)
+        res2 = relaxation.relax_to_equilibrium(sys2, x1.reshape(-1), np.zeros(sys2.n), s2)
+    finally:
+        relaxation.integrate = real
+    return res2.x, res2.w, calls, (res1.t, res2.t)
+
+
+class _Summed:
+    """The counts of several IntegrationResults, added."""
+
+    def __init__(self, results):
+        for k in ("newton_iterations", "jacobian_evaluations", "factorizations", "reuses", "rejected_reuses",
+                  "stage_retries", "rejected", "steps"):
+            setattr(self, k, int(sum(getattr(r, k) for r in results)))
+        self.contractions = [q for r in results for q in r.contractions]
+        reasons = {}
+        for r in results:
+            for k, v in r.refactor_reasons.items():
+                reasons[k] = reasons.get(k, 0) + v
+        self.refactor_reasons = reasons
+
+
+def main_strain(a) -> None:
+    import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
+    from rve.config.loader import load_config
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.strain import relax_fabric
+
+    n = a.strain_fabric
+    cfg = load_config(ROOT / "configs/rve/plain_weave.yaml", [f"fabric.n_warp={n}", f"fabric.n_weft={n}"])
+    fab, mesh = fabric_and_mesh(cfg)
+    cache = Path(a.cache) / f"strain_relaxed_{n}x{n}_{cfg.mesh.elements}.npy"
+    if cache.exists():
+        x_rel = np.load(cache)
+    else:
+        t0 = time.perf_counter()
+        x0 = fab.initial_state(mesh)
+        x_rel, _, _ = relax_fabric(cfg, fab, mesh, x0)
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        np.save(cache, x_rel)
+        print(f"relaxed the {n}x{n} weave in {time.perf_counter() - t0:.1f} s (cached: {cache})", flush=True)
+    names = [v for v in a.variants.split(",") if v]
+    load0 = os.getloadavg()
+    walls = {v: [] for v in names}
+    results = {}
+    for rep in range(a.repeats):
+        for v in names:
+            opts = dict(VARIANTS[v])
+            if opts["jacobian_reuse"]:
+                opts.update(reuse_contraction=a.contraction, linear_backend=a.backend)
+            t0 = time.perf_counter()
+            out = strain_phases(cfg, fab, mesh, x_rel, opts)
+            walls[v].append(time.perf_counter() - t0)
+            results[v] = out
+            print(f"  repeat {rep + 1} {v:>4}: {walls[v][-1]:7.2f} s (t reached {out[3]})", flush=True)
+    load1 = os.getloadavg()
+    n_fib = fab.n_fibrils if hasattr(fab, "n_fibrils") else "?"
+    print(f"# strain step 1 (uniaxial) dynamic phases, {n}x{n} plain weave ({n_fib} fibrils), "
+          f"{cfg.mesh.elements} el/fibril, {x_rel.size} dofs; driven: BE {cfg.strain.stretch_steps} x "
+          f"{cfg.strain.t_step / cfg.strain.stretch_steps:g} ms, damped: BE {cfg.strain.relax_steps} x "
+          f"{cfg.strain.t_relax / cfg.strain.relax_steps:g} ms; Newton rtol {cfg.strain.newton_rtol}, max "
+          f"{cfg.strain.newton_max_iter}; load average {load0[0]:.2f} -> {load1[0]:.2f} on {os.cpu_count()} cores")
+    t_ref = float(np.median(walls["off"])) if "off" in walls else None
+    print(f"{'variant':>7} {'wall med':>9} {'ratio':>6} {'its':>5} {'jac':>5} {'fact':>5} {'reused':>6} {'rej':>4} "
+          f"{'retry':>5} {'cuts':>4} {'theta med':>9} {'theta max':>9}  dropped because")
+    for v in names:
+        r = _Summed(results[v][2])
+        wm = float(np.median(walls[v]))
+        th = (f"{np.median(r.contractions):9.2e} {np.max(r.contractions):9.2e}" if r.contractions
+              else f"{'(quadr.)':>9} {'-':>9}")
+        print(f"{v:>7} {wm:9.2f} {(t_ref / wm if t_ref else float('nan')):6.2f} {r.newton_iterations:5d} "
+              f"{r.jacobian_evaluations:5d} {r.factorizations:5d} {r.reuses:6d} {r.rejected_reuses:4d} "
+              f"{r.stage_retries:5d} {r.rejected:4d} {th}  {r.refactor_reasons}")
+    print("(ratio = median wall of 'off' / median wall of the variant: > 1 means faster)")
+    if "off" in results:
+        xr = results["off"][0]
+        for v in names:
+            if v != "off":
+                print(f"   {v:>4} vs off, state after the damped phase: x {_rel(results[v][0], xr):.1e} (relative), "
+                      f"max |dx| {np.abs(results[v][0] - xr).max():.1e} mm")
+        # the difference is the loose stage tolerance's: both at a 1e5x tighter rtol
+        tight = load_config(ROOT / "configs/rve/plain_weave.yaml",
+                            [f"fabric.n_warp={n}", f"fabric.n_weft={n}", "strain.newton_rtol=1e-8",
+                             "strain.newton_max_iter=40"])
+        t_off = strain_phases(tight, fab, mesh, x_rel, dict(VARIANTS["off"]))
+        for v in names:
+            if v != "off":
+                t_v = strain_phases(tight, fab, mesh, x_rel, dict(VARIANTS[v]))
+                print(f"   {v:>4} vs off, both with stage rtol 1e-8: x {_rel(t_v[0], t_off[0]):.1e} (relative), "
+                      f"max |dx| {np.abs(t_v[0] - t_off[0]).max():.1e} mm; off(rtol 1e-3) vs off(1e-8): "
+                      f"max |dx| {np.abs(xr - t_off[0]).max():.1e} mm")
 
 
 def main(argv=None) -> None:
@@ -124,99 +248,63 @@ def main(argv=None) -> None:
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--h", type=float, default=5e-4)
     ap.add_argument("--v0", type=float, default=10.0)
-    ap.add_argument("--kappa", type=float, default=0.5)
-    ap.add_argument("--max-reuse", type=int, default=8)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--variants", default="off,on,auto")
+    ap.add_argument("--backend", default=None, help="linear_backend of the reuse variants (get_backend name)")
+    ap.add_argument("--contraction", type=float, default=0.5)
+    ap.add_argument("--strain", action="store_true", help="the dynamic phases of an RVE strain step instead")
+    ap.add_argument("--strain-fabric", type=int, default=2, help="warp (= weft) yarns of the strain-step weave")
+    ap.add_argument("--cache", default=str(ROOT / "results" / "bench_cache"))
     a = ap.parse_args(argv)
-
-    import rve.solvers.dirk as dirk
-
+    if a.backend == "pardiso":
+        _register_pardiso()
+    if a.strain:
+        return main_strain(a)
+    names = [v for v in a.variants.split(",") if v]
     system, x0, w0 = build(a.n, a.elements, a.v0)
-    real_newton = dirk.newton
-    rec = []
-    carried = {"lu": None, "factorizations": 0}
-    last_keys = {"kept": None, "dropped": None, "kept_changes": 0, "dropped_changes": 0}
-
-    def wrapped(fun, u0, *, atol=1e-10, rtol=1e-12, max_iter=30, label="", residual=None, **kw):
-        t0 = time.perf_counter()
-        ref = real_newton(fun, u0, atol=atol, rtol=rtol, max_iter=max_iter, label=label, residual=residual, **kw)
-        t_ref = time.perf_counter() - t0
-        if residual is None:
-            residual_ = lambda u: fun(u)[0]  # noqa: E731
-        else:
-            residual_ = residual
-        _, J0 = fun(u0)
-        for kind, drop in (("kept", False), ("dropped", True)):
-            k = _key(J0, drop)
-            if last_keys[kind] is not None and k != last_keys[kind]:
-                last_keys[kind + "_changes"] += 1
-            last_keys[kind] = k
-        # (i) factorised at the stage start
-        us, cs, rs = modified_newton(residual_, u0, Factor(J0), atol, rtol, 50)
-        # (ii) carried across stages and steps, adaptive refactorisation
-        nfac = 0
-        if carried["lu"] is None:
-            carried["lu"], nfac = Factor(J0), 1
-        uc, cc, rc = modified_newton(residual_, u0, carried["lu"], atol, rtol, a.max_reuse)
-        rates = [rc[k + 1] / rc[k] for k in range(len(rc) - 1) if rc[k] > 0]
-        if not cc or (rates and max(rates) > a.kappa):
-            carried["lu"] = Factor(J0)
-            nfac += 1
-            uc2, cc, rc2 = modified_newton(residual_, u0, carried["lu"], atol, rtol, 50)
-            its_c = (len(rc) - 1) + (len(rc2) - 1)
-            uc = uc2
-        else:
-            its_c = len(rc) - 1
-        carried["factorizations"] += nfac
-        scale = max(float(np.linalg.norm(ref.u)), 1e-300)
-        rec.append({
-            "label": label, "ref_its": ref.iterations, "ref_res": list(ref.residuals), "ref_s": t_ref,
-            "stage_its": len(rs) - 1, "stage_conv": cs, "stage_rates": [rs[k + 1] / rs[k] for k in range(len(rs) - 1)],
-            "carried_its": its_c, "carried_conv": cc, "carried_fac": nfac,
-            "carried_rates": rates,
-            "d_stage": float(np.linalg.norm(us - ref.u) / scale), "d_carried": float(np.linalg.norm(uc - ref.u) / scale),
-        })
-        return ref
-
-    dirk.newton = wrapped
-    try:
-        t0 = time.perf_counter()
-        res = dirk.integrate(system, x0, w0, 0.0, a.steps * a.h, a.steps, stages=2, fixed_step=True,
-                             consistent=False)
-        wall = time.perf_counter() - t0
-    finally:
-        dirk.newton = real_newton
-
-    nst = len(rec)
-    ref_its = np.array([r["ref_its"] for r in rec])
-    st_its = np.array([r["stage_its"] for r in rec])
-    ca_its = np.array([r["carried_its"] for r in rec])
-    st_rates = np.concatenate([r["stage_rates"] for r in rec if r["stage_rates"]] or [np.zeros(0)])
-    ca_rates = np.concatenate([r["carried_rates"] for r in rec if r["carried_rates"]] or [np.zeros(0)])
-    print(f"# {a.n}x{a.n} single-fibril plain weave, {a.elements} el/fibril, n={system.n} dofs, SDIRK2, "
-          f"h={a.h:g} ms, {a.steps} steps, v0={a.v0:g} mm/ms; run wall {wall:.1f} s (incl. the measurement)")
-    print(f"# max |w_z| at the end {np.abs(system.nodal(res.w)[:, 2]).max():.3g} mm/ms, "
-          f"active contact pairs at the end: {int(np.count_nonzero(system.active_pairs(res.x)))}"
-          if hasattr(system, "active_pairs") else "")
-    print(f"stage solves: {nst}")
-    print(f"full Newton (today, 1 factorisation/iteration): iterations {ref_its.sum()} "
-          f"(per stage: mean {ref_its.mean():.2f}, max {ref_its.max()}), factorisations = iterations = {ref_its.sum()}")
-    print(f"modified Newton, factorised at each stage start: iterations {st_its.sum()} (mean {st_its.mean():.2f}, "
-          f"max {st_its.max()}), factorisations {nst}, all converged: {all(r['stage_conv'] for r in rec)}")
-    print(f"   contraction |G_k+1|/|G_k|: median {np.median(st_rates):.2e}, max {st_rates.max():.2e}")
-    print(f"modified Newton, carried across stages/steps (refactorise when rate > {a.kappa}): iterations "
-          f"{ca_its.sum()} (mean {ca_its.mean():.2f}, max {ca_its.max()}), factorisations "
-          f"{carried['factorizations']}, all converged: {all(r['carried_conv'] for r in rec)}")
-    if ca_rates.size:
-        print(f"   contraction: median {np.median(ca_rates):.2e}, 90% {np.quantile(ca_rates, 0.9):.2e}, "
-              f"max {ca_rates.max():.2e}")
-    print(f"distance from the full-Newton stage value (relative): stage-start max "
-          f"{max(r['d_stage'] for r in rec):.1e}, carried max {max(r['d_carried'] for r in rec):.1e}")
-    print(f"stored pattern changes between stage starts: {last_keys['kept_changes']} of {nst - 1}; "
-          f"nonzero pattern (zeros dropped) changes: {last_keys['dropped_changes']} of {nst - 1}")
-    print("first stages (full its | stage-start its | carried its, contraction rates of the carried factor):")
-    for r in rec[:6] + rec[-4:]:
-        print(f"  {r['label']:<34} {r['ref_its']} | {r['stage_its']} | {r['carried_its']} "
-              f"{['%.1e' % v for v in r['carried_rates']]}")
+    load0 = os.getloadavg()
+    walls = {v: [] for v in names}
+    results = {}
+    for rep in range(a.repeats):
+        for v in names:
+            opts = dict(VARIANTS[v])
+            if opts["jacobian_reuse"]:
+                opts.setdefault("reuse_contraction", a.contraction)
+                opts.update(linear_backend=a.backend)
+            res, wall = run(system, x0, w0, a.steps, a.h, **opts)
+            walls[v].append(wall)
+            results[v] = res
+            print(f"  repeat {rep + 1} {v:>4}: {wall:7.2f} s", flush=True)
+    tight_opts = dict(atol=1e-12, rtol=1e-14)
+    tight, _ = run(system, x0, w0, a.steps, a.h, newton_opts=tight_opts)
+    tight_reuse = {v: run(system, x0, w0, a.steps, a.h, newton_opts=tight_opts, linear_backend=a.backend,
+                          **VARIANTS[v])[0] for v in names if v != "off"}
+    load1 = os.getloadavg()
+    print(f"# {a.n}x{a.n} single-fibril plain weave, {a.elements} el/fibril, n={system.n} dofs, SDIRK2, h={a.h:g} ms, "
+          f"{a.steps} steps ({2 * a.steps} stage solves), v0={a.v0:g} mm/ms, reuse threshold {a.contraction}, "
+          f"backend {a.backend or 'default'}; load average {load0[0]:.2f} -> {load1[0]:.2f} on {os.cpu_count()} cores")
+    ref = results.get("off")
+    t_ref = float(np.median(walls["off"])) if "off" in walls else None
+    print(f"{'variant':>7} {'wall med':>9} {'ratio':>6} {'its':>5} {'jac':>5} {'fact':>5} {'reused':>6} {'rej':>4} "
+          f"{'retry':>5} {'theta med':>9} {'theta max':>9}  dropped because")
+    for v in names:
+        r = results[v]
+        wm = float(np.median(walls[v]))
+        th = (f"{np.median(r.contractions):9.2e} {np.max(r.contractions):9.2e}" if r.contractions
+              else f"{'(quadr.)':>9} {'-':>9}")
+        print(f"{v:>7} {wm:9.2f} {(t_ref / wm if t_ref else float('nan')):6.2f} {r.newton_iterations:5d} "
+              f"{r.jacobian_evaluations:5d} {r.factorizations:5d} {r.reuses:6d} {r.rejected_reuses:4d} "
+              f"{r.stage_retries:5d} {th}  {r.refactor_reasons}")
+    print("(ratio = median wall of 'off' / median wall of the variant: > 1 means faster)")
+    if ref is not None:
+        print(f"final state vs full Newton (relative 2-norm): tolerance scale |off(default tol) - off(100x tighter)|: "
+              f"x {_rel(ref.x, tight.x):.1e}, w {_rel(ref.w, tight.w):.1e}")
+        for v in names:
+            if v != "off":
+                r = results[v]
+                rt = tight_reuse[v]
+                print(f"   {v:>4} vs off: x {_rel(r.x, ref.x):.1e}, w {_rel(r.w, ref.w):.1e}; both at the 100x tighter "
+                      f"tolerance: x {_rel(rt.x, tight.x):.1e}, w {_rel(rt.w, tight.w):.1e} (shrinks with the tolerance)")
 
 
 if __name__ == "__main__":

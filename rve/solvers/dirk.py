@@ -12,6 +12,15 @@ Thesis §6.2 and Appendix C; see ``docs/time_integration.md``.
   landing exactly on ``t_end``; or ``fixed_step=True`` (failure raises at once).
 * ``consistent_initialization`` -- solves ``F = 0`` for the massless (algebraic) dofs at
   t0 so that e.g. the potential V(0) is consistent with x(0), w(0).
+* Factorisation reuse (``integrate(jacobian_reuse=...)``, default off: one factorisation
+  per Newton iteration as before, bit for bit): the stepper keeps one
+  ``rve.solvers.newton.JacobianReuse`` for the run, so a factorisation serves Newton
+  iterations, stages and steps while the observed contraction stays below
+  ``reuse_contraction``; it is dropped when h·a_ii moves by more than ``reuse_h_rtol``
+  (relative), when the constraint set or the system's structure (``structure_token``: a
+  contact-map rebuild) changes, and after a failed stage; a stage whose modified Newton
+  fails is solved again from the same start by full Newton before the step is cut.
+  docs/time_integration.md "Factorisation reuse (modified Newton)".
 """
 from __future__ import annotations
 
@@ -24,14 +33,14 @@ from typing import Callable, Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .newton import NewtonResult, newton
+from .newton import JacobianReuse, newton
 from .system import FreeDofs, massless_dofs, mech_mask
 
 __all__ = [
     "Tableau", "sdirk", "BACKWARD_EULER", "SDIRK2", "SDIRK3", "SDIRK3_ALPHA",
     "order_conditions", "stability_function",
     "StepInfo", "StepFailure", "IntegrationFailure", "IntegrationResult",
-    "dirk_step", "integrate", "consistent_initialization", "DirkStepper",
+    "dirk_step", "integrate", "consistent_initialization", "DirkStepper", "structure_token",
 ]
 
 log = logging.getLogger("rve.dirk")
@@ -150,6 +159,20 @@ class StepInfo:
     stage_iterations: list       # Newton iterations per stage
     stage_residuals: list        # Newton residual history per stage
     linear_solves: int = 0
+    stage_jacobians: list = field(default_factory=list)       # Jacobian evaluations per stage
+    stage_factorizations: list = field(default_factory=list)  # factorisations per stage
+    stage_reuses: list = field(default_factory=list)          # iterations on a reused factorisation
+    stage_contractions: list = field(default_factory=list)    # |r_k|/|r_k-1| per stage (reuse on)
+    stage_retries: int = 0       # stages re-solved by full Newton after the modified Newton failed
+    rejected_reuses: int = 0     # modified steps discarded (redone with a fresh Jacobian)
+
+    @property
+    def jacobians(self) -> int:
+        return int(sum(self.stage_jacobians))
+
+    @property
+    def factorizations(self) -> int:
+        return int(sum(self.stage_factorizations))
 
     @property
     def newton_iterations(self) -> int:
@@ -160,7 +183,7 @@ class StepFailure(RuntimeError):
     """A stage Newton solve failed (no convergence, NaN, iteration limit, inadmissible)."""
 
     def __init__(self, stage: int, t: float, h: float, residuals, reason: str, newton_iterations: int = 0,
-                 linear_solves: int = 0):
+                 linear_solves: int = 0, counts: Optional[dict] = None):
         self.stage = stage
         self.t = t
         self.h = h
@@ -168,6 +191,7 @@ class StepFailure(RuntimeError):
         self.reason = reason
         self.newton_iterations = newton_iterations
         self.linear_solves = linear_solves
+        self.counts = dict(counts or {})   # jacobians, factorizations, reuses, ... of the attempt
         super().__init__(
             f"stage {stage} of the step from t = {t:.9g} with h = {h:.6g} failed: {reason}; "
             f"residuals {_fmt_res(self.residuals)}"
@@ -201,21 +225,52 @@ class IntegrationResult:
     steps: int = 0                       # accepted steps
     rejected: int = 0                    # failed (cut) attempts
     newton_iterations: int = 0           # all Newton iterations, including failed attempts
-    linear_solves: int = 0               # sparse LU solves (one per Newton iteration)
+    linear_solves: int = 0               # solves with a factorisation (reuse off: one per Newton iteration)
     h_min: float = math.inf
     history: list = field(default_factory=list)   # (t_end_of_step, h, newton its) per accepted step
+    jacobian_evaluations: int = 0        # residual + Jacobian evaluations (all attempts)
+    factorizations: int = 0              # numeric factorisations (reuse off: = linear_solves)
+    reuses: int = 0                      # Newton iterations done on a reused factorisation
+    rejected_reuses: int = 0             # modified steps discarded (then redone with a fresh Jacobian)
+    stage_retries: int = 0               # stages re-solved by full Newton after a failed modified Newton
+    refactor_reasons: dict = field(default_factory=dict)  # why reused factorisations were dropped
+    contractions: list = field(default_factory=list)      # all |r_k|/|r_k-1| of accepted steps (reuse on)
+
+    def add(self, counts: dict) -> None:
+        """Add the counts of one step attempt (``StepInfo`` / ``StepFailure`` counts)."""
+        self.newton_iterations += int(counts.get("newton_iterations", 0))
+        self.linear_solves += int(counts.get("linear_solves", 0))
+        self.jacobian_evaluations += int(counts.get("jacobians", 0))
+        self.factorizations += int(counts.get("factorizations", 0))
+        self.reuses += int(counts.get("reuses", 0))
+        self.rejected_reuses += int(counts.get("rejected_reuses", 0))
+        self.stage_retries += int(counts.get("stage_retries", 0))
 
 
 def _fmt_res(res) -> str:
     return "[" + ", ".join(f"{r:.3e}" for r in res) + "]"
 
 
-def _linear_solves(res: NewtonResult) -> int:
-    """One sparse LU solve per Newton iteration (+1 for an attempt that failed in/after it)."""
-    n = int(res.iterations)
-    if not res.converged and res.reason.startswith(("linear solve", "non-finite Newton update", "no admissible")):
-        n += 1
-    return n
+def _counts(results) -> dict:
+    """Summed counts of Newton results."""
+    keys = ("jacobians", "factorizations", "linear_solves", "reuses", "rejected_reuses")
+    out = {k: int(sum(getattr(r, k) for r in results)) for k in keys}
+    out["newton_iterations"] = int(sum(r.iterations for r in results))
+    return out
+
+
+def structure_token(system):
+    """What identifies the structure (sparsity pattern) of a system's matrices: the
+    system's ``structure_version`` if it has one, else the rebuild count of a contact
+    system (``stats["rebuilds"]``: every contact-map rebuild gives the matrices a new
+    structure), else None (no pattern changes known)."""
+    v = getattr(system, "structure_version", None)
+    if v is not None:
+        return v
+    stats = getattr(system, "stats", None)
+    if isinstance(stats, dict) and "rebuilds" in stats:
+        return stats["rebuilds"]
+    return None
 
 
 def _newton_kwargs(newton_opts) -> dict:
@@ -254,11 +309,23 @@ class DirkStepper:
     ``lazy_jacobian``: the Newton trial points are evaluated without the Jacobian, which is
     assembled only when another iteration needs it (``newton(residual=...)``); a stage that
     converges in one iteration then costs one Jacobian assembly, not two.
+
+    ``jacobian_reuse`` (False, True or "auto"): adaptive modified Newton with one
+    ``JacobianReuse`` (``self.reuse``) for the stepper's life; "auto" adds the measured
+    cost rule (``JacobianReuse(cost_aware=True)``). ``reuse_contraction`` is its
+    threshold, ``reuse_h_rtol`` the relative change of h·a_ii that drops the
+    factorisation, ``linear_backend`` the ``get_backend`` name (module docstring).
     """
 
     def __init__(self, system, tableau: Tableau, newton_opts: Optional[dict] = None,
-                 predictor_degree: int = 2, lazy_jacobian: bool = True):
+                 predictor_degree: int = 2, lazy_jacobian: bool = True, jacobian_reuse=False,
+                 reuse_contraction: float = 0.5, reuse_h_rtol: float = 0.1, linear_backend: Optional[str] = None):
         self.system = system
+        if jacobian_reuse not in (False, True, "auto"):
+            raise ValueError(f"jacobian_reuse must be False, True or 'auto', not {jacobian_reuse!r}")
+        self.reuse = (JacobianReuse(reuse_contraction, cost_aware=(jacobian_reuse == "auto"), backend=linear_backend)
+                      if jacobian_reuse else None)
+        self.reuse_h_rtol = float(reuse_h_rtol)
         self.lazy_jacobian = bool(lazy_jacobian)
         self.tableau = tableau
         if predictor_degree not in (0, 1, 2, 3):
@@ -297,7 +364,8 @@ class DirkStepper:
         Mw0 = M @ w0
         W, Fs = [], []
         its, ress = [], []
-        nsolves = 0
+        results = []
+        retries = 0
         w_prev = w0
         pts = self._history_at(t0, w0, h)
         for i in range(s):
@@ -340,12 +408,35 @@ class DirkStepper:
                 return bool(sysm.admissible(state(u)[0]))
 
             label = f"dirk s{s} stage {i + 1} t={ti:.6g}"
-            res = newton(functools.partial(stage_residual, jacobian=True), wi[free], admissible=adm, label=label,
-                         residual=functools.partial(stage_residual, jacobian=False) if self.lazy_jacobian else None,
-                         **self.newton_opts)
-            its.append(res.iterations)
+            fun = functools.partial(stage_residual, jacobian=True)
+            resid = functools.partial(stage_residual, jacobian=False) if self.lazy_jacobian else None
+            reuse = self.reuse
+            if reuse is None:
+                res = newton(fun, wi[free], admissible=adm, label=label, residual=resid, **self.newton_opts)
+                stage_results = [res]
+            else:
+                key = self._check_reuse(haii, fd.key)
+                res = newton(fun, wi[free], admissible=adm, label=label, residual=resid, reuse=reuse,
+                             **self.newton_opts)
+                if res.factorizations:
+                    reuse.key = key
+                stage_results = [res]
+                if not res.converged and (res.reuses or res.rejected_reuses):
+                    # the modified Newton failed: full Newton from the same start before a cut
+                    reuse.invalidate("failed stage")
+                    retries += 1
+                    log.info("%s: modified Newton failed (%s); full Newton retry", label, res.reason)
+                    res = newton(fun, wi[free], admissible=adm, label=label + " retry", residual=resid,
+                                 **self.newton_opts)
+                    stage_results.append(res)
+                log.info("%s: its=%d jacobians=%d factorisations=%d reused=%d rejected=%d contraction=%s", label,
+                         sum(r.iterations for r in stage_results), sum(r.jacobians for r in stage_results),
+                         sum(r.factorizations for r in stage_results), sum(r.reuses for r in stage_results),
+                         sum(r.rejected_reuses for r in stage_results),
+                         "[" + ", ".join(f"{q:.1e}" for r in stage_results for q in r.contractions) + "]")
+            results.extend(stage_results)
+            its.append(int(sum(r.iterations for r in stage_results)))
             ress.append(list(res.residuals))
-            nsolves += _linear_solves(res)
             reason = None
             if not res.converged:
                 reason = res.reason or "Newton did not converge"
@@ -355,7 +446,11 @@ class DirkStepper:
             if reason is None and not sysm.admissible(xi):
                 reason = "inadmissible stage state (det F <= 0)"
             if reason is not None:
-                raise StepFailure(i + 1, t0, h, res.residuals, reason, int(sum(its)), nsolves)
+                if self.reuse is not None:
+                    self.reuse.invalidate("failed step")
+                counts = _counts(results)
+                counts["stage_retries"] = retries
+                raise StepFailure(i + 1, t0, h, res.residuals, reason, int(sum(its)), counts["linear_solves"], counts)
             W.append(wsol)
             if i < s - 1:  # the last stage's F is not needed (stiffly accurate)
                 if "u" in cache and np.array_equal(cache["u"], res.u):
@@ -367,7 +462,30 @@ class DirkStepper:
             pts.append((ti, wsol))
         # stiffly accurate (A[s-1] = b, c_s = 1): the step result is the last stage
         self._points = pts[-(self.predictor_degree + 1):]
-        return xi, W[-1], StepInfo(t0, h, its, ress, nsolves)
+        counts = _counts(results)
+        info = StepInfo(t0, h, its, ress, counts["linear_solves"], stage_retries=retries)
+        for r in results:   # per stage (a retried stage: both attempts, in order)
+            info.stage_jacobians.append(r.jacobians)
+            info.stage_factorizations.append(r.factorizations)
+            info.stage_reuses.append(r.reuses)
+            info.stage_contractions.append(list(r.contractions))
+        info.rejected_reuses = counts["rejected_reuses"]
+        return xi, W[-1], info
+
+    def _check_reuse(self, haii: float, constraint_key) -> tuple:
+        """Drop the held factorisation if the stage matrix changed in a way the contraction
+        cannot see first; returns the key of the stage about to be solved."""
+        reuse = self.reuse
+        key = (haii, constraint_key, structure_token(self.system))
+        if reuse.usable and reuse.key is not None:
+            h_old, c_old, s_old = reuse.key
+            if c_old != constraint_key:
+                reuse.invalidate("constraints")
+            elif s_old != key[2]:
+                reuse.invalidate("pattern")
+            elif abs(haii - h_old) > self.reuse_h_rtol * abs(h_old):
+                reuse.invalidate("h")
+        return key
 
     def _history_at(self, t0: float, w0, h: float) -> list:
         """The remembered stage values if they end at (t0, w0) (the last accepted step),
@@ -388,15 +506,16 @@ class DirkStepper:
         return w
 
 
-def dirk_step(system, tableau, x0, w0, t0: float, h: float, newton_opts: Optional[dict] = None):
+def dirk_step(system, tableau, x0, w0, t0: float, h: float, newton_opts: Optional[dict] = None, **options):
     """One SDIRK step of size ``h`` from ``(x0, w0)`` at ``t0``.
 
     ``tableau`` is a ``Tableau`` or a stage count (1, 2, 3). Returns ``(x1, w1, StepInfo)``;
     raises ``StepFailure`` if a stage Newton solve fails. ``newton_opts`` are passed to
-    ``rve.solvers.newton.newton`` (atol, rtol, max_iter, line_search, max_halvings, ...).
+    ``rve.solvers.newton.newton`` (atol, rtol, max_iter, line_search, max_halvings, ...),
+    ``options`` to ``DirkStepper`` (predictor_degree, lazy_jacobian, jacobian_reuse, ...).
     """
     tab = tableau if isinstance(tableau, Tableau) else sdirk(tableau)
-    return DirkStepper(system, tab, newton_opts).step(x0, w0, t0, h)
+    return DirkStepper(system, tab, newton_opts, **options).step(x0, w0, t0, h)
 
 
 # ----------------------------------------------------------------------------- init
@@ -454,6 +573,10 @@ def integrate(
     tableau: Optional[Tableau] = None,
     predictor_degree: int = 2,
     lazy_jacobian: bool = True,
+    jacobian_reuse=False,
+    reuse_contraction: float = 0.5,
+    reuse_h_rtol: float = 0.1,
+    linear_backend: Optional[str] = None,
 ) -> IntegrationResult:
     """Integrate from ``t0`` to ``t_end`` with nominal step ``h0 = (t_end − t0)/n_steps``.
 
@@ -470,11 +593,22 @@ def integrate(
     the massless dofs are first solved for at t0 (``consistent_initialization``).
     ``predictor_degree`` sets the stage predictor (``DirkStepper``; 0 = previous stage value)
     and ``lazy_jacobian`` skips the Jacobian at converged points (``DirkStepper``).
+
+    Factorisation reuse (modified Newton; docs/time_integration.md): ``jacobian_reuse``
+    False (default: one factorisation per Newton iteration, today's results bit for bit),
+    True (keep a factorisation across iterations, stages and steps while the contraction
+    stays <= ``reuse_contraction``) or "auto" (also weigh the measured cost of the extra
+    iterations against a fresh factorisation); ``reuse_h_rtol``: relative change of
+    h·a_ii that drops the factorisation; ``linear_backend``: its
+    ``rve.solvers.linear.get_backend`` name. The result counts Jacobian evaluations,
+    factorisations, reused iterations, rejected modified steps, full-Newton stage retries
+    and why factorisations were dropped (``refactor_reasons``).
     """
     tab = tableau if tableau is not None else sdirk(stages)
     if n_steps < 1 or not t_end > t0:
         raise ValueError("need n_steps >= 1 and t_end > t0")
-    stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian)
+    stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian, jacobian_reuse,
+                          reuse_contraction, reuse_h_rtol, linear_backend)
     x = np.array(x0, dtype=float, copy=True)
     w = np.array(w0, dtype=float, copy=True)
     t = float(t0)
@@ -482,8 +616,7 @@ def integrate(
     if consistent:
         w, res0 = consistent_initialization(system, x, w, t, newton_opts)
         if res0 is not None:
-            out.newton_iterations += res0.iterations
-            out.linear_solves += _linear_solves(res0)
+            out.add(_counts([res0]))
     h0 = (float(t_end) - float(t0)) / int(n_steps)
     h = h0
     k_next = 1                   # index of the next nominal grid point
@@ -509,8 +642,7 @@ def integrate(
                 x1, w1, info = stepper.step(x, w, t, h_try)
             except StepFailure as fail:
                 out.rejected += 1
-                out.newton_iterations += fail.newton_iterations
-                out.linear_solves += fail.linear_solves
+                out.add(fail.counts)
                 log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)",
                          out.steps + 1, t, h_try, fail.stage, fail.reason)
                 if fixed_step or cuts >= max_cuts:
@@ -533,8 +665,12 @@ def integrate(
             cuts = 0
             successes += 1
             out.steps += 1
-            out.newton_iterations += info.newton_iterations
-            out.linear_solves += info.linear_solves
+            out.add({"newton_iterations": info.newton_iterations, "linear_solves": info.linear_solves,
+                     "jacobians": info.jacobians, "factorizations": info.factorizations,
+                     "reuses": sum(info.stage_reuses), "rejected_reuses": info.rejected_reuses,
+                     "stage_retries": info.stage_retries})
+            for c in info.stage_contractions:
+                out.contractions.extend(c)
             out.h_min = min(out.h_min, h_try)
             out.history.append((t, h_try, info.newton_iterations))
             log.info("step %d t=%.6g h=%.3e newton its=%s", out.steps, t, h_try, info.stage_iterations)
@@ -551,4 +687,6 @@ def integrate(
         if bar is not None:
             bar.close()
     out.x, out.w, out.t = x, w, t
+    if stepper.reuse is not None:
+        out.refactor_reasons = dict(stepper.reuse.refactor_reasons)
     return out
