@@ -130,9 +130,11 @@ class InducedNewton(Section):
     atol: Dimensionless = Field(1e-9, gt=0, description="absolute tolerance of the row-scaled stage residual")
     rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance")
     max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
-    integrator_options: dict = Field(
-        default_factory=dict, description="extra keyword options of rve.solvers.dirk.integrate (e.g. the "
-                                          "factorisation-reuse options of issue 10 once merged)")
+    jacobian_reuse: Literal[False, True, "auto"] = Field(
+        "auto", description="factorisation reuse across stage iterations, stages and steps (modified Newton, "
+                            "docs/time_integration.md section 7): false, true or auto (by measured costs)")
+    reuse_contraction: Dimensionless = Field(0.5, gt=0, lt=1, description="refactorise when the observed "
+                                             "contraction |r_k+1|/|r_k| of a reused factorisation exceeds this")
 
 
 class InducedOutput(Section):

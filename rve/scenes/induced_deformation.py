@@ -200,7 +200,7 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     h0 = t_end / steps
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = dict(cfg.newton.integrator_options)
+    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction}
     iopts.update(integrator_options or {})
     x = problem.x0.copy()
     scale = base.row_scales(h0, x, np.zeros(base.n))
