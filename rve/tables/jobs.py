@@ -16,6 +16,8 @@ import os
 from pathlib import Path
 from typing import Iterable, Mapping, Optional, Sequence, Union
 
+import numpy as np
+
 from ..config import config_as_dict
 from ..homogenisation.network import network_probes
 from ..fabrics.setup import fabric_and_mesh
@@ -52,7 +54,10 @@ def gather_records(records: Iterable[Union[PathLike, Mapping]], modes: Sequence[
 def _fabric_desc(fab, mesh, cfg) -> dict:
     desc = {"kind": fab.kind, "n_fibrils": int(fab.n_fibrils), "half_widths": [float(v) for v in fab.half_widths],
             "elements_per_fibril": int(cfg.mesh.elements), "order": int(cfg.mesh.order),
-            "fibril_radius": float(cfg.fabric.fibril_diameter / 2)}
+            "fibril_radius": float(cfg.fabric.fibril_diameter / 2),
+            # g: sum of reference length x pi R^2 x rho (the areal density of rve.tables.macro)
+            "fibril_mass_g": float(sum(f.length * np.pi * f.radius ** 2 for f in fab.fibrils)
+                                   * float(cfg.material.density))}
     for d in ("warp", "weft", "loop"):
         n = sum(1 for y in fab.yarns if y.direction == d)
         if n:
