@@ -704,3 +704,93 @@ def test_gather_reproduces_the_v1_table_bit_for_bit(tmp_path):
     for name in old.coords:
         assert list(new[name].values) == list(old[name].values), name
     assert float(new["areal_density"]) > 0
+
+
+# --------------------------------------------------------------------------- CF conventions (docs/macro_export.md §4)
+def _all_units(ds):
+    return {name: v.attrs["units"] for name, v in ds.variables.items() if "units" in v.attrs}
+
+
+@pytest.fixture(scope="module")
+def ci_table_file(tmp_path_factory):
+    """The CI run's table, gathered by today's code from the stored records."""
+    import yaml
+
+    from rve.tables.jobs import gather_job
+
+    spec = yaml.safe_load((Path(__file__).parents[1] / "configs/tests/pipeline_ci.yaml").read_text())["rve"]["runs"]["ci"]
+    spec["scene"]["strain"]["modes"] = ["uniaxial", "shear"]
+    out = tmp_path_factory.mktemp("ci") / "table.nc"
+    gather_job(sorted((DATA / "records_v1_ci").glob("*.json")), out, out.with_suffix(".csv"),
+               out.with_suffix(".txt"), None, spec, "ci")
+    return out
+
+
+def test_cf_layout_on_disk(ci_table_file, swept_table, tmp_path):
+    import netCDF4
+
+    write_table(swept_table, tmp_path / "swept.nc")
+    for path in (ci_table_file, tmp_path / "swept.nc"):
+        with netCDF4.Dataset(path) as f:
+            assert f.Conventions == "CF-1.11"
+            for name, var in f.variables.items():
+                if name in f.dimensions:  # a coordinate variable: numeric, no string
+                    assert var.dtype.kind in "fiu", name
+                assert "axis" not in var.ncattrs() or name != "strain"
+                if var.dtype != str and var.dtype.kind == "S":
+                    assert var.dimensions[-1].endswith("_strlen"), name  # a char array
+                if var.dtype is str:
+                    pytest.fail(f"{name}: variable-length string (CF wants char arrays)")
+            assert f.variables["mode_label"].dimensions == ("mode", "mode_strlen")
+            assert "mode_label" in f.variables["membrane_force"].coordinates
+    back = open_table(tmp_path / "swept.nc")
+    assert list(back["weave"].values) == list(swept_table["weave"].values)
+    assert back.sel(mode="uniaxial", weave="plain", fibril_radius=0.1)["contact_count"].size == 3
+
+
+def test_every_units_string_parses_with_udunits(ci_table_file, swept_table, macro_table):
+    cf_units = pytest.importorskip("cf_units", reason="cf_units (UDUNITS-2 parser; Debian libudunits2-0) "
+                                                      "not installed: units strings not checked")
+    seen = {}
+    for ds in (open_table(ci_table_file), swept_table, macro_table):
+        seen.update({f"{name}: {u}": u for name, u in _all_units(ds).items()})
+    from rve.tables.schema import KNOWN_PARAMETERS
+    seen.update({f"parameter {n}": u for n, (u, _) in KNOWN_PARAMETERS.items()})
+    bad = []
+    for where, u in seen.items():
+        try:
+            cf_units.Unit(u)
+        except ValueError:
+            bad.append(where)
+    assert not bad, f"units UDUNITS cannot parse: {bad}"
+    assert cf_units.Unit("N mm-1").convert(1.0, "N m-1") == pytest.approx(1000.0)
+    assert cf_units.Unit("g mm-2").convert(1.0, "kg m-2") == pytest.approx(1000.0)
+
+
+def test_cf_checker_reports_no_errors(ci_table_file, swept_table, tmp_path):
+    """The reference CF checker (cfchecker, newest 4.1: knows CF up to 1.8) on the CI table
+    and a swept table: 0 errors, 0 warnings. The copy it checks declares CF-1.8 (the
+    newest it knows) instead of CF-1.11 (units_metadata); the standard-name tables are
+    local stubs (the table uses no standard_name; the checker would download them)."""
+    import shutil
+    import subprocess
+
+    exe = shutil.which("cfchecks")
+    if exe is None:
+        pytest.skip("the CF checker (pip cfchecker; needs Debian libudunits2-0 / udunits-bin) is not installed")
+    import netCDF4
+
+    write_table(swept_table, tmp_path / "swept.nc")
+    cft = DATA / "cf_tables"
+    for k, src in enumerate((ci_table_file, tmp_path / "swept.nc")):
+        path = tmp_path / f"check{k}.nc"
+        shutil.copy(src, path)
+        with netCDF4.Dataset(path, "a") as f:
+            assert f.Conventions == "CF-1.11"
+            f.Conventions = "CF-1.8"
+        run = subprocess.run([exe, "-v", "1.8", "-s", str(cft / "standard_name_table.xml"),
+                              "-a", str(cft / "area_type_table.xml"), "-r", str(cft / "region_names.xml"),
+                              str(path)], capture_output=True, text=True, timeout=300)
+        assert "ERRORS detected: 0" in run.stdout, run.stdout[-3000:] + run.stderr[-2000:]
+        assert "WARNINGS given: 0" in run.stdout, run.stdout[-3000:]
+        assert run.returncode == 0

@@ -41,8 +41,14 @@ def _string_dims(ds: xr.Dataset) -> list[str]:
 
 
 def to_cf(ds: xr.Dataset) -> xr.Dataset:
-    """The on-disk layout: string index coordinates -> auxiliary ``<dim>_label`` coordinates."""
+    """The on-disk layout: string index coordinates -> auxiliary ``<dim>_label`` coordinates;
+    ``Conventions`` CF-1.11 and ``rve_table_format`` version 2 (what this layout is)."""
+    from .build import CF_VERSION
+    from .schema import TABLE_FORMAT
+
     out = ds.copy()
+    out.attrs["Conventions"] = CF_VERSION
+    out.attrs["rve_table_format"] = TABLE_FORMAT
     for d in _string_dims(ds):
         var = ds[d].variable
         out = out.drop_vars(d)
