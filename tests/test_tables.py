@@ -658,10 +658,12 @@ def test_macro_areal_density_gauge_factor_sheet(macro_table):
     sel = dict(mode="uniaxial", strain=0.1)
     g = 1.0 / ry + 1.0 / rc
     c = 4.0 / (rc * 2.0 ** 2)
-    assert float(t["yarn_sheet_conductance"].sel(**sel)) == pytest.approx(g, rel=1e-8)
+    for yarn in ("warp", "weft"):  # three probes: no warp/weft fit, the two-resistor fit for both
+        assert float(t["yarn_sheet_conductance"].sel(**sel, yarn=yarn)) == pytest.approx(g, rel=1e-8)
+        assert float(t["busbar_sheet_resistance"].sel(**sel, yarn=yarn)) == pytest.approx(1.0 / g, rel=1e-8)
+        assert float(t["transfer_length"].sel(**sel, yarn=yarn)) == pytest.approx(math.sqrt(g / (2 * c)), rel=1e-8)
     assert float(t["contact_exchange_conductance"].sel(**sel)) == pytest.approx(c, rel=1e-8)
-    assert float(t["busbar_sheet_resistance"].sel(**sel)) == pytest.approx(1.0 / g, rel=1e-8)
-    assert float(t["transfer_length"].sel(**sel)) == pytest.approx(math.sqrt(g / (2 * c)), rel=1e-8)
+    assert np.isnan(t["yarn_resistance_warp"]).all()
 
 
 def test_macro_stored_variables_unchanged_by_the_new_quantities(records):
@@ -794,3 +796,54 @@ def test_cf_checker_reports_no_errors(ci_table_file, swept_table, tmp_path):
         assert "ERRORS detected: 0" in run.stdout, run.stdout[-3000:] + run.stderr[-2000:]
         assert "WARNINGS given: 0" in run.stdout, run.stdout[-3000:]
         assert run.returncode == 0
+
+
+# --------------------------------------------------------------------------- the 4th probe: warp and weft yarns apart
+def test_fit_network3_recovers_separate_warp_and_weft_resistances():
+    from rve.homogenisation.network import fit_network3
+
+    net = YarnNetwork(4, 4)
+    probes = default_probe_terminals(4, 4, weft_probe=True)
+    assert probes["probe4"] == (("weft", 1, "+"), ("weft", 1, "-"))
+    for rw, rf, rc in ((0.4, 0.9, 1.5), (2.0, 0.5, 0.05), (0.3, 0.3, 30.0)):
+        R = net.solve_pairs3(list(probes.values()), rw, rf, rc)[0]
+        got = fit_network3(dict(zip(probes, R)), net, probes)
+        np.testing.assert_allclose(got[:3], (rw, rf, rc), rtol=1e-8)
+        assert got[3] < 1e-10
+        # equal yarn resistances: the same network as the two-resistor model
+    R2 = net.solve_pairs3(list(probes.values()), 0.7, 0.7, 1.1)[0]
+    np.testing.assert_allclose(R2, net.solve_pairs(list(probes.values()), 0.7, 1.1)[0], rtol=1e-13)
+    # the power fractions are the log-derivatives (finite differences) and sum to 1
+    pairs = list(probes.values())
+    R, pw, pf, pc = net.solve_pairs3(pairs, 0.4, 0.9, 1.5)
+    np.testing.assert_allclose(pw + pf + pc, 1.0, rtol=1e-12)
+    h = 1e-6
+    dR = (np.log(net.solve_pairs3(pairs, 0.4, 0.9 * math.exp(h), 1.5)[0])
+          - np.log(net.solve_pairs3(pairs, 0.4, 0.9 * math.exp(-h), 1.5)[0])) / (2 * h)
+    np.testing.assert_allclose(dR, pf, rtol=1e-7, atol=1e-10)
+    # an inconsistent 4th probe shows up in the residual; fewer than four probes: NaN
+    bad = dict(zip(probes, net.solve_pairs3(pairs, 0.4, 0.9, 1.5)[0]))
+    bad["probe2"] *= 1.2
+    assert fit_network3(bad, net, probes)[3] > 1e-2
+    assert all(np.isnan(fit_network3({k: bad[k] for k in ("probe1", "probe2", "probe3")}, net, probes)))
+
+
+def test_table_with_the_weft_probe_fits_warp_and_weft():
+    probes = default_probe_terminals(4, 4, weft_probe=True)
+    recs = []
+    for m in ("uniaxial", "shear"):
+        for e in (0.0, 0.1, 0.2):
+            rw, rf, rc = 0.4 * (1 + e), 0.6 * (1 + 0.2 * e), 1.5 * (1 - e)
+            R = NET.solve_pairs3(list(probes.values()), rw, rf, rc)[0]
+            recs.append({"mode": m, "strain": e, "probes": {p: {"voltage": 1.0, "current": 1.0 / r}
+                                                            for p, r in zip(probes, R)}})
+    t = build_table(recs, fabric=MACRO_FABRIC, config={})
+    s = dict(mode="uniaxial", strain=0.2)
+    assert float(t["yarn_resistance_warp"].sel(**s)) == pytest.approx(0.48, rel=1e-8)
+    assert float(t["yarn_resistance_weft"].sel(**s)) == pytest.approx(0.624, rel=1e-8)
+    assert float(t["contact_resistance_warp_weft"].sel(**s)) == pytest.approx(1.2, rel=1e-8)
+    assert float(t["network_fit_residual_warp_weft"].sel(**s)) < 1e-10
+    assert float(t["network_fit_residual"].sel(**s)) > 1e-3  # one R_y cannot explain both families
+    g = t["yarn_sheet_conductance"].sel(**s)
+    assert float(g.sel(yarn="warp")) == pytest.approx(1 / 0.48 + 1 / 1.2, rel=1e-8)
+    assert float(g.sel(yarn="weft")) == pytest.approx(1 / 0.624 + 1 / 1.2, rel=1e-8)

@@ -77,7 +77,8 @@ from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 import numpy as np
 import xarray as xr
 
-from ..homogenisation.network import Terminal, YarnNetwork, default_probe_terminals, fit_network, terminal_text
+from ..homogenisation.network import (Terminal, YarnNetwork, default_probe_terminals, fit_network, fit_network3,
+                                      terminal_text)
 from ..io.provenance import cf_attributes, package_version
 from .macro import add_macro_quantities
 from .schema import (COMPONENTS, COORD_ATTRS, DIMENSIONLESS, KNOWN_PARAMETERS, MODES, SIDE_ORDER, STRAIN_DECIMALS,
@@ -322,6 +323,18 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
     else:
         log.warning("build_table: records have fewer than two of the network probes %s; "
                     "yarn_resistance and contact_resistance are NaN", list(net_probes))
+    # separate warp and weft yarn resistors (format 2): four probes or more
+    probes3 = (dict(network_probes) if network_probes is not None
+               else default_probe_terminals(n_warp, n_weft, weft_probe=True) if min(n_warp, n_weft) >= 2 else {})
+    usable3 = [p for p in probes3 if p in pidx]
+    if len(usable3) >= 4:
+        for idx in zip(*np.nonzero(filled)):
+            measured = {p: data["probe_resistance"][idx + (pidx[p],)] for p in usable3}
+            rw, rf, rc3, res3 = fit_network3(measured, network, {p: probes3[p] for p in usable3})
+            data["yarn_resistance_warp"][idx] = rw
+            data["yarn_resistance_weft"][idx] = rf
+            data["contact_resistance_warp_weft"][idx] = rc3
+            data["network_fit_residual_warp_weft"][idx] = res3
 
     # --- assemble
     coords: dict[str, Any] = {

@@ -376,8 +376,10 @@ def read_lsdyna_curves(path: PathLike) -> dict[int, tuple[np.ndarray, np.ndarray
 # --------------------------------------------------------------------------- curves, comsol
 def _curves_csv(ds, curves, opts, path: Path) -> list[Path]:
     written = []
+    if not path.suffix:  # a folder: <folder>/<curve>.csv
+        path.mkdir(parents=True, exist_ok=True)
     for c in curves:
-        out = path.with_name(f"{path.stem}.{c.key}{path.suffix or '.csv'}")
+        out = path / f"{c.key}.csv" if not path.suffix else path.with_name(f"{path.stem}.{c.key}{path.suffix}")
         head = " | ".join(_header(ds, [c], opts))
         lines = [f"# {head}", f"{c.x_name} [{c.x_units}],{c.name} [{opts['units']['force_per_length']}]"]
         lines += [f"{x!r},{y * opts['fpl']!r}" for x, y in zip(c.x.tolist(), c.y.tolist())]

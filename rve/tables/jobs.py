@@ -1,8 +1,8 @@
-"""The job bodies of the table rules (workflow/rules/rve.smk): ``rve_gather``, ``rve_report``.
+"""The job bodies of the table rules (workflow/rules/rve.smk): ``rve_gather``, ``rve_exports``, ``rve_report``.
 
 docs/rve_pipeline.md ("The DAG"). ``gather_job``: every probe record of a run -> the
-lookup table (netCDF), its csv export and a text summary, all atomic; ``report_job``: the
-table -> its figures. ``gather_records`` turns probe records into table records (the
+lookup table (netCDF), its csv export and a text summary, all atomic; ``export_job``: the
+table -> its macro-ready exports (docs/macro_export.md); ``report_job``: the table -> its figures. ``gather_records`` turns probe records into table records (the
 relaxed state becomes the strain-0 record of every mode).
 
 The tables are the higher layer: this module imports the homogenisation (run configs,
@@ -30,7 +30,7 @@ from .io import open_table, write_table
 from .plot import plot_table
 from .summary import summarize
 
-__all__ = ["gather_records", "gather_job", "report_job"]
+__all__ = ["gather_records", "gather_job", "export_job", "report_job"]
 
 log = logging.getLogger("rve.tables.jobs")
 
@@ -98,6 +98,21 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
         atomic_write_text(out_summary, text)
         log.info("table %s from %d records:\n%s", out_table, len(records), text)
     return ds
+
+
+def export_job(table: PathLike, outputs: Mapping[str, PathLike], log_path: Optional[PathLike]) -> list:
+    """The macro-ready exports of the table (``rve.tables.formats.export_macro`` with its
+    defaults: pretension removed, t = 1 mm, the table's units): ``outputs`` maps a format
+    (abaqus, lsdyna, hermite, curves) to its path."""
+    from .formats import export_macro
+
+    with logging_to(log_path):
+        ds = open_table(table)
+        paths = []
+        for fmt, out in outputs.items():
+            paths += export_macro(ds, out, fmt, source=str(table))
+        log.info("exports: %s", ", ".join(map(str, paths)))
+    return paths
 
 
 def report_job(table: PathLike, out_prefix: PathLike, log_path: Optional[PathLike]) -> list:

@@ -15,10 +15,10 @@ yarn_strain                    (mode, strain, *swept, yarn)            1
 shear_angle                    (mode, strain, *swept)                  rad
 areal_density                  (*swept) or scalar                      g mm-2
 gauge_factor                   (mode, strain, *swept, probe)           1
-yarn_sheet_conductance         (mode, strain, *swept[, yarn])          S
+yarn_sheet_conductance         (mode, strain, *swept, yarn)            S
 contact_exchange_conductance   (mode, strain, *swept)                  S mm-2
-busbar_sheet_resistance        (mode, strain, *swept[, yarn])          ohm
-transfer_length                (mode, strain, *swept[, yarn])          mm
+busbar_sheet_resistance        (mode, strain, *swept, yarn)            ohm
+transfer_length                (mode, strain, *swept, yarn)            mm
 =============================  ======================================  ==========
 
 Definitions (docs/macro_export.md):
@@ -40,8 +40,9 @@ Definitions (docs/macro_export.md):
 * ``gauge_factor`` = (R(eps) - R(0)) / (R(0) eps) per probe and mode (NaN at eps = 0).
 * Two-potential sheet model: g = 1/R_y + 1/R_c (S), c = 4 / (R_c a^2) (S mm-2, a = the yarn
   pitch), bus-bar sheet resistance 1/g (ohm per reference square), transfer length
-  sqrt(g / 2c) (mm). With separate warp and weft yarn resistances (``yarn_resistance_warp``,
-  ``yarn_resistance_weft``) g and its derived quantities get a ``yarn`` dimension.
+  sqrt(g / 2c) (mm), per yarn family (``yarn`` dimension): with the warp/weft fit
+  (``yarn_resistance_warp``, ``yarn_resistance_weft``, ``contact_resistance_warp_weft``)
+  where it has values, else the two-resistor fit for both families.
 """
 from __future__ import annotations
 
@@ -230,26 +231,31 @@ def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
                                   "gauge factor (R(eps) - R(0)) / (R(0) eps) of the probe, eps the mode's strain "
                                   "coordinate (NaN at eps = 0)")
 
-    # --- two-potential sheet parameters
-    if "contact_resistance" in ds:
-        Rc = ds["contact_resistance"]
-        if "yarn_resistance_warp" in ds and "yarn_resistance_weft" in ds:
-            Ry = xr.concat([ds["yarn_resistance_warp"], ds["yarn_resistance_weft"]], dim="yarn",
-                           coords="minimal", compat="override").assign_coords(yarn=ds["yarn"])
-            Ry = Ry.transpose(*Rc.dims, "yarn")
-        else:
-            Ry = ds["yarn_resistance"]
-        g = (1.0 / Ry + 1.0 / Rc)
-        c = 4.0 / (Rc * pitch ** 2)
-        tl = np.sqrt(g / (2.0 * c))
-        dims = g.dims
-        ds["yarn_sheet_conductance"] = _var(dims, g.values, "S",
-                                            "two-potential sheet model: yarn-layer sheet conductance g = 1/R_y + 1/R_c")
-        ds["contact_exchange_conductance"] = _var(Rc.dims, c.values, "S mm-2",
+    # --- two-potential sheet parameters (per yarn family: the warp/weft fit where it has
+    # values, else the two-resistor fit for both)
+    if "contact_resistance" in ds and "yarn_resistance" in ds:
+        Ry2, Rc2 = ds["yarn_resistance"], ds["contact_resistance"]
+        dims = Rc2.dims + ("yarn",)
+        ry = np.stack([Ry2.values, Ry2.values], axis=-1)
+        rc = Rc2.values.copy()
+        if "yarn_resistance_warp" in ds and "contact_resistance_warp_weft" in ds:
+            r3 = np.stack([ds["yarn_resistance_warp"].transpose(*Rc2.dims).values,
+                           ds["yarn_resistance_weft"].transpose(*Rc2.dims).values], axis=-1)
+            rc3 = ds["contact_resistance_warp_weft"].transpose(*Rc2.dims).values
+            ok = np.isfinite(r3).all(axis=-1) & np.isfinite(rc3)
+            ry = np.where(ok[..., None], r3, ry)
+            rc = np.where(ok, rc3, rc)
+        g = 1.0 / ry + 1.0 / rc[..., None]
+        c = 4.0 / (rc * pitch ** 2)
+        src = ("R_y, R_c of the warp/weft fit (yarn_resistance_warp/_weft, contact_resistance_warp_weft) where it "
+               "has values, else yarn_resistance, contact_resistance")
+        ds["yarn_sheet_conductance"] = _var(dims, g, "S", "two-potential sheet model: sheet conductance "
+                                            "g = 1/R_y + 1/R_c of the yarn family's layer", comment=src)
+        ds["contact_exchange_conductance"] = _var(Rc2.dims, c, "S mm-2",
                                                   "two-potential sheet model: warp-weft exchange conductance per "
-                                                  "reference area c = 4 / (R_c a^2)")
-        ds["busbar_sheet_resistance"] = _var(dims, (1.0 / g).values, "ohm",
+                                                  "reference area c = 4 / (R_c a^2)", comment=src)
+        ds["busbar_sheet_resistance"] = _var(dims, 1.0 / g, "ohm",
                                              "bus-bar sheet resistance 1/g (ohm per reference square) of a yarn layer")
-        ds["transfer_length"] = _var(dims, tl.transpose(*dims).values, "mm",
+        ds["transfer_length"] = _var(dims, np.sqrt(g / (2.0 * c[..., None])), "mm",
                                      "transfer length sqrt(g / 2c) of the two-potential sheet model")
     return ds

@@ -97,6 +97,17 @@ VARIABLES: dict[str, tuple[tuple[str, ...], str, str, dict]] = {
     "network_fit_residual": ((), DIMENSIONLESS,
                              "RMS of log(model / measured probe resistance) of the network "
                              "fit (0: the probes are consistent with the network model)", {}),
+    # format 2: the fit with separate warp and weft yarn resistors (four probes or more)
+    "yarn_resistance_warp": ((), "ohm", "network-model warp yarn resistance R_yw of one warp yarn across one "
+                             "cell, fitted with separate warp and weft yarn resistors", {}),
+    "yarn_resistance_weft": ((), "ohm", "network-model weft yarn resistance R_yf of one weft yarn across one "
+                             "cell, fitted with separate warp and weft yarn resistors", {}),
+    "contact_resistance_warp_weft": ((), "ohm", "network-model contact resistance R_c of the fit with "
+                                     "separate warp and weft yarn resistors", {}),
+    "network_fit_residual_warp_weft": ((), DIMENSIONLESS,
+                                       "RMS of log(model / measured probe resistance) of the fit with "
+                                       "separate warp and weft yarn resistors (four probes or more: one "
+                                       "left over as a check; NaN with fewer)", {}),
 }
 
 # known swept parameters: name -> (units, long_name)
