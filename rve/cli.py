@@ -268,7 +268,17 @@ def _cmd_table(args: argparse.Namespace) -> int:
             else:
                 sys.stdout.write(_format_interpolated(out, args.method))
         elif args.table_command == "export":
-            for path in tables.export_table(ds, args.out, args.format):
+            from .tables.formats import MACRO_FORMATS, export_macro
+
+            if args.format in MACRO_FORMATS:
+                paths = export_macro(ds, args.out, args.format, thickness=args.thickness,
+                                     keep_pretension=args.keep_pretension, modes=args.modes or None,
+                                     params=dict(_parse_param(p) for p in args.params),
+                                     lcid_start=args.lcid_start, units=args.units, strain=args.strain,
+                                     source=str(args.path))
+            else:
+                paths = tables.export_table(ds, args.out, args.format)
+            for path in paths:
                 print(f"rve: wrote {path}", file=sys.stderr)
         elif args.table_command == "plot":
             for path in tables.plot_table(ds, args.out):
@@ -301,10 +311,31 @@ def _add_table(sub) -> None:
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
     e = tsub.add_parser("export", parents=[_common(False)], help="export for macroscale FE codes")
     e.add_argument("path", metavar="PATH", help="lookup table (.nc)")
-    e.add_argument("--format", required=True, choices=("csv", "json", "dat"),
-                   help="csv (long table), json, dat (whitespace lookup per mode)")
+    e.add_argument("--format", required=True,
+                   choices=("abaqus", "lsdyna", "curves", "comsol", "hermite", "spice", "csv", "json", "dat"),
+                   help="abaqus (*FABRIC include), lsdyna (*DEFINE_CURVE_TITLE + *MAT_FABRIC skeleton), curves "
+                        "(one CSV per curve), comsol (spreadsheet), hermite (JSON splines), spice (.subckt "
+                        "rve_cell + a static variant), csv (long table), json, dat (whitespace lookup per mode); "
+                        "docs/macro_export.md")
     e.add_argument("--out", required=True, metavar="FILE",
-                   help="output file (dat: FILE's stem + .<mode> + suffix per mode)")
+                   help="output file (dat: FILE's stem + .<mode> + suffix per mode; curves: + .<curve>; "
+                        "spice: also FILE's stem + .static)")
+    e.add_argument("--thickness", default=None, metavar="T",
+                   help="sheet thickness for stresses and densities (abaqus, lsdyna), e.g. '1 mm' (default 1 mm)")
+    e.add_argument("--keep-pretension", action="store_true",
+                   help="keep the relaxed cell's force at zero strain in the curves (default: removed, stated)")
+    e.add_argument("--mode", dest="modes", action="append", default=[], metavar="MODE",
+                   help="use only this mode's curves (repeatable; spice: the mode of R(strain), default uniaxial)")
+    e.add_argument("--param", dest="params", action="append", default=[], metavar="NAME=VALUE",
+                   help="swept parameter value (repeatable; numbers between stored values are interpolated "
+                        "linearly; lsdyna: one numeric parameter may stay free, written as *DEFINE_TABLE_2D)")
+    e.add_argument("--lcid-start", type=int, default=1001, metavar="N",
+                   help="first LS-DYNA curve id (default 1001)")
+    e.add_argument("--units", default=None, metavar="SET",
+                   help="consistent unit set of the macro exports: mm-ms-g-N-MPa (the table's, default), "
+                        "mm-s-t-N-MPa, m-s-kg-N-Pa, mm-ms-kg-kN-GPa")
+    e.add_argument("--strain", type=float, default=0.0,
+                   help="strain of the static SPICE variant (default 0)")
     g = tsub.add_parser("plot", parents=[_common(False)], help="write PNG figures of the table")
     g.add_argument("path", metavar="PATH", help="lookup table (.nc)")
     g.add_argument("--out", required=True, metavar="PREFIX", help="PNG path prefix")

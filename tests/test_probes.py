@@ -134,7 +134,7 @@ def test_thesis_probes_on_a_small_weave(small_weave):
 
     cfg, fab, mesh, x = small_weave
     res = solve_probes(cfg, fab, mesh, x, with_fields=True)
-    assert list(res) == ["probe1", "probe2", "probe3"]
+    assert list(res) == ["probe1", "probe2", "probe3", "probe4"]  # the thesis probes + a weft yarn end to end
     for name, r in res.items():
         assert r.current_plus > 0 > r.current_minus, name
         assert r.conservation_error < 1e-9, name  # I+ + I- + I_leak = 0
@@ -149,3 +149,5 @@ def test_thesis_probes_on_a_small_weave(small_weave):
     # probe 1 is essentially the warp fibril's own resistance (contacts add parallel paths)
     L = 2 * fab.half_widths[0]
     assert res["probe1"].resistance <= L / (SIGMA * AREA) * (1 + 1e-9)
+    # probe 4 is the weft twin of probe 1 (the symmetric 2 x 2 weave): the same bound
+    assert res["probe4"].resistance <= 2 * fab.half_widths[1] / (SIGMA * AREA) * (1 + 1e-9)

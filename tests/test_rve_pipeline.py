@@ -26,6 +26,9 @@ SCHEMA = ROOT / "workflow" / "schemas" / "pipeline.schema.yaml"
 RUN = "ci"
 TABLE = f"results/rve/{RUN}/table.nc"
 PLOTS = list(L.report_outputs(RUN).values())
+EXPORTS = list(L.export_outputs(RUN).values())
+MODES = ["uniaxial", "shear", "uniaxial_y", "trellis"]
+PROBES = ["probe1", "probe2", "probe3", "probe4"]
 
 
 def _ci_spec():
@@ -47,11 +50,11 @@ def _run(cwd: Path, cmd: list[str], timeout: float = 600) -> subprocess.Complete
 
 @pytest.fixture(scope="module")
 def ci_run(tmp_path_factory):
-    """The whole RVE DAG of the CI config, uninterrupted (13 jobs)."""
+    """The whole RVE DAG of the CI config, uninterrupted (22 jobs)."""
     pytest.importorskip("snakemake")
     work = workflow_copy(tmp_path_factory.mktemp("rve_ci"))
     t0 = time.perf_counter()
-    _run(work, _snakemake_cmd(TABLE, *PLOTS))
+    _run(work, _snakemake_cmd(TABLE, *PLOTS, *EXPORTS))
     work.joinpath("wall_s.txt").write_text(f"{time.perf_counter() - t0:.1f}\n")
     return work
 
@@ -69,13 +72,13 @@ def test_every_stage_wrote_outputs_logs_and_benchmarks(ci_run):
     spec = _ci_spec()
     cfg = S.load_run_config(spec)
     names = L.state_names(cfg)
-    assert names == ["relaxed", "uniaxial_01", "uniaxial_02", "shear_01", "shear_02"]
+    assert names == ["relaxed"] + [f"{m}_{k:02d}" for m in MODES for k in (1, 2)]
     base = res / "rve" / RUN / "base"
     for n in ["initial", *names]:
         assert (base / "states" / f"{n}.nc").stat().st_size > 0, n
     for n in names:
         rec = json.loads((base / "probes" / f"{n}.json").read_text())
-        assert set(rec["probes"]) == {"probe1", "probe2", "probe3"}
+        assert set(rec["probes"]) == set(PROBES)
         assert (res / f"benchmarks/rve/{RUN}/base/probes/{n}.tsv").exists()
         assert (res / f"logs/rve/{RUN}/base/probes/{n}.log").exists()
     for n in names[1:]:
@@ -83,7 +86,7 @@ def test_every_stage_wrote_outputs_logs_and_benchmarks(ci_run):
     for stage in ("fabric", "relax"):
         assert (res / f"benchmarks/rve/{RUN}/base/{stage}.tsv").exists()
         assert (res / f"logs/rve/{RUN}/base/{stage}.log").exists()
-    for stage in ("gather", "report"):
+    for stage in ("gather", "exports", "report"):
         assert (res / f"benchmarks/rve/{RUN}/{stage}.tsv").exists()
     for png in PLOTS:
         assert (ci_run / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -108,15 +111,17 @@ def test_checkpoints_are_self_describing_and_land_on_the_strain_path(ci_run):
     assert relaxed.kind == "relaxed" and relaxed.strain == 0.0
     np.testing.assert_array_equal(relaxed.origin, relaxed.x)
     assert relaxed.config["fabric"]["n_warp"] == 2 and relaxed.config["scene"] == "rve"
-    for mode, d in (("uniaxial", 0), ("shear", 1)):
+    from rve.homogenisation.strain import end_targets
+
+    for mode in MODES:
         for step in (1, 2):
             st = load_state(base / f"{mode}_{step:02d}.nc")
             assert (st.kind, st.mode, st.step) == ("strained", mode, step)
             assert st.strain == pytest.approx(levels[step])
             assert st.solver["converged"]
-            # ends at X + eps X1 e_d exactly (X: the relaxed state)
-            want = relaxed.x[ends, :3].copy()
-            want[:, d] += levels[step] * relaxed.x[ends, 0]
+            # ends at F(eps) X exactly (X: the relaxed state; uniaxial X + eps X1 e1, shear X + eps X1 e2,
+            # uniaxial_y X + eps X2 e2, trellis the picture frame)
+            want = end_targets(relaxed.x[ends, :3], mode, levels[step])
             np.testing.assert_allclose(st.x[ends, :3], want, rtol=0, atol=1e-13)
             assert set(st.reaction_force) == {"x-", "x+", "y-", "y+"}
     import xarray as xr
@@ -130,9 +135,9 @@ def test_checkpoints_are_self_describing_and_land_on_the_strain_path(ci_run):
 
 # --------------------------------------------------------------------------- table acceptance
 def test_table_has_both_modes_all_levels_and_probes(table):
-    assert list(table["mode"].values) == ["uniaxial", "shear"]
+    assert list(table["mode"].values) == MODES
     np.testing.assert_allclose(table["strain"].values, [0.0, 0.05, 0.1])
-    assert list(table["probe"].values) == ["probe1", "probe2", "probe3"]
+    assert list(table["probe"].values) == PROBES
     for v in ("reaction_force", "probe_current", "probe_resistance", "temperature_rise_max",
               "temperature_rise_mean", "contact_count"):
         assert np.all(np.isfinite(table[v].values)), v
@@ -188,12 +193,14 @@ def test_cf_attributes(table):
         assert "units" in attrs and "long_name" in attrs, name
     assert table["probe_resistance"].attrs["units"] == "ohm"
     assert table["reaction_force"].attrs["units"] == "N"
-    assert table["strain"].attrs["axis"] == "X"
+    assert "axis" not in table["strain"].attrs  # CF: strain is not a space axis
+    assert table.attrs["Conventions"] == "CF-1.11"
     cfg = json.loads(table.attrs["config"])
     assert cfg["run"] == RUN and cfg["scene"]["scene"] == "rve"
     probes = json.loads(table.attrs["probe_definitions"])
-    assert [p["name"] for p in probes] == ["probe1", "probe2", "probe3"]
-    assert list(table["probe_terminals"].values) == ["warp0+ | warp0-", "warp0+ | warp1-", "warp0+ | weft0+"]
+    assert [p["name"] for p in probes] == PROBES
+    assert list(table["probe_terminals"].values) == ["warp0+ | warp0-", "warp0+ | warp1-", "warp0+ | weft0+",
+                                                     "weft0+ | weft0-"]
 
 
 # --------------------------------------------------------------------------- resume
@@ -344,3 +351,79 @@ def test_sweep_runs_through_snakemake_with_one_dimension_per_parameter(tmp_path)
     lo, hi = r.isel(contact_conductance=0), r.isel(contact_conductance=1)
     for p in ("probe2", "probe3"):
         assert bool((hi.sel(probe=p) < lo.sel(probe=p)).all()), p
+
+
+# --------------------------------------------------------------------------- macro quantities and exports
+def test_macro_exports_beside_the_table(ci_run, table):
+    from rve.tables.formats import read_abaqus_curves, read_lsdyna_curves
+
+    out = {k: ci_run / v for k, v in L.export_outputs(RUN).items()}
+    curves = read_abaqus_curves(out["abaqus"])
+    assert set(curves) == {"1", "2", "12"}
+    text = out["abaqus"].read_text()
+    assert "from mode uniaxial_y" in text and "from mode trellis" in text and "symmetric weave" not in text
+    N = table["membrane_force"]
+    np.testing.assert_array_equal(curves["2"][1], [float(f"{v:.9e}") for v in (
+        N.sel(mode="uniaxial_y", edge="y", component="y").values
+        - float(table["membrane_force_at_zero_strain"].sel(mode="uniaxial_y", edge="y", component="y")))])
+    assert len(read_lsdyna_curves(out["lsdyna"])) == 3
+    assert sorted(p.name for p in out["curves"].glob("*.csv")) == ["shear.csv", "warp.csv", "weft.csv"]
+    assert json.loads(out["hermite"].read_text())["format"] == "rve-hermite/1"
+    # the relaxed cell's pretension is recorded; the areal density is the cell's mass / area
+    assert float(table["membrane_force_at_zero_strain"].sel(mode="uniaxial", edge="x", component="x")) > 0
+    assert float(table["areal_density"]) == pytest.approx(4 * 4.0 * np.pi * 0.15 ** 2 * 1e-3 / 16.0, rel=1e-12)
+    # the 4th probe separates warp and weft; the weave is symmetric at strain 0
+    r0 = table.sel(mode="uniaxial", strain=0.0)
+    assert float(r0["yarn_resistance_warp"]) == pytest.approx(float(r0["yarn_resistance_weft"]), rel=1e-3)
+    assert float(r0["network_fit_residual_warp_weft"]) < 0.05
+    assert float(r0["probe_resistance"].sel(probe="probe4")) == pytest.approx(
+        float(r0["probe_resistance"].sel(probe="probe1")), rel=1e-3)
+    # trellis keeps the yarn lengths; uniaxial_y stretches the weft
+    assert float(table["yarn_strain"].sel(mode="trellis", strain=0.1, yarn="warp")) == 0.0
+    assert float(table["yarn_strain"].sel(mode="uniaxial_y", strain=0.1, yarn="weft")) == pytest.approx(0.1)
+
+
+def test_wall_time_per_mode_from_the_benchmarks(ci_run):
+    """The benchmarks give the wall time per mode (strain steps + probe jobs); printed for the report."""
+    import csv
+
+    bench = ci_run / "results" / "benchmarks" / "rve" / RUN / "base"
+    per_mode = {}
+    for m in MODES:
+        total = 0.0
+        for stage in ("strain", "probes"):
+            for k in (1, 2):
+                with open(bench / stage / f"{m}_{k:02d}.tsv") as fh:
+                    total += float(next(csv.DictReader(fh, delimiter="\t"))["s"])
+        per_mode[m] = total
+    print("wall s per mode (strain steps + probes):", {m: round(v, 1) for m, v in per_mode.items()})
+    assert all(v > 0 for v in per_mode.values())
+
+
+# --------------------------------------------------------------------------- driver modes (no Snakemake)
+def test_driver_fields_of_the_new_modes():
+    from rve.homogenisation.strain import affine_velocity, end_targets, secant_velocity, trellis_gradient
+
+    rng = np.random.default_rng(3)
+    origin = rng.normal(size=(7, 9))
+    # uniaxial_y: v = rate X2 e2 on the centroids and (g_a)_2 e2 on the directors
+    w = affine_velocity(origin, "uniaxial_y", 2.0)
+    for blk in range(3):
+        np.testing.assert_array_equal(w[:, 3 * blk + 1], 2.0 * origin[:, 3 * blk + 1])
+        assert not w[:, 3 * blk].any() and not w[:, 3 * blk + 2].any()
+    # the old modes: unchanged arithmetic (bit for bit)
+    w = affine_velocity(origin, "shear", 0.5)
+    np.testing.assert_array_equal(w[:, 1], 0.5 * origin[:, 0])
+    np.testing.assert_array_equal(w[:, 4], 0.5 * origin[:, 3])
+    # trellis: both families keep their length, the angle drops by theta
+    F = trellis_gradient(0.3)
+    assert np.linalg.norm(F[:, 0]) == pytest.approx(1.0, abs=1e-15)
+    assert np.linalg.norm(F[:, 1]) == pytest.approx(1.0, abs=1e-15)
+    assert np.arccos(F[:, 0] @ F[:, 1]) == pytest.approx(np.pi / 2 - 0.3, rel=1e-14)
+    # the secant field of a step moves F(theta_0) X to F(theta_1) X in t_step exactly
+    X = origin[:, :3]
+    t_step = 0.01
+    w = secant_velocity(origin, trellis_gradient(0.05), trellis_gradient(0.1), t_step)
+    np.testing.assert_allclose(end_targets(X, "trellis", 0.05) + t_step * w[:, :3], end_targets(X, "trellis", 0.1),
+                               rtol=0, atol=1e-14)
+    np.testing.assert_allclose(end_targets(X, "uniaxial_y", 0.1)[:, 1], X[:, 1] * 1.1, rtol=1e-15)

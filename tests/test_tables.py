@@ -108,7 +108,7 @@ def swept_table():
 # --------------------------------------------------------------------------- build
 def test_build_dims_and_values(table):
     assert dict(table.sizes) == {"mode": 2, "strain": 11, "probe": 3, "side": 4,
-                                 "component": 3, "terminal": 2}
+                                 "component": 3, "terminal": 2, "edge": 2, "yarn": 2}
     assert list(table["mode"].values) == ["uniaxial", "shear"]
     np.testing.assert_array_equal(table["strain"].values, np.round(STRAINS, 12))
     assert list(table["terminal"].values) == ["+", "-"]
@@ -206,7 +206,7 @@ def test_every_variable_and_coordinate_has_units_and_long_name(table_file):
 
 def test_provenance_attributes(table_file):
     ds = open_table(table_file)
-    assert ds.attrs["Conventions"] == "CF-1.10"
+    assert ds.attrs["Conventions"] == "CF-1.11"
     assert ds.attrs["title"]
     assert ds.attrs["source"]
     assert json.loads(ds.attrs["config"]) == CONFIG
@@ -437,11 +437,12 @@ def test_export_csv_round_trip(table, tmp_path):
     (path,) = export_table(table, tmp_path / "t.csv", "csv")
     text = path.read_text()
     header = next(line for line in text.splitlines() if not line.startswith("#"))
-    assert header == "variable,units,mode,strain [1],probe,side,component,terminal,value"
+    assert header == "variable,units,mode,strain [1],probe,side,component,terminal,edge,yarn,value"
     assert "# variable probe_resistance [ohm] dims (mode, strain, probe)" in text
     back = read_table_csv(path)
-    assert set(back.data_vars) == set(table.data_vars)
-    for name in table.data_vars:
+    kept = [n for n, v in table.data_vars.items() if "strain" in v.dims or v.ndim == 0]
+    assert set(back.data_vars) == set(kept)
+    for name in kept:
         ref = table[name]
         got = back[name].transpose(*ref.dims)
         for d in ref.dims:
@@ -449,7 +450,7 @@ def test_export_csv_round_trip(table, tmp_path):
         np.testing.assert_array_equal(got.values, ref.values, err_msg=name)
         assert got.attrs["units"] == ref.attrs["units"]
         assert got.attrs["long_name"] == ref.attrs["long_name"]
-    assert back.attrs["Conventions"] == "CF-1.10"
+    assert back.attrs["Conventions"] == "CF-1.11"
 
 
 def test_export_csv_is_tidy(table, tmp_path):
@@ -457,7 +458,7 @@ def test_export_csv_is_tidy(table, tmp_path):
 
     (path,) = export_table(table, tmp_path / "t.csv", "csv")
     df = pd.read_csv(path, comment="#", keep_default_na=False)
-    assert len(df) == sum(v.size for v in table.data_vars.values())
+    assert len(df) == sum(v.size for v in table.data_vars.values() if "strain" in v.dims)
     row = df[(df.variable == "reaction_force") & (df["mode"] == "shear") & (df.side == "weft-")
              & (df.component == "x") & (df["strain [1]"] == 0.2)]
     assert len(row) == 1 and row.units.iloc[0] == "N"
@@ -586,3 +587,263 @@ def test_cubic_interpolation_falls_back_to_linear_on_series_with_nan_or_inf():
     at = interpolate(t, s, mode="uniaxial", method="cubic")
     np.testing.assert_array_equal(at["probe_resistance"].values,
                                   t["probe_resistance"].sel(mode="uniaxial").values)
+
+
+# --------------------------------------------------------------------------- macro quantities (docs/macro_export.md §1)
+from pathlib import Path  # noqa: E402
+
+DATA = Path(__file__).parent / "data"
+MACRO_FABRIC = {"kind": "plain weave", "n_warp": 4, "n_weft": 4, "spacing": 2.0, "half_widths": [4.0, 4.0, 0.6],
+                "fibril_mass_g": 0.0384}
+
+
+@pytest.fixture(scope="module")
+def macro_table(records):
+    extra = [record("trellis", e) for e in STRAINS[:3]] + [record("uniaxial_y", e) for e in STRAINS[:3]]
+    return build_table(records + extra, fabric=MACRO_FABRIC, config=CONFIG)
+
+
+def test_macro_geometry_and_membrane_force(macro_table):
+    t = macro_table
+    assert float(t["cell_length_x"]) == 8.0 and float(t["cell_length_y"]) == 8.0 and float(t["yarn_pitch"]) == 2.0
+    assert t["membrane_force"].attrs["units"] == "N mm-1"
+    for mode in ("uniaxial", "shear"):
+        for e in (0.0, 0.1, 0.25):
+            N = t["membrane_force"].sel(mode=mode, strain=round(e, 12))
+            Fx, Fy = reaction(mode, "warp+", e), reaction(mode, "weft+", e)
+            np.testing.assert_array_equal(N.sel(edge="x").values, Fx / 8.0)  # edge x: length L_y = 8
+            np.testing.assert_array_equal(N.sel(edge="y").values, Fy / 8.0)
+            imb = t["side_force_imbalance"].sel(mode=mode, strain=round(e, 12))
+            assert float(imb.sel(edge="x")) == pytest.approx(
+                np.linalg.norm(reaction(mode, "warp-", e) + reaction(mode, "warp+", e)), rel=1e-15)
+    np.testing.assert_array_equal(t["membrane_force_at_zero_strain"].sel(mode="shear").values,
+                                  t["membrane_force"].sel(mode="shear", strain=0.0).values)
+
+
+def test_macro_strain_measures_by_hand(macro_table):
+    t = macro_table
+    ys, th = t["yarn_strain"], t["shear_angle"]
+    assert th.attrs["units"] == "rad"
+    # simple shear gamma = 0.25: warp stretched by sqrt(1 + 1/16) - 1 = 3.078 %, angle drop atan(0.25)
+    assert float(ys.sel(mode="shear", strain=0.25, yarn="warp")) == pytest.approx(0.030776406404415, rel=1e-12)
+    assert float(ys.sel(mode="shear", strain=0.25, yarn="weft")) == 0.0
+    assert float(th.sel(mode="shear", strain=0.25)) == pytest.approx(0.244978663126864, rel=1e-13)
+    assert float(ys.sel(mode="uniaxial", strain=0.1, yarn="warp")) == pytest.approx(0.1, rel=1e-14)
+    assert float(ys.sel(mode="uniaxial_y", strain=0.05, yarn="weft")) == pytest.approx(0.05, rel=1e-14)
+    assert float(ys.sel(mode="uniaxial_y", strain=0.05, yarn="warp")) == 0.0
+    assert float(th.sel(mode="trellis", strain=0.05)) == 0.05
+    assert float(ys.sel(mode="trellis", strain=0.05, yarn="warp")) == 0.0
+    # trellis states exist only up to 0.05: no strain measure where no state is stored
+    assert np.isnan(float(th.sel(mode="trellis", strain=0.25)))
+    # the picture-frame F keeps both yarn lengths and drops the angle by the strain
+    from rve.tables.macro import mode_deformation, yarn_strain_and_angle
+    F = mode_deformation("trellis", 0.3)
+    np.testing.assert_allclose(np.linalg.norm(F, axis=0), 1.0, rtol=0, atol=1e-15)
+    assert math.acos(F[:, 0] @ F[:, 1]) == pytest.approx(math.pi / 2 - 0.3, rel=1e-14)
+    s, a = yarn_strain_and_angle("shear", np.array([0.0, 0.25]))
+    assert a[0] == 0.0 and s[0, 0] == 0.0
+
+
+def test_macro_areal_density_gauge_factor_sheet(macro_table):
+    t = macro_table
+    assert float(t["areal_density"]) == pytest.approx(0.0384 / 64.0, rel=1e-15)
+    assert t["areal_density"].attrs["units"] == "g mm-2"
+    R = t["probe_resistance"].sel(mode="uniaxial", probe="probe1")
+    gf = t["gauge_factor"].sel(mode="uniaxial", probe="probe1")
+    assert np.isnan(float(gf.sel(strain=0.0)))
+    R0, R1 = float(R.sel(strain=0.0)), float(R.sel(strain=0.1))
+    assert float(gf.sel(strain=0.1)) == pytest.approx((R1 - R0) / (R0 * 0.1), rel=1e-13)
+    # sheet parameters from the fitted (= generating) R_y, R_c
+    ry, rc = R_y("uniaxial", 0.1), R_c("uniaxial", 0.1)
+    sel = dict(mode="uniaxial", strain=0.1)
+    g = 1.0 / ry + 1.0 / rc
+    c = 4.0 / (rc * 2.0 ** 2)
+    for yarn in ("warp", "weft"):  # three probes: no warp/weft fit, the two-resistor fit for both
+        assert float(t["yarn_sheet_conductance"].sel(**sel, yarn=yarn)) == pytest.approx(g, rel=1e-8)
+        assert float(t["busbar_sheet_resistance"].sel(**sel, yarn=yarn)) == pytest.approx(1.0 / g, rel=1e-8)
+        assert float(t["transfer_length"].sel(**sel, yarn=yarn)) == pytest.approx(math.sqrt(g / (2 * c)), rel=1e-8)
+    assert float(t["contact_exchange_conductance"].sel(**sel)) == pytest.approx(c, rel=1e-8)
+    assert np.isnan(t["yarn_resistance_warp"]).all()
+
+
+def test_macro_stored_variables_unchanged_by_the_new_quantities(records):
+    """The macro quantities are additions: the stored variables are those of the table built without them."""
+    from rve.tables.schema import VARIABLES
+
+    t = build_table(records, fabric=MACRO_FABRIC, config=CONFIG)
+    for name in VARIABLES:
+        assert name in t
+    assert "axis" not in t["strain"].attrs  # CF: strain is not a space axis
+
+
+def test_v1_table_still_opens_with_macro_quantities():
+    ds = open_table(DATA / "table_v1_ci.nc")
+    assert ds.attrs["rve_table_format"] == "rve-lookup-table/1"
+    assert "membrane_force" in ds and "rve_table_upgraded" in ds.attrs
+    Fx = ds["reaction_force"].sel(mode="uniaxial", side="x+", component="x")
+    np.testing.assert_array_equal(ds["membrane_force"].sel(mode="uniaxial", edge="x", component="x").values,
+                                  Fx.values / float(ds["cell_length_y"]))
+    assert float(ds["cell_length_y"]) == 4.0  # the CI cell: 2 x 2 yarns, 2 mm apart
+    assert np.isnan(float(ds["areal_density"]))  # version 1 did not record the fibril mass
+
+
+def test_gather_reproduces_the_v1_table_bit_for_bit(tmp_path):
+    """The stored records of the v1 fixture's CI run, gathered by today's code: every
+    version-1 variable is identical (the new quantities are additions)."""
+    import yaml
+
+    from rve.tables.jobs import gather_job
+
+    spec = yaml.safe_load((Path(__file__).parents[1] / "configs/tests/pipeline_ci.yaml").read_text())["rve"]["runs"]["ci"]
+    spec["scene"]["strain"]["modes"] = ["uniaxial", "shear"]  # the modes of the v1 run
+    records = sorted((DATA / "records_v1_ci").glob("*.json"))
+    out = tmp_path / "table.nc"
+    gather_job(records, out, tmp_path / "t.csv", tmp_path / "s.txt", None, spec, "ci")
+    new, old = open_table(out), xr.open_dataset(DATA / "table_v1_ci.nc").load()
+    assert new.attrs["rve_table_format"] == "rve-lookup-table/2"
+    for name in old.data_vars:
+        np.testing.assert_array_equal(new[name].values, old[name].values, err_msg=name)
+    for name in old.coords:
+        assert list(new[name].values) == list(old[name].values), name
+    assert float(new["areal_density"]) > 0
+
+
+# --------------------------------------------------------------------------- CF conventions (docs/macro_export.md §4)
+def _all_units(ds):
+    return {name: v.attrs["units"] for name, v in ds.variables.items() if "units" in v.attrs}
+
+
+@pytest.fixture(scope="module")
+def ci_table_file(tmp_path_factory):
+    """The CI run's table, gathered by today's code from the stored records."""
+    import yaml
+
+    from rve.tables.jobs import gather_job
+
+    spec = yaml.safe_load((Path(__file__).parents[1] / "configs/tests/pipeline_ci.yaml").read_text())["rve"]["runs"]["ci"]
+    spec["scene"]["strain"]["modes"] = ["uniaxial", "shear"]
+    out = tmp_path_factory.mktemp("ci") / "table.nc"
+    gather_job(sorted((DATA / "records_v1_ci").glob("*.json")), out, out.with_suffix(".csv"),
+               out.with_suffix(".txt"), None, spec, "ci")
+    return out
+
+
+def test_cf_layout_on_disk(ci_table_file, swept_table, tmp_path):
+    import netCDF4
+
+    write_table(swept_table, tmp_path / "swept.nc")
+    for path in (ci_table_file, tmp_path / "swept.nc"):
+        with netCDF4.Dataset(path) as f:
+            assert f.Conventions == "CF-1.11"
+            for name, var in f.variables.items():
+                if name in f.dimensions:  # a coordinate variable: numeric, no string
+                    assert var.dtype.kind in "fiu", name
+                assert "axis" not in var.ncattrs() or name != "strain"
+                if var.dtype != str and var.dtype.kind == "S":
+                    assert var.dimensions[-1].endswith("_strlen"), name  # a char array
+                if var.dtype is str:
+                    pytest.fail(f"{name}: variable-length string (CF wants char arrays)")
+            assert f.variables["mode_label"].dimensions == ("mode", "mode_strlen")
+            assert "mode_label" in f.variables["membrane_force"].coordinates
+    back = open_table(tmp_path / "swept.nc")
+    assert list(back["weave"].values) == list(swept_table["weave"].values)
+    assert back.sel(mode="uniaxial", weave="plain", fibril_radius=0.1)["contact_count"].size == 3
+
+
+def test_every_units_string_parses_with_udunits(ci_table_file, swept_table, macro_table):
+    cf_units = pytest.importorskip("cf_units", reason="cf_units (UDUNITS-2 parser; Debian libudunits2-0) "
+                                                      "not installed: units strings not checked")
+    seen = {}
+    for ds in (open_table(ci_table_file), swept_table, macro_table):
+        seen.update({f"{name}: {u}": u for name, u in _all_units(ds).items()})
+    from rve.tables.schema import KNOWN_PARAMETERS
+    seen.update({f"parameter {n}": u for n, (u, _) in KNOWN_PARAMETERS.items()})
+    bad = []
+    for where, u in seen.items():
+        try:
+            cf_units.Unit(u)
+        except ValueError:
+            bad.append(where)
+    assert not bad, f"units UDUNITS cannot parse: {bad}"
+    assert cf_units.Unit("N mm-1").convert(1.0, "N m-1") == pytest.approx(1000.0)
+    assert cf_units.Unit("g mm-2").convert(1.0, "kg m-2") == pytest.approx(1000.0)
+
+
+def test_cf_checker_reports_no_errors(ci_table_file, swept_table, tmp_path):
+    """The reference CF checker (cfchecker, newest 4.1: knows CF up to 1.8) on the CI table
+    and a swept table: 0 errors, 0 warnings. The copy it checks declares CF-1.8 (the
+    newest it knows) instead of CF-1.11 (units_metadata); the standard-name tables are
+    local stubs (the table uses no standard_name; the checker would download them)."""
+    import shutil
+    import subprocess
+
+    exe = shutil.which("cfchecks")
+    if exe is None:
+        pytest.skip("the CF checker (pip cfchecker; needs Debian libudunits2-0 / udunits-bin) is not installed")
+    import netCDF4
+
+    write_table(swept_table, tmp_path / "swept.nc")
+    cft = DATA / "cf_tables"
+    for k, src in enumerate((ci_table_file, tmp_path / "swept.nc")):
+        path = tmp_path / f"check{k}.nc"
+        shutil.copy(src, path)
+        with netCDF4.Dataset(path, "a") as f:
+            assert f.Conventions == "CF-1.11"
+            f.Conventions = "CF-1.8"
+        run = subprocess.run([exe, "-v", "1.8", "-s", str(cft / "standard_name_table.xml"),
+                              "-a", str(cft / "area_type_table.xml"), "-r", str(cft / "region_names.xml"),
+                              str(path)], capture_output=True, text=True, timeout=300)
+        assert "ERRORS detected: 0" in run.stdout, run.stdout[-3000:] + run.stderr[-2000:]
+        assert "WARNINGS given: 0" in run.stdout, run.stdout[-3000:]
+        assert run.returncode == 0
+
+
+# --------------------------------------------------------------------------- the 4th probe: warp and weft yarns apart
+def test_fit_network3_recovers_separate_warp_and_weft_resistances():
+    from rve.homogenisation.network import fit_network3
+
+    net = YarnNetwork(4, 4)
+    probes = default_probe_terminals(4, 4, weft_probe=True)
+    assert probes["probe4"] == (("weft", 1, "+"), ("weft", 1, "-"))
+    for rw, rf, rc in ((0.4, 0.9, 1.5), (2.0, 0.5, 0.05), (0.3, 0.3, 30.0)):
+        R = net.solve_pairs3(list(probes.values()), rw, rf, rc)[0]
+        got = fit_network3(dict(zip(probes, R)), net, probes)
+        np.testing.assert_allclose(got[:3], (rw, rf, rc), rtol=1e-8)
+        assert got[3] < 1e-10
+        # equal yarn resistances: the same network as the two-resistor model
+    R2 = net.solve_pairs3(list(probes.values()), 0.7, 0.7, 1.1)[0]
+    np.testing.assert_allclose(R2, net.solve_pairs(list(probes.values()), 0.7, 1.1)[0], rtol=1e-13)
+    # the power fractions are the log-derivatives (finite differences) and sum to 1
+    pairs = list(probes.values())
+    R, pw, pf, pc = net.solve_pairs3(pairs, 0.4, 0.9, 1.5)
+    np.testing.assert_allclose(pw + pf + pc, 1.0, rtol=1e-12)
+    h = 1e-6
+    dR = (np.log(net.solve_pairs3(pairs, 0.4, 0.9 * math.exp(h), 1.5)[0])
+          - np.log(net.solve_pairs3(pairs, 0.4, 0.9 * math.exp(-h), 1.5)[0])) / (2 * h)
+    np.testing.assert_allclose(dR, pf, rtol=1e-7, atol=1e-10)
+    # an inconsistent 4th probe shows up in the residual; fewer than four probes: NaN
+    bad = dict(zip(probes, net.solve_pairs3(pairs, 0.4, 0.9, 1.5)[0]))
+    bad["probe2"] *= 1.2
+    assert fit_network3(bad, net, probes)[3] > 1e-2
+    assert all(np.isnan(fit_network3({k: bad[k] for k in ("probe1", "probe2", "probe3")}, net, probes)))
+
+
+def test_table_with_the_weft_probe_fits_warp_and_weft():
+    probes = default_probe_terminals(4, 4, weft_probe=True)
+    recs = []
+    for m in ("uniaxial", "shear"):
+        for e in (0.0, 0.1, 0.2):
+            rw, rf, rc = 0.4 * (1 + e), 0.6 * (1 + 0.2 * e), 1.5 * (1 - e)
+            R = NET.solve_pairs3(list(probes.values()), rw, rf, rc)[0]
+            recs.append({"mode": m, "strain": e, "probes": {p: {"voltage": 1.0, "current": 1.0 / r}
+                                                            for p, r in zip(probes, R)}})
+    t = build_table(recs, fabric=MACRO_FABRIC, config={})
+    s = dict(mode="uniaxial", strain=0.2)
+    assert float(t["yarn_resistance_warp"].sel(**s)) == pytest.approx(0.48, rel=1e-8)
+    assert float(t["yarn_resistance_weft"].sel(**s)) == pytest.approx(0.624, rel=1e-8)
+    assert float(t["contact_resistance_warp_weft"].sel(**s)) == pytest.approx(1.2, rel=1e-8)
+    assert float(t["network_fit_residual_warp_weft"].sel(**s)) < 1e-10
+    assert float(t["network_fit_residual"].sel(**s)) > 1e-3  # one R_y cannot explain both families
+    g = t["yarn_sheet_conductance"].sel(**s)
+    assert float(g.sel(yarn="warp")) == pytest.approx(1 / 0.48 + 1 / 1.2, rel=1e-8)
+    assert float(g.sel(yarn="weft")) == pytest.approx(1 / 0.624 + 1 / 1.2, rel=1e-8)

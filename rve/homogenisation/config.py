@@ -23,10 +23,10 @@ from ..config.fields import (
     Time, Voltage,
 )
 
-__all__ = ["RVEConfig", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
-MODES = ("uniaxial", "shear")
+MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
 
 
 class RVEMaterial(FabricMaterial):
@@ -58,9 +58,13 @@ class StrainPath(Section):
     phase (velocity field for ``t_step``), a heavily damped relaxation (``t_relax``) and a
     static solve."""
 
-    modes: list[Literal["uniaxial", "shear"]] = Field(
-        ["uniaxial", "shear"], min_length=1, description="deformation modes (each its own chain of steps)")
-    total: Dimensionless = Field(0.25, gt=0, le=1, description="final strain (engineering / shear)")
+    modes: list[Literal["uniaxial", "shear", "uniaxial_y", "trellis"]] = Field(
+        ["uniaxial", "shear"], min_length=1,
+        description="deformation modes (each its own chain of steps): uniaxial (along the warp x), shear "
+                    "(simple shear), uniaxial_y (along the weft y), trellis (picture-frame shear; its strain is "
+                    "the angle drop in rad)")
+    total: Dimensionless = Field(0.25, gt=0, le=1, description="final strain (engineering / shear / trellis "
+                                 "angle drop in rad)")
     steps: Integer = Field(10, ge=1, le=99, description="strain steps per mode")
     t_step: Time = Field("0.01 ms", gt=0, description="duration of the driven phase of a step (short: inertia "
                          "carries the affine field)")
@@ -130,6 +134,14 @@ def thesis_probes() -> list[dict]:
     ]
 
 
+def default_probes() -> list[dict]:
+    """The thesis probes and a 4th: the x = -1 weft yarn end to end, so the network fit
+    separates the warp and weft yarn resistances (docs/macro_export.md §2)."""
+    return thesis_probes() + [
+        {"name": "probe4", "terminals": [{"yarn": "weft", "position": -1.0, "end": "y+"},
+                                         {"yarn": "weft", "position": -1.0, "end": "y-"}]}]
+
+
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 
@@ -141,8 +153,9 @@ class RVEConfig(SceneConfig):
     relaxation: FabricRelaxation = Field(default_factory=FabricRelaxation)
     settle: Settle = Field(default_factory=Settle)
     strain: StrainPath = Field(default_factory=StrainPath)
-    probes: list[ProbeSpec] = Field(default_factory=lambda: [ProbeSpec(**p) for p in thesis_probes()],
-                                    min_length=1, description="probes (thesis Fig. 7.2.2 by default)")
+    probes: list[ProbeSpec] = Field(default_factory=lambda: [ProbeSpec(**p) for p in default_probes()],
+                                    min_length=1, description="probes (thesis Fig. 7.2.2 and a weft yarn end to "
+                                                              "end by default)")
     probe_solver: ProbeSolver = Field(default_factory=ProbeSolver)
 
     @model_validator(mode="after")

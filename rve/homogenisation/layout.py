@@ -13,13 +13,15 @@ rule's pattern: ``state_path("{run}", "{combo}", "{state}")`` ->
 ``{RVE_DIR}/{run}/{combo}/probes/{state}.json``         probe record of a state (rve_probes)
 ``{RVE_DIR}/{run}/table.nc``, ``table.csv``,            lookup table (rve_gather)
 ``summary.txt``
+``{RVE_DIR}/{run}/table_abaqus.inc``, ``table_lsdyna.k``,  macro-FE exports (rve_exports;
+``table_hermite.json``, ``table_curves/{curve}.csv``      docs/macro_export.md)
 ``{RVE_DIR}/{run}/plots/table_*.png``                   figures (rve_report)
 ``{LOG_DIR}/{run}/{job}.log``                           log of a job (every rule)
 ``{BENCHMARK_DIR}/{run}/{job}.tsv``                     benchmark of a job (every rule)
 ======================================================  =================================
 
 ``{job}`` (``job_name``): ``{combo}/fabric``, ``{combo}/relax``,
-``{combo}/strain/{state}``, ``{combo}/probes/{state}``, ``gather``, ``report``.
+``{combo}/strain/{state}``, ``{combo}/probes/{state}``, ``gather``, ``exports``, ``report``.
 ``RVE_DIR`` = results/rve, ``LOG_DIR`` = results/logs/rve, ``BENCHMARK_DIR`` =
 results/benchmarks/rve; every function takes ``root`` to place a run elsewhere.
 
@@ -37,7 +39,7 @@ from .sweeps import combos, load_run_config
 
 __all__ = [
     "RVE_DIR", "LOG_DIR", "BENCHMARK_DIR", "STAGES", "state_name", "state_names", "state_path", "record_path",
-    "previous_state", "run_record_paths", "table_outputs", "report_prefix", "report_outputs", "job_name",
+    "previous_state", "run_record_paths", "table_outputs", "export_outputs", "report_prefix", "report_outputs", "job_name",
     "log_path", "benchmark_path", "default_targets",
 ]
 
@@ -48,7 +50,7 @@ LOG_DIR = "results/logs/rve"
 BENCHMARK_DIR = "results/benchmarks/rve"
 
 #: the jobs of a run, in DAG order (one Snakemake rule each)
-STAGES = ("fabric", "relax", "strain", "probes", "gather", "report")
+STAGES = ("fabric", "relax", "strain", "probes", "gather", "exports", "report")
 
 
 # ============================================================================ state names
@@ -99,6 +101,13 @@ def table_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
             "summary": f"{root}/{run}/summary.txt"}
 
 
+def export_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
+    """The macro-ready exports beside the table (``rve.tables.formats``): ``abaqus``,
+    ``lsdyna``, ``hermite`` (files) and ``curves`` (a folder of ``{curve}.csv``)."""
+    return {"abaqus": f"{root}/{run}/table_abaqus.inc", "lsdyna": f"{root}/{run}/table_lsdyna.k",
+            "hermite": f"{root}/{run}/table_hermite.json", "curves": f"{root}/{run}/table_curves"}
+
+
 def report_prefix(run: str, root: PathLike = RVE_DIR) -> str:
     """Path prefix of the report's figures (``rve.tables.plot_table``)."""
     return f"{root}/{run}/plots/table"
@@ -118,7 +127,7 @@ def job_name(stage: str, combo: Optional[str] = None, state: Optional[str] = Non
     ``{combo}/probes/{state}``, ``gather``, ``report``."""
     if stage not in STAGES:
         raise ValueError(f"unknown stage {stage!r} (have {', '.join(STAGES)})")
-    if stage in ("gather", "report"):
+    if stage in ("gather", "exports", "report"):
         return stage
     if combo is None:
         raise ValueError(f"stage {stage!r}: a job of one combination needs its combo")
@@ -143,9 +152,11 @@ def benchmark_path(run: str, stage: str, combo: Optional[str] = None, state: Opt
 
 # ============================================================================ targets
 def default_targets(config: Mapping, extra: Optional[Mapping[str, Sequence[str]]] = None) -> list[str]:
-    """Targets of ``snakemake -j2``: the table and figures of every run in
-    ``rve.default_runs`` when ``default_targets`` lists ``rve`` (the default), plus the
-    outputs of the other names ``default_targets`` lists (``extra``: name -> files)."""
+    """Targets of ``snakemake -j2``: the table, its macro-ready exports (runs without a
+    parameter sweep: the exports need the swept values chosen, ``rve table export --param``)
+    and figures of every run in ``rve.default_runs`` when ``default_targets`` lists ``rve``
+    (the default), plus the outputs of the other names ``default_targets`` lists
+    (``extra``: name -> files)."""
     names = list(config.get("default_targets") or ["rve"])
     extra = dict(extra or {})
     out: list[str] = []
@@ -154,6 +165,8 @@ def default_targets(config: Mapping, extra: Optional[Mapping[str, Sequence[str]]
             rve = config.get("rve") or {}
             for run in rve.get("default_runs") or []:
                 out += list(table_outputs(run).values()) + list(report_outputs(run).values())
+                if not (rve.get("runs", {}).get(run) or {}).get("sweep"):
+                    out += list(export_outputs(run).values())
         elif name in extra:
             out += list(extra[name])
         else:

@@ -15,6 +15,10 @@ Contract
   (+ terminal, - terminal) yarn ends ``(direction, index, end)``.
 * :func:`fit_network` ``(measured, network, probes)``: (R_y, R_c, rms log residual) by
   least squares on log R; NaNs with fewer than two usable probes.
+* :meth:`YarnNetwork.solve_pairs3` and :func:`fit_network3` ``(measured, network, probes)``:
+  the same with separate warp and weft yarn resistances, (R_yw, R_yf, R_c, rms log
+  residual); needs four usable probes (three unknowns, one probe left over as a check:
+  docs/macro_export.md §2), NaNs otherwise.
 * :func:`network_probes` ``(cfg, fab)``: the probes of an ``RVEConfig`` as yarn-end
   terminals of the model ({} for a knit or a probe that is not a warp/weft end).
 
@@ -31,8 +35,8 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["TERMINALS", "Terminal", "YarnNetwork", "default_probe_terminals", "fit_network", "network_probes",
-           "terminal_text"]
+__all__ = ["TERMINALS", "Terminal", "YarnNetwork", "default_probe_terminals", "fit_network", "fit_network3",
+           "network_probes", "terminal_text"]
 
 log = logging.getLogger("rve.homogenisation.network")
 
@@ -42,7 +46,8 @@ TERMINALS = ("+", "-")
 Terminal = tuple[str, int, str]  # (direction 'warp'|'weft', yarn index, end '-'|'+')
 
 
-def default_probe_terminals(n_warp: int = 4, n_weft: int = 4) -> dict[str, tuple[Terminal, Terminal]]:
+def default_probe_terminals(n_warp: int = 4, n_weft: int = 4,
+                            weft_probe: bool = False) -> dict[str, tuple[Terminal, Terminal]]:
     """The three thesis probes (thesis Fig. 7.2.2; docs/rve_pipeline.md "Probe definitions")
     as (+ terminal, - terminal) yarn ends.
 
@@ -51,16 +56,21 @@ def default_probe_terminals(n_warp: int = 4, n_weft: int = 4) -> dict[str, tuple
 
     * probe1: the y = -1 warp yarn end to end (x+ end | x- end);
     * probe2: its x = +4 end to the x = -4 end of the y = +1 warp yarn (parallel yarns);
-    * probe3: its x = +4 end to the y = +4 end of the x = -1 weft yarn (crossing yarns).
+    * probe3: its x = +4 end to the y = +4 end of the x = -1 weft yarn (crossing yarns);
+    * probe4 (``weft_probe``): the x = -1 weft yarn end to end (y+ end | y- end), so warp
+      and weft yarn resistances are fitted separately (docs/macro_export.md §2).
     """
     if n_warp < 2 or n_weft < 2:
         raise ValueError("the thesis probes need at least 2 warp and 2 weft yarns")
     j1, j2, i1 = n_warp // 2 - 1, n_warp // 2, n_weft // 2 - 1
-    return {
+    out = {
         "probe1": (("warp", j1, "+"), ("warp", j1, "-")),
         "probe2": (("warp", j1, "+"), ("warp", j2, "-")),
         "probe3": (("warp", j1, "+"), ("weft", i1, "+")),
     }
+    if weft_probe:
+        out["probe4"] = (("weft", i1, "+"), ("weft", i1, "-"))
+    return out
 
 
 def terminal_text(t: Terminal) -> str:
@@ -188,6 +198,33 @@ class YarnNetwork:
         out = shape + (len(pairs),)
         return R.reshape(out), py.reshape(out), pc.reshape(out)
 
+    @cached_property
+    def _laplacians3(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        ye, ce = self.edges
+        return self._laplacian(ye[0::2]), self._laplacian(ye[1::2]), self._laplacian(ce)
+
+    def solve_pairs3(self, pairs: Sequence[tuple[Terminal, Terminal]], R_yw: float, R_yf: float, R_c: float):
+        """Two-terminal solves with separate warp (``R_yw``) and weft (``R_yf``) yarn
+        resistances (scalars). Returns ``(R, p_warp, p_weft, p_contact)``, each (n_pairs,):
+        resistances and Joule power fractions (= d log R / d log of each resistance)."""
+        vals = np.array([R_yw, R_yf, R_c], dtype=float)
+        if not (np.all(vals > 0) and np.all(np.isfinite(vals))):
+            raise ValueError("R_yw, R_yf and R_c must be positive and finite")
+        n = self.n_nodes
+        U = np.zeros((n, len(pairs)))
+        for k, (plus, minus) in enumerate(pairs):
+            a, b = self.terminal_node(plus), self.terminal_node(minus)
+            if a == b:
+                raise ValueError(f"probe {k}: the two terminals are the same yarn end")
+            U[a, k], U[b, k] = 1.0, -1.0
+        g = 1.0 / vals
+        Ls = self._laplacians3
+        A = sum(gi * L for gi, L in zip(g, Ls)) + g.sum() / n
+        V = np.linalg.solve(A, U)
+        R = np.einsum("np,np->p", U, V)
+        fr = [np.einsum("np,nm,mp->p", V, L, V) * gi / R for gi, L in zip(g, Ls)]
+        return R, fr[0], fr[1], fr[2]
+
     def resistance(self, plus: Terminal, minus: Terminal, R_y: float, R_c: float) -> float:
         """Two-terminal resistance between yarn ends ``plus`` and ``minus``."""
         return float(self.solve_pairs([(plus, minus)], R_y, R_c)[0][0])
@@ -262,6 +299,50 @@ def fit_network(measured: Mapping[str, float], network: Optional[YarnNetwork] = 
         return nan
     return float(math.exp(x[0])), float(math.exp(x[1])), float(np.sqrt(np.mean(resid ** 2)))
 
+
+
+def fit_network3(measured: Mapping[str, float], network: Optional[YarnNetwork] = None,
+                 probes: Optional[Mapping[str, tuple[Terminal, Terminal]]] = None) -> tuple[float, float, float, float]:
+    """R_yw, R_yf, R_c from measured probe resistances (separate warp and weft yarn
+    resistors): least squares on log R over (log R_yw, log R_yf, log R_c), started from the
+    two-resistor fit (:func:`fit_network`), Levenberg-Marquardt with the exact Jacobian
+    (power fractions). Needs four usable probes (one left over as a check) that involve
+    warp and weft yarns; returns ``(R_yw, R_yf, R_c, rms_log_residual)`` or NaNs."""
+    from scipy.optimize import least_squares
+
+    network = network or YarnNetwork()
+    probes = default_probe_terminals(network.n_warp, network.n_weft, weft_probe=True) if probes is None else probes
+    names = [n for n in probes if n in measured and np.isfinite(measured[n]) and float(measured[n]) > 0]
+    nan = (math.nan,) * 4
+    if len(names) < 4:
+        return nan
+    dirs = {t[0] for n in names for t in probes[n]}
+    if dirs != {"warp", "weft"}:
+        return nan
+    logm = np.log(np.array([float(measured[n]) for n in names]))
+    pairs = [probes[n] for n in names]
+    ry, rc, _ = fit_network(measured, network, {n: probes[n] for n in names})
+    if not (np.isfinite(ry) and np.isfinite(rc)):
+        return nan
+    x0 = np.log([ry, ry, rc])
+
+    def fun(x):
+        return np.log(network.solve_pairs3(pairs, *np.exp(x))[0]) - logm
+
+    def jac(x):
+        _, pw, pf, pc = network.solve_pairs3(pairs, *np.exp(x))
+        return np.column_stack([pw, pf, pc])
+
+    lo, hi = float(logm.min()) - 35.0, float(logm.max()) + 35.0
+    try:
+        sol = least_squares(fun, np.clip(x0, lo + 1e-9, hi - 1e-9), jac=jac, method="trf",
+                            bounds=([lo] * 3, [hi] * 3), xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200)
+        resid = fun(sol.x)
+    except (np.linalg.LinAlgError, ValueError, OverflowError) as exc:  # pragma: no cover
+        log.warning("network fit (warp/weft) failed: %s", exc)
+        return nan
+    rw, rf, rc = (float(v) for v in np.exp(sol.x))
+    return rw, rf, rc, float(np.sqrt(np.mean(resid ** 2)))
 
 
 def network_probes(cfg, fab) -> dict:

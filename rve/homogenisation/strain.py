@@ -18,13 +18,18 @@ From the stored state at strain eps_{n-1} to eps_n = eps_{n-1} + d with d = tota
 
 1. **driven phase** (Algorithm 7.1, 1a-1b): the velocity field
 
-       uniaxial: v = (d / t_step) X1 e1,    shear: v = (d / t_step) X1 e2
+       uniaxial: v = (d / t_step) X1 e1,    shear: v = (d / t_step) X1 e2,
+       uniaxial_y: v = (d / t_step) X2 e2,
+       trellis (picture frame, strain = the angle drop theta in rad, F(theta) of
+       ``trellis_gradient``: both yarn families keep their length):
+       v = (F(theta_n) - F(theta_{n-1})) X / t_step (the secant of the step)
 
    (the thesis writes (Delta_step / t_step)(X1 / L0): Delta_step is then the elongation
    d L0 of the box length L0 per step) is prescribed on the pinned end centroids for
    ``t_step`` and is the initial velocity of every node (centroids and directors: the
    affine field of the material points r + xi_a g_a). X is the **origin** of the strain
-   path, the relaxed state, so after n steps the ends sit exactly at X + eps_n X1 e_i.
+   path, the relaxed state, so after n steps the ends sit exactly at X + eps_n X1 e_i
+   (uniaxial_y: X + eps_n X2 e2; trellis: F(theta_n) X).
    Backward Euler (``integrate`` through ``rve.solvers.relaxation.relax_to_equilibrium`` with
    ``static=False``: chunks of ``rebuild_every`` steps, the contact map rebuilt between)
    with the light damping ``strain.damping`` (Table 7.1's gamma).
@@ -54,12 +59,15 @@ from ..solvers.minimize import capped_newton, minimize_energy
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
-           "static_polish", "static_minimize", "MODE_DIRECTION"]
+           "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
+           "end_targets"]
 
 log = logging.getLogger("rve.homogenisation.strain")
 
-#: component of the velocity field of each mode (e1 for uniaxial, e2 for shear)
-MODE_DIRECTION = {"uniaxial": 0, "shear": 1}
+#: component of the velocity field of each mode (e1 for uniaxial, e2 for shear and uniaxial_y)
+MODE_DIRECTION = {"uniaxial": 0, "shear": 1, "uniaxial_y": 1, "trellis": 0}
+#: reference coordinate the velocity is proportional to (X1 by default; X2 for uniaxial_y)
+MODE_SOURCE = {"uniaxial_y": 1}
 
 
 def strain_levels(cfg) -> np.ndarray:
@@ -226,13 +234,44 @@ def free_residual(system, x) -> float:
 
 def affine_velocity(origin, mode: str, rate: float) -> np.ndarray:
     """The driving velocity field at the nodes, (n_nodes, 9): rate * X1 e_i on the
-    centroids and rate * (g_a)_1 e_i on the directors (X, g_a of ``origin``)."""
+    centroids and rate * (g_a)_1 e_i on the directors (X, g_a of ``origin``); uniaxial_y:
+    rate * X2 e2 (and (g_a)_2 e2)."""
     d = MODE_DIRECTION[mode]
+    src = MODE_SOURCE.get(mode, 0)
     origin = np.asarray(origin, float)
     w = np.zeros_like(origin)
-    for blk in range(3):  # r, g1, g2: the x component of each drives component d
-        w[:, 3 * blk + d] = rate * origin[:, 3 * blk + 0]
+    for blk in range(3):  # r, g1, g2: the src component of each drives component d
+        w[:, 3 * blk + d] = rate * origin[:, 3 * blk + src]
     return w
+
+
+def trellis_gradient(theta: float) -> np.ndarray:
+    """In-plane deformation gradient (3, 3) of the picture frame at angle drop ``theta``
+    (rad): F e1 = (cos t/2, sin t/2), F e2 = (sin t/2, cos t/2), |F e1| = |F e2| = 1."""
+    c, s = np.cos(theta / 2.0), np.sin(theta / 2.0)
+    return np.array([[c, s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def secant_velocity(origin, F_prev: np.ndarray, F_next: np.ndarray, t_step: float) -> np.ndarray:
+    """Driving field of a mode whose F is not linear in the strain (trellis): the constant
+    velocity (F_n - F_{n-1}) X / t_step on the centroids and (F_n - F_{n-1}) g_a / t_step on
+    the directors (X, g_a of ``origin``), so the ends land exactly on F_n X after t_step."""
+    dF = (np.asarray(F_next, float) - np.asarray(F_prev, float)) / float(t_step)
+    origin = np.asarray(origin, float)
+    w = np.zeros_like(origin)
+    for blk in range(3):
+        w[:, 3 * blk:3 * blk + 3] = origin[:, 3 * blk:3 * blk + 3] @ dF.T
+    return w
+
+
+def end_targets(origin_ends: np.ndarray, mode: str, eps: float) -> np.ndarray:
+    """Positions (n_ends, 3) of the pinned end centroids at strain ``eps`` of ``mode``."""
+    target = np.asarray(origin_ends, float).copy()
+    if mode == "trellis":
+        return target @ trellis_gradient(eps).T
+    d, src = MODE_DIRECTION[mode], MODE_SOURCE.get(mode, 0)
+    target[:, d] += eps * origin_ends[:, src]
+    return target
 
 
 def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
@@ -252,7 +291,10 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
     origin = np.asarray(origin, float)
     x = np.array(x_prev, float).reshape(nn, 9)
     ends, _, _ = clamped_ends(fab, mesh)
-    w_aff = affine_velocity(origin, mode, rate)
+    if mode == "trellis":  # F(theta) is not linear in theta: the secant field of the step
+        w_aff = secant_velocity(origin, trellis_gradient(float(levels[step - 1])), trellis_gradient(eps), sp_.t_step)
+    else:
+        w_aff = affine_velocity(origin, mode, rate)
     end_vel = w_aff[ends, :3]
     info = {"mode": mode, "step": int(step), "strain": eps, "strain_increment": d_eps}
 
@@ -272,9 +314,12 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
         x1 += (1.0 - done) * sp_.t_step * w_aff
         info["driven"]["kinematic_fraction"] = float(1.0 - done)
     # the ends land exactly on X + eps X1 e_i (the integration puts them there to round-off)
-    d = MODE_DIRECTION[mode]
-    target = origin[ends, :3].copy()
-    target[:, d] += eps * origin[ends, 0]
+    if mode == "trellis":
+        target = end_targets(origin[ends, :3], mode, eps)
+    else:  # (the original arithmetic of uniaxial and shear, unchanged)
+        d = MODE_DIRECTION[mode]
+        target = origin[ends, :3].copy()
+        target[:, d] += eps * origin[ends, MODE_SOURCE.get(mode, 0)]
     info["driven"]["end_drift_mm"] = float(np.abs(x1[ends, :3] - target).max())
     x1[ends, :3] = target
 

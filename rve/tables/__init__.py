@@ -9,6 +9,9 @@ docs/lookup_tables.md. One concept per module:
 * ``interpolate`` -- :func:`interpolate` in strain and numeric swept parameters;
 * ``export`` -- csv, json, dat (:func:`export_table`, :func:`read_table_csv`,
   :func:`to_json_dict`);
+* ``macro`` -- the macro quantities (:func:`add_macro_quantities`, docs/macro_export.md §1);
+* ``formats`` -- the macro-FE exports abaqus, lsdyna, curves, comsol, hermite, spice
+  (:func:`export_macro`, docs/macro_export.md §3);
 * ``summary`` -- :func:`summarize`; ``plot`` -- :func:`plot_table`;
 * ``jobs`` -- the bodies of the Snakemake rules ``rve_gather`` and ``rve_report`` (not
   imported here: they need the homogenisation pipeline).
@@ -19,8 +22,10 @@ from ..homogenisation.network import YarnNetwork, default_probe_terminals, fit_n
 from ..io.provenance import package_version
 from .build import build_table
 from .export import EXPORT_FORMATS, export_table, read_table_csv, to_json_dict
+from .formats import MACRO_FORMATS, export_macro
 from .interpolate import interpolate
 from .io import open_table, write_table
+from .macro import add_macro_quantities
 from .plot import plot_table
 from .schema import KNOWN_PARAMETERS, MODES, TABLE_FORMAT
 from .summary import summarize
@@ -29,6 +34,7 @@ __all__ = [
     "MODES",
     "TABLE_FORMAT",
     "EXPORT_FORMATS",
+    "MACRO_FORMATS",
     "KNOWN_PARAMETERS",
     "YarnNetwork",
     "default_probe_terminals",
@@ -38,6 +44,8 @@ __all__ = [
     "open_table",
     "interpolate",
     "export_table",
+    "export_macro",
+    "add_macro_quantities",
     "read_table_csv",
     "to_json_dict",
     "summarize",

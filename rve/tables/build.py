@@ -62,8 +62,10 @@ two resistors of the network model of thesis Fig. 7.2.1
 resistances (least squares on log R over the probes the model knows; two probes determine
 them exactly, the third is a check reported by ``network_fit_residual``). Every variable
 and coordinate has ``units`` and ``long_name``; the global attributes
-(``rve.io.provenance.cf_attributes``) hold the provenance (config and fabric as JSON, rve
-version, creation date, source).
+(``rve.io.provenance.cf_attributes``, Conventions CF-1.11) hold the provenance (config and
+fabric as JSON, rve version, creation date, source). Last, the macro quantities
+(membrane force per width, yarn strains, shear angle, areal density, gauge factors, the
+two-potential sheet parameters) are derived once by ``rve.tables.macro.add_macro_quantities``.
 """
 from __future__ import annotations
 
@@ -75,12 +77,17 @@ from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 import numpy as np
 import xarray as xr
 
-from ..homogenisation.network import Terminal, YarnNetwork, default_probe_terminals, fit_network, terminal_text
+from ..homogenisation.network import (Terminal, YarnNetwork, default_probe_terminals, fit_network, fit_network3,
+                                      terminal_text)
 from ..io.provenance import cf_attributes, package_version
+from .macro import add_macro_quantities
 from .schema import (COMPONENTS, COORD_ATTRS, DIMENSIONLESS, KNOWN_PARAMETERS, MODES, SIDE_ORDER, STRAIN_DECIMALS,
                      TABLE_FORMAT, TERMINALS, VARIABLES, json_safe)
 
-__all__ = ["build_table"]
+__all__ = ["build_table", "CF_VERSION"]
+
+#: units_metadata (temperature differences) is CF-1.11 (docs/macro_export.md §4)
+CF_VERSION = "CF-1.11"
 
 log = logging.getLogger("rve.tables")
 
@@ -316,6 +323,18 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
     else:
         log.warning("build_table: records have fewer than two of the network probes %s; "
                     "yarn_resistance and contact_resistance are NaN", list(net_probes))
+    # separate warp and weft yarn resistors (format 2): four probes or more
+    probes3 = (dict(network_probes) if network_probes is not None
+               else default_probe_terminals(n_warp, n_weft, weft_probe=True) if min(n_warp, n_weft) >= 2 else {})
+    usable3 = [p for p in probes3 if p in pidx]
+    if len(usable3) >= 4:
+        for idx in zip(*np.nonzero(filled)):
+            measured = {p: data["probe_resistance"][idx + (pidx[p],)] for p in usable3}
+            rw, rf, rc3, res3 = fit_network3(measured, network, {p: probes3[p] for p in usable3})
+            data["yarn_resistance_warp"][idx] = rw
+            data["yarn_resistance_weft"][idx] = rf
+            data["contact_resistance_warp_weft"][idx] = rc3
+            data["network_fit_residual_warp_weft"][idx] = res3
 
     # --- assemble
     coords: dict[str, Any] = {
@@ -338,7 +357,6 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
         attrs = {"units": units, "long_name": long_name, **extra}
         data_vars[name] = (lead + dims, data[name], attrs)
     ds = xr.Dataset(data_vars, coords=coords)
-    ds["strain"].attrs["axis"] = "X"
     ds["yarn_resistance"].attrs["comment"] = ds["contact_resistance"].attrs["comment"] = (
         "fitted to the probe resistances under the network model of docs/lookup_tables.md "
         f"({n_warp} x {n_weft} cells, probes {', '.join(usable) or 'none'})")
@@ -360,4 +378,5 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
         swept_parameters=" ".join(pnames),
         internal_units="mm, ms, g, N, MPa, K, A, mC, V (ohm = V/A)",
     ))
-    return ds
+    ds.attrs["Conventions"] = CF_VERSION
+    return add_macro_quantities(ds)

@@ -37,7 +37,10 @@ def export_table(ds: xr.Dataset, path: PathLike, fmt: str) -> list[Path]:
       ``units``, the leading coordinates with units in the header (``strain [1]``,
       ``fibril_radius [mm]``, ...), the label coordinates ``probe``, ``side``,
       ``component``, ``terminal`` (empty where a variable has no such dimension) and
-      ``value``; ``#`` comment lines first (title, provenance, variable units).
+      ``value``; ``#`` comment lines first (title, provenance, variable units, the
+      scalar constants such as ``areal_density``). Only per-state variables (those with a
+      ``strain`` dimension) are rows; ``membrane_force_at_zero_strain`` is the strain-0
+      row of ``membrane_force``.
       :func:`read_table_csv` reads it back into the Dataset.
     * ``"json"``: ``xarray.Dataset.to_dict`` layout (``coords``, ``data_vars`` with
       ``dims``, ``attrs`` and ``data``; missing values as null) plus ``"format"``.
@@ -59,6 +62,11 @@ def export_table(ds: xr.Dataset, path: PathLike, fmt: str) -> list[Path]:
     raise ValueError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_FORMATS)})")
 
 
+def _state_vars(ds: xr.Dataset) -> dict:
+    """The per-state variables (those with a ``strain`` dimension), in dataset order."""
+    return {n: v for n, v in ds.data_vars.items() if "strain" in v.dims}
+
+
 def _csv_text(ds: xr.Dataset) -> str:
     import csv
     import io
@@ -75,11 +83,15 @@ def _csv_text(ds: xr.Dataset) -> str:
         if key in ds.attrs:
             buf.write(f"# {key}: {ds.attrs[key]}\n")
     for name, var in ds.data_vars.items():
+        if "strain" not in var.dims and var.ndim == 0:
+            buf.write(f"# constant {name} [{var.attrs.get('units', '')}] = {_fmt_num(float(var.values))}: "
+                      f"{var.attrs.get('long_name', '')}\n")
+    for name, var in _state_vars(ds).items():
         buf.write(f"# variable {name} [{var.attrs.get('units', '')}] dims ({', '.join(var.dims)}): "
                   f"{var.attrs.get('long_name', '')}\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
-    for name, var in ds.data_vars.items():
+    for name, var in _state_vars(ds).items():
         dims = var.dims
         coords = [ds[d].values for d in dims]
         units = var.attrs.get("units", "")
@@ -114,10 +126,16 @@ def read_table_csv(path: PathLike) -> xr.Dataset:
         lead.append(name)
         lead_units[name] = unit.rstrip("]")
     var_meta: dict[str, dict] = {}
+    constants: dict[str, tuple] = {}
     attrs: dict[str, str] = {}
     for c in comments:
         text = c[1:].strip()
-        if text.startswith("variable "):
+        if text.startswith("constant "):
+            name, rest = text[len("constant "):].split(" [", 1)
+            units, rest = rest.split("] = ", 1)
+            value, long_name = rest.split(": ", 1)
+            constants[name] = (float(value), units, long_name)
+        elif text.startswith("variable "):
             rest = text[len("variable "):]
             name, rest = rest.split(" [", 1)
             units, rest = rest.split("] dims (", 1)
@@ -164,6 +182,8 @@ def read_table_csv(path: PathLike) -> xr.Dataset:
             else np.array(coord_vals[d], dtype=object)
         attrs_d = {"units": lead_units.get(d) or DIMENSIONLESS}
         ds.coords[d] = xr.Variable((d,), vals, attrs=attrs_d)
+    for name, (value, units, long_name) in constants.items():
+        ds[name] = xr.Variable((), value, attrs={"units": units, "long_name": long_name})
     return ds
 
 
@@ -190,7 +210,7 @@ def _export_dat(ds: xr.Dataset, path: Path) -> list[Path]:
                 (d, sub[d].attrs.get("units", ""), sub[d].attrs.get("long_name", ""))
                 for d in num_dims + ["strain"]]
             blocks = []
-            for name, var in sub.data_vars.items():
+            for name, var in _state_vars(sub).items():
                 other = [d for d in var.dims if d not in num_dims and d != "strain"]
                 v = var.transpose(*(num_dims + ["strain"] + other))
                 nrow = int(np.prod([sub.sizes[d] for d in num_dims + ["strain"]]))
@@ -213,6 +233,10 @@ def _export_dat(ds: xr.Dataset, path: Path) -> list[Path]:
                      "# column  name  [units]  meaning"]
             for k, (tag, units, long_name) in enumerate(columns, start=1):
                 lines.append(f"# {k:4d}  {tag}  [{units}]  {long_name}")
+            for name, var in sub.data_vars.items():
+                if "strain" not in var.dims and var.ndim == 0:
+                    lines.append(f"# constant {name} = {_fmt_num(float(var.values))} [{var.attrs.get('units', '')}]"
+                                 f"  {var.attrs.get('long_name', '')}")
             lines.append("# " + " ".join(tag for tag, _, _ in columns))
             for row in table:
                 lines.append(" ".join(f"{x: .12e}" if math.isfinite(x) else "nan" for x in row))

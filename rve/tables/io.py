@@ -1,10 +1,21 @@
-"""netCDF storage of a lookup table: ``write_table`` (atomic, zlib) and ``open_table``.
+"""netCDF storage of a lookup table: ``write_table`` (atomic, zlib, CF-1.11) and ``open_table``.
 
-Format ``rve-lookup-table/1`` (docs/lookup_tables.md §2, ``rve.tables.schema``):
+Format ``rve-lookup-table/2`` (docs/lookup_tables.md §2, docs/macro_export.md §4,
+``rve.tables.schema``). In memory a table has string index coordinates (``mode``,
+``probe``, ``side``, ``component``, ``terminal``, ``edge``, ``yarn`` and string-valued swept
+parameters), so ``ds.sel(mode="shear")`` works. On disk CF wants coordinate variables
+numeric and monotonic, so ``write_table`` stores each string label dimension ``d`` without
+a coordinate variable and its labels as the auxiliary coordinate ``d_label`` (a char
+array, dimension ``d_strlen``), listed in the data variables' ``coordinates``;
+``open_table`` restores the index coordinates.
+
 ``write_table(ds, path)`` writes netCDF-4 through ``rve.io.atomic.atomic_path`` (a file
 that exists is complete), zlib level 4 with shuffle on numeric variables, no fill value
 on coordinates (CF). ``open_table(path)`` reads any table written so far into memory (the
-file is closed) and checks that it has the ``mode`` and ``strain`` dimensions.
+file is closed) and checks that it has the ``mode`` and ``strain`` dimensions; a version-1
+table (string coordinate variables, no macro quantities) is read as it was stored plus the
+macro quantities derived by ``rve.tables.macro.add_macro_quantities`` (its attribute
+``rve_table_format`` stays version 1; ``rve_table_upgraded`` says what was added).
 """
 from __future__ import annotations
 
@@ -12,13 +23,53 @@ import os
 from pathlib import Path
 from typing import Union
 
+import numpy as np
 import xarray as xr
 
 from ..io.atomic import atomic_path
 
-__all__ = ["write_table", "open_table"]
+__all__ = ["write_table", "open_table", "LABEL_SUFFIX", "to_cf", "from_cf"]
 
 PathLike = Union[str, os.PathLike]
+
+#: suffix of the auxiliary label coordinate of a string dimension on disk
+LABEL_SUFFIX = "_label"
+
+
+def _string_dims(ds: xr.Dataset) -> list[str]:
+    return [d for d in ds.dims if d in ds.coords and ds[d].dtype.kind in "OSU"]
+
+
+def to_cf(ds: xr.Dataset) -> xr.Dataset:
+    """The on-disk layout: string index coordinates -> auxiliary ``<dim>_label`` coordinates;
+    ``Conventions`` CF-1.11 and ``rve_table_format`` version 2 (what this layout is)."""
+    from .build import CF_VERSION
+    from .schema import TABLE_FORMAT
+
+    out = ds.copy()
+    out.attrs["Conventions"] = CF_VERSION
+    out.attrs["rve_table_format"] = TABLE_FORMAT
+    for d in _string_dims(ds):
+        var = ds[d].variable
+        out = out.drop_vars(d)
+        out.coords[d + LABEL_SUFFIX] = xr.Variable((d,), np.array([str(v) for v in var.values], dtype=object),
+                                                  attrs=dict(var.attrs))
+    return out
+
+
+def from_cf(ds: xr.Dataset) -> xr.Dataset:
+    """Inverse of :func:`to_cf` (a no-op on a version-1 table)."""
+    out = ds
+    for name in list(ds.variables):
+        if not name.endswith(LABEL_SUFFIX):
+            continue
+        d = name[: -len(LABEL_SUFFIX)]
+        var = ds[name].variable
+        if var.dims != (d,) or d in ds.coords:
+            continue
+        labels = np.array([v.decode() if isinstance(v, bytes) else str(v) for v in var.values], dtype=object)
+        out = out.drop_vars(name).assign_coords({d: xr.Variable((d,), labels, attrs=dict(var.attrs))})
+    return out
 
 
 def _encoding(ds: xr.Dataset) -> dict:
@@ -29,25 +80,38 @@ def _encoding(ds: xr.Dataset) -> dict:
             if name in ds.coords:
                 e["_FillValue"] = None  # CF: coordinate variables have no missing values
             enc[name] = e
+        elif var.dtype.kind in "OSU":  # CF: strings as char arrays
+            stem = name[: -len(LABEL_SUFFIX)] if name.endswith(LABEL_SUFFIX) else name
+            enc[name] = {"dtype": "S1", "char_dim_name": f"{stem}_strlen", "_FillValue": None}
     return enc
 
 
 def write_table(ds: xr.Dataset, path: PathLike) -> Path:
-    """Write ``ds`` atomically as netCDF-4 (zlib level 4 on numeric variables)."""
+    """Write ``ds`` atomically as CF-1.11 netCDF-4 (module docstring)."""
     path = Path(path)
+    disk = to_cf(ds)
     with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=_encoding(ds))
+        disk.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=_encoding(disk))
     return path
 
 
 def open_table(path: PathLike) -> xr.Dataset:
-    """Open a table written by :func:`write_table`, loaded into memory (file closed)."""
+    """Open a table written by :func:`write_table` (either format version), loaded into
+    memory (file closed), with string index coordinates."""
+    from .macro import MACRO_VARIABLES, add_macro_quantities
+    from .schema import TABLE_FORMAT_V1
+
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no lookup table at {path}")
     with xr.open_dataset(path, engine="netcdf4") as ds:
         ds = ds.load()
+    ds = from_cf(ds)
     for name in ("mode", "strain"):
         if name not in ds.dims:
             raise ValueError(f"{path} is not an rve lookup table (no {name!r} dimension)")
+    if ds.attrs.get("rve_table_format") == TABLE_FORMAT_V1 and "membrane_force" not in ds:
+        ds = add_macro_quantities(ds)
+        ds.attrs["rve_table_upgraded"] = ("read as rve-lookup-table/1; derived on reading: "
+                                          + ", ".join(v for v in MACRO_VARIABLES if v in ds))
     return ds

@@ -1,8 +1,8 @@
-"""The job bodies of the table rules (workflow/rules/rve.smk): ``rve_gather``, ``rve_report``.
+"""The job bodies of the table rules (workflow/rules/rve.smk): ``rve_gather``, ``rve_exports``, ``rve_report``.
 
 docs/rve_pipeline.md ("The DAG"). ``gather_job``: every probe record of a run -> the
-lookup table (netCDF), its csv export and a text summary, all atomic; ``report_job``: the
-table -> its figures. ``gather_records`` turns probe records into table records (the
+lookup table (netCDF), its csv export and a text summary, all atomic; ``export_job``: the
+table -> its macro-ready exports (docs/macro_export.md); ``report_job``: the table -> its figures. ``gather_records`` turns probe records into table records (the
 relaxed state becomes the strain-0 record of every mode).
 
 The tables are the higher layer: this module imports the homogenisation (run configs,
@@ -16,6 +16,8 @@ import os
 from pathlib import Path
 from typing import Iterable, Mapping, Optional, Sequence, Union
 
+import numpy as np
+
 from ..config import config_as_dict
 from ..homogenisation.network import network_probes
 from ..fabrics.setup import fabric_and_mesh
@@ -28,7 +30,7 @@ from .io import open_table, write_table
 from .plot import plot_table
 from .summary import summarize
 
-__all__ = ["gather_records", "gather_job", "report_job"]
+__all__ = ["gather_records", "gather_job", "export_job", "report_job"]
 
 log = logging.getLogger("rve.tables.jobs")
 
@@ -52,7 +54,10 @@ def gather_records(records: Iterable[Union[PathLike, Mapping]], modes: Sequence[
 def _fabric_desc(fab, mesh, cfg) -> dict:
     desc = {"kind": fab.kind, "n_fibrils": int(fab.n_fibrils), "half_widths": [float(v) for v in fab.half_widths],
             "elements_per_fibril": int(cfg.mesh.elements), "order": int(cfg.mesh.order),
-            "fibril_radius": float(cfg.fabric.fibril_diameter / 2)}
+            "fibril_radius": float(cfg.fabric.fibril_diameter / 2),
+            # g: sum of reference length x pi R^2 x rho (the areal density of rve.tables.macro)
+            "fibril_mass_g": float(sum(f.length * np.pi * f.radius ** 2 for f in fab.fibrils)
+                                   * float(cfg.material.density))}
     for d in ("warp", "weft", "loop"):
         n = sum(1 for y in fab.yarns if y.direction == d)
         if n:
@@ -93,6 +98,21 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
         atomic_write_text(out_summary, text)
         log.info("table %s from %d records:\n%s", out_table, len(records), text)
     return ds
+
+
+def export_job(table: PathLike, outputs: Mapping[str, PathLike], log_path: Optional[PathLike]) -> list:
+    """The macro-ready exports of the table (``rve.tables.formats.export_macro`` with its
+    defaults: pretension removed, t = 1 mm, the table's units): ``outputs`` maps a format
+    (abaqus, lsdyna, hermite, curves) to its path."""
+    from .formats import export_macro
+
+    with logging_to(log_path):
+        ds = open_table(table)
+        paths = []
+        for fmt, out in outputs.items():
+            paths += export_macro(ds, out, fmt, source=str(table))
+        log.info("exports: %s", ", ".join(map(str, paths)))
+    return paths
 
 
 def report_job(table: PathLike, out_prefix: PathLike, log_path: Optional[PathLike]) -> list:

@@ -83,7 +83,7 @@ def plot_table(ds: xr.Dataset, out_png_prefix: PathLike, select: Optional[Mappin
     probes = list(sub["probe"].values)
     strain = sub["strain"].values
     paths = []
-    styles = {"uniaxial": "-", "shear": "--"}
+    styles = {"uniaxial": "-", "shear": "--", "uniaxial_y": "-.", "trellis": ":"}
     marks = {"x": "o", "y": "s", "z": "^"}
 
     # reaction forces

@@ -1,4 +1,4 @@
-"""The lookup-table format ``rve-lookup-table/1``: dimensions, variables, attributes.
+"""The lookup-table format ``rve-lookup-table/2``: dimensions, variables, attributes.
 
 docs/lookup_tables.md (§2 "The table") records the format; this module is where it is spelt:
 the coordinate and variable metadata every module of ``rve.tables`` writes and reads, the
@@ -7,8 +7,10 @@ metadata (``json_safe``, built on ``rve.io.provenance.to_jsonable``).
 
 Contract
 --------
-* ``TABLE_FORMAT``, ``MODES``, ``TERMINALS``, ``COMPONENTS``, ``SIDE_ORDER``: the format
-  id and the label coordinates' values.
+* ``TABLE_FORMAT``, ``TABLE_FORMAT_V1``, ``MODES``, ``TERMINALS``, ``COMPONENTS``,
+  ``SIDE_ORDER``, ``EDGES``, ``YARNS``: the format ids (version 2 adds the macro
+  quantities of ``rve.tables.macro`` and stores label coordinates CF-style, ``rve.tables.io``;
+  version 1 is still read) and the label coordinates' values.
 * ``COORD_ATTRS`` (name -> CF attrs), ``VARIABLES`` (name -> (dims after the leading
   ``(mode, strain, *swept)``, units, long_name, extra attrs)), ``KNOWN_PARAMETERS``
   (swept name -> (units, long_name)).
@@ -27,11 +29,15 @@ import xarray as xr
 from ..homogenisation.network import TERMINALS
 from ..io.provenance import to_jsonable
 
-__all__ = ["TABLE_FORMAT", "MODES", "TERMINALS", "COMPONENTS", "SIDE_ORDER", "DIMENSIONLESS", "STRAIN_DECIMALS",
+__all__ = ["TABLE_FORMAT", "TABLE_FORMAT_V1", "EDGES", "YARNS", "MODES", "TERMINALS", "COMPONENTS", "SIDE_ORDER", "DIMENSIONLESS", "STRAIN_DECIMALS",
            "COORD_ATTRS", "VARIABLES", "KNOWN_PARAMETERS", "LABEL_DIMS", "lead_dims", "json_safe"]
 
-TABLE_FORMAT = "rve-lookup-table/1"
-MODES = ("uniaxial", "shear")
+TABLE_FORMAT = "rve-lookup-table/2"
+TABLE_FORMAT_V1 = "rve-lookup-table/1"
+#: deformation modes, in table order (the first two are the thesis's)
+MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
+EDGES = ("x", "y")
+YARNS = ("warp", "weft")
 COMPONENTS = ("x", "y", "z")
 SIDE_ORDER = ("warp-", "warp+", "weft-", "weft+", "x-", "x+", "y-", "y+")
 DIMENSIONLESS = "1"
@@ -40,10 +46,13 @@ STRAIN_DECIMALS = 12
 COORD_ATTRS = {
     "mode": {"units": DIMENSIONLESS, "long_name": "deformation mode of the strain path "
              "(uniaxial: stretch along the warp direction x; shear: simple shear, "
-             "displacement along y proportional to x)"},
+             "displacement along y proportional to x; uniaxial_y: stretch along the weft "
+             "direction y; trellis: picture-frame shear, both yarn families keep their length)"},
     "strain": {"units": DIMENSIONLESS, "long_name": "engineering strain of the applied deformation "
                "(uniaxial: elongation / initial length along x; shear: engineering shear "
-               "strain gamma = displacement along y / initial length along x)"},
+               "strain gamma = displacement along y / initial length along x; uniaxial_y: "
+               "elongation / initial length along y; trellis: angle drop between the yarn "
+               "families in rad)"},
     "probe": {"units": DIMENSIONLESS, "long_name": "electrical probe (pair of terminals a test "
               "voltage is applied across)"},
     "side": {"units": DIMENSIONLESS, "long_name": "side of the RVE box the clamped fibril ends "
@@ -88,6 +97,17 @@ VARIABLES: dict[str, tuple[tuple[str, ...], str, str, dict]] = {
     "network_fit_residual": ((), DIMENSIONLESS,
                              "RMS of log(model / measured probe resistance) of the network "
                              "fit (0: the probes are consistent with the network model)", {}),
+    # format 2: the fit with separate warp and weft yarn resistors (four probes or more)
+    "yarn_resistance_warp": ((), "ohm", "network-model warp yarn resistance R_yw of one warp yarn across one "
+                             "cell, fitted with separate warp and weft yarn resistors", {}),
+    "yarn_resistance_weft": ((), "ohm", "network-model weft yarn resistance R_yf of one weft yarn across one "
+                             "cell, fitted with separate warp and weft yarn resistors", {}),
+    "contact_resistance_warp_weft": ((), "ohm", "network-model contact resistance R_c of the fit with "
+                                     "separate warp and weft yarn resistors", {}),
+    "network_fit_residual_warp_weft": ((), DIMENSIONLESS,
+                                       "RMS of log(model / measured probe resistance) of the fit with "
+                                       "separate warp and weft yarn resistors (four probes or more: one "
+                                       "left over as a check; NaN with fewer)", {}),
 }
 
 # known swept parameters: name -> (units, long_name)
@@ -107,7 +127,7 @@ KNOWN_PARAMETERS: dict[str, tuple[str, str]] = {
 
 
 #: dimensions of the label coordinates; the others lead (mode, strain, swept parameters)
-LABEL_DIMS = ("probe", "side", "component", "terminal")
+LABEL_DIMS = ("probe", "side", "component", "terminal", "edge", "yarn")
 
 
 def lead_dims(ds: xr.Dataset) -> list[str]:

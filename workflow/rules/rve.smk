@@ -5,6 +5,7 @@
 # rve.runs) and per sweep combination ({combo}, "base" without a sweep):
 #   rve_fabric -> rve_relax -> rve_strain_step (step i from step i-1, per mode)
 #   -> rve_probes (one job per stored state, independent) -> rve_gather -> rve_report
+#                                                                      -> rve_exports (macro-FE files)
 # Every output is written atomically, so a killed run resumes from the last complete step.
 # The strain steps (the critical path: two chains) have priority; the probe jobs fill in.
 # The job modules are imported in the rule bodies: parsing the workflow stays cheap.
@@ -15,9 +16,9 @@ from rve.homogenisation import layout as rve_layout
 wildcard_constraints:
     run=r"[A-Za-z0-9_]+",
     combo=r"[A-Za-z0-9_.+=-]+",
-    mode=r"uniaxial|shear",
+    mode=r"uniaxial_y|uniaxial|shear|trellis",
     step=r"[0-9]{2}",
-    state=r"relaxed|(uniaxial|shear)_[0-9]{2}",
+    state=r"relaxed|(uniaxial_y|uniaxial|shear|trellis)_[0-9]{2}",
 
 
 rule rve_fabric:
@@ -138,6 +139,28 @@ rule rve_gather:
             params.spec,
             wildcards.run,
         )
+
+
+rule rve_exports:
+    """Macro-ready exports beside the table: Abaqus, LS-DYNA, Hermite splines, curve CSVs."""
+    input:
+        table=rve_layout.table_outputs("{run}")["table"],
+    output:
+        abaqus=rve_layout.export_outputs("{run}")["abaqus"],
+        lsdyna=rve_layout.export_outputs("{run}")["lsdyna"],
+        hermite=rve_layout.export_outputs("{run}")["hermite"],
+        curves=directory(rve_layout.export_outputs("{run}")["curves"]),
+    log:
+        rve_layout.log_path("{run}", "exports"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "exports")
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+    run:
+        from rve.tables.jobs import export_job
+
+        export_job(input.table, dict(output.items()), log[0])
 
 
 rule rve_report:

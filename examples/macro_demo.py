@@ -1,0 +1,424 @@
+"""Macro demo (docs/macro_export.md §5): the table's exports in a scikit-fem macro model.
+
+Run: ``python examples/macro_demo.py TABLE [--out DIR]`` (default: the CI fixture
+tests/data/table_v1_ci.nc); ``tests/test_macro_demo.py`` runs the checks.
+
+Electrics. A two-potential sheet: warp potential phi_w conducting along the warp with the
+sheet conductance g, weft potential phi_f along the weft with g, exchange c (phi_w - phi_f)
+per reference area (g, c: the table's ``yarn_sheet_conductance``,
+``contact_exchange_conductance``); electrodes act on phi_w. On a deformed mesh the
+conductance is pushed forward, G = F G0 F^T / J (and c / J). It is compared with the sparse
+resistor network of the same patch (``network_resistance``, the cell of
+rve.homogenisation.network) built from the table's R_y(eps), R_c(eps):
+
+1. uniform strain, bus-bar electrodes: equal to round-off at every stored strain, on the
+   reference and on the deformed mesh (without the push-forward: off by the stretch);
+2. pads on 4 of 16 warp ends of a 16 x 16-cell patch: the two-potential model within 5 %
+   of the network, a one-potential sheet (isotropic g) far off;
+3. the network of the RVE from the fitted R_y, R_c gives the stored probe resistances to
+   the fit residual.
+
+Mechanics. A total-Lagrangian membrane with the decoupled fabric law of the exported
+curves (``rve.tables.formats.fabric_curves``, the data of every export, as monotone cubic
+Hermite splines in their own strain measure: warp N(eps_warp), weft N(eps_weft), shear
+N(theta); pretension removed; energy density the
+integrals of the curves, tangent by complex-step differentiation of the first Piola force,
+exact): a strip pulled along the warp gives the reaction per reference width = the
+table's N_xx at every stored strain; Newton converges in a few iterations per step. Then a
+strip with a hole: its warp strain field feeds R_y(eps), R_c(eps) into the sheet model,
+the resistance change of the stretched sensor patch, checked against its uniform-strain
+limit (no hole); a PNG of the strain and potential fields.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# ============================================================================ electrics
+def network_resistance(nx: int, ny: int, Ry: float, Rc: float, plus_warps: Sequence[int],
+                       minus_warps: Sequence[int]) -> float:
+    """Resistance of the sparse network of an nx x ny-cell patch (nx cells along the warp x,
+    ny warp yarns): every cell the four-terminal cell of rve.homogenisation.network (warp
+    R_y, weft R_y, four R_c); 1 V on the x- ends of ``plus_warps``, 0 V on the x+ ends of
+    ``minus_warps``, every other boundary insulating."""
+    def W(j, i):
+        return j * (nx + 1) + i
+
+    def F(i, j):
+        return ny * (nx + 1) + i * (ny + 1) + j
+
+    n = ny * (nx + 1) + nx * (ny + 1)
+    jj, ii = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+    jj, ii = jj.ravel(), ii.ravel()
+    a_y = np.concatenate([W(jj, ii), F(ii, jj)])
+    b_y = np.concatenate([W(jj, ii + 1), F(ii, jj + 1)])
+    a_c = np.concatenate([W(jj, ii), W(jj, ii), W(jj, ii + 1), W(jj, ii + 1)])
+    b_c = np.concatenate([F(ii, jj), F(ii, jj + 1), F(ii, jj), F(ii, jj + 1)])
+    a = np.concatenate([a_y, a_c])
+    b = np.concatenate([b_y, b_c])
+    g = np.concatenate([np.full(a_y.size, 1.0 / Ry), np.full(a_c.size, 1.0 / Rc)])
+    L = sp.coo_matrix((np.concatenate([g, g, -g, -g]), (np.concatenate([a, b, a, b]), np.concatenate([a, b, b, a]))),
+                      shape=(n, n)).tocsr()
+    fixed = np.array([W(j, 0) for j in plus_warps] + [W(j, nx) for j in minus_warps])
+    fv = np.array([1.0] * len(plus_warps) + [0.0] * len(minus_warps))
+    return 1.0 / _dirichlet_power(L, fixed, fv)[0]
+
+
+def _dirichlet_power(K, fixed, fv) -> tuple:
+    """(u^T K u, u) of the solution of K u = 0 on the free dofs with u = fv on ``fixed``."""
+    n = K.shape[0]
+    free = np.setdiff1d(np.arange(n), fixed)
+    u = np.zeros(n)
+    u[fixed] = fv
+    u[free] = spla.spsolve(K[free][:, free].tocsc(), -(K[free][:, fixed] @ fv))
+    return float(u @ (K @ u)), u
+
+
+def sheet_resistance(mesh, g0, c0, electrode_plus, electrode_minus, F=None, push_forward: bool = True,
+                     one_potential: bool = False, return_fields: bool = False):
+    """Resistance between two electrodes (node index arrays, on phi_w) of the two-potential
+    sheet on the scikit-fem quad ``mesh`` (reference coordinates, mm). ``g0``, ``c0``: the
+    reference sheet conductance (S) and exchange (S mm-2), scalars or one value per element.
+    ``F``: a uniform in-plane deformation gradient (2, 2): the model is solved on the
+    deformed mesh x = F X with G = F G0 F^T / J (``push_forward``; else G0 as if the mesh were
+    undeformed) and c / J. ``one_potential``: a single potential with isotropic g."""
+    from skfem import Basis, BilinearForm, ElementQuad1, asm
+    from skfem.helpers import dot, grad
+
+    F = np.eye(2) if F is None else np.asarray(F, float)
+    J = float(np.linalg.det(F))
+    m = mesh if np.allclose(F, np.eye(2)) else type(mesh)(F @ mesh.p, mesh.t)
+    basis = Basis(m, ElementQuad1())
+    ne = m.t.shape[1]
+    g0 = np.broadcast_to(np.asarray(g0, float), (ne,))
+    c0 = np.broadcast_to(np.asarray(c0, float), (ne,))
+    Fw = F if push_forward else np.eye(2)
+    Jw = J if push_forward else 1.0
+    layers = []
+    for d in (0, 1):  # warp conducts along e1, weft along e2 (reference), pushed forward
+        e = Fw[:, d]
+        layers.append(np.outer(e, e) / Jw)
+    iso = (np.outer(Fw[:, 0], Fw[:, 0]) + np.outer(Fw[:, 1], Fw[:, 1])) / Jw
+
+    def cond(Gd):
+        @BilinearForm
+        def form(u, v, w):
+            gq = w["g"]
+            return gq * dot(np.einsum("ij,j...->i...", Gd, grad(u)), grad(v))
+        return form
+
+    @BilinearForm
+    def mass(u, v, w):
+        return w["c"] * u * v
+
+    gf = basis.interpolate(np.zeros(basis.N))  # placeholder to get the quadrature shape
+    gq = np.broadcast_to(g0[:, None], gf.shape)
+    cq = np.broadcast_to((c0 / Jw)[:, None], gf.shape)
+    Kw = asm(cond(layers[0]), basis, g=gq)
+    if one_potential:
+        K = asm(cond(iso), basis, g=gq).tocsr()
+    else:
+        Kf = asm(cond(layers[1]), basis, g=gq)
+        M = asm(mass, basis, c=cq)
+        K = sp.bmat([[Kw + M, -M], [-M, Kf + M]]).tocsr()
+    fixed = np.concatenate([electrode_plus, electrode_minus])
+    fv = np.concatenate([np.ones(len(electrode_plus)), np.zeros(len(electrode_minus))])
+    P, u = _dirichlet_power(K, fixed, fv)
+    if return_fields:
+        return 1.0 / P, u
+    return 1.0 / P
+
+
+def patch_mesh(nx: int, ny: int, a: float, refine: int = 2):
+    """Quad mesh of an nx x ny-cell patch of cell size ``a`` (mm), ``refine`` elements per cell."""
+    from skfem import MeshQuad
+
+    return MeshQuad.init_tensor(np.linspace(0, nx * a, nx * refine + 1), np.linspace(0, ny * a, ny * refine + 1))
+
+
+def electrodes(mesh, nx: int, a: float, ylo: float, yhi: float):
+    """Node indices on x = 0 and x = nx a with ylo <= y <= yhi."""
+    x, y = mesh.p
+    tol = 1e-9 * max(1.0, nx * a)
+    on = (y >= ylo - tol) & (y <= yhi + tol)
+    return np.nonzero(on & (np.abs(x) < tol))[0], np.nonzero(on & (np.abs(x - nx * a) < tol))[0]
+
+
+def table_sheet(ds, mode: str = "uniaxial"):
+    """(strains, R_y, R_c, g, c) of ``mode`` at its stored strains (the table's two-resistor
+    fit and the sheet parameters derived from it)."""
+    s = ds.sel(mode=mode)
+    ok = np.isfinite(s["yarn_resistance"].values)
+    eps = s["strain"].values[ok]
+    g = s["yarn_sheet_conductance"].sel(yarn="warp").values[ok]
+    return eps, s["yarn_resistance"].values[ok], s["contact_resistance"].values[ok], g, \
+        s["contact_exchange_conductance"].values[ok]
+
+
+def check_busbar(ds, n: int = 4, refine: int = 1) -> dict:
+    """Check 1: max relative difference macro vs network at every stored strain of the
+    uniaxial mode (reference mesh, deformed mesh with push-forward, and without it)."""
+    a = float(ds["yarn_pitch"])
+    eps, Ry, Rc, g, c = table_sheet(ds)
+    m = patch_mesh(n, n, a, refine)
+    ep, em = electrodes(m, n, a, 0.0, n * a)
+    out = {"reference": 0.0, "deformed": 0.0, "no_push_forward": 0.0}
+    for k, e in enumerate(eps):
+        Rn = network_resistance(n, n, Ry[k], Rc[k], range(n), range(n))
+        F = np.diag([1.0 + e, 1.0])
+        for key, kw in (("reference", {}), ("deformed", {"F": F}), ("no_push_forward", {"F": F, "push_forward": False})):
+            R = sheet_resistance(m, g[k], c[k], ep, em, **kw)
+            out[key] = max(out[key], abs(R / Rn - 1.0))
+    return out
+
+
+def check_pads(ds, strain: float = 0.0, n: int = 16, pads=range(6, 10), refine: int = 4) -> dict:
+    """Check 2: pads on warp ends ``pads`` of an n x n patch: relative error of the two- and
+    one-potential models against the network."""
+    a = float(ds["yarn_pitch"])
+    eps, Ry, Rc, g, c = table_sheet(ds)
+    k = int(np.argmin(np.abs(eps - strain)))
+    Rn = network_resistance(n, n, Ry[k], Rc[k], pads, pads)
+    m = patch_mesh(n, n, a, refine)
+    ep, em = electrodes(m, n, a, min(pads) * a, (max(pads) + 1) * a)
+    R2 = sheet_resistance(m, g[k], c[k], ep, em)
+    R1 = sheet_resistance(m, g[k], c[k], ep, em, one_potential=True)
+    return {"network": Rn, "two_potential": R2 / Rn - 1.0, "one_potential": R1 / Rn - 1.0,
+            "transfer_length_mm": float(np.sqrt(g[k] / (2 * c[k])))}
+
+
+def check_probes(ds) -> float:
+    """Check 3: max over states of |rms log misfit of the RVE network's probe resistances -
+    network_fit_residual|."""
+    import json
+
+    from rve.homogenisation.network import YarnNetwork
+
+    fab = json.loads(ds.attrs["fabric"])
+    net = YarnNetwork(int(fab["n_warp"]), int(fab["n_weft"]))
+    terms = {}
+    for p, txt in zip(ds["probe"].values, ds["probe_terminals"].values):
+        if txt:
+            terms[str(p)] = tuple(_terminal(t.strip()) for t in str(txt).split("|"))
+    worst = 0.0
+    for mode in ds["mode"].values:
+        for e in ds["strain"].values:
+            s = ds.sel(mode=mode, strain=e)
+            ry, rc = float(s["yarn_resistance"]), float(s["contact_resistance"])
+            if not np.isfinite(ry):
+                continue
+            model = net.probe_resistances(ry, rc, terms)
+            meas = {p: float(s["probe_resistance"].sel(probe=p)) for p in terms}
+            rms = np.sqrt(np.mean([np.log(model[p] / meas[p]) ** 2 for p in terms]))
+            worst = max(worst, abs(rms - float(s["network_fit_residual"])))
+    return worst
+
+
+def _terminal(text: str):
+    d = "warp" if text.startswith("warp") else "weft"
+    return d, int(text[len(d):-1]), text[-1]
+
+
+# ============================================================================ mechanics
+class FabricLaw:
+    """Decoupled fabric law of the exported Hermite curves (rve.tables.formats.hermite_eval):
+    energy density W(F) = int N_warp d eps_warp + int N_weft d eps_weft + int N_shear d theta,
+    eps = |F e_i| - 1, theta = asin(a.b / |a||b|) the angle drop; first Piola P = dW/dF
+    (N mm-1), tangent by complex-step differentiation of P (exact to round-off)."""
+
+    def __init__(self, entries: dict):
+        self.e = entries
+
+    @staticmethod
+    def _h(entry, x):
+        """Hermite value and slope at (possibly complex) x, linear extension outside."""
+        t, p, m = (np.asarray(entry[k], float) for k in ("t", "p", "m"))
+        xr = np.real(x)
+        i = np.clip(np.searchsorted(t, xr, side="right") - 1, 0, len(t) - 2)
+        h = t[i + 1] - t[i]
+        s = (x - t[i]) / h
+        val = ((1 + 2 * s) * (1 - s) ** 2 * p[i] + s * (1 - s) ** 2 * h * m[i]
+               + s * s * (3 - 2 * s) * p[i + 1] + s * s * (s - 1) * h * m[i + 1])
+        lo, hi = xr < t[0], xr > t[-1]
+        val = np.where(lo, p[0] + m[0] * (x - t[0]), val)
+        val = np.where(hi, p[-1] + m[-1] * (x - t[-1]), val)
+        return val
+
+    def piola(self, F):
+        """P (2, 2, ...) of F (2, 2, ...)."""
+        a, b = F[:, 0], F[:, 1]
+        la, lb = np.sqrt(np.sum(a * a, axis=0)), np.sqrt(np.sum(b * b, axis=0))
+        na, nb = self._h(self.e["warp"], la - 1.0), self._h(self.e["weft"], lb - 1.0)
+        P = np.zeros_like(F)
+        P[:, 0] = na * a / la
+        P[:, 1] = nb * b / lb
+        if "shear" in self.e:
+            cosang = np.sum(a * b, axis=0) / (la * lb)
+            ns = self._h(self.e["shear"], np.arcsin(cosang))
+            dth = ns / np.sqrt(1.0 - cosang ** 2)  # d theta / d cos = 1 / sqrt(1 - cos^2)
+            P[:, 0] += dth * (b / (la * lb) - cosang * a / la ** 2)
+            P[:, 1] += dth * (a / (la * lb) - cosang * b / lb ** 2)
+        return P
+
+    def tangent(self, F):
+        """dP/dF (2, 2, 2, 2, ...) by complex step."""
+        h = 1e-30
+        A = np.zeros((2, 2) + F.shape)
+        for k in range(2):
+            for L in range(2):
+                Fc = F.astype(complex)
+                Fc[k, L] += 1j * h
+                A[:, :, k, L] = np.imag(self.piola(Fc)) / h
+        return A
+
+
+def strip_reactions(entries: dict, strains, L: float = 20.0, W: float = 8.0, n: int = 8, hole: float = 0.0,
+                    return_state: bool = False):
+    """Total-Lagrangian membrane strip [0, L] x [0, W] (a hole of radius ``hole`` at the centre):
+    x = 0 held in x (one node in y), x = L moved to L (1 + eps) in x; returns the reaction per
+    reference width at x = L and the Newton iterations of every step (and the last state)."""
+    from skfem import Basis, BilinearForm, ElementQuad1, ElementVector, LinearForm, MeshQuad, asm
+
+    m = MeshQuad.init_tensor(np.linspace(0, L, int(n * L / W) + 1), np.linspace(0, W, n + 1))
+    if hole > 0:
+        c = m.p[:, m.t].mean(axis=1)
+        m = m.remove_elements(np.nonzero(np.hypot(c[0] - L / 2, c[1] - W / 2) < hole)[0])
+    basis = Basis(m, ElementVector(ElementQuad1()))
+    law = FabricLaw(entries)
+    X = basis.doflocs
+    left = basis.get_dofs(lambda x: np.isclose(x[0], 0.0))
+    right = basis.get_dofs(lambda x: np.isclose(x[0], L))
+    lx, rx = left.nodal["u^1"], right.nodal["u^1"]
+    corner = basis.get_dofs(lambda x: np.isclose(x[0], 0.0) & np.isclose(x[1], 0.0)).nodal["u^2"]
+    D = np.concatenate([lx, rx, corner])
+    u = np.zeros(basis.N)
+
+    @LinearForm
+    def residual(v, w):
+        Fq = np.eye(2)[:, :, None, None] + w["u"].grad
+        return np.einsum("ij...,ij...->...", law.piola(Fq), v.grad)
+
+    @BilinearForm
+    def jacobian(du, v, w):
+        Fq = np.eye(2)[:, :, None, None] + w["u"].grad
+        A = law.tangent(Fq)
+        return np.einsum("ijkl...,kl...,ij...->...", A, du.grad, v.grad)
+
+    reactions, iters = [], []
+    for e in strains:
+        u[rx] = e * L
+        u[lx] = 0.0
+        u[corner] = 0.0
+        for it in range(1, 30):
+            uw = basis.interpolate(u)
+            R = asm(residual, basis, u=uw)
+            free = np.setdiff1d(np.arange(basis.N), D)
+            if np.linalg.norm(R[free]) < 1e-12 * max(1.0, np.abs(R[rx]).sum()):
+                break
+            K = asm(jacobian, basis, u=uw).tocsr()
+            u[free] -= spla.spsolve(K[free][:, free].tocsc(), R[free])
+        else:
+            raise RuntimeError(f"Newton did not converge at strain {e}")
+        iters.append(it - 1)
+        reactions.append(R[rx].sum() / W)
+    out = (np.array(reactions), iters)
+    if return_state:
+        return out + ((m, basis, u, law),)
+    return out
+
+
+def warp_strain_field(m, basis, u):
+    """Element mean of the warp yarn strain |F e1| - 1 of the displacement ``u``."""
+    uw = basis.interpolate(u)
+    Fq = np.eye(2)[:, :, None, None] + uw.grad
+    return (np.sqrt(Fq[0, 0] ** 2 + Fq[1, 0] ** 2) - 1.0).mean(axis=1)
+
+
+def sensor_patch(ds, entries, strain: float, hole: float, L: float = 20.0, W: float = 8.0, n: int = 8):
+    """Resistance change R(strain)/R(0) - 1 of a bus-bar sensor patch (the strip, warp along
+    x), the strip's warp strain field fed into g(eps), c(eps) of the table (uniaxial mode,
+    linear between the stored strains), solved on the reference configuration (the pull-back
+    of the pushed-forward model). Returns (relative change, fields for the figure)."""
+    eps_t, _, _, g_t, c_t = table_sheet(ds)
+    (_, _, (m, basis, u, law)) = strip_reactions(entries, [strain], L=L, W=W, n=n, hole=hole, return_state=True)
+    ew = warp_strain_field(m, basis, u)
+    g = np.interp(ew, eps_t, g_t)
+    c = np.interp(ew, eps_t, c_t)
+    ep, em = electrodes(m, int(round(L)), 1.0, 0.0, W)
+    R, phi = sheet_resistance(m, g, c, ep, em, return_fields=True)
+    R0 = sheet_resistance(m, np.interp(0.0, eps_t, g_t), np.interp(0.0, eps_t, c_t), ep, em)
+    return R / R0 - 1.0, {"mesh": m, "warp_strain": ew, "phi_w": phi[:m.p.shape[1]], "u": u, "basis": basis}
+
+
+def figure(fields, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    m = fields["mesh"]
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), constrained_layout=True)
+    polys = m.p.T[m.t.T]
+    pc = PolyCollection(polys, array=fields["warp_strain"], cmap="viridis")
+    axes[0].add_collection(pc)
+    fig.colorbar(pc, ax=axes[0], label="warp yarn strain [1]")
+    tri = np.hstack([m.t[[0, 1, 2]], m.t[[0, 2, 3]]]).T
+    tc = axes[1].tripcolor(m.p[0], m.p[1], fields["phi_w"], triangles=tri, shading="gouraud", cmap="plasma")
+    fig.colorbar(tc, ax=axes[1], label="warp potential phi_w [V]")
+    for ax, title in zip(axes, ("strip with a hole: warp strain (reference configuration)",
+                                "bus-bar sensor patch: warp potential")):
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_title(title)
+        ax.set_xlabel("x [mm]")
+        ax.set_ylabel("y [mm]")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def hermite_law_entries(ds) -> dict:
+    """The fabric curves of the table as Hermite entries (``rve.tables.formats``), keyed
+    warp / weft / shear, abscissa = the curve's strain measure (warp / weft strain; the
+    angle drop for the shear curve)."""
+    from rve.tables.formats import _pchip_slopes, fabric_curves, select_params
+
+    return {c.key: {"t": c.x.tolist(), "p": c.y.tolist(), "m": _pchip_slopes(c.x, c.y).tolist()}
+            for c in fabric_curves(select_params(ds))}
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    from rve.tables import open_table
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("table", nargs="?", default=str(ROOT / "tests" / "data" / "table_v1_ci.nc"))
+    p.add_argument("--out", default="results/macro_demo")
+    args = p.parse_args(argv)
+    ds = open_table(args.table)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    print("check 1 (bus-bar, max rel. diff):", check_busbar(ds))
+    print("check 2 (pads):", check_pads(ds))
+    print("check 3 (probes, |rms - fit residual|):", check_probes(ds))
+    entries = hermite_law_entries(ds)
+    strains = [float(e) for e in ds["strain"].values]
+    Nxx, iters = strip_reactions(entries, strains)
+    print("strip: reaction / width", Nxx, "Newton iterations", iters)
+    dR, fields = sensor_patch(ds, entries, strains[-1], hole=2.0)
+    dR0, _ = sensor_patch(ds, entries, strains[-1], hole=0.0)
+    print(f"sensor patch: dR/R = {dR:.6g} with the hole, {dR0:.6g} uniform")
+    print("figure:", figure(fields, out / "macro_demo_fields.png"))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
