@@ -80,6 +80,8 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
+from .linear import SingularFactorError
+
 __all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
 
 log = logging.getLogger("rve.solvers.pardiso")
@@ -297,8 +299,14 @@ class PardisoFactorization:
 
     def factorize(self, A, inertia: bool = False) -> "PardisoFactorization":
         """Phase 22 of ``A`` (phase 11 first if its pattern is not the analysed one).
-        ``inertia`` is accepted for the layer's interface: the counts are always there."""
+        The inertia counts are always there; ``inertia=True`` (the layer's contract: a zero
+        pivot raises) raises ``rve.solvers.linear.SingularFactorError`` when a pivot was
+        perturbed (a near-singular matrix; the factorisation stays usable). A non-finite
+        entry raises ``SingularFactorError`` too."""
         A = self._canonical(A)
+        if not np.all(np.isfinite(A.data)):
+            self._factored = False
+            raise SingularFactorError("non-finite matrix entry")
         if not (self._alive and self._same_pattern(A)):
             self.analyse(A)
         self._a = self._values(A)
@@ -306,6 +314,9 @@ class PardisoFactorization:
         self._call(22)
         self._factored = True
         self.factorizations += 1
+        if inertia and self.perturbed_pivots:
+            raise SingularFactorError(f"{self.perturbed_pivots} pivot(s) perturbed (near-singular matrix): "
+                                      "the inertia is not SuperLU's")
         return self
 
     def solve(self, b) -> np.ndarray:
