@@ -161,29 +161,15 @@ def mkl_library() -> str:
     return "" if lib is None else lib[0]._name
 
 
-def _upper_plan(A):
-    """The upper-triangle CSR pattern of the square CSR/CSC matrix ``A`` (canonical) with
-    every diagonal entry present: ``(indptr, indices (int32, 0-based), src, n_inserted)``
-    where ``data_u = A.data[src]`` (src = -1 marks an inserted zero diagonal)."""
+def _upper_entries(A):
+    """``(keys, positions)`` of the upper-triangle entries of the canonical square CSR
+    matrix ``A`` (CSC: of Aᵀ, the same pattern for a symmetric matrix): sorted keys
+    ``row * n + col`` and their positions in ``A.data``."""
     n = A.shape[0]
     rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
     cols = A.indices.astype(np.int64)
     keep = np.flatnonzero(cols >= rows)
-    r, c = rows[keep], cols[keep]
-    has_diag = np.zeros(n, dtype=bool)
-    has_diag[r[r == c]] = True
-    missing = np.flatnonzero(~has_diag)
-    if missing.size:
-        r = np.concatenate([r, missing])
-        c = np.concatenate([c, missing])
-        src = np.concatenate([keep, np.full(missing.size, -1, dtype=np.int64)])
-        order = np.lexsort((c, r))
-        r, c, src = r[order], c[order], src[order]
-    else:
-        src = keep
-    indptr = np.zeros(n + 1, dtype=np.int32)
-    np.cumsum(np.bincount(r, minlength=n), out=indptr[1:])
-    return indptr, np.ascontiguousarray(c, dtype=np.int32), src, int(missing.size)
+    return rows[keep] * n + cols[keep], keep
 
 
 class PardisoFactorization:
@@ -194,7 +180,8 @@ class PardisoFactorization:
     reuses_analysis = True
 
     def __init__(self, threads: Optional[int] = 1, matching: bool = True, drop_zeros: bool = True,
-                 refinement: int = 0, check: bool = False, ordering: int = 2):
+                 refinement: int = 0, check: bool = False, ordering: int = 2, reuse_subpattern: bool = True,
+                 grow_limit: float = 1.25):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"PARDISO is not available: {_REASON}")
@@ -218,9 +205,13 @@ class PardisoFactorization:
         ip[34] = 1                       # iparm(35): zero-based indices
         self.matching = bool(matching)
         self.drop_zeros = bool(drop_zeros)
+        self.reuse_subpattern = bool(reuse_subpattern)
+        self.grow_limit = float(grow_limit)
         self.n = 0
-        self._pattern = None             # (shape, indptr, indices) of the analysed input
-        self._plan = None
+        self._pattern = None             # (shape, indptr, indices) of the input the plan maps
+        self._plan = None                # (indptr, indices, src, n_missing) of the analysed upper pattern
+        self._keys = None                # sorted keys row * n + col of the analysed upper pattern
+        self.subpattern_reuses = 0
         self._a = None                   # values handed to PARDISO (kept alive for phase 33)
         self._factored = False
         self._alive = False
@@ -274,22 +265,45 @@ class PardisoFactorization:
 
     def _values(self, A):
         src = self._plan[2]
-        if self.inserted_diagonal:
+        if self._plan[3]:
             a = np.where(src >= 0, A.data[np.maximum(src, 0)], 0.0)
         else:
             a = A.data[src]
         return np.ascontiguousarray(a, dtype=np.float64)
 
+    def _set_map(self, A, src) -> None:
+        """Map the analysed pattern onto the arrays of ``A`` (src = -1: a zero there)."""
+        self._plan = (self._plan[0], self._plan[1], src, int(np.count_nonzero(src < 0)))
+        self._pattern = (A.shape, A.indptr.copy(), A.indices.copy())
+
+    def _map(self, A, keys, keep):
+        """``src`` of ``A`` on the analysed pattern, or None when an entry of ``A`` is not in it."""
+        ak = self._keys
+        pos = np.searchsorted(ak, keys)
+        if pos.size and (pos[-1] >= ak.size or not np.array_equal(ak[pos], keys)):
+            return None
+        src = np.full(ak.size, -1, dtype=np.int64)
+        src[pos] = keep
+        return src
+
     # ------------------------------------------------------------------ interface
-    def analyse(self, A) -> "PardisoFactorization":
-        """Phase 11 on the pattern (and, with ``matching``, the values) of ``A``."""
+    def analyse(self, A, _extra_keys=None) -> "PardisoFactorization":
+        """Phase 11 on the pattern (and, with ``matching``, the values) of ``A`` (every
+        diagonal entry included; ``_extra_keys``: more upper-triangle entries, as zeros)."""
         A = self._canonical(A)
         if self._alive:
             self.release()
-        self.n = int(A.shape[0])
-        self._plan = _upper_plan(A)
-        self.inserted_diagonal = self._plan[3]
-        self._pattern = (A.shape, A.indptr.copy(), A.indices.copy())
+        n = self.n = int(A.shape[0])
+        keys, keep = _upper_entries(A)
+        diag = np.arange(n, dtype=np.int64) * (n + 1)
+        self.inserted_diagonal = int(n - np.count_nonzero(np.isin(diag, keys, assume_unique=True)))
+        parts = [keys, diag] + ([] if _extra_keys is None else [_extra_keys])
+        ukeys = np.unique(np.concatenate(parts))
+        indptr = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum(np.bincount(ukeys // n, minlength=n), out=indptr[1:])
+        self._keys = ukeys
+        self._plan = (indptr, np.ascontiguousarray(ukeys % n, dtype=np.int32), None, 0)
+        self._set_map(A, self._map(A, keys, keep))
         self._a = self._values(A)
         self._factored = False
         self._alive = True
@@ -298,17 +312,34 @@ class PardisoFactorization:
         return self
 
     def factorize(self, A, inertia: bool = False) -> "PardisoFactorization":
-        """Phase 22 of ``A`` (phase 11 first if its pattern is not the analysed one).
-        The inertia counts are always there; ``inertia=True`` (the layer's contract: a zero
-        pivot raises) raises ``rve.solvers.linear.SingularFactorError`` when a pivot was
-        perturbed (a near-singular matrix; the factorisation stays usable). A non-finite
-        entry raises ``SingularFactorError`` too."""
+        """Phase 22 of ``A``, reusing the analysis when ``A``'s pattern is the analysed one
+        or (``reuse_subpattern``) lies in it (the missing entries factorised as zeros);
+        otherwise phase 11 first, on the union of the two patterns when that is at most
+        ``grow_limit`` times ``A``'s (contacts that come and go then stop costing
+        analyses), else on ``A``'s. The inertia counts are always there; ``inertia=True``
+        (the layer's contract: a zero pivot raises) raises
+        ``rve.solvers.linear.SingularFactorError`` when a pivot was perturbed (a
+        near-singular matrix; the factorisation stays usable). A non-finite entry raises
+        ``SingularFactorError`` too."""
         A = self._canonical(A)
         if not np.all(np.isfinite(A.data)):
             self._factored = False
             raise SingularFactorError("non-finite matrix entry")
         if not (self._alive and self._same_pattern(A)):
-            self.analyse(A)
+            src = None
+            if self._alive and self.reuse_subpattern and A.shape[0] == self.n:
+                keys, keep = _upper_entries(A)
+                src = self._map(A, keys, keep)
+                if src is not None:
+                    self._set_map(A, src)
+                    self.subpattern_reuses += 1
+                else:
+                    union = np.union1d(keys, self._keys)
+                    grow = union.size <= self.grow_limit * (keys.size + self.n)
+                    self.analyse(A, _extra_keys=self._keys if grow else None)
+                    src = True
+            if src is None:
+                self.analyse(A)
         self._a = self._values(A)
         self._factored = False
         self._call(22)
@@ -364,6 +395,7 @@ class PardisoFactorization:
 
     def stats(self) -> dict:
         return {"analyses": self.analyses, "factorizations": self.factorizations, "solves": self.solves,
+                "subpattern_reuses": self.subpattern_reuses,
                 "negative_pivots": int(self.iparm[22]), "perturbed_pivots": self.perturbed_pivots,
                 "refinement_steps": self.refinement_steps, "factor_nnz": self.factor_nnz, **self.memory_kb}
 
@@ -377,6 +409,7 @@ class PardisoFactorization:
             except PardisoError as exc:  # pragma: no cover
                 log.warning("PARDISO release failed: %s", exc)
         self._pattern = None
+        self._keys = None
 
     def __enter__(self):
         return self
