@@ -22,7 +22,10 @@ solve time measured by wrapping (factorisation + solve, assembly, contact rebuil
 energy, other). Backends: ``superlu`` (today's arithmetic: = today's main), ``pardiso``
 (the default "auto" where MKL is present: analysis reused per nonzero pattern),
 ``pardiso_keep`` (PARDISO on the contact map's stored pattern, explicit zeros kept:
-``rve.solvers.minimize.KEEP_STORED_PATTERN = True``).
+``rve.solvers.minimize.KEEP_STORED_PATTERN = True``), ``pardiso_grow`` (the analysed
+pattern is always the union of the patterns met: ``grow_limit = inf``), ``pardiso_nosub``
+(a new analysis for every new nonzero pattern: ``reuse_subpattern = False``),
+``pardiso_amd`` (minimum-degree ordering, no weighted matching: a cheaper analysis).
 
 For every saved matrix and every variant, in a fresh subprocess (so ``ru_maxrss`` is the
 peak of that variant alone): median wall time of one numeric factorisation and of one
@@ -167,7 +170,10 @@ def table(results: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- whole runs
-RUN_BACKENDS = ("superlu", "pardiso", "pardiso_keep")
+RUN_BACKENDS = ("superlu", "pardiso", "pardiso_keep", "pardiso_grow", "pardiso_nosub", "pardiso_amd")
+#: PARDISO variants of the whole runs: rve.solvers.minimize.PARDISO_OPTIONS
+RUN_VARIANT_OPTIONS = {"pardiso_grow": {"grow_limit": float("inf")}, "pardiso_nosub": {"reuse_subpattern": False},
+                       "pardiso_amd": {"ordering": 0, "matching": False}}
 RELAX_CONFIG = ROOT / "configs/scenes/plain_weave_relax.yaml"
 STRAIN_CONFIG = ROOT / "configs/rve/plain_weave.yaml"
 
@@ -218,6 +224,7 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
 
     if backend == "pardiso_keep":
         minimize.KEEP_STORED_PATTERN = True
+    minimize.PARDISO_OPTIONS.update(RUN_VARIANT_OPTIONS.get(backend, {}))
     split = _instrument()
     rec = {"kind": kind, "arg": arg, "backend": backend, "env": os.environ.get("RVE_LINEAR_BACKEND", "")}
     t0 = time.perf_counter()

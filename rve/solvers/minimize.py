@@ -49,6 +49,10 @@ log = logging.getLogger("rve.solvers.minimize")
 #: weave (docs/engine.md, "Backend choice"): dropping the zeros is faster.
 KEEP_STORED_PATTERN = False
 
+#: further options of the PARDISO instance a run keeps (``PardisoFactorization``'s keywords;
+#: benchmarks/engine_speed.py measures variants through it)
+PARDISO_OPTIONS: dict = {}
+
 
 def run_backend(backend=None, keep_pattern: bool = None):
     """``(instance, owned)``: the linear-solver backend one solver run keeps for all its
@@ -62,7 +66,7 @@ def run_backend(backend=None, keep_pattern: bool = None):
     if name == "pardiso":
         from .pardiso import PardisoFactorization
 
-        return PardisoFactorization(drop_zeros=not keep), True
+        return PardisoFactorization(**{"drop_zeros": not keep, **PARDISO_OPTIONS}), True
     return get_backend(name, symmetric=True), True
 
 
