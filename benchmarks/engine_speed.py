@@ -22,7 +22,9 @@ solve time measured by wrapping (factorisation + solve, assembly, contact rebuil
 energy, other). Backends: ``superlu`` (today's arithmetic: = today's main), ``pardiso``
 (the default "auto" where MKL is present: analysis reused per nonzero pattern),
 ``pardiso_keep`` (PARDISO on the contact map's stored pattern, explicit zeros kept:
-``rve.solvers.minimize.KEEP_STORED_PATTERN = True``), ``pardiso_grow`` (the analysed
+``rve.solvers.minimize.KEEP_STORED_PATTERN = True``), ``pardiso_stored`` (the stored pattern handed in, the nonzero pattern factorised on
+the analysed one while it lies in it, a new analysis on the stored pattern when not:
+``analyse_stored``), ``pardiso_grow`` (the analysed
 pattern is always the union of the patterns met: ``grow_limit = inf``), ``pardiso_nosub``
 (a new analysis for every new nonzero pattern: ``reuse_subpattern = False``),
 ``pardiso_amd`` (minimum-degree ordering, no weighted matching: a cheaper analysis).
@@ -170,9 +172,11 @@ def table(results: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- whole runs
-RUN_BACKENDS = ("superlu", "pardiso", "pardiso_keep", "pardiso_grow", "pardiso_nosub", "pardiso_amd")
+RUN_BACKENDS = ("superlu", "pardiso", "pardiso_keep", "pardiso_stored", "pardiso_grow", "pardiso_nosub",
+                "pardiso_amd")
 #: PARDISO variants of the whole runs: rve.solvers.minimize.PARDISO_OPTIONS
-RUN_VARIANT_OPTIONS = {"pardiso_grow": {"grow_limit": float("inf")}, "pardiso_nosub": {"reuse_subpattern": False},
+RUN_VARIANT_OPTIONS = {"pardiso_stored": {"drop_zeros": True, "analyse_stored": True},
+                       "pardiso_grow": {"grow_limit": float("inf")}, "pardiso_nosub": {"reuse_subpattern": False},
                        "pardiso_amd": {"ordering": 0, "matching": False}}
 RELAX_CONFIG = ROOT / "configs/scenes/plain_weave_relax.yaml"
 STRAIN_CONFIG = ROOT / "configs/rve/plain_weave.yaml"
@@ -222,7 +226,7 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
     import rve.scenes  # noqa: F401
     from rve.solvers import minimize
 
-    if backend == "pardiso_keep":
+    if backend in ("pardiso_keep", "pardiso_stored"):
         minimize.KEEP_STORED_PATTERN = True
     minimize.PARDISO_OPTIONS.update(RUN_VARIANT_OPTIONS.get(backend, {}))
     split = _instrument()

@@ -285,3 +285,23 @@ def test_inertia_of_weave_tangents_equals_superlu(tmp_path):
         counts.append(neg)
     assert counts[0] > 0 and counts[-1] == 0  # indefinite at sigma = 0, definite after the shift
     assert inst.analyses < len(counts)
+
+
+def test_analyse_stored_pattern():
+    """``analyse_stored``: the analysis is of the stored pattern (zeros included), so a
+    later matrix whose nonzeros lie in it (a contact activated) needs no new analysis."""
+    A = with_inertia(n_neg=15, seed=9)
+    b = np.random.default_rng(9).standard_normal(A.shape[0])
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    inactive = (rows != A.indices) & ((rows + A.indices) % 3 == 0)  # a symmetric choice
+    Z = A.copy()
+    Z.data[inactive] = 0.0  # stored zeros (inactive pairs): same stored pattern as A
+    assert Z.nnz == A.nnz and np.count_nonzero(Z.data) < A.nnz
+    for stored, analyses in ((True, 1), (False, 2)):
+        f = pardiso.PardisoFactorization(analyse_stored=stored, grow_limit=1.0)
+        for M in (Z, A, Z):
+            f.factorize(M)
+            assert _rel_res(M, f.solve(b), b) < 1e-10
+            assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(M.toarray()) < 0))
+        assert f.analyses == analyses, stored
+        f.release()

@@ -190,7 +190,7 @@ class PardisoFactorization:
 
     def __init__(self, threads: Optional[int] = 1, matching: bool = True, drop_zeros: bool = True,
                  refinement: int = 0, check: bool = False, ordering: int = 2, reuse_subpattern: bool = True,
-                 grow_limit: float = 1.25):
+                 grow_limit: float = 1.25, analyse_stored: bool = False):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"PARDISO is not available: {_REASON}")
@@ -216,6 +216,8 @@ class PardisoFactorization:
         self.drop_zeros = bool(drop_zeros)
         self.reuse_subpattern = bool(reuse_subpattern)
         self.grow_limit = float(grow_limit)
+        self.analyse_stored = bool(analyse_stored)
+        self._stored = None
         self.n = 0
         self._pattern = None             # (shape, indptr, indices) of the input the plan maps
         self._plan = None                # (indptr, indices, src, n_missing) of the analysed upper pattern
@@ -260,6 +262,7 @@ class PardisoFactorization:
         if not A.has_canonical_format:
             A = A.copy()
             A.sum_duplicates()
+        self._stored = A                 # the stored pattern (analyse_stored)
         if self.drop_zeros and A.nnz and not np.all(A.data):
             A = A.copy()
             A.eliminate_zeros()
@@ -325,7 +328,8 @@ class PardisoFactorization:
         or (``reuse_subpattern``) lies in it (the missing entries factorised as zeros);
         otherwise phase 11 first, on the union of the two patterns when that is at most
         ``grow_limit`` times ``A``'s (contacts that come and go then stop costing
-        analyses), else on ``A``'s. The inertia counts are always there; ``inertia=True``
+        analyses), else on ``A``'s; with ``analyse_stored`` on ``A``'s stored pattern
+        (explicit zeros included) instead. The inertia counts are always there; ``inertia=True``
         (the layer's contract: a zero pivot raises) raises
         ``rve.solvers.linear.SingularFactorError`` when a pivot was perturbed (a
         near-singular matrix; the factorisation stays usable). A non-finite entry raises
@@ -346,12 +350,18 @@ class PardisoFactorization:
                     src[pos] = keep
                     self._set_map(A, src)
                     self.subpattern_reuses += 1
+                elif self.analyse_stored and self._stored is not None and self._stored.nnz > A.nnz:
+                    # analyse the stored pattern (explicit zeros included: e.g. the contact
+                    # map's candidate pairs) so that later nonzero patterns lie in it
+                    self.analyse(A, _extra_keys=_upper_entries(self._stored)[0])
+                    src = True
                 else:
                     grow = ak.size + n_new <= self.grow_limit * (keys.size + self.n)
                     self.analyse(A, _extra_keys=ak if grow else None)
                     src = True
             if src is None:
-                self.analyse(A)
+                stored = self._stored if self.analyse_stored and self._stored.nnz > A.nnz else None
+                self.analyse(A, _extra_keys=None if stored is None else _upper_entries(stored)[0])
         self._a = self._values(A)
         self._factored = False
         self._call(22)
