@@ -298,12 +298,16 @@ def run_whole(kind: str, arg: str, backend: str, out_npz: Path) -> dict:
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     cmd = [sys.executable, __file__, "--run-worker", kind, str(arg), backend, str(out_npz)]
     t0 = time.perf_counter()
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     p = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     if p.returncode != 0:
         return {"backend": backend, "error": (p.stderr.strip().splitlines() or ["?"])[-1], "wall_s": wall}
     rec = json.loads(p.stdout.strip().splitlines()[-1])
     rec["wall_s"] = wall
+    rec["cpu_s"] = cpu
     return rec
 
 
@@ -314,9 +318,11 @@ def whole_table(title: str, runs: list, xs: dict) -> str:
     ok = lambda b: [r for r in by.get(b, []) if "error" not in r]  # noqa: E731
     ref = ok("superlu")
     ref_wall = float(np.median([r["wall_s"] for r in ref])) if ref else float("nan")
+    ref_cpu = float(np.median([r["cpu_s"] for r in ref])) if ref else float("nan")
     ref_E = ref[0]["energy_mJ"] if ref else float("nan")
     x_ref = xs.get(("superlu", 0))
-    head = (f"{'backend':<13} {'runs':>4} {'wall(med)':>9} {'ratio':>6} {'solve':>8} {'RSS MiB':>8} {'its':>5} "
+    head = (f"{'backend':<13} {'runs':>4} {'wall(med)':>9} {'ratio':>6} {'cpu(med)':>8} {'ratio':>6} {'solve':>8} "
+            f"{'RSS MiB':>8} {'its':>5} "
             f"{'fact':>5} {'anal':>5} {'energy mJ':>16} {'dE/E':>8} {'ovl/R':>7} {'neg':>4} {'|dx|max':>8}  "
             f"split of the solve: fact / asm / rebuild / energy / other (s)")
     lines = [title, head, "-" * len(head)]
@@ -328,21 +334,23 @@ def whole_table(title: str, runs: list, xs: dict) -> str:
         if not good:
             continue
         wall = float(np.median([r["wall_s"] for r in good]))
+        cpu = float(np.median([r["cpu_s"] for r in good]))
         r0 = good[0]
         walls = ", ".join(f"{r['wall_s']:.1f}" for r in good)
         x0 = xs.get((b, 0))
         dx = float(np.abs(x0 - x_ref).max()) if x0 is not None and x_ref is not None else float("nan")
         sp_ = {k: float(np.median([r["split_s"][k] for r in good])) for k in r0["split_s"]}
         lines.append(
-            f"{b:<13} {len(good):>4} {wall:>9.1f} {ref_wall / wall:>5.2f}x "
+            f"{b:<13} {len(good):>4} {wall:>9.1f} {ref_wall / wall:>5.2f}x {cpu:>8.1f} {ref_cpu / cpu:>5.2f}x "
             f"{np.median([r['solve_s'] for r in good]):>8.1f} {max(r['rss_mib'] for r in good):>8.0f} "
             f"{r0['iterations']:>5} {r0['factorizations']:>5} {r0['analyses']:>5} {r0['energy_mJ']:>16.12f} "
             f"{abs(r0['energy_mJ'] - ref_E) / abs(ref_E):>8.1e} {r0['max_overlap_over_R']:>7.4f} "
             f"{r0['negative_pivots']:>4} {dx:>8.1e}  "
             + " / ".join(f"{sp_[k]:.1f}" for k in ("factorisation", "assembly", "contact_rebuild", "energy", "other"))
             + f"   (walls: {walls})")
-    lines.append("wall = whole process (launch to exit), median; ratio = superlu median / this median (same "
-                 "invocation, interleaved); its/fact/anal: Newton iterations, factorisations, symbolic "
+    lines.append("wall = whole process (launch to exit), median; cpu = its user + system CPU time (the fairer "
+                 "figure on a loaded machine); ratio = superlu median / this median (same "
+                 "invocation, interleaved); solve = the solve alone (wall); its/fact/anal: Newton iterations, factorisations, symbolic "
                  "analyses of the first run; neg: negative pivots of the final tangent (0 = stable)")
     return "\n".join(lines)
 
@@ -359,7 +367,7 @@ def main_whole(kind: str, arg: str, runs: int, backends, json_path=None, outdir=
             recs.append(r)
             if "error" not in r:
                 xs[(b, k)] = np.load(npz)
-            print(f"  {kind} {arg} {b} run {k + 1}: " + (f"{r['wall_s']:.1f} s, E = {r['energy_mJ']:.12f} mJ, "
+            print(f"  {kind} {arg} {b} run {k + 1}: " + (f"{r['wall_s']:.1f} s (cpu {r['cpu_s']:.1f} s), E = {r['energy_mJ']:.12f} mJ, "
                   f"its {r['iterations']}, fact {r['factorizations']}, anal {r['analyses']}, split "
                   + ", ".join(f"{kk} {v:.1f}" for kk, v in r["split_s"].items()) if "error" not in r
                   else f"error {r['error']}"), file=sys.stderr, flush=True)
