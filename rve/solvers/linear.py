@@ -324,12 +324,13 @@ def shifted(J, M, sigma: float, keep_pattern: bool = False):
         return (J + sigma * M).tocsc()
     J = sp.csc_matrix(J)
     M = sp.csc_matrix(M)
-    key = (J.shape, J.indptr.ctypes.data, J.indices.ctypes.data, J.nnz, M.indptr.ctypes.data, M.nnz)
-    if _SLOT_CACHE.get("key") == key:
-        slots = _SLOT_CACHE["slots"]
+    c = _SLOT_CACHE
+    if c and all(_same_arrays(c[k], X) for k, X in (("J", J), ("M", M))):
+        slots = c["slots"]
     else:
         slots = _slots_in(J, M)
-        _SLOT_CACHE.update(key=key, slots=slots, J=J, M=M)  # arrays kept alive: the key stays valid
+        c.update(J=(J.shape, J.indptr.copy(), J.indices.copy()), M=(M.shape, M.indptr.copy(), M.indices.copy()),
+                 slots=slots)
     if slots is None:
         return (J + sigma * M).tocsc()
     data = J.data.copy()
@@ -338,6 +339,12 @@ def shifted(J, M, sigma: float, keep_pattern: bool = False):
 
 
 _SLOT_CACHE: dict = {}
+
+
+def _same_arrays(key, X) -> bool:
+    shape, indptr, indices = key
+    return (X.shape == shape and X.indptr.size == indptr.size and X.indices.size == indices.size
+            and np.array_equal(X.indptr, indptr) and np.array_equal(X.indices, indices))
 
 
 def _slots_in(J, M):

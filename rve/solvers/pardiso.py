@@ -61,7 +61,8 @@ Snakefile also runs jobs with ``MKL_NUM_THREADS=1``). ``threads=None`` leaves MK
 setting (``MKL_NUM_THREADS`` / all cores).
 
 Why our own ctypes call instead of ``pypardiso.PyPardisoSolver``: pypardiso is used only to
-*find* ``mkl_rt`` (its constructor's search: ``PYPARDISO_MKL_RT``, ``find_library``, the
+*find* ``mkl_rt`` (first where the MKL wheel puts it, ``_mkl_rt_direct``, without importing
+pypardiso, whose import alone ran its slow search: 0.85-7 s; then its constructor's search: ``PYPARDISO_MKL_RT``, ``find_library``, the
 venv's ``lib``). Its ``_call_pardiso`` is private, converts ``indptr``/``indices`` to
 1-based int32 copies on every call (O(nnz) per phase), keeps no reference to the arrays
 PARDISO reads again during the solve's iterative refinement, and its ``factorize``/``solve``
@@ -110,6 +111,26 @@ class PardisoError(RuntimeError):
         super().__init__(f"PARDISO phase {phase} failed with error {code}: {_ERRORS.get(code, 'unknown')}")
 
 
+def _mkl_rt_direct() -> str:
+    """``mkl_rt`` where the MKL wheel puts it (``$PYPARDISO_MKL_RT``, else
+    ``sys.prefix/lib/libmkl_rt.so*`` / ``.dylib`` / ``Library/bin/mkl_rt*.dll``), "" if not
+    there. pypardiso's own search (``find_library``, which runs ldconfig/gcc, then a
+    recursive glob of the whole environment) took 7 s of a 12-element relaxation on the
+    loaded machine; this is the fast path, pypardiso's search the fallback."""
+    import glob
+    import os
+    import sys
+
+    env = os.environ.get("PYPARDISO_MKL_RT")
+    if env:
+        return env
+    for pat in ("lib/libmkl_rt.so*", "lib/libmkl_rt*.dylib", "Library/bin/mkl_rt*.dll"):
+        hits = sorted(glob.glob(os.path.join(sys.prefix, pat)), key=len)
+        if hits:
+            return hits[0]
+    return ""
+
+
 def _load():
     """Find mkl_rt the way pypardiso does and bind ``pardiso``; sets the reason on failure."""
     global _LIB, _REASON
@@ -118,13 +139,21 @@ def _load():
     if platform.machine().lower() not in ("x86_64", "amd64", "i386", "i686", "x86"):
         _REASON = f"no MKL on {platform.machine()} (MKL is x86 only)"
         return None
+    import importlib.util
+
+    if importlib.util.find_spec("pypardiso") is None:
+        _REASON = "pypardiso not importable: No module named 'pypardiso'"
+        return None
     try:
-        from pypardiso.pardiso_wrapper import PyPardisoSolver
+        path = _mkl_rt_direct()
+        if not path:  # pypardiso's own search (slow: find_library, a recursive glob)
+            from pypardiso.pardiso_wrapper import PyPardisoSolver
+
+            path = PyPardisoSolver().libmkl._name
     except Exception as exc:  # ImportError, or MKL missing at pypardiso's import
         _REASON = f"pypardiso not importable: {exc}"
         return None
     try:
-        path = PyPardisoSolver().libmkl._name
         lib = ctypes.CDLL(path)  # a fresh CDLL object: our own function prototypes
         fn = lib.pardiso
     except Exception as exc:
