@@ -20,7 +20,10 @@ analyses, final energy and its relative difference to superlu's, max overlap / R
 negative pivots of the final tangent (stable), |x - x_superlu|_max, and the split of the
 solve time measured by wrapping (factorisation + solve, assembly, contact rebuild,
 energy, other). Backends: ``superlu`` (today's arithmetic: = today's main), ``pardiso``
-(the default "auto" where MKL is present: analysis reused per nonzero pattern),
+(the default "auto" where MKL is present, = ``pardiso_stored`` since the measurements of
+docs/engine.md; the figures there labelled "pardiso" were taken with the then default,
+now ``pardiso_nonzero``: the nonzero pattern, analysis redone when it leaves the analysed
+one or its union), ``pardiso_nonzero``,
 ``pardiso_keep`` (PARDISO on the contact map's stored pattern, explicit zeros kept:
 ``rve.solvers.minimize.KEEP_STORED_PATTERN = True``), ``pardiso_stored`` (the stored pattern handed in, the nonzero pattern factorised on
 the analysed one while it lies in it, a new analysis on the stored pattern when not:
@@ -172,10 +175,11 @@ def table(results: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- whole runs
-RUN_BACKENDS = ("superlu", "pardiso", "pardiso_keep", "pardiso_stored", "pardiso_grow", "pardiso_nosub",
-                "pardiso_amd")
+RUN_BACKENDS = ("superlu", "pardiso", "pardiso_nonzero", "pardiso_keep", "pardiso_stored", "pardiso_grow",
+                "pardiso_nosub", "pardiso_amd")
 #: PARDISO variants of the whole runs: rve.solvers.minimize.PARDISO_OPTIONS
 RUN_VARIANT_OPTIONS = {"pardiso_stored": {"drop_zeros": True, "analyse_stored": True},
+                       "pardiso": {"drop_zeros": True, "analyse_stored": True},
                        "pardiso_grow": {"grow_limit": float("inf")}, "pardiso_nosub": {"reuse_subpattern": False},
                        "pardiso_amd": {"ordering": 0, "matching": False}}
 RELAX_CONFIG = ROOT / "configs/scenes/plain_weave_relax.yaml"
@@ -226,8 +230,9 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
     import rve.scenes  # noqa: F401
     from rve.solvers import minimize
 
-    if backend in ("pardiso_keep", "pardiso_stored"):
-        minimize.KEEP_STORED_PATTERN = True
+    # the variants are set explicitly (independent of the defaults of rve.solvers.minimize)
+    minimize.KEEP_STORED_PATTERN = backend in ("pardiso", "pardiso_keep", "pardiso_stored")
+    minimize.PARDISO_OPTIONS.clear()
     minimize.PARDISO_OPTIONS.update(RUN_VARIANT_OPTIONS.get(backend, {}))
     split = _instrument()
     rec = {"kind": kind, "arg": arg, "backend": backend, "env": os.environ.get("RVE_LINEAR_BACKEND", "")}
