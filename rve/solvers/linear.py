@@ -44,9 +44,12 @@ changes), ``factorize(A)`` (numeric factorisation; returns the instance), ``solv
 analysis.
 
 * ``"pardiso"`` (``PardisoBackend``, ``rve/solvers/pardiso.py``): MKL PARDISO LDL^T,
-  symmetric indefinite, analysis (METIS + matching) reused while the *nonzero* pattern is
-  unchanged (explicit zeros dropped: measured the better choice, docs/engine.md), one MKL
-  thread. Symmetric matrices only (it reads one triangle).
+  symmetric indefinite, one MKL thread, explicit zeros dropped, the analysis (METIS +
+  matching) reused while the nonzero pattern lies in the analysed one (a new analysis on
+  the union when small). The energy minimiser hands it the contact map's stored pattern
+  and analyses that (``analyse_stored``; ``rve.solvers.minimize.run_backend``): measured
+  the best of four choices, docs/engine.md "Backend choice". Symmetric matrices only (it
+  reads one triangle).
 * ``"superlu"`` (``SuperLUBackend``): scipy's SuperLU. ``symmetric=True``: minimum degree
   on A^T + A with diagonal pivots only (``SUPERLU_SYMMETRIC``), so the diagonal of U is
   the D of A = L D L^T (up to rounding) and gives the inertia; ``symmetric=False``:
