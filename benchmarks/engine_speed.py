@@ -25,7 +25,8 @@ docs/engine.md; the figures there labelled "pardiso" were taken with the then de
 now ``pardiso_nonzero``: the nonzero pattern, analysis redone when it leaves the analysed
 one or its union), ``pardiso_nonzero``,
 ``pardiso_keep`` (PARDISO on the contact map's stored pattern, explicit zeros kept:
-``rve.solvers.minimize.KEEP_STORED_PATTERN = True``), ``pardiso_stored`` (the stored pattern handed in, the nonzero pattern factorised on
+``rve.solvers.minimize.KEEP_STORED_PATTERN = True``), ``pardiso_stored`` (the stored
+pattern handed in, the nonzero pattern factorised on
 the analysed one while it lies in it, a new analysis on the stored pattern when not:
 ``analyse_stored``), ``pardiso_grow`` (the analysed
 pattern is always the union of the patterns met: ``grow_limit = inf``), ``pardiso_nosub``
@@ -255,7 +256,6 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
                                                   "factorizations", "analyses", "wall_s")} for h in stages])
     else:
         from rve.config import load_config
-        from rve.fabrics.relaxation import relax_settings  # noqa: F401  (import cost as the job)
         from rve.fabrics.setup import fabric_and_mesh
         from rve.homogenisation.checkpoint import load_state
         from rve.homogenisation.strain import strain_step
@@ -274,7 +274,8 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
         rec.update(converged=bool(info.get("converged")), residual_N=float(info.get("residual_N", np.nan)),
                    energy_mJ=float(system.energy(x)), max_overlap_over_R=float(cst["max_overlap_over_R"]),
                    negative_pivots=int(neg), stable=bool(neg == 0),
-                   iterations=int(_count(info, "newton_iterations")), factorizations=int(_count(info, "factorizations")),
+                   iterations=int(_count(info, "newton_iterations")),
+                   factorizations=int(_count(info, "factorizations")),
                    analyses=int(_count(info, "analyses")))
     rec["solve_s"] = time.perf_counter() - t0
     rec["import_s"] = t0 - t_import
@@ -355,8 +356,8 @@ def whole_table(title: str, runs: list, xs: dict) -> str:
             + f"   (walls: {walls})")
     lines.append("wall = whole process (launch to exit), median; cpu = its user + system CPU time (the fairer "
                  "figure on a loaded machine); ratio = superlu median / this median (same "
-                 "invocation, interleaved); solve = the solve alone (wall); its/fact/anal: Newton iterations, factorisations, symbolic "
-                 "analyses of the first run; neg: negative pivots of the final tangent (0 = stable)")
+                 "invocation, interleaved); solve = the solve alone (wall); its/fact/anal: Newton iterations, "
+                 "factorisations, symbolic analyses of the first run; neg: negative pivots of the final tangent (0 = stable)")
     return "\n".join(lines)
 
 
@@ -372,7 +373,8 @@ def main_whole(kind: str, arg: str, runs: int, backends, json_path=None, outdir=
             recs.append(r)
             if "error" not in r:
                 xs[(b, k)] = np.load(npz)
-            print(f"  {kind} {arg} {b} run {k + 1}: " + (f"{r['wall_s']:.1f} s (cpu {r['cpu_s']:.1f} s), E = {r['energy_mJ']:.12f} mJ, "
+            print(f"  {kind} {arg} {b} run {k + 1}: " + (f"{r['wall_s']:.1f} s (cpu {r['cpu_s']:.1f} s), "
+                  f"E = {r['energy_mJ']:.12f} mJ, "
                   f"its {r['iterations']}, fact {r['factorizations']}, anal {r['analyses']}, split "
                   + ", ".join(f"{kk} {v:.1f}" for kk, v in r["split_s"].items()) if "error" not in r
                   else f"error {r['error']}"), file=sys.stderr, flush=True)

@@ -71,7 +71,8 @@ setting (``MKL_NUM_THREADS`` / all cores).
 
 Why our own ctypes call instead of ``pypardiso.PyPardisoSolver``: pypardiso is used only to
 *find* ``mkl_rt`` (first where the MKL wheel puts it, ``_mkl_rt_direct``, without importing
-pypardiso, whose import alone ran its slow search: 0.85-7 s; then its constructor's search: ``PYPARDISO_MKL_RT``, ``find_library``, the
+pypardiso, whose import alone ran its slow search: 0.85-7 s; then its constructor's
+search: ``PYPARDISO_MKL_RT``, ``find_library``, the
 venv's ``lib``). Its ``_call_pardiso`` is private, converts ``indptr``/``indices`` to
 1-based int32 copies on every call (O(nnz) per phase), keeps no reference to the arrays
 PARDISO reads again during the solve's iterative refinement, and its ``factorize``/``solve``
