@@ -1,12 +1,24 @@
 """rve.solvers.linear: factorisations solve to round-off, the inertia count is right, the
-banded path agrees with SuperLU, the fallback rescues a breakdown, the backend seam."""
+banded path agrees with SuperLU, the fallback rescues a breakdown, the backend seam, the
+backend choice (auto / RVE_LINEAR_BACKEND / backend=, clear errors). Runs without
+pypardiso (the PARDISO cases are skipped; the choice then falls back to SuperLU)."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from rve.solvers import linear
+from rve.solvers import linear, pardiso
 from rve.solvers.linear import (BandedBackend, NotBandedError, SingularFactorError, SuperLUBackend, band_of,
-                                factor_inertia, factorize, sparse_solve)
+                                factor_inertia, factorize, resolve_backend, shifted, sparse_solve)
+
+HAVE_PARDISO = pardiso.available()
+needs_pardiso = pytest.mark.skipif(not HAVE_PARDISO, reason=f"PARDISO unavailable: {pardiso.unavailable_reason()}")
+#: every backend that gives an inertia here
+INERTIA_BACKENDS = ["superlu"] + (["pardiso"] if HAVE_PARDISO else [])
+
+
+@pytest.fixture
+def no_env(monkeypatch):
+    monkeypatch.delenv(linear.BACKEND_ENV, raising=False)
 
 
 def _sym_indefinite(n, seed, density=0.05, band=None):
@@ -48,11 +60,15 @@ def test_negative_pivots_count_negative_eigenvalues(seed):
     assert factorize(A + (1.0 - lam) * sp.identity(80, format="csc"), inertia=True).negative_pivots == 0
 
 
-def test_singular_factor():
+@pytest.mark.parametrize("backend", INERTIA_BACKENDS)
+def test_singular_factor(backend):
     A = sp.csc_matrix(np.diag([1.0, 0.0, 2.0, 3.0]))
     with pytest.raises(SingularFactorError):
-        factorize(A, inertia=True)
-    assert factor_inertia(A) == (None, -1)
+        factorize(A, inertia=True, backend=backend)
+    assert factor_inertia(A, backend=backend) == (None, -1)
+    B = A.copy()
+    B.data[0] = np.nan
+    assert factor_inertia(B, backend=backend) == (None, -1)
 
 
 def test_banded_path_equals_superlu_path():
@@ -68,14 +84,18 @@ def test_banded_path_equals_superlu_path():
         BandedBackend().factorize(A, inertia=True)  # LU with partial pivoting: no inertia
 
 
-def test_wide_band_goes_to_superlu():
+def test_wide_band_goes_to_the_sparse_backend(monkeypatch):
     n = 200
     A = _sym_indefinite(n, 11, density=0.02)
     assert band_of(A) is None
     with pytest.raises(NotBandedError):
         BandedBackend().factorize(A)
     b = np.ones(n)
-    np.testing.assert_array_equal(sparse_solve(A, b), SuperLUBackend().factorize(A).solve(b))
+    ref = SuperLUBackend().factorize(A).solve(b)
+    monkeypatch.setenv(linear.BACKEND_ENV, "superlu")  # the fallback forced: today's SuperLU exactly
+    np.testing.assert_array_equal(sparse_solve(A, b), ref)
+    monkeypatch.setenv(linear.BACKEND_ENV, "auto")  # PARDISO where available: the same to round-off
+    np.testing.assert_allclose(sparse_solve(A, b), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
 
 
 def test_fallback_rescues_zero_diagonal_pivot():
@@ -85,9 +105,10 @@ def test_fallback_rescues_zero_diagonal_pivot():
     np.testing.assert_allclose(sparse_solve(A, b), np.linalg.solve(A.toarray(), b), rtol=1e-14)
 
 
-def test_backend_registry():
-    assert linear.DEFAULT_BACKEND == "superlu"
-    assert isinstance(linear.get_backend(), SuperLUBackend)
+def test_backend_registry(no_env):
+    assert linear.DEFAULT_BACKEND == "auto"
+    assert set(linear.BACKENDS) >= {"superlu", "pardiso", "banded"}
+    assert isinstance(linear.get_backend("superlu"), SuperLUBackend)
     with pytest.raises(ValueError, match="unknown linear-solver backend"):
         factorize(sp.identity(3, format="csc"), backend="nope")
 
@@ -121,3 +142,126 @@ def test_backend_registry():
         assert Dense.analyses == 2
     finally:
         del linear.BACKENDS["dense-test"]
+
+
+# ----------------------------------------------------------------------------- the choice
+def test_auto_picks_pardiso_when_available_else_superlu(no_env, monkeypatch):
+    assert resolve_backend() == ("pardiso" if HAVE_PARDISO else "superlu")
+    assert resolve_backend("auto") == resolve_backend()
+    assert resolve_backend("auto", symmetric=False) == "superlu"  # PARDISO here is LDL^T only
+    assert linear.get_backend().name == resolve_backend()
+    # MKL absent (e.g. aarch64, or pypardiso not installed): auto is SuperLU
+    monkeypatch.setattr(pardiso, "available", lambda: False)
+    assert resolve_backend() == "superlu"
+    assert isinstance(linear.get_backend(), SuperLUBackend)
+
+
+def test_environment_override(monkeypatch):
+    monkeypatch.setenv(linear.BACKEND_ENV, "superlu")
+    assert resolve_backend() == "superlu"
+    assert isinstance(linear.get_backend(), SuperLUBackend)
+    lu, neg = factor_inertia(_sym_indefinite(40, 2))
+    assert isinstance(lu, SuperLUBackend)
+    monkeypatch.setenv(linear.BACKEND_ENV, " Auto ")
+    assert resolve_backend() == ("pardiso" if HAVE_PARDISO else "superlu")
+    # the backend= argument wins over the environment
+    monkeypatch.setenv(linear.BACKEND_ENV, "pardiso")
+    assert resolve_backend("superlu") == "superlu"
+
+
+def test_bad_backend_name_is_a_clear_error(monkeypatch):
+    allowed = r"allowed: auto, banded, pardiso, superlu"
+    with pytest.raises(ValueError, match=r"unknown linear-solver backend 'mumps'.*" + allowed):
+        resolve_backend("mumps")
+    monkeypatch.setenv(linear.BACKEND_ENV, "pardisso")
+    with pytest.raises(ValueError, match=r"environment variable RVE_LINEAR_BACKEND.*allowed: auto"):
+        resolve_backend()
+    with pytest.raises(ValueError, match="pardisso"):
+        sparse_solve(_sym_indefinite(60, 1), np.ones(60))
+
+
+def test_pardiso_named_where_unavailable(monkeypatch):
+    monkeypatch.setattr(pardiso, "available", lambda: False)
+    monkeypatch.setattr(pardiso, "unavailable_reason", lambda: "pypardiso not importable: test")
+    with pytest.raises(RuntimeError, match="not available: pypardiso not importable"):
+        linear.get_backend("pardiso")
+
+
+@pytest.mark.parametrize("backend", INERTIA_BACKENDS)
+@pytest.mark.parametrize("seed", range(4))
+def test_inertia_equal_across_backends(backend, seed):
+    A = _sym_indefinite(150, 20 + seed, density=0.04)
+    ref = SuperLUBackend().factorize(A, inertia=True).negative_pivots
+    n_neg = int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
+    lu, neg = factor_inertia(A, backend=backend)
+    assert neg == ref == n_neg
+    b = np.random.default_rng(seed).normal(size=150)
+    x = lu.solve(b)
+    assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b) * np.abs(A).max() * 10
+
+
+@needs_pardiso
+def test_pardiso_inertia_with_perturbed_pivot_falls_back_to_superlu():
+    # a near-singular 2x2 block (Schur complement -1e-12 << 1e-8 |A|, scaling cannot fix
+    # it): PARDISO perturbs that pivot; the count must be SuperLU's
+    near = np.array([[1.0, 1.0], [1.0, 1.0 - 1e-12]])
+    A = sp.csc_matrix(sp.block_diag([near, np.diag([2.0, -3.0]), _sym_indefinite(30, 4).toarray()]))
+    ref = SuperLUBackend().factorize(A, inertia=True).negative_pivots
+    f = linear.get_backend("pardiso")
+    f.factorize(A)
+    assert f.perturbed_pivots > 0
+    with pytest.raises(SingularFactorError):
+        f.factorize(A, inertia=True)
+    lu, neg = factor_inertia(A, backend=f)
+    assert neg == ref and isinstance(lu, SuperLUBackend)
+
+
+@needs_pardiso
+def test_sparse_solve_with_pardiso_equals_superlu_and_reuses_the_analysis(monkeypatch):
+    A = _sym_indefinite(300, 5, density=0.02)
+    assert band_of(A) is None
+    b = np.random.default_rng(5).normal(size=300)
+    ref = SuperLUBackend().factorize(A).solve(b)
+    inst = linear.get_backend("pardiso")
+    x1 = sparse_solve(A, b, backend=inst)
+    x2 = sparse_solve(2.0 * A, b, backend=inst)  # same pattern: one analysis for both
+    assert (inst.analyses, inst.factorizations) == (1, 2)
+    np.testing.assert_allclose(x1, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    np.testing.assert_allclose(x2, 0.5 * ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    # the shared instance of the module (backend by name) reuses too
+    linear.release_shared()
+    monkeypatch.setenv(linear.BACKEND_ENV, "pardiso")
+    sparse_solve(A, b)
+    sparse_solve(3.0 * A, b)
+    assert linear._SHARED["pardiso"].analyses == 1
+    linear.release_shared()
+
+
+@needs_pardiso
+def test_sparse_solve_unsymmetric_goes_to_superlu():
+    A = _sym_indefinite(200, 6, density=0.03).tolil()
+    A[3, 150] += 0.7  # not symmetric: PARDISO's LDL^T (one triangle) would be wrong
+    A = A.tocsc()
+    assert not linear.is_symmetric(A) and linear.is_symmetric(_sym_indefinite(200, 6, density=0.03))
+    b = np.ones(200)
+    inst = linear.get_backend("pardiso")
+    x = sparse_solve(A, b, backend=inst)
+    assert inst.factorizations == 0
+    np.testing.assert_allclose(A @ x, b, rtol=0, atol=1e-10)
+
+
+def test_shifted_keeps_the_stored_pattern():
+    A = _sym_indefinite(50, 8, density=0.1)
+    J = A.copy()
+    J.data[::7] = 0.0  # explicit zeros (inactive contact pairs)
+    M = sp.diags(np.linspace(1.0, 2.0, 50), format="csc")
+    S0 = shifted(J, M, 0.3)
+    S1 = shifted(J, M, 0.3, keep_pattern=True)
+    assert S0.nnz < J.nnz == S1.nnz  # scipy's sum drops the zeros; keep_pattern keeps them
+    np.testing.assert_array_equal(S1.indices, J.indices)
+    np.testing.assert_array_equal(S1.toarray(), S0.toarray())
+    np.testing.assert_array_equal(shifted(J, M, 0.5, keep_pattern=True).toarray(), (J + 0.5 * M).toarray())
+    assert shifted(J, M, 0.0) is J
+    # an M entry outside J's pattern: scipy's sum
+    M2 = sp.csc_matrix(np.eye(50) + np.eye(50, k=40))
+    np.testing.assert_array_equal(shifted(J, M2, 0.3, keep_pattern=True).toarray(), (J + 0.3 * M2).toarray())

@@ -118,7 +118,8 @@ def test_analysis_reused_for_the_same_pattern_and_redone_for_a_new_one():
     assert (f.analyses, f.factorizations) == (1, 2)
     assert _rel_res(A2, f.solve(b), b) < 1e-10
     assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(A2.toarray()) < 0))
-    # an entry pair set to 0.0: the default (drop_zeros) re-analyses, once
+    # an entry pair set to 0.0: the nonzero pattern is a subset of the analysed one; the
+    # default (drop_zeros, reuse_subpattern) factorises on the analysed pattern, no analysis
     A3 = A2.copy()
     rows = np.repeat(np.arange(A3.shape[0]), np.diff(A3.indptr))
     k = np.flatnonzero(rows < A3.indices)[0]
@@ -126,15 +127,26 @@ def test_analysis_reused_for_the_same_pattern_and_redone_for_a_new_one():
     kt = A3.indptr[j] + np.flatnonzero(A3.indices[A3.indptr[j]:A3.indptr[j + 1]] == i)[0]
     A3.data[[k, kt]] = 0.0
     f.factorize(A3)
-    assert (f.analyses, f.factorizations) == (2, 3)
+    assert (f.analyses, f.factorizations, f.subpattern_reuses) == (1, 3, 1)
     assert _rel_res(A3, f.solve(b), b) < 1e-10
+    assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(A3.toarray()) < 0))
     A3b = A3.copy()
-    A3b.data = A3b.data * 0.9  # same zeros, new values: reused
+    A3b.data = A3b.data * 0.9  # same zeros, new values: reused (the fast path)
     f.factorize(A3b)
-    assert (f.analyses, f.factorizations) == (2, 4)
+    assert (f.analyses, f.factorizations, f.subpattern_reuses) == (1, 4, 1)
     assert _rel_res(A3b, f.solve(b), b) < 1e-10
-    f.factorize(A2)  # the zeros become nonzeros again: analysed again
-    assert f.analyses == 3
+    f.factorize(A2)  # the zeros become nonzeros again: the analysed pattern itself
+    assert f.analyses == 1
+    assert _rel_res(A2, f.solve(b), b) < 1e-10
+    # without subpattern reuse: every new nonzero pattern is analysed
+    h = pardiso.PardisoFactorization(reuse_subpattern=False)
+    h.factorize(A2)
+    h.factorize(A3)
+    h.factorize(A3b)
+    h.factorize(A2)
+    assert (h.analyses, h.factorizations) == (3, 4)
+    assert _rel_res(A2, h.solve(b), b) < 1e-10
+    h.release()
     # drop_zeros=False: explicit zeros are part of the (stored) pattern, no new analysis
     g = pardiso.PardisoFactorization(drop_zeros=False)
     g.factorize(A2)
@@ -142,13 +154,34 @@ def test_analysis_reused_for_the_same_pattern_and_redone_for_a_new_one():
     assert (g.analyses, g.factorizations) == (1, 2)
     assert _rel_res(A3, g.solve(b), b) < 1e-10
     g.release()
-    # a new pattern: one new analysis
-    A4 = (A2 + sp.random(A.shape[0], A.shape[0], density=0.01, random_state=7) * 1e-3).tocsr()
+    # a new pattern: one new analysis (on the union when it is small: A2 then lies in it)
+    A4 = (A2 + sp.random(A.shape[0], A.shape[0], density=0.002, random_state=7) * 1e-3).tocsr()
     A4 = ((A4 + A4.T) * 0.5).tocsr()
     n_before = f.analyses
     f.factorize(A4)
     assert f.analyses == n_before + 1
     assert _rel_res(A4, f.solve(b), b) < 1e-10
+    f.factorize(A2)
+    assert f.analyses == n_before + 1
+    assert _rel_res(A2, f.solve(b), b) < 1e-10
+    # a larger new pattern (A5 ⊃ A2): analysed on the union with the old one (A4's
+    # extra entries are then zeros in it), and A2 lies in it: no further analysis
+    A5 = (A2 + sp.random(A.shape[0], A.shape[0], density=0.05, random_state=8) * 1e-3).tocsr()
+    A5 = ((A5 + A5.T) * 0.5).tocsr()
+    f.factorize(A5)
+    assert f.analyses == n_before + 2 and f._plan[3] > 0
+    assert _rel_res(A5, f.solve(b), b) < 1e-10
+    f.factorize(A2)
+    assert f.analyses == n_before + 2
+    assert _rel_res(A2, f.solve(b), b) < 1e-10
+    # a small matrix outside it: the union would be > grow_limit x its pattern, so it is
+    # analysed alone (no entry of the analysed pattern missing from it)
+    n = A.shape[0]
+    A6 = sp.csr_matrix(sp.diags(np.full(n, 3.0)) + sp.csr_matrix(([1.0, 1.0], ([0, n - 1], [n - 1, 0])), shape=(n, n)))
+    assert f._map(A6, *pardiso._upper_entries(A6)) is None
+    f.factorize(A6)
+    assert f.analyses == n_before + 3 and f._plan[3] == 0
+    assert _rel_res(A6, f.solve(b), b) < 1e-12
     f.release()
 
 
@@ -183,3 +216,92 @@ def test_errors_and_release():
 def test_unavailable_reason_is_empty_when_available():
     assert pardiso.unavailable_reason() == ""
     assert pardiso.mkl_library()
+
+
+# ----------------------------------------------------------------------------- in the solvers
+SMALL_WEAVE = {
+    "scene": "fabric_relax",
+    "fabric": {"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]},
+    "mesh": {"elements": 12},
+    "relaxation": {"duration": "2 ms", "steps": 4, "rebuild_every": 2},
+}
+
+
+def _small_weave(tmp_path):
+    import yaml
+
+    from rve.config import load_config
+
+    p = tmp_path / "cfg.yaml"
+    p.write_text(yaml.safe_dump(SMALL_WEAVE))
+    return load_config(str(p))
+
+
+def _relax(cfg, backend, monkeypatch):
+    from rve.scenes import fabric_relax
+
+    monkeypatch.setenv("RVE_LINEAR_BACKEND", backend)
+    res = fabric_relax.solve(cfg)
+    return np.asarray(res.state["x"], float), res.summary
+
+
+def test_minimiser_with_pardiso_equals_superlu_on_a_small_weave(tmp_path, monkeypatch):
+    cfg = _small_weave(tmp_path)
+    x_lu, s_lu = _relax(cfg, "superlu", monkeypatch)
+    x_pd, s_pd = _relax(cfg, "pardiso", monkeypatch)
+    stages = [h for h in s_pd["history"] if h.get("method") == "minimize_energy"]
+    assert stages and all(h["linear_backend"] == "pardiso" and h["analyses"] >= 1 for h in stages)
+    # analysis reused: fewer analyses than factorisations
+    assert sum(h["analyses"] for h in stages) < sum(h["factorizations"] for h in stages)
+    assert all(h["linear_backend"] == "superlu" for h in s_lu["history"] if h.get("method") == "minimize_energy")
+    assert s_lu["static_converged"] and s_pd["static_converged"]
+    assert np.abs(x_pd - x_lu).max() <= 1e-10 * np.abs(x_lu).max()
+    assert abs(s_pd["energy_mJ"] - s_lu["energy_mJ"]) <= 1e-10 * abs(s_lu["energy_mJ"])
+    assert s_pd["negative_pivots"] == s_lu["negative_pivots"] == 0
+
+
+def test_inertia_of_weave_tangents_equals_superlu(tmp_path):
+    """K + sigma M of the small weave at its (stressed, indefinite) initial state, for a
+    range of shifts through the indefinite range: PARDISO's count (one instance, analysis
+    reused) = SuperLU's = the dense eigenvalue count."""
+    from rve.fabrics.relaxation import relaxation_system
+    from rve.solvers.linear import SuperLUBackend, factor_inertia, shifted
+    from rve.solvers.static import StaticProblem
+
+    cfg = _small_weave(tmp_path)
+    fab, system, x0 = relaxation_system(cfg)[:3]
+    prob = StaticProblem(system, x0, np.zeros(system.n), 0.0)
+    _, J = prob(prob.u0())
+    M = prob.fd.matrix(system.mass())
+    scale = np.abs(J.diagonal()).max() / np.abs(M.diagonal()).max()
+    inst = pardiso.PardisoFactorization()
+    counts = []
+    for sigma in [0.0] + list(scale * np.logspace(-9, 0, 10)):
+        A = shifted(J, M, sigma)
+        ref = SuperLUBackend().factorize(A, inertia=True).negative_pivots
+        lu, neg = factor_inertia(A, backend=inst)
+        dense = int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
+        assert neg == ref == dense, sigma
+        counts.append(neg)
+    assert counts[0] > 0 and counts[-1] == 0  # indefinite at sigma = 0, definite after the shift
+    assert inst.analyses < len(counts)
+
+
+def test_analyse_stored_pattern():
+    """``analyse_stored``: the analysis is of the stored pattern (zeros included), so a
+    later matrix whose nonzeros lie in it (a contact activated) needs no new analysis."""
+    A = with_inertia(n_neg=15, seed=9)
+    b = np.random.default_rng(9).standard_normal(A.shape[0])
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    inactive = (rows != A.indices) & ((rows + A.indices) % 3 == 0)  # a symmetric choice
+    Z = A.copy()
+    Z.data[inactive] = 0.0  # stored zeros (inactive pairs): same stored pattern as A
+    assert Z.nnz == A.nnz and np.count_nonzero(Z.data) < A.nnz
+    for stored, analyses in ((True, 1), (False, 2)):
+        f = pardiso.PardisoFactorization(analyse_stored=stored, grow_limit=1.0)
+        for M in (Z, A, Z):
+            f.factorize(M)
+            assert _rel_res(M, f.solve(b), b) < 1e-10
+            assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(M.toarray()) < 0))
+        assert f.analyses == analyses, stored
+        f.release()

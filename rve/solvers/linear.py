@@ -2,29 +2,54 @@
 
 Contract
 --------
-* ``sparse_solve(J, r) -> du``: one direct solve ``J du = r`` (Newton, the static and
-  pseudo-transient solvers, the capped Newton): LAPACK's banded LU when ``J`` is narrowly
-  banded (single fibrils), else SuperLU in symmetric mode (``SUPERLU_SYMMETRIC``),
-  checked by its residual, with COLAMD + partial pivoting (``SUPERLU_FALLBACK_PERMC``) as
-  the fallback. Raises ``RuntimeError`` only if the fallback does.
-* ``factorize(A, symmetric=True, inertia=False, backend=None) -> LinearBackend``: a
+* Backend choice: ``resolve_backend(name=None, symmetric=True) -> str``. ``name`` (the
+  ``backend=`` argument of the functions below) wins; else the environment variable
+  ``RVE_LINEAR_BACKEND``; else ``DEFAULT_BACKEND = "auto"``. ``"auto"`` is ``"pardiso"``
+  when ``rve.solvers.pardiso.available()`` (and the matrix is symmetric), else
+  ``"superlu"``. A name outside ``BACKENDS`` / ``"auto"`` raises ``ValueError`` listing the
+  allowed ones; ``"pardiso"`` named explicitly where it is unavailable raises
+  ``RuntimeError`` with the reason. ``RVE_LINEAR_BACKEND=superlu`` forces the pure-scipy
+  fallback everywhere (docs/engine.md, "Backend choice").
+* ``sparse_solve(J, r, backend=None) -> du``: one direct solve ``J du = r`` (Newton, the
+  static and pseudo-transient solvers, the capped Newton): LAPACK's banded LU when ``J``
+  is narrowly banded (single fibrils); else the chosen backend — PARDISO (only when ``J``
+  is symmetric to rounding: a two-vector bilinear test) or SuperLU in symmetric mode
+  (``SUPERLU_SYMMETRIC``) — checked by its residual ``|J du - r| <= 1e-8 |r|``; a failed
+  check or a breakdown (PARDISO's perturbed pivots show up here) falls back to SuperLU
+  symmetric mode and then to COLAMD + partial pivoting (``SUPERLU_FALLBACK_PERMC``).
+  Raises ``RuntimeError`` only if the last fallback does. ``backend`` may be a backend
+  *instance* (``get_backend(...)``): keeping one across calls reuses PARDISO's analysis
+  while the pattern is unchanged; by default (a name or None) one shared instance per
+  backend name is kept by this module (``release_shared()`` frees it).
+* ``factorize(A, symmetric=True, inertia=False, backend=None) -> backend instance``: a
   factorisation of ``A`` with ``.solve(b)`` and ``.negative_pivots`` (the number of
-  negative pivots of a symmetric factorisation with diagonal pivots; by Sylvester's law of
-  inertia the number of negative eigenvalues of a symmetric ``A``). With ``inertia=True``
-  the pivots are checked at once and a factorisation with a zero or non-finite pivot
-  raises ``SingularFactorError`` (the energy minimiser then raises its shift). Backends
-  are chosen by name from ``BACKENDS`` (default ``DEFAULT_BACKEND = "superlu"``).
-* ``factor_inertia(A) -> (factorisation, n_negative)``: the same with ``inertia=True``,
-  ``(None, -1)`` instead of the exception (the energy minimiser's inertia check,
-  docs/relaxation.md).
+  negative pivots of a symmetric factorisation; by Sylvester's law of inertia the number
+  of negative eigenvalues of a symmetric ``A``). With ``inertia=True`` the pivots are
+  checked at once and a factorisation with a zero or non-finite pivot raises
+  ``SingularFactorError``. ``backend`` is a name or an instance (reused, analysis kept).
+* ``factor_inertia(A, backend=None) -> (factorisation, n_negative)``: the energy
+  minimiser's inertia check (docs/relaxation.md); ``(None, -1)`` for a zero or non-finite
+  pivot. With PARDISO a factorisation that perturbed a pivot (its count of that pivot's
+  sign is then not SuperLU's) or failed is redone by SuperLU, so the count always equals
+  SuperLU's on the same matrix.
+* ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (the minimiser's and
+  the pseudo-transient solver's regularised tangent). ``keep_pattern=False`` is scipy's
+  sum (explicit zeros dropped: today's arithmetic); ``True`` keeps ``J``'s stored pattern
+  (explicit zeros of inactive contact pairs included) when ``M``'s pattern lies in it.
 
-Backends (the seam of issue 10: a supernodal LDL^T with its analysis reused per sparsity
-pattern plugs in here by ``register_backend``). A backend instance is stateful and used
-as ``analyse(pattern)`` (fill-reducing ordering / symbolic factorisation of a sparsity
-pattern; ``factorize`` calls it itself when the pattern changes), ``factorize(A)``
-(numeric factorisation; returns the instance), ``solve(b)`` and ``negative_pivots``.
-Keeping one instance across calls with the same pattern reuses the analysis.
+Backends. A backend instance is stateful and used as ``analyse(pattern)`` (fill-reducing
+ordering / symbolic factorisation; ``factorize`` calls it itself when the pattern
+changes), ``factorize(A)`` (numeric factorisation; returns the instance), ``solve(b)`` and
+``negative_pivots``. Keeping one instance across calls with the same pattern reuses the
+analysis.
 
+* ``"pardiso"`` (``PardisoBackend``, ``rve/solvers/pardiso.py``): MKL PARDISO LDL^T,
+  symmetric indefinite, one MKL thread, explicit zeros dropped, the analysis (METIS +
+  matching) reused while the nonzero pattern lies in the analysed one (a new analysis on
+  the union when small). The energy minimiser hands it the contact map's stored pattern
+  and analyses that (``analyse_stored``; ``rve.solvers.minimize.run_backend``): measured
+  the best of four choices, docs/engine.md "Backend choice". Symmetric matrices only (it
+  reads one triangle).
 * ``"superlu"`` (``SuperLUBackend``): scipy's SuperLU. ``symmetric=True``: minimum degree
   on A^T + A with diagonal pivots only (``SUPERLU_SYMMETRIC``), so the diagonal of U is
   the D of A = L D L^T (up to rounding) and gives the inertia; ``symmetric=False``:
@@ -33,19 +58,22 @@ Keeping one instance across calls with the same pattern reuses the analysis.
 * ``"banded"`` (``BandedBackend``): LAPACK ``gbsv`` on the band of ``A`` (LU with partial
   pivoting, no inertia); ``factorize`` raises ``NotBandedError`` when the bandwidth
   exceeds ``BANDED_MAX_BANDWIDTH``. The band is factorised in each ``solve``.
+  ``sparse_solve`` takes this path itself for narrow bands, whatever the backend.
 """
 from __future__ import annotations
 
-from typing import Callable, Dict, Optional
+import os
+from typing import Callable, Dict, Optional, Union
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["sparse_solve", "factorize", "factor_inertia", "LinearBackend", "SuperLUBackend", "BandedBackend", "BACKENDS",
-           "DEFAULT_BACKEND", "register_backend", "get_backend", "SingularFactorError", "NotBandedError",
-           "SUPERLU_SYMMETRIC", "SUPERLU_FALLBACK_PERMC", "BANDED_MAX_BANDWIDTH", "band_of"]
+__all__ = ["sparse_solve", "factorize", "factor_inertia", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
+           "PardisoBackend", "BACKENDS", "DEFAULT_BACKEND", "BACKEND_ENV", "resolve_backend", "register_backend",
+           "get_backend", "release_shared", "SingularFactorError", "NotBandedError", "SUPERLU_SYMMETRIC",
+           "SUPERLU_FALLBACK_PERMC", "BANDED_MAX_BANDWIDTH", "band_of", "is_symmetric"]
 
 
 #: Our Jacobians are structurally symmetric with dominant diagonals (beam stiffness, mass,
@@ -214,11 +242,29 @@ class BandedBackend(LinearBackend):
         return scipy.linalg.solve_banded((lo, up), ab, b, check_finite=False)
 
 
-#: backend classes by name
-BACKENDS: Dict[str, Callable[..., LinearBackend]] = {"superlu": SuperLUBackend, "banded": BandedBackend}
+def PardisoBackend(symmetric: bool = True, **options):
+    """The ``"pardiso"`` backend: a fresh ``rve.solvers.pardiso.PardisoFactorization``
+    (one MKL thread, weighted matching, explicit zeros dropped; ``options`` go to it).
+    Symmetric matrices only; ``RuntimeError`` with the reason when MKL is unavailable."""
+    from . import pardiso
 
-#: the backend ``factorize`` uses when none is named
-DEFAULT_BACKEND = "superlu"
+    if not symmetric:
+        raise ValueError("the pardiso backend factorises symmetric matrices only (mtype -2); "
+                         "use backend='superlu' with symmetric=False")
+    if not pardiso.available():
+        raise RuntimeError(f"linear-solver backend 'pardiso' is not available: {pardiso.unavailable_reason()}")
+    return pardiso.PardisoFactorization(**options)
+
+
+#: backend classes by name
+BACKENDS: Dict[str, Callable[..., LinearBackend]] = {"superlu": SuperLUBackend, "banded": BandedBackend,
+                                                     "pardiso": PardisoBackend}
+
+#: the backend used when neither a ``backend=`` argument nor ``RVE_LINEAR_BACKEND`` names one
+DEFAULT_BACKEND = "auto"
+
+#: environment variable overriding the default backend (superlu | pardiso | auto)
+BACKEND_ENV = "RVE_LINEAR_BACKEND"
 
 
 def register_backend(name: str, cls: Callable[..., LinearBackend]) -> None:
@@ -226,27 +272,135 @@ def register_backend(name: str, cls: Callable[..., LinearBackend]) -> None:
     BACKENDS[str(name)] = cls
 
 
+def _allowed() -> str:
+    return ", ".join(["auto", *sorted(BACKENDS)])
+
+
+def resolve_backend(name: Optional[str] = None, symmetric: bool = True) -> str:
+    """The registry name that ``name`` (else ``$RVE_LINEAR_BACKEND``, else
+    ``DEFAULT_BACKEND``) stands for; ``"auto"``: pardiso when available and ``symmetric``,
+    else superlu. Raises ``ValueError`` for an unknown name."""
+    source = "backend argument"
+    if name is None:
+        env = os.environ.get(BACKEND_ENV, "").strip()
+        name, source = (env, f"environment variable {BACKEND_ENV}") if env else (DEFAULT_BACKEND, "default")
+    key = str(name).strip().lower()
+    if key == "auto":
+        from . import pardiso
+
+        return "pardiso" if symmetric and pardiso.available() else "superlu"
+    if key not in BACKENDS:
+        raise ValueError(f"unknown linear-solver backend {name!r} (from the {source}; allowed: {_allowed()})")
+    return key
+
+
 def get_backend(name: Optional[str] = None, symmetric: bool = True) -> LinearBackend:
-    """A fresh instance of the backend ``name`` (default ``DEFAULT_BACKEND``)."""
-    key = DEFAULT_BACKEND if name is None else str(name)
-    try:
-        cls = BACKENDS[key]
-    except KeyError:
-        raise ValueError(f"unknown linear-solver backend {key!r} (known: {', '.join(sorted(BACKENDS))})") from None
-    return cls(symmetric=symmetric)
+    """A fresh instance of the backend ``name`` (``resolve_backend``: argument, else
+    ``$RVE_LINEAR_BACKEND``, else ``"auto"``)."""
+    return BACKENDS[resolve_backend(name, symmetric)](symmetric=symmetric)
 
 
-def factorize(A, symmetric: bool = True, inertia: bool = False, backend: Optional[str] = None) -> LinearBackend:
-    """Factorise ``A`` with a fresh backend instance; returns it (``.solve(b)``,
-    ``.negative_pivots``). Raises ``SingularFactorError`` on an exactly zero pivot (and,
-    with ``inertia=True``, on a non-finite one)."""
-    return get_backend(backend, symmetric=symmetric).factorize(A, inertia=inertia)
+BackendSpec = Union[None, str, LinearBackend, object]
+
+
+def _instance(backend: BackendSpec, symmetric: bool = True):
+    """``backend`` if it is an instance, else a fresh one by name."""
+    if backend is None or isinstance(backend, str):
+        return get_backend(backend, symmetric=symmetric)
+    return backend
+
+
+def factorize(A, symmetric: bool = True, inertia: bool = False, backend: BackendSpec = None):
+    """Factorise ``A`` with ``backend`` (an instance: reused; a name or None: a fresh
+    instance); returns the instance (``.solve(b)``, ``.negative_pivots``). Raises
+    ``SingularFactorError`` on an exactly zero pivot (and, with ``inertia=True``, on a
+    non-finite one)."""
+    return _instance(backend, symmetric).factorize(A, inertia=inertia)
+
+
+def shifted(J, M, sigma: float, keep_pattern: bool = False):
+    """``J + sigma M`` as CSC. ``keep_pattern=False``: scipy's sum (explicit zeros dropped);
+    ``True``: on ``J``'s stored pattern when ``M``'s pattern lies in it (else scipy's sum)."""
+    if sigma == 0.0:
+        return J
+    if not keep_pattern:
+        return (J + sigma * M).tocsc()
+    J = sp.csc_matrix(J)
+    M = sp.csc_matrix(M)
+    c = _SLOT_CACHE
+    if c and all(_same_arrays(c[k], X) for k, X in (("J", J), ("M", M))):
+        slots = c["slots"]
+    else:
+        slots = _slots_in(J, M)
+        c.update(J=(J.shape, J.indptr.copy(), J.indices.copy()), M=(M.shape, M.indptr.copy(), M.indices.copy()),
+                 slots=slots)
+    if slots is None:
+        return (J + sigma * M).tocsc()
+    data = J.data.copy()
+    data[slots] += sigma * M.data  # canonical M: distinct slots
+    return sp.csc_matrix((data, J.indices, J.indptr), shape=J.shape)
+
+
+_SLOT_CACHE: dict = {}
+
+
+def _same_arrays(key, X) -> bool:
+    shape, indptr, indices = key
+    return (X.shape == shape and X.indptr.size == indptr.size and X.indices.size == indices.size
+            and np.array_equal(X.indptr, indptr) and np.array_equal(X.indices, indices))
+
+
+def _slots_in(J, M):
+    """Positions in ``J.data`` of the entries of ``M`` (both canonical CSC), or None when
+    an entry of ``M`` is not stored in ``J``."""
+    J.sum_duplicates()
+    M.sum_duplicates()
+    n = J.shape[0]
+    kj = np.repeat(np.arange(J.shape[1], dtype=np.int64), np.diff(J.indptr)) * n + J.indices
+    km = np.repeat(np.arange(M.shape[1], dtype=np.int64), np.diff(M.indptr)) * n + M.indices
+    pos = np.searchsorted(kj, km)
+    pos = np.minimum(pos, kj.size - 1)
+    if kj.size == 0 or not np.array_equal(kj[pos], km):
+        return None
+    return pos
 
 
 # ----------------------------------------------------------------------------- one solve
-def sparse_solve(J, r):
-    """Direct sparse solve J du = r: banded LAPACK for narrow bands, else SuperLU in
-    symmetric mode, with COLAMD + partial pivoting as the fallback."""
+_SHARED: Dict[str, object] = {}
+
+
+def release_shared() -> None:
+    """Free the backend instances ``sparse_solve`` keeps between calls."""
+    for inst in _SHARED.values():
+        rel = getattr(inst, "release", None)
+        if rel is not None:
+            rel()
+    _SHARED.clear()
+
+
+def is_symmetric(J, rtol: float = 1e-10) -> bool:
+    """``|v.(J w) - w.(J v)| <= rtol |v| |J| |w|`` for two fixed random vectors (two
+    products: O(nnz)); True for matrices symmetric to rounding."""
+    n = J.shape[0]
+    if J.shape[1] != n:
+        return False
+    rng = np.random.default_rng(12345)
+    v, w = rng.standard_normal(n), rng.standard_normal(n)
+    Jw, Jv = J @ w, J @ v
+    scale = np.linalg.norm(v) * max(np.linalg.norm(Jw), np.linalg.norm(Jv))
+    return bool(abs(v @ Jw - w @ Jv) <= rtol * max(scale, 1e-300))
+
+
+def _accept(J, du, r) -> bool:
+    rn = np.linalg.norm(r)
+    return bool(np.all(np.isfinite(du)) and np.linalg.norm(J @ du - r) <= _FALLBACK_RTOL * max(rn, 1e-300))
+
+
+def sparse_solve(J, r, backend: BackendSpec = None):
+    """Direct sparse solve J du = r: banded LAPACK for narrow bands, else the chosen
+    backend (PARDISO for symmetric ``J`` when available, SuperLU in symmetric mode) checked
+    by its residual, with SuperLU symmetric mode and then COLAMD + partial pivoting as the
+    fallbacks (module docstring)."""
     J = sp.csc_matrix(J)
     J.sum_duplicates()
     r = np.asarray(r, float)
@@ -259,22 +413,51 @@ def sparse_solve(J, r):
             du = None
         if du is not None and np.all(np.isfinite(du)):
             return du
+    if backend is None or isinstance(backend, str):
+        name = resolve_backend(backend, symmetric=True)
+        if name == "banded":
+            name = "superlu"
+        solver = None
+        if name != "superlu":
+            solver = _SHARED.get(name)
+            if solver is None:
+                solver = _SHARED[name] = get_backend(name, symmetric=True)
+    else:
+        solver = backend if getattr(backend, "name", "") != "superlu" else None
+    if solver is not None and getattr(solver, "symmetric", True) and is_symmetric(J):
+        try:
+            du = solver.factorize(J).solve(r)
+            if _accept(J, du, r):
+                return du
+        except RuntimeError:  # PardisoError, SingularFactorError
+            pass
     try:
         du = SuperLUBackend(symmetric=True).factorize(J).solve(r)
-        rn = np.linalg.norm(r)
-        if np.all(np.isfinite(du)) and np.linalg.norm(J @ du - r) <= _FALLBACK_RTOL * max(rn, 1e-300):
+        if _accept(J, du, r):
             return du
     except RuntimeError:  # exactly singular diagonal pivot
         pass
     return spla.spsolve(J, r, permc_spec=SUPERLU_FALLBACK_PERMC)
 
 
-def factor_inertia(A, backend: Optional[str] = None):
-    """Factorise the symmetric sparse ``A`` with diagonal pivots and count its negative
-    eigenvalues from the pivots (the minimiser's inertia check). Returns
-    ``(factorisation, n_negative)``; ``(None, -1)`` when a pivot is zero or not finite."""
+def factor_inertia(A, backend: BackendSpec = None):
+    """Factorise the symmetric sparse ``A`` and count its negative eigenvalues from the
+    pivots (the minimiser's inertia check). ``backend``: a name or an instance (kept:
+    PARDISO's analysis reused). A PARDISO factorisation that perturbed a pivot or failed
+    is redone by SuperLU (whose count is then returned). Returns ``(factorisation,
+    n_negative)``; ``(None, -1)`` when a pivot is zero or not finite."""
+    solver = _instance(backend, symmetric=True)
+    if getattr(solver, "name", "") != "superlu":
+        try:
+            lu = solver.factorize(A, inertia=False)
+            if getattr(lu, "perturbed_pivots", 0) == 0:
+                return lu, lu.negative_pivots
+        except SingularFactorError:  # a non-finite entry
+            return None, -1
+        except RuntimeError:  # PardisoError: SuperLU decides below
+            pass
     try:
-        lu = factorize(A, symmetric=True, inertia=True, backend=backend)
+        lu = SuperLUBackend(symmetric=True).factorize(A, inertia=True)
     except SingularFactorError:
         return None, -1
     return lu, lu.negative_pivots

@@ -19,6 +19,9 @@ themselves (their one side effect on the system besides ``tangent_near``).
   ``F(x, 0, t) = 0`` with the centroid motion per iteration capped, the map rebuilt after
   ``step_cap`` of motion and a Levenberg-Marquardt safeguard on rejected steps.
 * ``active_pair_keys(system, x) -> (e_plus, e_minus)``: the element pairs in contact.
+* Linear solves: both take ``backend=`` (a name, or an instance that is used as is); a
+  run keeps ONE backend instance (``run_backend``) for all its factorisations, so
+  PARDISO's symbolic analysis is reused while the pattern is unchanged (docs/engine.md).
 
 Neither solver raises for non-convergence: the result says ``converged`` and why not
 (``reason``). Moved here from ``rve/contact/relax.py`` (issue 9), arithmetic unchanged.
@@ -31,13 +34,48 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .linear import factor_inertia, sparse_solve
+from .linear import factor_inertia, get_backend, resolve_backend, shifted, sparse_solve
 from .newton import NewtonResult, convergence_rates
 from .static import StaticProblem
 
-__all__ = ["minimize_energy", "MinimizeResult", "capped_newton", "active_pair_keys"]
+__all__ = ["minimize_energy", "MinimizeResult", "capped_newton", "active_pair_keys", "run_backend",
+           "KEEP_STORED_PATTERN"]
 
 log = logging.getLogger("rve.solvers.minimize")
+
+#: Pattern the minimiser hands to PARDISO: True (default) K + sigma M on the contact map's
+#: stored pattern (explicit zeros of inactive candidate pairs kept, ``shifted(...,
+#: keep_pattern=True)``), which PARDISO (``PARDISO_OPTIONS``: ``analyse_stored``) analyses
+#: when the nonzero pattern leaves the analysed one and otherwise factorises on the analysed
+#: pattern; False: the nonzero pattern of scipy's sum. Measured on the 80-fibril weave
+#: (docs/engine.md, "Backend choice"): 30 analyses instead of 283 at 30 el/fibril, 153 vs
+#: 169 s of CPU; 4 instead of 50 at 12.
+KEEP_STORED_PATTERN = True
+
+#: options of the PARDISO instance a run keeps (``PardisoFactorization``'s keywords;
+#: benchmarks/engine_speed.py measures variants through it)
+PARDISO_OPTIONS: dict = {"drop_zeros": True, "analyse_stored": True}
+
+
+def run_backend(backend=None, keep_pattern: bool = None):
+    """``(instance, owned)``: the linear-solver backend one solver run keeps for all its
+    factorisations (``backend``: an instance, used as is, or a name / None:
+    ``rve.solvers.linear.resolve_backend``), so PARDISO's analysis is reused while the
+    pattern is unchanged; ``owned`` says whether the run must release it."""
+    if backend is not None and not isinstance(backend, str):
+        return backend, False
+    keep = KEEP_STORED_PATTERN if keep_pattern is None else bool(keep_pattern)
+    name = resolve_backend(backend, symmetric=True)
+    if name == "pardiso":
+        from .pardiso import PardisoFactorization
+
+        return PardisoFactorization(**{"drop_zeros": not keep, **PARDISO_OPTIONS}), True
+    return get_backend(name, symmetric=True), True
+
+
+def _release(solver, owned: bool) -> None:
+    if owned and hasattr(solver, "release"):
+        solver.release()
 
 
 def _free_centroids(prob, layout) -> np.ndarray:
@@ -48,12 +86,21 @@ def _free_centroids(prob, layout) -> np.ndarray:
 
 
 def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20,
-                  max_rejections=12):
+                  max_rejections=12, backend=None):
     """Static Newton on ``F(x, 0, t) = 0`` with the centroid motion per iteration capped
     at ``step_cap``, the contact map rebuilt after ``step_cap`` of motion, and a
     Levenberg-Marquardt safeguard: a step that increases |F| is rejected and retried
     with ``(K + sigma M) du = -F`` (sigma raised 8x per rejection, lowered 4x after an
-    accepted step, down to pure Newton). Returns ``(x, w, NewtonResult)``."""
+    accepted step, down to pure Newton). ``backend``: the linear solver (``run_backend``;
+    one instance for the run). Returns ``(x, w, NewtonResult)``."""
+    solver, owned = run_backend(backend)
+    try:
+        return _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver)
+    finally:
+        _release(solver, owned)
+
+
+def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver):
     w0 = np.zeros(system.n)
     lay = system.layout
 
@@ -76,9 +123,9 @@ def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.0
             return (*prob.state(u), NewtonResult(u, False, it, res, "non-finite residual"))
         if rn <= atol or rn <= rtol * r0:
             return (*prob.state(u), NewtonResult(u, True, it, res))
-        A = J if sigma == 0.0 else (J + sigma * Mff).tocsc()
+        A = shifted(J, Mff, sigma, keep_pattern=KEEP_STORED_PATTERN and solver.name == "pardiso")
         try:
-            du = -sparse_solve(A, r)
+            du = -sparse_solve(A, r, backend=solver)
         except RuntimeError as exc:
             return (*prob.state(u), NewtonResult(u, False, it, res, f"linear solve failed: {exc}"))
         if not np.all(np.isfinite(du)):
@@ -140,7 +187,9 @@ class MinimizeResult(NewtonResult):
     ``energies`` (N mm), ``sigmas`` (regularisation used by each accepted step),
     ``steps`` (step fraction alpha), ``factorizations``, ``rejections``, ``rebuilds``,
     ``negative_pivots`` (inertia of the last unregularised tangent; 0: a local minimum),
-    ``reused`` (modified-Newton steps with a kept factorisation)."""
+    ``reused`` (modified-Newton steps with a kept factorisation), ``backend`` (the linear
+    solver's name) and ``analyses`` (its symbolic analyses in this run; 0 for SuperLU,
+    which orders every factorisation afresh)."""
 
     energies: list = field(default_factory=list)
     sigmas: list = field(default_factory=list)
@@ -150,10 +199,12 @@ class MinimizeResult(NewtonResult):
     rejections: int = 0
     rebuilds: int = 0
     negative_pivots: int = -1
+    backend: str = ""
+    analyses: int = 0
 
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
-                    label="minimize", time_budget=None, backtrack=0, near=0.0, reuse=0):
+                    label="minimize", time_budget=None, backtrack=0, near=0.0, reuse=0, backend=None):
     """Static equilibrium of a mechanics-only ``ContactRelaxable`` system (e.g. a
     ``ContactSystem``) as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
@@ -179,11 +230,25 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     tangent also holds the normal penalty stiffness of points closer than this,
     the system's ``tangent_near``) and ``reuse`` (modified-Newton steps with the same
     factorisation while sigma > 0). Converged when ``|F_free| <= atol`` or
-    ``<= rtol |F_0|``.
+    ``<= rtol |F_0|``. ``backend``: the linear solver of the inertia check (``run_backend``:
+    one instance for the whole run, so PARDISO's analysis is reused while the pattern is
+    unchanged; default ``rve.solvers.linear.resolve_backend()``).
 
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
     """
+    solver, owned = run_backend(backend)
+    try:
+        return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
+                                backtrack, near, reuse, solver)
+    finally:
+        _release(solver, owned)
+
+
+def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, near,
+                     reuse, solver):
     t0 = time.perf_counter()
+    keep = KEEP_STORED_PATTERN and solver.name == "pardiso"
+    analyses0 = int(getattr(solver, "analyses", 0))
     w0 = np.zeros(system.n)
     lay = system.layout
     guard = 0.5 * float(system.params.margin)
@@ -228,7 +293,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
             break
         # factorise K + sigma M, raising sigma until it is positive definite
         for _ in range(60):
-            lu, neg = factor_inertia(J if sigma == 0.0 else J + sigma * Mff)
+            lu, neg = factor_inertia(shifted(J, Mff, sigma, keep_pattern=keep), backend=solver)
             out.factorizations += 1
             if sigma == 0.0:
                 out.negative_pivots = neg
@@ -359,5 +424,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     system.tangent_near = 0.0
     out.u = u
     out.iterations = it
+    out.backend = solver.name
+    out.analyses = int(getattr(solver, "analyses", 0)) - analyses0
     xs, ws = prob.state(u)
     return xs, ws, out

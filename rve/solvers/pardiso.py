@@ -31,6 +31,15 @@ backend (registry name ``"pardiso"``) with the interface of the linear-solver la
   factorisation costs 1.4-3.5x less, while the nonzero pattern changed at about one
   stage start in ten of a dynamic weave run. ``drop_zeros=False`` keeps the stored pattern
   (one analysis per contact map).
+* Analysis reuse beyond the same pattern (``reuse_subpattern=True``, default): a matrix
+  whose (nonzero) pattern lies in the analysed one is factorised on the analysed pattern,
+  the missing entries as zeros (``subpattern_reuses`` counts them); otherwise the new
+  analysis is of the union with the old pattern when that is at most ``grow_limit``
+  (1.25) times the new one, else of the new one; with ``analyse_stored=True`` of the
+  stored pattern of the matrix handed in (explicit zeros included: the contact map's
+  candidate pairs), so later nonzero patterns under the same map lie in it. Measured on
+  the 80-fibril relaxation (docs/engine.md): 30 analyses for 491 factorisations at 30
+  el/fibril with ``analyse_stored`` against 283 without.
 * ``solve(b)``: phase 33 (b of shape (n,) or (n, k)); ``refinement_steps`` is the number
   of iterative refinement steps PARDISO performed (iparm(7)). ``refinement=0`` is MKL's
   default: two steps automatically when pivots were perturbed, none otherwise.
@@ -61,7 +70,9 @@ Snakefile also runs jobs with ``MKL_NUM_THREADS=1``). ``threads=None`` leaves MK
 setting (``MKL_NUM_THREADS`` / all cores).
 
 Why our own ctypes call instead of ``pypardiso.PyPardisoSolver``: pypardiso is used only to
-*find* ``mkl_rt`` (its constructor's search: ``PYPARDISO_MKL_RT``, ``find_library``, the
+*find* ``mkl_rt`` (first where the MKL wheel puts it, ``_mkl_rt_direct``, without importing
+pypardiso, whose import alone ran its slow search: 0.85-7 s; then its constructor's
+search: ``PYPARDISO_MKL_RT``, ``find_library``, the
 venv's ``lib``). Its ``_call_pardiso`` is private, converts ``indptr``/``indices`` to
 1-based int32 copies on every call (O(nnz) per phase), keeps no reference to the arrays
 PARDISO reads again during the solve's iterative refinement, and its ``factorize``/``solve``
@@ -79,6 +90,8 @@ from typing import Optional
 
 import numpy as np
 import scipy.sparse as sp
+
+from .linear import SingularFactorError
 
 __all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
 
@@ -108,6 +121,26 @@ class PardisoError(RuntimeError):
         super().__init__(f"PARDISO phase {phase} failed with error {code}: {_ERRORS.get(code, 'unknown')}")
 
 
+def _mkl_rt_direct() -> str:
+    """``mkl_rt`` where the MKL wheel puts it (``$PYPARDISO_MKL_RT``, else
+    ``sys.prefix/lib/libmkl_rt.so*`` / ``.dylib`` / ``Library/bin/mkl_rt*.dll``), "" if not
+    there. pypardiso's own search (``find_library``, which runs ldconfig/gcc, then a
+    recursive glob of the whole environment) took 7 s of a 12-element relaxation on the
+    loaded machine; this is the fast path, pypardiso's search the fallback."""
+    import glob
+    import os
+    import sys
+
+    env = os.environ.get("PYPARDISO_MKL_RT")
+    if env:
+        return env
+    for pat in ("lib/libmkl_rt.so*", "lib/libmkl_rt*.dylib", "Library/bin/mkl_rt*.dll"):
+        hits = sorted(glob.glob(os.path.join(sys.prefix, pat)), key=len)
+        if hits:
+            return hits[0]
+    return ""
+
+
 def _load():
     """Find mkl_rt the way pypardiso does and bind ``pardiso``; sets the reason on failure."""
     global _LIB, _REASON
@@ -116,13 +149,21 @@ def _load():
     if platform.machine().lower() not in ("x86_64", "amd64", "i386", "i686", "x86"):
         _REASON = f"no MKL on {platform.machine()} (MKL is x86 only)"
         return None
+    import importlib.util
+
+    if importlib.util.find_spec("pypardiso") is None:
+        _REASON = "pypardiso not importable: No module named 'pypardiso'"
+        return None
     try:
-        from pypardiso.pardiso_wrapper import PyPardisoSolver
+        path = _mkl_rt_direct()
+        if not path:  # pypardiso's own search (slow: find_library, a recursive glob)
+            from pypardiso.pardiso_wrapper import PyPardisoSolver
+
+            path = PyPardisoSolver().libmkl._name
     except Exception as exc:  # ImportError, or MKL missing at pypardiso's import
         _REASON = f"pypardiso not importable: {exc}"
         return None
     try:
-        path = PyPardisoSolver().libmkl._name
         lib = ctypes.CDLL(path)  # a fresh CDLL object: our own function prototypes
         fn = lib.pardiso
     except Exception as exc:
@@ -159,29 +200,24 @@ def mkl_library() -> str:
     return "" if lib is None else lib[0]._name
 
 
-def _upper_plan(A):
-    """The upper-triangle CSR pattern of the square CSR/CSC matrix ``A`` (canonical) with
-    every diagonal entry present: ``(indptr, indices (int32, 0-based), src, n_inserted)``
-    where ``data_u = A.data[src]`` (src = -1 marks an inserted zero diagonal)."""
+def _sorted_unique(keys):
+    """Sorted unique int64 keys (a sort and a mask: NumPy 2's hash-based ``np.unique`` was
+    measured 10x slower on these ~10^5-10^6 keys)."""
+    k = np.sort(keys)
+    if k.size:
+        k = k[np.concatenate(([True], k[1:] != k[:-1]))]
+    return k
+
+
+def _upper_entries(A):
+    """``(keys, positions)`` of the upper-triangle entries of the canonical square CSR
+    matrix ``A`` (CSC: of Aᵀ, the same pattern for a symmetric matrix): sorted keys
+    ``row * n + col`` and their positions in ``A.data``."""
     n = A.shape[0]
     rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
     cols = A.indices.astype(np.int64)
     keep = np.flatnonzero(cols >= rows)
-    r, c = rows[keep], cols[keep]
-    has_diag = np.zeros(n, dtype=bool)
-    has_diag[r[r == c]] = True
-    missing = np.flatnonzero(~has_diag)
-    if missing.size:
-        r = np.concatenate([r, missing])
-        c = np.concatenate([c, missing])
-        src = np.concatenate([keep, np.full(missing.size, -1, dtype=np.int64)])
-        order = np.lexsort((c, r))
-        r, c, src = r[order], c[order], src[order]
-    else:
-        src = keep
-    indptr = np.zeros(n + 1, dtype=np.int32)
-    np.cumsum(np.bincount(r, minlength=n), out=indptr[1:])
-    return indptr, np.ascontiguousarray(c, dtype=np.int32), src, int(missing.size)
+    return rows[keep] * n + cols[keep], keep
 
 
 class PardisoFactorization:
@@ -192,7 +228,8 @@ class PardisoFactorization:
     reuses_analysis = True
 
     def __init__(self, threads: Optional[int] = 1, matching: bool = True, drop_zeros: bool = True,
-                 refinement: int = 0, check: bool = False, ordering: int = 2):
+                 refinement: int = 0, check: bool = False, ordering: int = 2, reuse_subpattern: bool = True,
+                 grow_limit: float = 1.25, analyse_stored: bool = False):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"PARDISO is not available: {_REASON}")
@@ -216,9 +253,15 @@ class PardisoFactorization:
         ip[34] = 1                       # iparm(35): zero-based indices
         self.matching = bool(matching)
         self.drop_zeros = bool(drop_zeros)
+        self.reuse_subpattern = bool(reuse_subpattern)
+        self.grow_limit = float(grow_limit)
+        self.analyse_stored = bool(analyse_stored)
+        self._stored = None
         self.n = 0
-        self._pattern = None             # (shape, indptr, indices) of the analysed input
-        self._plan = None
+        self._pattern = None             # (shape, indptr, indices) of the input the plan maps
+        self._plan = None                # (indptr, indices, src, n_missing) of the analysed upper pattern
+        self._keys = None                # sorted keys row * n + col of the analysed upper pattern
+        self.subpattern_reuses = 0
         self._a = None                   # values handed to PARDISO (kept alive for phase 33)
         self._factored = False
         self._alive = False
@@ -258,6 +301,7 @@ class PardisoFactorization:
         if not A.has_canonical_format:
             A = A.copy()
             A.sum_duplicates()
+        self._stored = A                 # the stored pattern (analyse_stored)
         if self.drop_zeros and A.nnz and not np.all(A.data):
             A = A.copy()
             A.eliminate_zeros()
@@ -272,22 +316,45 @@ class PardisoFactorization:
 
     def _values(self, A):
         src = self._plan[2]
-        if self.inserted_diagonal:
+        if self._plan[3]:
             a = np.where(src >= 0, A.data[np.maximum(src, 0)], 0.0)
         else:
             a = A.data[src]
         return np.ascontiguousarray(a, dtype=np.float64)
 
+    def _set_map(self, A, src) -> None:
+        """Map the analysed pattern onto the arrays of ``A`` (src = -1: a zero there)."""
+        self._plan = (self._plan[0], self._plan[1], src, int(np.count_nonzero(src < 0)))
+        self._pattern = (A.shape, A.indptr.copy(), A.indices.copy())
+
+    def _map(self, A, keys, keep):
+        """``src`` of ``A`` on the analysed pattern, or None when an entry of ``A`` is not in it."""
+        ak = self._keys
+        pos = np.searchsorted(ak, keys)
+        if pos.size and (pos[-1] >= ak.size or not np.array_equal(ak[pos], keys)):
+            return None
+        src = np.full(ak.size, -1, dtype=np.int64)
+        src[pos] = keep
+        return src
+
     # ------------------------------------------------------------------ interface
-    def analyse(self, A) -> "PardisoFactorization":
-        """Phase 11 on the pattern (and, with ``matching``, the values) of ``A``."""
+    def analyse(self, A, _extra_keys=None) -> "PardisoFactorization":
+        """Phase 11 on the pattern (and, with ``matching``, the values) of ``A`` (every
+        diagonal entry included; ``_extra_keys``: more upper-triangle entries, as zeros)."""
         A = self._canonical(A)
         if self._alive:
             self.release()
-        self.n = int(A.shape[0])
-        self._plan = _upper_plan(A)
-        self.inserted_diagonal = self._plan[3]
-        self._pattern = (A.shape, A.indptr.copy(), A.indices.copy())
+        n = self.n = int(A.shape[0])
+        keys, keep = _upper_entries(A)
+        diag = np.arange(n, dtype=np.int64) * (n + 1)
+        self.inserted_diagonal = int(n - np.count_nonzero(np.isin(diag, keys, assume_unique=True)))
+        parts = [keys, diag] + ([] if _extra_keys is None else [_extra_keys])
+        ukeys = _sorted_unique(np.concatenate(parts))
+        indptr = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum(np.bincount(ukeys // n, minlength=n), out=indptr[1:])
+        self._keys = ukeys
+        self._plan = (indptr, np.ascontiguousarray(ukeys % n, dtype=np.int32), None, 0)
+        self._set_map(A, self._map(A, keys, keep))
         self._a = self._values(A)
         self._factored = False
         self._alive = True
@@ -296,16 +363,52 @@ class PardisoFactorization:
         return self
 
     def factorize(self, A, inertia: bool = False) -> "PardisoFactorization":
-        """Phase 22 of ``A`` (phase 11 first if its pattern is not the analysed one).
-        ``inertia`` is accepted for the layer's interface: the counts are always there."""
+        """Phase 22 of ``A``, reusing the analysis when ``A``'s pattern is the analysed one
+        or (``reuse_subpattern``) lies in it (the missing entries factorised as zeros);
+        otherwise phase 11 first, on the union of the two patterns when that is at most
+        ``grow_limit`` times ``A``'s (contacts that come and go then stop costing
+        analyses), else on ``A``'s; with ``analyse_stored`` on ``A``'s stored pattern
+        (explicit zeros included) instead. The inertia counts are always there; ``inertia=True``
+        (the layer's contract: a zero pivot raises) raises
+        ``rve.solvers.linear.SingularFactorError`` when a pivot was perturbed (a
+        near-singular matrix; the factorisation stays usable). A non-finite entry raises
+        ``SingularFactorError`` too."""
         A = self._canonical(A)
+        if not np.all(np.isfinite(A.data)):
+            self._factored = False
+            raise SingularFactorError("non-finite matrix entry")
         if not (self._alive and self._same_pattern(A)):
-            self.analyse(A)
+            src = None
+            if self._alive and self.reuse_subpattern and A.shape[0] == self.n:
+                keys, keep = _upper_entries(A)
+                ak = self._keys
+                pos = np.minimum(np.searchsorted(ak, keys), ak.size - 1)
+                n_new = int(np.count_nonzero(ak[pos] != keys))
+                if n_new == 0:
+                    src = np.full(ak.size, -1, dtype=np.int64)
+                    src[pos] = keep
+                    self._set_map(A, src)
+                    self.subpattern_reuses += 1
+                elif self.analyse_stored and self._stored is not None and self._stored.nnz > A.nnz:
+                    # analyse the stored pattern (explicit zeros included: e.g. the contact
+                    # map's candidate pairs) so that later nonzero patterns lie in it
+                    self.analyse(A, _extra_keys=_upper_entries(self._stored)[0])
+                    src = True
+                else:
+                    grow = ak.size + n_new <= self.grow_limit * (keys.size + self.n)
+                    self.analyse(A, _extra_keys=ak if grow else None)
+                    src = True
+            if src is None:
+                stored = self._stored if self.analyse_stored and self._stored.nnz > A.nnz else None
+                self.analyse(A, _extra_keys=None if stored is None else _upper_entries(stored)[0])
         self._a = self._values(A)
         self._factored = False
         self._call(22)
         self._factored = True
         self.factorizations += 1
+        if inertia and self.perturbed_pivots:
+            raise SingularFactorError(f"{self.perturbed_pivots} pivot(s) perturbed (near-singular matrix): "
+                                      "the inertia is not SuperLU's")
         return self
 
     def solve(self, b) -> np.ndarray:
@@ -353,6 +456,7 @@ class PardisoFactorization:
 
     def stats(self) -> dict:
         return {"analyses": self.analyses, "factorizations": self.factorizations, "solves": self.solves,
+                "subpattern_reuses": self.subpattern_reuses,
                 "negative_pivots": int(self.iparm[22]), "perturbed_pivots": self.perturbed_pivots,
                 "refinement_steps": self.refinement_steps, "factor_nnz": self.factor_nnz, **self.memory_kb}
 
@@ -366,6 +470,7 @@ class PardisoFactorization:
             except PardisoError as exc:  # pragma: no cover
                 log.warning("PARDISO release failed: %s", exc)
         self._pattern = None
+        self._keys = None
 
     def __enter__(self):
         return self

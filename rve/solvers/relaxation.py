@@ -38,6 +38,10 @@ rebuildable contact map, ``energy(x)``, ``set_onset``, ``params.margin``; e.g.
    Repeated (``static_rounds``) until a rebuild at the solution finds no active pair the
    previous map missed. If it fails, pseudo-transient continuation takes over.
 
+Linear solver: ``settings.linear_backend`` (None: ``$RVE_LINEAR_BACKEND``, else "auto":
+PARDISO when available, SuperLU otherwise; docs/engine.md); each static solve keeps one
+backend instance (analysis reuse).
+
 ``RelaxResult``: final ``x``, ``w`` (zero velocities after the static phase), ``t``,
 ``history`` (one dict per chunk/solve/stage: iterations, factorisations, residuals,
 energies, pairs, active pairs, max overlap / R, wall time), ``timings`` (seconds:
@@ -87,6 +91,7 @@ class RelaxSettings:
     backtrack: int = 3
     near: float = 0.0
     reuse: int = 0
+    linear_backend: Optional[str] = None   # None: $RVE_LINEAR_BACKEND, else auto (rve.solvers.linear)
 
 
 @dataclass
@@ -166,13 +171,13 @@ def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Opti
         for rnd in range(s.static_rounds):
             system.rebuild(x)
             xs, ws, nres = capped_newton(system, x, t, atol=s.static_atol, rtol=s.static_rtol,
-                                         max_iter=s.static_max_iter, step_cap=cap)
+                                         max_iter=s.static_max_iter, step_cap=cap, backend=s.linear_backend)
             how = "capped newton"
             if not nres.converged:
                 log.warning("static Newton failed (%s); pseudo-transient continuation", nres.reason)
                 system.rebuild(xs)
                 xs2, ws2, pres = pseudo_transient_solve(system, xs, w, t, atol=s.static_atol, rtol=s.static_rtol,
-                                                        max_iter=200)
+                                                        max_iter=200, backend=s.linear_backend)
                 how = "pseudo-transient"
                 nres = NewtonResult(pres.u, pres.converged, nres.iterations + pres.iterations,
                                     nres.residuals + pres.residuals, pres.reason)
@@ -216,13 +221,14 @@ def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:
         xs, _, res = minimize_energy(system, x, t0, atol=s.static_atol, rtol=s.static_rtol,
                                      max_iter=s.energy_max_iter, step_cap=s.step_cap, label=f"onset={eps:g}R",
                                      time_budget=budget, sigma0=None if k == 0 else 0.0,
-                                     backtrack=s.backtrack, near=s.near, reuse=s.reuse)
+                                     backtrack=s.backtrack, near=s.near, reuse=s.reuse,
+                                     backend=s.linear_backend)
         x = xs
         st = system.contact_state(x)
         rec = {"phase": "static", "stage": k + 1, "method": "minimize_energy", "onset_over_R": eps,
                "converged": bool(res.converged), "newton_iterations": int(res.iterations),
                "factorizations": int(res.factorizations), "reused_factorization_steps": int(res.reused),
-               "rejections": int(res.rejections),
+               "rejections": int(res.rejections), "linear_backend": res.backend, "analyses": int(res.analyses),
                "map_rebuilds": int(res.rebuilds), "negative_pivots": int(res.negative_pivots),
                "residuals": [float(v) for v in res.residuals], "energies": [float(v) for v in res.energies],
                "sigmas": [float(v) for v in res.sigmas], "steps": [float(v) for v in res.steps],

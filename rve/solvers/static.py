@@ -14,6 +14,9 @@ The Jacobian is ``dF/dx`` on the mechanical columns and ``dF/dw`` on the others.
 
 Two paths to equilibrium:
 
+Linear solves: ``rve.solvers.linear.sparse_solve`` (PARDISO when available, SuperLU
+otherwise; docs/engine.md); ``pseudo_transient_solve`` keeps one backend instance per run.
+
 * ``static_solve`` -- Newton (with the backtracking line search and det F guard of
   ``rve.solvers.newton``); quadratic near the solution.
 * ``pseudo_transient_solve`` -- pseudo-transient continuation
@@ -32,7 +35,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .linear import sparse_solve
+from .linear import shifted, sparse_solve
 from .newton import NewtonResult, convergence_rates, newton
 from .system import FreeDofs, mech_mask
 
@@ -112,6 +115,7 @@ def pseudo_transient_solve(
     sigma_boost: float = 10.0,
     max_rejections: int = 30,
     label: Optional[str] = None,
+    backend=None,
 ):
     """Pseudo-transient continuation to the static equilibrium ``F(x, w*, t) = 0``.
 
@@ -122,9 +126,24 @@ def pseudo_transient_solve(
     with no mass on any unknown, M is replaced by the identity.
     Convergence when ``|F| <= atol`` or ``|F| <= rtol |F_0|``.
 
+    ``backend``: the linear solver (``rve.solvers.linear``; one instance kept for the run,
+    so PARDISO's analysis is reused while the pattern is unchanged).
+
     Returns ``(x, w, NewtonResult)`` (``iterations`` counts accepted steps, each one linear
     solve; rejected trials are logged).
     """
+    from .minimize import _release, run_backend
+
+    solver, owned = run_backend(backend)
+    try:
+        return _pseudo_transient(system, x, w, t, sigma0, atol, rtol, max_iter, reject_factor, sigma_boost,
+                                 max_rejections, label, solver)
+    finally:
+        _release(solver, owned)
+
+
+def _pseudo_transient(system, x, w, t, sigma0, atol, rtol, max_iter, reject_factor, sigma_boost, max_rejections,
+                      label, solver):
     prob = StaticProblem(system, x, w, t)
     label = label or f"pseudo-transient t={prob.t:.6g}"
     Mff = prob.fd.matrix(sp.csr_matrix(system.mass()))
@@ -150,9 +169,9 @@ def pseudo_transient_solve(
             return (*prob.state(u), NewtonResult(u, True, it - 1, res))
         sigma = sigma0 * beta * rn / r0
         while True:
-            A = (K + sigma * Mff).tocsc() if sigma > 0 else K
+            A = shifted(K, Mff, sigma) if sigma > 0 else K
             try:
-                du = -sparse_solve(A, r)
+                du = -sparse_solve(A, r, backend=solver)
             except RuntimeError:
                 du = np.full_like(u, np.nan)
             trial = u + du
