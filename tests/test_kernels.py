@@ -105,8 +105,8 @@ def _random_pairs(P=40, G=4, seed=1, nodes=60):
 
 @needs_numba
 @pytest.mark.parametrize("recompute", [True, False])
-@pytest.mark.parametrize("onset,near", [(0.0, 0.0), (0.03, 0.0), (0.0, 0.05)])
-def test_contact_kernel_matches_numpy(recompute, onset, near):
+@pytest.mark.parametrize("onset", [0.0, 0.03])
+def test_contact_kernel_matches_numpy(recompute, onset):
     from rve.kernels.contact import chord_gaps as cgaps, penalty_forms
     from rve.physics.contact_forms import chord_gaps, chord_geometry, penalty_forces
 
@@ -116,22 +116,15 @@ def test_contact_kernel_matches_numpy(recompute, onset, near):
     ends = lambda sel: (r[npl[sel, 0]], r[npl[sel, 1]], r[nmi[sel, 0]], r[nmi[sel, 1]])  # noqa: E731
     g_ref = chord_gaps(*ends(slice(None)), sp_, gr, s_minus)
     assert _rel(cgaps(r, npl, nmi, sp_, gr, s_minus, recompute), g_ref) < RTOL
-    act_ref = np.flatnonzero((g_ref > (-near if near else 0.0)).any(axis=1))
+    act_ref = np.flatnonzero((g_ref > 0.0).any(axis=1))
     assert 0 < act_ref.size < len(gr)
     for jac in (True, False):
-        act, R, K = penalty_forms(r, npl, nmi, sp_, gr, s_minus, recompute, w, Ps, onset, near if jac else 0.0, jac)
-        if not jac:
-            act_ref = np.flatnonzero((g_ref > 0.0).any(axis=1))
+        act, R, K = penalty_forms(r, npl, nmi, sp_, gr, s_minus, recompute, w, Ps, onset, jac)
         np.testing.assert_array_equal(act, act_ref)
         geo = chord_geometry(*ends(act), sp_[act], gr[act], None if recompute else sm[act])
         R0, K0 = penalty_forces(geo, w[act], Ps, jac, onset)
         assert _rel(R, R0) < RTOL
         if jac:
-            if near:
-                pts = (geo.g <= 0.0) & (geo.g > -near) & (geo.rho > 1e-300)
-                kn = np.where(pts, w[act, None] * Ps * (1.0 + geo.g / near), 0.0)
-                cn = (geo.c[..., :, None] * geo.n[..., None, :]).reshape(act.size, -1, 12)
-                K0 = K0 + np.matmul(np.swapaxes(cn * kn[..., None], 1, 2), cn).reshape(K0.shape)
             assert _rel(K, K0) < RTOL
         else:
             assert K is None
@@ -190,12 +183,10 @@ def _mech_contact_system(onset=0.0, recompute=True, seed=4):
 
 
 @pytest.mark.parametrize("path", PATHS)
-@pytest.mark.parametrize("onset,recompute,near", [(0.0, True, 0.0), (0.1, True, 0.0), (0.0, False, 0.0),
-                                                  (0.0, True, 0.03)])
-def test_mechanics_contact_tangent_fd_both_paths(monkeypatch, path, onset, recompute, near):
+@pytest.mark.parametrize("onset,recompute", [(0.0, True), (0.1, True), (0.0, False)])
+def test_mechanics_contact_tangent_fd_both_paths(monkeypatch, path, onset, recompute):
     monkeypatch.setenv("RVE_KERNELS", path)
     sysm, x = _mech_contact_system(onset, recompute)
-    sysm.tangent_near = near
     w = np.zeros(sysm.n)
     F, Fx, _ = sysm.evaluate(x, w, 0.0)
     assert sysm.contact_state(x)["active_points"] > 0
@@ -203,9 +194,6 @@ def test_mechanics_contact_tangent_fd_both_paths(monkeypatch, path, onset, recom
     h = 1e-7
     cols = np.flatnonzero(sysm.mech)
     scale = 1e-6 * (1 + np.abs(Fxd).max())
-    if near:  # the near-band stiffness is a model (tangent only): compare with it removed
-        sysm.tangent_near = 0.0
-        Fxd = sysm.evaluate(x, w, 0.0)[1].toarray()
     for c in cols:
         xp, xm = x.copy(), x.copy()
         xp[c] += h
@@ -238,7 +226,7 @@ def test_coupled_and_contact_fd_tests_pass_on_both_paths(monkeypatch, path):
 def test_weave_numba_equals_numpy(monkeypatch, elements):
     """The 80-fibril thesis plain weave: F, Fx, Fw and the energy of both paths agree to
     1e-12 (relative to the largest entry) at a perturbed designed state, with and without
-    the onset and the near-band tangent."""
+    the onset."""
     from rve.config.loader import load_config
     from rve.scenes.fabric_relax import setup
     from pathlib import Path
@@ -248,9 +236,8 @@ def test_weave_numba_equals_numpy(monkeypatch, elements):
     _, system, x = setup(cfg)
     x = x + 0.01 * np.random.default_rng(3).standard_normal(x.size) * system.mech
     w = np.zeros(system.n)
-    for onset, near in ((0.0, 0.0), (0.05, 0.0), (0.0, 0.05)):
+    for onset in (0.0, 0.05):
         system.set_onset(onset)
-        system.tangent_near = near
         out = {}
         for path in ("numpy", "numba"):
             monkeypatch.setenv("RVE_KERNELS", path)

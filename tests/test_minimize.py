@@ -43,7 +43,6 @@ class EnergySystem:
         self.layout = _Layout(n)
         self.params = _Params(margin)
         self.map = _Map()
-        self.tangent_near = 0.0
         self.fixed = np.asarray(fixed, dtype=np.int64)
         self.x_map = None
         self.rebuilds = 0

@@ -80,11 +80,6 @@ class FabricRelaxation(Section):
         None, description="energy + coarse_elements: onset stages on the target mesh before the final one "
                           "(null: none, the target mesh starts from the interpolated coarse minimum with contact.onset)")
     energy_max_iter: Integer = Field(300, ge=1, description="energy: Newton iterations per stage")
-    near_band: Length = Field("0 mm", ge=0, description="energy: while the steps are large, the Newton model also "
-                                                        "holds the penalty stiffness of points closer than this "
-                                                        "(tangent only; 0: off)")
-    reuse: Integer = Field(0, ge=0, description="energy: extra modified-Newton steps per factorisation while "
-                                                "sigma > 0 (residual + energy + triangular solve each)")
     backtrack: Integer = Field(3, ge=0, description="energy: step halvings (energy evaluations only) before a "
                                                     "trial is rejected and refactorised with a larger sigma")
     wall_budget_s: Optional[float] = Field(None, gt=0, description="energy: stop after this wall time (s)")

@@ -68,8 +68,7 @@ def relax_settings(cfg, schedule=None) -> RelaxSettings:
                          newton_atol=r.static_atol, static=r.static, static_atol=r.static_atol,
                          static_rounds=r.static_rounds, static_max_iter=r.static_max_iter,
                          method=r.method, onset_schedule=tuple(schedule), energy_max_iter=r.energy_max_iter,
-                         time_budget=r.wall_budget_s, backtrack=r.backtrack, near=r.near_band,
-                         reuse=r.reuse)
+                         time_budget=r.wall_budget_s, backtrack=r.backtrack)
 
 
 def _coarse_stage(cfg, system):

@@ -11,11 +11,10 @@ table), ``weight`` (P,).
 * ``chord_gaps(r, npl, nmi, s_plus, gap_radius, s_minus, recompute)`` -> g (P, G): the
   overlaps, with the formulas of ``rve.physics.contact_forms.chord_gaps``.
 * ``penalty_forms(r, npl, nmi, s_plus, gap_radius, s_minus, recompute, weight, penalty,
-  onset, near, jacobian)`` -> ``(act, R (Pa, 4, 3), K (Pa, 4, 3, 4, 3) or None)``: the pairs
-  with a point of g > 0 (g > -near when ``near`` > 0) and their penalty residual and tangent:
-  ``chord_geometry`` + ``penalty_forces`` of ``rve.physics.contact_forms`` (the reference,
-  formulas there) and the ``tangent_near`` model stiffness of ``ContactTerm.forms``, fused in
-  one pass over the points (no (P, G, 4, 3) temporaries).
+  onset, jacobian)`` -> ``(act, R (Pa, 4, 3), K (Pa, 4, 3, 4, 3) or None)``: the pairs
+  with a point of g > 0 and their penalty residual and tangent: ``chord_geometry`` +
+  ``penalty_forces`` of ``rve.physics.contact_forms`` (the reference, formulas there),
+  fused in one pass over the points (no (P, G, 4, 3) temporaries).
 """
 from __future__ import annotations
 
@@ -77,7 +76,7 @@ def _select(r, npl, nmi, sp, gr, sm, recompute, thr, mark):
 
 
 @njit(cache=True, nogil=True)
-def _forms(r, npl, nmi, sp, gr, sm, recompute, weight, act, Pstar, onset, near, jacobian, R, K):
+def _forms(r, npl, nmi, sp, gr, sm, recompute, weight, act, Pstar, onset, jacobian, R, K):
     Gn = sp.shape[1]
     c = np.empty(4)
     ds = np.empty((4, 3))
@@ -158,15 +157,6 @@ def _forms(r, npl, nmi, sp, gr, sm, recompute, weight, act, Pstar, onset, near, 
                             for b in range(4):
                                 for jj in range(3):
                                     K[ia, a, i, b, jj] += bdi * ds[b, jj]
-            elif jacobian and near > 0.0 and g <= 0.0 and g > -near and rho > _TINY:
-                kn = w * Pstar * (1.0 + g / near)
-                if kn > 0.0:
-                    for a in range(4):
-                        for i in range(3):
-                            cni = c[a] * n[i] * kn
-                            for b in range(4):
-                                for jj in range(3):
-                                    K[ia, a, i, b, jj] += cni * (c[b] * n[jj])
 
 
 def _prep(r, npl, nmi, s_plus, gap_radius, s_minus):
@@ -188,19 +178,18 @@ def chord_gaps(r, npl, nmi, s_plus, gap_radius, s_minus=None, recompute: bool = 
 
 
 def penalty_forms(r, npl, nmi, s_plus, gap_radius, s_minus, recompute: bool, weight, penalty: float,
-                  onset: float = 0.0, near: float = 0.0, jacobian: bool = True):
+                  onset: float = 0.0, jacobian: bool = True):
     """``(act, R, K)`` of the active pairs (module docstring)."""
     r, npl, nmi, sp, gr, sm = _prep(r, npl, nmi, s_plus, gap_radius, s_minus)
     w = np.ascontiguousarray(weight, dtype=np.float64)
     P = sp.shape[0]
     mark = np.zeros(P, np.bool_)
-    thr = -float(near) if near > 0.0 else 0.0
-    _select(r, npl, nmi, sp, gr, sm, bool(recompute), thr, mark)
+    _select(r, npl, nmi, sp, gr, sm, bool(recompute), 0.0, mark)
     act = np.flatnonzero(mark)
     Pa = act.size
     R = np.zeros((Pa, 4, 3))
     K = np.zeros((Pa, 4, 3, 4, 3)) if jacobian else np.zeros((0, 4, 3, 4, 3))
     if Pa:
         _forms(r, npl, nmi, sp, gr, sm, bool(recompute), w, act, float(penalty), float(onset),
-               float(near) if jacobian else 0.0, bool(jacobian), R, K)
+               bool(jacobian), R, K)
     return act, R, (K if jacobian else None)

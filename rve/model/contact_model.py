@@ -24,7 +24,7 @@ element group), ``params`` a ``ContactParams`` (the ``ContactTerm``'s law); impl
   (``contact_energy``) of a mechanics-only system; ``F(x, 0)`` is its exact gradient.
 * Diagnostics: ``gaps``, ``active_pairs``, ``geometry``, ``contact_state``,
   ``fibril_contact_forces``, ``contact_conductance``, ``max_displacement_since_rebuild``;
-  ``onset`` / ``set_onset``, ``tangent_near``, ``map``; ``stats`` (counts and wall times).
+  ``onset`` / ``set_onset``, ``map``; ``stats`` (counts and wall times).
 
 Everything else (``mesh``, ``layout``, ``nodal``, ``end_currents``, ...) is the base model's.
 """
@@ -85,14 +85,6 @@ class ContactSystem:
     @property
     def onset(self) -> float:
         return self.term.onset
-
-    @property
-    def tangent_near(self) -> float:
-        return self.term.tangent_near
-
-    @tangent_near.setter
-    def tangent_near(self, value: float) -> None:
-        self.term.tangent_near = float(value)
 
     def nodal(self, u):
         return self.layout.as_nodal(u)

@@ -6,7 +6,7 @@ Both work on a mechanics-only ``ContactRelaxable`` system (``rve.solvers.system`
 ``DynamicSystem`` with a rebuildable contact map, ``energy(x)``, ``layout``,
 ``params.margin``; e.g. ``rve.model.ContactSystem``) at zero velocities, on the
 free dofs of ``rve.solvers.static.StaticProblem``, and rebuild the system's contact map
-themselves (their one side effect on the system besides ``tangent_near``).
+themselves (their one side effect on the system).
 
 * ``minimize_energy(system, x, t=0, ...) -> (x, w, MinimizeResult)``: the static
   equilibrium as a **local minimum** of ``system.energy(x)``: Newton with a
@@ -187,7 +187,7 @@ class MinimizeResult(NewtonResult):
     ``energies`` (N mm), ``sigmas`` (regularisation used by each accepted step),
     ``steps`` (step fraction alpha), ``factorizations``, ``rejections``, ``rebuilds``,
     ``negative_pivots`` (inertia of the last unregularised tangent; 0: a local minimum),
-    ``reused`` (modified-Newton steps with a kept factorisation), ``backend`` (the linear
+    ``backend`` (the linear
     solver's name) and ``analyses`` (its symbolic analyses in this run; 0 for SuperLU,
     which orders every factorisation afresh)."""
 
@@ -195,7 +195,6 @@ class MinimizeResult(NewtonResult):
     sigmas: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     factorizations: int = 0
-    reused: int = 0
     rejections: int = 0
     rebuilds: int = 0
     negative_pivots: int = -1
@@ -204,7 +203,7 @@ class MinimizeResult(NewtonResult):
 
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
-                    label="minimize", time_budget=None, backtrack=0, near=0.0, reuse=0, backend=None):
+                    label="minimize", time_budget=None, backtrack=0, backend=None):
     """Static equilibrium of a mechanics-only ``ContactRelaxable`` system (e.g. a
     ``ContactSystem``) as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
@@ -225,12 +224,8 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     the factor was indefinite (a memory fading x1/4 per iteration); x2 after a shortened
     step, x4 after a poor or rejected one; below 1e-8 of the stiffest mode's sigma it is 0:
     plain Newton, quadratic convergence. ``sigma0`` is the first sigma (default 1e-6 of the
-    stiffest mode's; 0 to start with plain Newton from a near solution). Options measured
-    without gain on the weave (docs/relaxation.md): ``near`` (mm; while steps are large the
-    tangent also holds the normal penalty stiffness of points closer than this,
-    the system's ``tangent_near``) and ``reuse`` (modified-Newton steps with the same
-    factorisation while sigma > 0). Converged when ``|F_free| <= atol`` or
-    ``<= rtol |F_0|``. ``backend``: the linear solver of the inertia check (``run_backend``:
+    stiffest mode's; 0 to start with plain Newton from a near solution). Converged when
+    ``|F_free| <= atol`` or ``<= rtol |F_0|``. ``backend``: the linear solver of the inertia check (``run_backend``:
     one instance for the whole run, so PARDISO's analysis is reused while the pattern is
     unchanged; default ``rve.solvers.linear.resolve_backend()``).
 
@@ -239,13 +234,12 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     solver, owned = run_backend(backend)
     try:
         return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
-                                backtrack, near, reuse, solver)
+                                backtrack, solver)
     finally:
         _release(solver, owned)
 
 
-def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, near,
-                     reuse, solver):
+def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, solver):
     t0 = time.perf_counter()
     keep = KEEP_STORED_PATTERN and solver.name == "pardiso"
     analyses0 = int(getattr(solver, "analyses", 0))
@@ -264,7 +258,6 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
     x = np.array(x, float, copy=True)
     if system.max_displacement_since_rebuild(x) > 0.0:
         system.rebuild(x)
-    system.tangent_near = float(near)
     prob, cen, Mff = setup(x)
     u = prob.u0()
     r, J = prob(u)
@@ -360,39 +353,6 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
         out.sigmas.append(sigma)
         out.steps.append(alpha)
         sigma_used = sigma
-        if reuse and sigma_used > 0.0 and ratio > 0.5 and not backtracked:
-            # modified-Newton steps with the same factorisation of K + sigma M (residual +
-            # energy + a triangular solve each, no assembly of K): while the regularised
-            # model is good, they buy most of a new factorisation's progress at a fraction
-            # of its cost. Never in the sigma = 0 phase (quadratic convergence untouched).
-            inner = 0
-            while inner < reuse and rn > atol and it < max_iter:
-                du2 = -lu.solve(r)
-                slope2 = float(r @ du2)
-                if not slope2 < 0.0:
-                    break
-                mv2 = float(np.abs(du2[cen]).max()) * np.sqrt(3.0) if cen.size else 0.0
-                a2 = min(1.0, cap / mv2) if mv2 > 0 else 1.0
-                u2 = u + a2 * du2
-                x2 = prob.state(u2)[0]
-                if system.max_displacement_since_rebuild(x2) > guard:
-                    break
-                P2 = float(system.energy(x2))
-                if not P2 < Pi + 1e-4 * a2 * slope2:
-                    break
-                F2, _, _ = system.evaluate(x2, w0, t, jacobian=False)
-                r2 = np.asarray(F2, float)[prob.free]
-                inner += 1
-                it += 1
-                u, r, rn, Pi = u2, r2, float(np.linalg.norm(r2)), P2
-                out.residuals.append(rn)
-                out.energies.append(Pi)
-                out.sigmas.append(sigma_used)
-                out.steps.append(a2)
-                out.reused += 1
-                log.info("%s it=%d |F|=%.3e Pi=%.12e step=%.3g (same factorisation)", label, it, rn, Pi, a2)
-            if inner:
-                r, J = prob(u)
         # lower sigma after a good full step, but not below twice the last sigma at which
         # K + sigma M was indefinite (that memory fades by 4x per iteration): saves the
         # factorisations the inertia check would reject
@@ -411,17 +371,10 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
         elif alpha < 1.0:
             sigma = max(2.0 * sigma, sig_floor)
         sig_neg *= 0.25
-        if system.tangent_near > 0.0 and not backtracked and alpha == 1.0 and (
-                alpha * move < 0.25 * system.tangent_near or rn < 1e-5):
-            # the motion is now small against the near band: exact tangent from here on
-            system.tangent_near = 0.0
-            r, J = prob(u)
-            log.info("%s it=%d: near-contact stiffness off (exact Newton from here)", label, it)
         rates = convergence_rates(out.residuals)
         log.info("%s it=%d |F|=%.3e Pi=%.12e dPi=%.2e ratio=%.2f step=%.3g sigma=%.3g pairs=%d rate=%s wall=%.1f",
                  label, it, rn, Pi, dPi, ratio, alpha, out.sigmas[-1], system.map.n_pairs,
                  f"{rates[-1]:.2f}" if rates else "-", time.perf_counter() - t0)
-    system.tangent_near = 0.0
     out.u = u
     out.iterations = it
     out.backend = solver.name

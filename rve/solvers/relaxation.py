@@ -89,8 +89,6 @@ class RelaxSettings:
     energy_max_iter: int = 300
     time_budget: Optional[float] = None
     backtrack: int = 3
-    near: float = 0.0
-    reuse: int = 0
     linear_backend: Optional[str] = None   # None: $RVE_LINEAR_BACKEND, else auto (rve.solvers.linear)
 
 
@@ -221,13 +219,13 @@ def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:
         xs, _, res = minimize_energy(system, x, t0, atol=s.static_atol, rtol=s.static_rtol,
                                      max_iter=s.energy_max_iter, step_cap=s.step_cap, label=f"onset={eps:g}R",
                                      time_budget=budget, sigma0=None if k == 0 else 0.0,
-                                     backtrack=s.backtrack, near=s.near, reuse=s.reuse,
+                                     backtrack=s.backtrack,
                                      backend=s.linear_backend)
         x = xs
         st = system.contact_state(x)
         rec = {"phase": "static", "stage": k + 1, "method": "minimize_energy", "onset_over_R": eps,
                "converged": bool(res.converged), "newton_iterations": int(res.iterations),
-               "factorizations": int(res.factorizations), "reused_factorization_steps": int(res.reused),
+               "factorizations": int(res.factorizations),
                "rejections": int(res.rejections), "linear_backend": res.backend, "analyses": int(res.analyses),
                "map_rebuilds": int(res.rebuilds), "negative_pivots": int(res.negative_pivots),
                "residuals": [float(v) for v in res.residuals], "energies": [float(v) for v in res.energies],

@@ -45,8 +45,6 @@ contact term, e.g. ``ContactSystem``): a ``DynamicSystem`` plus
   ``max_displacement_since_rebuild(x)`` -- the largest centroid motion since then;
 * ``energy(x)`` -- the potential whose gradient is the static residual ``F(x, 0, t)``;
 * ``set_onset(fraction)`` -- the penalty onset width (fraction of R) of the contact law;
-* ``tangent_near`` -- float attribute (mm), read and written by the minimiser: while > 0
-  the tangent also holds the normal penalty stiffness of points closer than it;
 * ``map`` (``n_pairs``, ``e_plus``, ``e_minus``), ``active_pairs(x)`` (indices of the
   pairs in contact) and ``contact_state(x)`` (dict with ``pairs``, ``active_pairs``,
   ``max_overlap_over_R``) -- for the records and the check that a final rebuild finds no
@@ -98,7 +96,6 @@ class ContactRelaxable(DynamicSystem, Protocol):
     layout: object
     params: object
     map: object
-    tangent_near: float
 
     def rebuild(self, x: np.ndarray) -> None:
         ...

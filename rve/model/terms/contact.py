@@ -20,7 +20,7 @@ params, E_star)``: a term of *pair elements*, not of beam elements:
 * diagnostics: ``geometry(x)``, ``gaps(x)``, ``active_pairs(x)``, ``energy(x)`` (penalty
   energy, the potential of the mechanical residual), ``contact_state(x)``,
   ``conductance_by_pair(x, field)``; ``onset`` / ``set_onset`` (C² onset of the penalty
-  law), ``tangent_near`` (model stiffness of points about to touch, tangent only).
+  law).
 """
 from __future__ import annotations
 
@@ -95,7 +95,6 @@ class ContactTerm:
         #: > 0: the tangent (not the residual) also holds the normal penalty stiffness of the
         #: points whose separation is below this (mm), ramped to 0 at it: a model for Newton
         #: steps that close gaps (``minimize_energy`` sets it while far from the solution)
-        self.tangent_near = 0.0
         self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
         self.map: Optional[ContactMap] = None
 
@@ -175,13 +174,9 @@ class ContactTerm:
         none = np.zeros(0, np.int64), np.zeros(0), None, None
         if self.map.n_pairs == 0:
             return none
-        near = float(self.tangent_near) if (jacobian and not self.scalar) else 0.0
         if not self.scalar and use_numba():
-            return self._forms_compiled(x, near, jacobian)
-        if near > 0.0:
-            act = np.flatnonzero((self.gaps(x) > -near).any(axis=1))
-        else:
-            act = self.active_pairs(x)
+            return self._forms_compiled(x, jacobian)
+        act = self.active_pairs(x)
         if act.size == 0:
             return none
         geo = self.geometry(x, act)
@@ -191,15 +186,6 @@ class ContactTerm:
             Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
             if not jacobian:
                 return act, Rm, None, None
-            if near > 0.0:
-                # model stiffness of the points about to touch (separation < near): the
-                # normal penalty stiffness, ramped to 0 at the band's edge (tangent only)
-                pts = (geo.g <= 0.0) & (geo.g > -near) & (geo.rho > 1e-300)
-                kn = np.where(pts, wgt[:, None] * self.params.penalty * (1.0 + geo.g / near), 0.0)
-                if np.any(kn > 0):
-                    cn = geo.c[..., :, None] * geo.n[..., None, :]  # (Pa, G, 4, 3)
-                    cn = cn.reshape(Pa, -1, 12)
-                    Km = Km + np.matmul(np.swapaxes(cn * kn[..., None], 1, 2), cn).reshape(Km.shape)
             return act, Rm, Km.reshape(Pa, -1), None
         Rl = np.zeros((Pa, m, nC))
         Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
@@ -231,7 +217,7 @@ class ContactTerm:
             return act, Rl, None, None
         return act, Rl, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
 
-    def _forms_compiled(self, x, near: float, jacobian: bool):
+    def _forms_compiled(self, x, jacobian: bool):
         """``forms`` of a mechanics-only term by the compiled kernel (rve.kernels.contact)."""
         from ...kernels.contact import penalty_forms as compiled
 
@@ -240,7 +226,7 @@ class ContactTerm:
         rec = bool(self.params.recompute_closest)
         act, Rm, Km = compiled(r, cmap.nodes_plus, cmap.nodes_minus, cmap.s_plus, self.gap_radius,
                                None if rec else cmap.s_minus, rec, self.weight, float(self.params.penalty),
-                               self.onset, near, jacobian)
+                               self.onset, jacobian)
         if act.size == 0:
             return np.zeros(0, np.int64), np.zeros(0), None, None
         return act, Rm, (Km.reshape(act.size, -1) if jacobian else None), None
