@@ -55,7 +55,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import lapack
 
-from .linear import band_of, get_backend, sparse_solve
+from .linear import band_of, get_backend, is_symmetric, sparse_solve
 
 __all__ = ["NewtonResult", "newton", "convergence_rates", "JacobianReuse", "StageFactorisation"]
 
@@ -120,6 +120,12 @@ class StageFactorisation:
             if info == 0:
                 self.kind, self._band = "banded", (lo, up, lu, piv)
                 return
+        if getattr(backend, "name", "") == "pardiso" and not is_symmetric(J):
+            # PARDISO runs as a symmetric LDL^T (upper triangle only): an unsymmetric stage
+            # matrix (Lorentz / back-EMF couplings) goes to SuperLU
+            self._backend = get_backend("superlu", symmetric=False).factorize(J)
+            self.kind = "superlu-colamd"
+            return
         try:
             self._backend = backend.factorize(J)
             self.kind = getattr(backend, "name", "backend")
