@@ -178,12 +178,7 @@ class YarnNetwork:
                 and np.all(np.isfinite(rc))):
             raise ValueError("R_y and R_c must be positive and finite")
         n = self.n_nodes
-        U = np.zeros((n, len(pairs)))
-        for k, (plus, minus) in enumerate(pairs):
-            a, b = self.terminal_node(plus), self.terminal_node(minus)
-            if a == b:
-                raise ValueError(f"probe {k}: the two terminals are the same yarn end")
-            U[a, k], U[b, k] = 1.0, -1.0
+        U = self._terminal_incidence(pairs)
         Ly, Lc = self._laplacians
         gy, gc = 1.0 / ry, 1.0 / rc
         s = (gy + gc)[:, None, None] / n
@@ -198,6 +193,16 @@ class YarnNetwork:
         out = shape + (len(pairs),)
         return R.reshape(out), py.reshape(out), pc.reshape(out)
 
+    def _terminal_incidence(self, pairs) -> np.ndarray:
+        """(n_nodes, n_pairs): +1 at each probe's first terminal node, -1 at its second."""
+        U = np.zeros((self.n_nodes, len(pairs)))
+        for k, (plus, minus) in enumerate(pairs):
+            a, b = self.terminal_node(plus), self.terminal_node(minus)
+            if a == b:
+                raise ValueError(f"probe {k}: the two terminals are the same yarn end")
+            U[a, k], U[b, k] = 1.0, -1.0
+        return U
+
     @cached_property
     def _laplacians3(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         ye, ce = self.edges
@@ -211,12 +216,7 @@ class YarnNetwork:
         if not (np.all(vals > 0) and np.all(np.isfinite(vals))):
             raise ValueError("R_yw, R_yf and R_c must be positive and finite")
         n = self.n_nodes
-        U = np.zeros((n, len(pairs)))
-        for k, (plus, minus) in enumerate(pairs):
-            a, b = self.terminal_node(plus), self.terminal_node(minus)
-            if a == b:
-                raise ValueError(f"probe {k}: the two terminals are the same yarn end")
-            U[a, k], U[b, k] = 1.0, -1.0
+        U = self._terminal_incidence(pairs)
         g = 1.0 / vals
         Ls = self._laplacians3
         A = sum(gi * L for gi, L in zip(g, Ls)) + g.sum() / n

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .dynamic_wire import field_ramp  # the one C2 switch-on of B
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, CircuitBC, ContactParams, ContactSystem, Couplings, DirichletBC
 from ..model import RowScaledSystem
@@ -60,18 +61,6 @@ def field_vector(cfg) -> np.ndarray:
     o = cfg.field.orientation
     d = np.asarray(ORIENTATIONS[o] if isinstance(o, str) else o, float)
     return cfg.field.magnitude * d / np.linalg.norm(d)
-
-
-def field_ramp(t_r: float):
-    """C2 quintic switch-on of B over [0, t_r] (None: a step at t = 0, the thesis)."""
-    if not t_r > 0:
-        return None
-
-    def ramp(t):
-        s = min(max(t / t_r, 0.0), 1.0)
-        return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
-
-    return ramp
 
 
 @dataclass
