@@ -58,7 +58,8 @@ from .schema import DIMENSIONLESS, EDGES, VARIABLES, YARNS
 #: the variables a state stores (rve.tables.schema.VARIABLES): their values mark the states
 STORED_VARIABLES = tuple(VARIABLES)
 
-__all__ = ["add_macro_quantities", "mode_deformation", "yarn_strain_and_angle", "cell_geometry", "MACRO_VARIABLES"]
+__all__ = ["add_macro_quantities", "mode_deformation", "yarn_strain_and_angle", "cell_geometry",
+           "sheet_network_parameters", "MACRO_VARIABLES"]
 
 #: the variables add_macro_quantities writes (in this order)
 MACRO_VARIABLES = ("membrane_force", "membrane_force_at_zero_strain", "side_force_imbalance", "yarn_strain",
@@ -137,6 +138,53 @@ def _side_index(ds: xr.Dataset, names) -> Optional[int]:
 
 def _var(dims, data, units, long_name, **extra) -> xr.Variable:
     return xr.Variable(dims, data, attrs={"units": units, "long_name": long_name, **extra})
+
+
+def sheet_network_parameters(ds: xr.Dataset) -> xr.Dataset:
+    """The network parameters of the two-potential sheet model, one choice per state that
+    the sheet parameters (``yarn_sheet_conductance`` ...) and any resistor network of the
+    same patch must share (docs/macro_export.md §1, "Which network fit"):
+
+    * ``yarn_resistance`` (*state dims, yarn) [ohm]: R_y of the warp and of the weft yarn
+      across one cell; ``contact_resistance`` (*state dims) [ohm]: R_c;
+    * ``warp_weft_fit`` (*state dims, bool): True where they are the warp/weft fit
+      (``yarn_resistance_warp``, ``yarn_resistance_weft``, ``contact_resistance_warp_weft``,
+      four probes or more), False where that fit has no value (a version-1 or 3-probe
+      table) and the two-resistor fit (``yarn_resistance``, ``contact_resistance``) stands
+      for both families;
+    * attribute ``network_fit``: "warp/weft fit (R_yw, R_yf, R_c)", "two-resistor fit
+      (R_y, R_c)" or "mixed: ..." over the states that have values.
+
+    The state dims are those of ``contact_resistance`` (mode, strain, *swept)."""
+    Ry2, Rc2 = ds["yarn_resistance"], ds["contact_resistance"]
+    dims = Rc2.dims
+    ry = np.stack([Ry2.transpose(*dims).values, Ry2.transpose(*dims).values], axis=-1)
+    rc = Rc2.values.copy()
+    ok = np.zeros(Rc2.shape, bool)
+    if all(k in ds for k in ("yarn_resistance_warp", "yarn_resistance_weft", "contact_resistance_warp_weft")):
+        r3 = np.stack([ds["yarn_resistance_warp"].transpose(*dims).values,
+                       ds["yarn_resistance_weft"].transpose(*dims).values], axis=-1)
+        rc3 = ds["contact_resistance_warp_weft"].transpose(*dims).values
+        ok = np.isfinite(r3).all(axis=-1) & np.isfinite(rc3)
+        ry = np.where(ok[..., None], r3, ry)
+        rc = np.where(ok, rc3, rc)
+    has = np.isfinite(rc) & np.isfinite(ry).all(axis=-1)
+    three, two = "warp/weft fit (R_yw, R_yf, R_c)", "two-resistor fit (R_y, R_c)"
+    if not has.any() or not ok[has].any():
+        which = two
+    elif ok[has].all():
+        which = three
+    else:
+        which = f"mixed: {three} at {int(ok[has].sum())} states, {two} at {int((~ok[has]).sum())}"
+    coords = {k: v for k, v in Rc2.coords.items() if set(v.dims) <= set(dims)}
+    out = xr.Dataset(
+        {"yarn_resistance": (dims + ("yarn",), ry, {"units": "ohm", "long_name": "R_y of the sheet model's network"}),
+         "contact_resistance": (dims, rc, {"units": "ohm", "long_name": "R_c of the sheet model's network"}),
+         "warp_weft_fit": (dims, ok, {"long_name": "True: the warp/weft fit; False: the two-resistor fit"})},
+        coords=coords)
+    out.coords["yarn"] = ("yarn", np.array(YARNS, dtype=object))
+    out.attrs["network_fit"] = which
+    return out
 
 
 def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
@@ -232,23 +280,17 @@ def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
                                   "coordinate (NaN at eps = 0)")
 
     # --- two-potential sheet parameters (per yarn family: the warp/weft fit where it has
-    # values, else the two-resistor fit for both)
+    # values, else the two-resistor fit for both; sheet_network_parameters)
     if "contact_resistance" in ds and "yarn_resistance" in ds:
-        Ry2, Rc2 = ds["yarn_resistance"], ds["contact_resistance"]
-        dims = Rc2.dims + ("yarn",)
-        ry = np.stack([Ry2.values, Ry2.values], axis=-1)
-        rc = Rc2.values.copy()
-        if "yarn_resistance_warp" in ds and "contact_resistance_warp_weft" in ds:
-            r3 = np.stack([ds["yarn_resistance_warp"].transpose(*Rc2.dims).values,
-                           ds["yarn_resistance_weft"].transpose(*Rc2.dims).values], axis=-1)
-            rc3 = ds["contact_resistance_warp_weft"].transpose(*Rc2.dims).values
-            ok = np.isfinite(r3).all(axis=-1) & np.isfinite(rc3)
-            ry = np.where(ok[..., None], r3, ry)
-            rc = np.where(ok, rc3, rc)
+        net = sheet_network_parameters(ds)
+        ry, rc = net["yarn_resistance"].values, net["contact_resistance"].values
+        dims = net["contact_resistance"].dims + ("yarn",)
+        Rc2 = net["contact_resistance"]
         g = 1.0 / ry + 1.0 / rc[..., None]
         c = 4.0 / (rc * pitch ** 2)
         src = ("R_y, R_c of the warp/weft fit (yarn_resistance_warp/_weft, contact_resistance_warp_weft) where it "
-               "has values, else yarn_resistance, contact_resistance")
+               "has values, else yarn_resistance, contact_resistance (rve.tables.macro.sheet_network_parameters; "
+               f"this table: {net.attrs['network_fit']})")
         ds["yarn_sheet_conductance"] = _var(dims, g, "S", "two-potential sheet model: sheet conductance "
                                             "g = 1/R_y + 1/R_c of the yarn family's layer", comment=src)
         ds["contact_exchange_conductance"] = _var(Rc2.dims, c, "S mm-2",
