@@ -410,7 +410,7 @@ def strip_reactions(entries: dict, strains, L: float = 20.0, W: float = 8.0, n: 
             solves += 1
         if verbose:
             print(f"  strain {e:.4g}: {solves} iterations; |R_free| [N] = " + ", ".join(f"{h:.2e}" for h in hist)
-                  + "; Newton corrections |du| [mm] = " + ", ".join(f"{h:.2e}" for h in steps)
+                  + "; Newton corrections |du| [mm] = " + (", ".join(f"{h:.2e}" for h in steps) or "none")
                   + (f" (|du_k+1| / |du_k|^2 = {', '.join(f'{q:.3g}' for q in quadratic_ratios(steps))} mm-1)"
                      if len(steps) > 1 else ""))
         history.append((float(e), u.copy()))

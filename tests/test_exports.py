@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rve import cli
-from rve.tables import YarnNetwork, build_table, interpolate, open_table, write_table
+from rve.tables import YarnNetwork, build_table, default_probe_terminals, interpolate, open_table, write_table
 from rve.tables.formats import (UNIT_SYSTEMS, export_macro, hermite_eval, read_abaqus_curves, read_lsdyna_curves,
                                 spice_network_deck)
 
@@ -251,3 +251,27 @@ def test_exports_of_a_version_1_table(tmp_path):
         assert "rve-lookup-table/1" in text and "symmetric weave" in text, fmt
     assert "areal density not recorded" in (tmp_path / "v1.abaqus").read_text()
     assert math.isnan(float(ds["areal_density"]))
+
+
+def test_spice_cell_uses_the_network_fit_of_the_sheet_parameters(tmp_path):
+    # a four-probe table: R_yw, R_yf and R_c all from the warp/weft fit (not R_c of the
+    # two-resistor fit beside R_yw, R_yf of the other), as the sheet parameters g, c
+    from rve.tables.macro import sheet_network_parameters
+
+    probes = default_probe_terminals(4, 4, weft_probe=True)
+    recs = []
+    for e in STRAINS[:3]:
+        R = NET.solve_pairs3(list(probes.values()), 0.29 * (1 + e), 0.35, 11.0 * (1 - e))[0]
+        recs.append({"mode": "uniaxial", "strain": e, "contact_count": 100,
+                     "reaction_force": {k: list(v) for k, v in force("uniaxial", e, 0.15).items()},
+                     "probes": {p: {"voltage": 1.0, "current": 1.0 / r} for p, r in zip(probes, R)}})
+    t = build_table(recs, fabric=FABRIC, config={})
+    s = t.sel(mode="uniaxial", strain=STRAINS[1])
+    assert abs(float(s["contact_resistance"]) / float(s["contact_resistance_warp_weft"]) - 1) > 1e-4
+    paths = export_macro(t, tmp_path / "cell.cir", "spice", modes=["uniaxial"], strain=STRAINS[1])
+    static = {ln.split()[0]: float(ln.split()[-1]) for ln in paths[1].read_text().splitlines()
+              if ln[:1] == "R"}
+    net = sheet_network_parameters(t).sel(mode="uniaxial", strain=STRAINS[1])
+    assert static["Ryw"] == float(s["yarn_resistance_warp"]) and static["Ryf"] == float(s["yarn_resistance_weft"])
+    assert static["Rc0"] == float(s["contact_resistance_warp_weft"]) == float(net["contact_resistance"])
+    assert "warp/weft fit" in paths[0].read_text() and "warp/weft fit" in paths[1].read_text()

@@ -483,11 +483,22 @@ def _hermite(ds, curves, opts, path: Path) -> list[Path]:
     doc = {"format": "rve-hermite/1", "header": _header(ds, curves, opts, [
                "cubic Hermite splines: on [t_i, t_i+1] with s = (x - t_i)/h, h = t_i+1 - t_i: "
                "p_i h00(s) + h m_i h10(s) + p_i+1 h01(s) + h m_i+1 h11(s) (field names as HYLC's 1-D entries); "
-               "slopes m are those of rve.tables.interpolate(method='cubic') (monotone PCHIP)"]),
+               "slopes m are those of rve.tables.interpolate(method='cubic') (monotone PCHIP)",
+               *_network_fit_line(ds)]),
            "table_format": ds.attrs.get("rve_table_format", TABLE_FORMAT),
            "units": opts["units"], "entries": hermite_entries(ds, curves, opts)}
     atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return [path]
+
+
+def _network_fit_line(ds: xr.Dataset) -> list[str]:
+    """The header line naming the network fit of the sheet parameters (and of the SPICE cell)."""
+    if "contact_resistance" not in ds or "yarn_resistance" not in ds:
+        return []
+    from .macro import sheet_network_parameters
+
+    return [f"network fit of the sheet parameters g, c (and of the SPICE cell): "
+            f"{sheet_network_parameters(ds).attrs['network_fit']} (docs/macro_export.md §1)"]
 
 
 # --------------------------------------------------------------------------- spice
@@ -495,14 +506,17 @@ SPICE_OPTIONS = ".options reltol=1e-9 abstol=1e-15 vntol=1e-12"
 
 
 def _spice_resistances(ds: xr.Dataset, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(strains, R_yw, R_yf, R_c) of ``mode``: the network fit of the sheet parameters
+    (``rve.tables.macro.sheet_network_parameters``: the warp/weft fit where it has values,
+    else the two-resistor fit), never R_y of one fit with R_c of the other."""
+    from .macro import sheet_network_parameters
+
     idx = _mode_states(ds, mode)
     x = np.asarray(ds["strain"].values, float)[idx]
-    rc = np.asarray(ds["contact_resistance"].sel(mode=mode).isel(strain=idx).values, float)
-    if "yarn_resistance_warp" in ds and np.all(np.isfinite(ds["yarn_resistance_warp"].sel(mode=mode).isel(strain=idx))):
-        rw = np.asarray(ds["yarn_resistance_warp"].sel(mode=mode).isel(strain=idx).values, float)
-        rf = np.asarray(ds["yarn_resistance_weft"].sel(mode=mode).isel(strain=idx).values, float)
-    else:
-        rw = rf = np.asarray(ds["yarn_resistance"].sel(mode=mode).isel(strain=idx).values, float)
+    net = sheet_network_parameters(ds).sel(mode=mode).isel(strain=idx)
+    ry = np.asarray(net["yarn_resistance"].transpose("strain", "yarn").values, float)
+    rw, rf = ry[:, 0], ry[:, 1]
+    rc = np.asarray(net["contact_resistance"].values, float)
     if not (np.all(np.isfinite(rc)) and np.all(np.isfinite(rw)) and np.all(np.isfinite(rf))):
         raise ValueError(f"spice: the table has no fitted network resistances for mode {mode!r}")
     return x, rw, rf, rc
@@ -515,6 +529,7 @@ def _pwl(x, y) -> str:
 def _spice(ds, opts, path: Path, mode: str, strain: float) -> list[Path]:
     x, rw, rf, rc = _spice_resistances(ds, mode)
     head = _header(ds, [], opts, [
+        *_network_fit_line(ds),
         f"one crossing cell of the network model (docs/lookup_tables.md): warp yarn w0-w1 (R_yw), weft yarn f0-f1 "
         f"(R_yf), four contacts R_c (w0, w1 to f0, f1); R(strain) of mode {mode} ({_PATHS.get(mode, mode)}), "
         "piecewise linear in the strain, read as the voltage of node 'strain' (1 V = strain 1)",
@@ -532,7 +547,7 @@ def _spice(ds, opts, path: Path, mode: str, strain: float) -> list[Path]:
         raise ValueError(f"spice: strain {strain:g} outside the table range [{x[0]:g}, {x[-1]:g}] of mode {mode!r}")
     r = [float(np.interp(strain, x, v)) for v in (rw, rf, rc)]
     spath = path.with_name(f"{path.stem}.static{path.suffix or '.cir'}")
-    lines = ["* " + h for h in head[:-2]] + [
+    lines = ["* " + h for h in head[:-2]] + [  # without the pwl cell and the options lines
         f"* static variant: mode {mode} at strain {strain!r} (linear between the stored strains)",
         ".subckt rve_cell_static w0 w1 f0 f1",
         f"Ryw w0 w1 {r[0]!r}", f"Ryf f0 f1 {r[1]!r}",
