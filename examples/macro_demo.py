@@ -368,10 +368,13 @@ def strip_reactions(entries: dict, strains, L: float = 20.0, W: float = 8.0, n: 
     def jacobian(du, v, w):
         return np.einsum("ijkl...,kl...,ij...->...", w["A"], du.grad, v.grad)
 
-    def assemble(u, tangent=True):
+    def forces(u):
+        """(F at the quadrature points, the nodal force vector R(u))."""
         Fq = np.eye(2)[:, :, None, None] + basis.interpolate(u).grad
-        R = asm(residual, basis, P=law.piola(Fq))
-        return R, (asm(jacobian, basis, A=law.tangent(Fq)).tocsr() if tangent else None)
+        return Fq, asm(residual, basis, P=law.piola(Fq))
+
+    def stiffness(Fq):
+        return asm(jacobian, basis, A=law.tangent(Fq)).tocsr()
 
     def solve(K, rhs):
         return spla.spsolve(K[free][:, free].tocsc(), rhs)
@@ -387,7 +390,8 @@ def strip_reactions(entries: dict, strains, L: float = 20.0, W: float = 8.0, n: 
         else:
             u = u1.copy()
             if predictor != "none" and e != e1:  # the Dirichlet increment spread through K(u_n)
-                R, K = assemble(u)
+                Fq, R = forces(u)
+                K = stiffness(Fq)
                 du = np.zeros(basis.N)
                 du[rx] = (e - e1) * L
                 u[free] += solve(K, -(R[free] + K[free] @ du))
@@ -396,15 +400,14 @@ def strip_reactions(entries: dict, strains, L: float = 20.0, W: float = 8.0, n: 
         u[rx], u[lx], u[corner] = e * L, 0.0, 0.0
         hist, steps = [], []
         while True:
-            R, _ = assemble(u, tangent=False)
+            Fq, R = forces(u)
             r = float(np.linalg.norm(R[free]))
             hist.append(r)
             if r == 0.0 or r <= rtol * float(np.linalg.norm(R[D])):
                 break
             if solves >= max_iter:
                 raise RuntimeError(f"Newton did not converge at strain {e}: |R_free| history {hist}")
-            _, K = assemble(u)
-            du = solve(K, R[free])
+            du = solve(stiffness(Fq), R[free])
             u[free] -= du
             steps.append(float(np.linalg.norm(du)))
             solves += 1

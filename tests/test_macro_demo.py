@@ -180,8 +180,8 @@ def test_sheet_network_parameters_pick_the_warp_weft_fit_else_the_two_resistor_f
     assert float(p4["contact_resistance"].sel(**s)) == pytest.approx(_warp_weft(0.25)[2], rel=1e-8)
     # the sheet parameters of the table are made from the same values
     g = ds4["yarn_sheet_conductance"].sel(**s).values
-    np.testing.assert_allclose(g, 1 / p4["yarn_resistance"].sel(**s).values + 1 / float(p4["contact_resistance"].sel(**s)),
-                               rtol=1e-14)
+    ry, rc = p4["yarn_resistance"].sel(**s).values, float(p4["contact_resistance"].sel(**s))
+    np.testing.assert_allclose(g, 1 / ry + 1 / rc, rtol=1e-14)
     # a version-1 / three-probe table: the two-resistor fit for both families
     p3 = sheet_network_parameters(ds)
     assert p3.attrs["network_fit"].startswith("two-resistor fit") and not bool(p3["warp_weft_fit"].any())
