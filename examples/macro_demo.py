@@ -1,6 +1,6 @@
 """Macro demo (docs/macro_export.md §5): the table's exports in a scikit-fem macro model.
 
-Run: ``python examples/macro_demo.py TABLE [--out DIR]`` (default: the CI fixture
+Run: ``python examples/macro_demo.py TABLE [--out DIR] [--predictor secant|tangent|none]`` (default: the CI fixture
 tests/data/table_v1_ci.nc); ``tests/test_macro_demo.py`` runs the checks.
 
 Electrics. A two-potential sheet: warp potential phi_w conducting along the warp with the
@@ -439,7 +439,7 @@ def warp_strain_field(m, basis, u):
 
 
 def sensor_patch(ds, entries, strain: float, hole: float, L: float = 20.0, W: float = 8.0, n: int = 8,
-                 max_step: float = 0.025, verbose: bool = False):
+                 max_step: float = 0.025, predictor: str = "secant", verbose: bool = False):
     """Resistance change R(strain)/R(0) - 1 of a bus-bar sensor patch (the strip, warp along
     x, pulled through the table's stored strains up to ``strain``, each interval cut into
     steps of at most ``max_step``, the default run's strain step), the strip's warp strain
@@ -452,7 +452,7 @@ def sensor_patch(ds, entries, strain: float, hole: float, L: float = 20.0, W: fl
     knots = [0.0] + [float(e) for e in eps_t if 0.0 < e < strain] + [float(strain)]
     path = [float(x) for a, b in zip(knots[:-1], knots[1:])
             for x in np.linspace(a, b, max(1, int(np.ceil((b - a) / max_step - 1e-9))) + 1)[1:]]
-    strip = strip_reactions(entries, path, L=L, W=W, n=n, hole=hole, verbose=verbose)
+    strip = strip_reactions(entries, path, L=L, W=W, n=n, hole=hole, predictor=predictor, verbose=verbose)
     m, basis, u, law = strip.state
     ew = warp_strain_field(m, basis, u)
     gw, gf = np.interp(ew, eps_t, g_t[:, 0]), np.interp(ew, eps_t, g_t[:, 1])
@@ -508,6 +508,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("table", nargs="?", default=str(ROOT / "tests" / "data" / "table_v1_ci.nc"))
     p.add_argument("--out", default="results/macro_demo")
+    p.add_argument("--predictor", choices=("secant", "tangent", "none"), default="secant",
+                   help="the strips' Newton predictor (strip_reactions; 'none': the first version's)")
     args = p.parse_args(argv)
     ds = open_table(args.table)
     out = Path(args.out)
@@ -521,11 +523,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     N = ds["membrane_force"].sel(mode="uniaxial", edge="x", component="x").values
     N = N - float(ds["membrane_force_at_zero_strain"].sel(mode="uniaxial", edge="x", component="x"))
     print("strip (Newton per step):")
-    strip = strip_reactions(entries, strains, verbose=True)
+    strip = strip_reactions(entries, strains, predictor=args.predictor, verbose=True)
     print("strip: reaction / width", strip.reaction, "\n  max |reaction/width - N_xx| / max |N_xx| =",
           float(np.max(np.abs(strip.reaction - N)) / np.max(np.abs(N))), "\n  Newton iterations", strip.iterations)
     print("strip with a hole (Newton per step):")
-    dR, fields = sensor_patch(ds, entries, strains[-1], hole=2.0, verbose=True)
+    dR, fields = sensor_patch(ds, entries, strains[-1], hole=2.0, predictor=args.predictor, verbose=True)
     print("strip with a hole: Newton iterations", fields["strip"].iterations)
     dR0, _ = sensor_patch(ds, entries, strains[-1], hole=0.0)
     print(f"sensor patch: dR/R = {dR:.6g} with the hole, {dR0:.6g} uniform")
