@@ -151,18 +151,21 @@ class _StageRecorder:
         return self.system.admissible(x)
 
     def evaluate(self, x, w, t, jacobian=True):
-        self.last[t] = (np.array(x, copy=True), np.array(w, copy=True))
         t0 = time.perf_counter()
         out = self.system.evaluate(x, w, t, jacobian)
         self.wall += time.perf_counter() - t0
+        self.last[t] = (np.array(x, copy=True), np.array(w, copy=True), np.array(out[0], dtype=float, copy=True))
         return out
 
-
-class _Rebuild(Exception):
-    """Raised from on_step to end a chunk early (a centroid moved half the search margin)."""
-
-    def __init__(self, t, x, w):
-        self.t, self.x, self.w = t, x, w
+    def residual_at(self, x, w, t):
+        """F of the last evaluation at time t if it was at exactly (x, w), else None."""
+        hit = self.last.get(t)
+        if hit is None and self.last:
+            tk = max(self.last)  # the step's end time t0 + h may differ from t in the last bit
+            hit = self.last[tk] if abs(tk - t) <= 1e-12 * max(1.0, abs(t)) else None
+        if hit is not None and np.array_equal(hit[0], x) and np.array_equal(hit[1], w):
+            return hit[2]
+        return None
 
 
 def _initial_w(problem, system, x0, t0, nopts):
@@ -189,7 +192,8 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     h0 = t_end / steps
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction}
+    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
+             "linear_backend": None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend}
     iopts.update(integrator_options or {})
     x = problem.x0.copy()
     scale = base.row_scales(h0, x, np.zeros(base.n))
@@ -213,8 +217,9 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     stored = {"t": [0.0], "x": [base.nodal(x)[:, :9].copy()], "w": [w.copy()], "T": [T_of(w)]}
     guard = 0.5 * float(sysm.params.margin)
     wall = {"integration": 0.0, "balances": 0.0, "thermal_post": 0.0, "rebuild": 0.0}
-    counters = {"steps": 0, "rejected": 0, "newton": 0, "linear_solves": 0, "chunks": 0, "extra_rebuilds": 0,
-                "stage_iterations": [], "since_store": 0}
+    counters = {"steps": 0, "rejected": 0, "newton": 0, "linear_solves": 0, "extra_rebuilds": 0,
+                "structure_changes": 0, "residual_reused": 0, "stage_iterations": [], "since_store": 0, "since_rebuild": 0}
+    kk = max(1, int(cfg.contact.rebuild_every))
 
     def on_step(t, x_, w_, info):
         nonlocal T
@@ -224,12 +229,14 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
             stages = []
             for i in range(tab.stages - 1):
                 ti = info.t + tab.c[i] * info.h
-                stages.append(rec.last[ti])
+                stages.append(rec.last[ti][:2])
             stages.append((x_, w_))
             T = post.step(T, stages, info.t, info.h)
+        F_end = rec.residual_at(x_, w_, t)
+        counters["residual_reused"] += int(F_end is not None)
         rec.last.clear()
         tb = time.perf_counter()
-        b = balances(x_, w_, t, T_of(w_))
+        b = balances(x_, w_, t, T_of(w_), F_end)
         b["contact_active_pairs"] = float(sysm.term.active_pairs(x_).size) if sysm.term.map is not None else 0.0
         for k_, v in b.items():
             bal[k_].append(v)
@@ -242,44 +249,48 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
             stored["x"].append(base.nodal(x_)[:, :9].copy())
             stored["w"].append(np.array(w_, copy=True))
             stored["T"].append(T_of(w_))
-        if guard > 0 and sysm.max_displacement_since_rebuild(x_) > guard and t < t_end * (1 - 1e-12):
-            raise _Rebuild(t, x_, w_)
+        if progress and counters["steps"] % 100 == 0:
+            log.info("t = %.5g / %.5g ms: %d steps accepted, %d Newton iterations, max T %.3g K, %.1f s",
+                     t, t_end, counters["steps"], sum(map(sum, counters["stage_iterations"])),
+                     float(np.max(T_of(w_))), time.perf_counter() - wall0)
+        # contact map: rebuilt every ``rebuild_every`` accepted steps on the nominal grid (Appendix A),
+        # and at once when a centroid has moved half the search margin since the last rebuild
+        counters["since_rebuild"] += 1
+        if t >= t_end * (1 - 1e-12):
+            return
+        on_grid = abs(t / h0 - round(t / h0)) < 1e-6
+        early = guard > 0 and sysm.max_displacement_since_rebuild(x_) > guard
+        if early or (counters["since_rebuild"] >= kk and on_grid):
+            tr_ = time.perf_counter()
+            kept = sysm.assembler.reused
+            sysm.rebuild(x_)
+            counters["structure_changes"] += int(sysm.assembler.reused == kept)
+            counters["extra_rebuilds"] += int(early and counters["since_rebuild"] < kk)
+            counters["since_rebuild"] = 0
+            wall["rebuild"] += time.perf_counter() - tr_
 
     t = 0.0
-    kk = max(1, int(cfg.contact.rebuild_every))
-    while t < t_end * (1 - 1e-12):
-        k_cur = int(math.floor(t / h0 + 1e-9))
-        k_b = min(steps, k_cur + kk)
-        t_b = t_end if k_b >= steps else k_b * h0
-        m = max(1, k_b - k_cur)
-        tr = time.perf_counter()
-        sysm.rebuild(x)
-        wall["rebuild"] += time.perf_counter() - tr
-        counters["chunks"] += 1
-        rs = RowScaledSystem(rec, scale)
-        ti = time.perf_counter()
-        try:
-            res = integrate(rs, x, w, t, t_b, m, stages=tab.stages, newton_opts=nopts, max_cuts=cfg.time.max_cuts,
-                            on_step=on_step, fixed_step=not cfg.time.step_control, consistent=False, **iopts)
-            x, w, t = res.x, res.w, res.t
-            counters["rejected"] += res.rejected
-            counters["newton"] += res.newton_iterations
-            counters["linear_solves"] += res.linear_solves
-        except _Rebuild as stop:
-            x, w, t = stop.x, stop.w, stop.t
-            counters["extra_rebuilds"] += 1
-            counters["newton"] += sum(sum(s) for s in counters["stage_iterations"][-1:])  # approx (chunk cut)
-        except IntegrationFailure as exc:
-            wall["integration"] += time.perf_counter() - ti
-            raise SceneFailure(
-                "induced_deformation", f"time integration failed with step size h = {exc.h:.6g} ms: {exc}",
-                phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
-                state={"x": exc.x, "w": exc.w, "T": T_of(exc.w)}, model=base,
-                details={"h": exc.h, "residuals": [float(r) for r in exc.residuals],
-                         "history": {"stored": stored, "balances": {"t": bal_t, **bal}}}) from exc
-        wall["integration"] += time.perf_counter() - ti
-        if progress:
-            log.info("t = %.5g ms, steps %d, rejected %d", t, counters["steps"], counters["rejected"])
+    sysm.rebuild(x)
+    tr = time.perf_counter()
+    try:
+        res = integrate(RowScaledSystem(rec, scale), x, w, 0.0, t_end, steps, stages=tab.stages, newton_opts=nopts,
+                        max_cuts=cfg.time.max_cuts, on_step=on_step, fixed_step=not cfg.time.step_control,
+                        consistent=False, **iopts)
+    except IntegrationFailure as exc:
+        wall["integration"] += time.perf_counter() - tr
+        raise SceneFailure(
+            "induced_deformation", f"time integration failed with step size h = {exc.h:.6g} ms: {exc}",
+            phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
+            state={"x": exc.x, "w": exc.w, "T": T_of(exc.w)}, model=base,
+            details={"h": exc.h, "residuals": [float(r) for r in exc.residuals],
+                     "history": {"stored": stored, "balances": {"t": bal_t, **bal}}}) from exc
+    wall["integration"] += time.perf_counter() - tr
+    x, w, t = res.x, res.w, res.t
+    counters["rejected"] = res.rejected
+    counters["newton"] = res.newton_iterations
+    counters["linear_solves"] = res.linear_solves
+    counters["factorizations"] = res.factorizations
+    counters["jacobians"] = res.jacobian_evaluations
     # newton iterations: count from the stage iterations of the accepted steps (+ rejected attempts)
     stage_its = counters["stage_iterations"]
     newton_acc = int(sum(sum(s) for s in stage_its))
@@ -313,7 +324,12 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         "steps_rejected": counters["rejected"],
         "newton_iterations": newton_acc,
         "newton_iterations_per_stage": newton_acc / n_stages,
+        "newton_iterations_all_attempts": counters["newton"],
         "linear_solves": counters["linear_solves"],
+        "factorizations": counters["factorizations"],
+        "jacobian_evaluations": counters["jacobians"],
+        "contact_structure_changes": counters["structure_changes"],
+        "balance_residuals_reused": counters["residual_reused"],
         "contact_rebuilds": int(stats.get("rebuilds", 0)),
         "extra_rebuilds": counters["extra_rebuilds"],
         "dofs": {**base.dof_counts(), **({"thermal_post_solve": int(mesh.n_nodes)} if mode == "post" else {})},
@@ -344,7 +360,7 @@ def run(cfg, out_dir: Path) -> dict:
 
     out_dir = Path(out_dir)
     try:
-        res = solve(cfg, record=True)
+        res = solve(cfg, record=True, progress=True)
     except SceneFailure as failure:
         failure.save(out_dir / "induced_deformation_last_good_state.npz")
         log.error("%s", failure)
