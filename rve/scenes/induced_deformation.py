@@ -9,11 +9,16 @@ Contract (the scene protocol, rve.scenes.protocol)
 conditions, the initial state and the circuit bookkeeping; ``mode`` "post" (fields mech, V;
 T post-solved after every accepted step) or "monolithic" (mech, T, V).
 ``solve(cfg, record=True) -> SceneResult``: integrates from the crimped initial state at
-rest to ``time.t_end`` in chunks of ``contact.rebuild_every`` nominal steps (the contact
-map is rebuilt before every chunk, and early when a centroid has moved half the search
-margin); ``state`` ``x``, ``w``, ``T`` at t_end; ``summary`` the figures of ``run``; with
-``record`` the stored states (every ``time.store_every`` accepted steps) and the balance
-terms of every accepted step under ``"history"``.
+rest to ``time.t_end`` with ONE ``rve.solvers.dirk.integrate`` call (so the stage predictor's
+history and the kept stage factorisation of the modified Newton survive the contact-map
+rebuilds); the map is rebuilt from ``on_step`` every ``contact.rebuild_every`` accepted steps
+that end on the nominal grid (Appendix A), and at once when a centroid has moved half the
+search margin since the last rebuild. A rebuild that changes the union sparsity pattern
+leaves the stepper's mass matrix on the old pattern (same values: the solvers' triplet path
+assembles the stage matrix then; counted in ``contact_structure_changes``). ``state`` ``x``,
+``w``, ``T`` at t_end; ``summary`` the figures of ``run``; with ``record`` the stored states
+(every ``time.store_every`` accepted steps) and the balance terms of every accepted step
+under ``"history"``.
 ``run(cfg, out_dir) -> dict``: ``solve`` + ``induced_deformation.nc`` (netCDF time series),
 ``tubes/induced.pvd`` (tube meshes coloured by current and temperature), PNG frames
 (``frames.png``, ``temperature.png``) and the summary (keys of issue 11: orientation,
