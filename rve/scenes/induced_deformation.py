@@ -322,6 +322,8 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
             x, w, t = res.x, res.w, res.t
         except _Restart as stop:
             x, w, t = stop.x, stop.w, stop.t
+            if progress:
+                log.info("integrator restarted at t = %.6g ms (contact pattern changed)", t)
         except IntegrationFailure as exc:
             wall["integration"] += time.perf_counter() - ti
             raise SceneFailure(
@@ -331,8 +333,6 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
                 details={"h": exc.h, "residuals": [float(r) for r in exc.residuals],
                          "history": {"stored": stored, "balances": {"t": bal_t, **bal}}}) from exc
         wall["integration"] += time.perf_counter() - ti
-        if progress:
-            log.info("integrator restarted at t = %.6g ms (contact pattern changed)", t)
     counters["rejected"] = rec.rejected
     # newton iterations: count from the stage iterations of the accepted steps (+ rejected attempts)
     stage_its = counters["stage_iterations"]
