@@ -135,6 +135,12 @@ class InducedNewton(Section):
                             "docs/time_integration.md section 7): false, true or auto (by measured costs)")
     reuse_contraction: Dimensionless = Field(0.5, gt=0, lt=1, description="refactorise when the observed "
                                              "contraction |r_k+1|/|r_k| of a reused factorisation exceeds this")
+    linear_backend: Optional[Literal["auto", "superlu", "pardiso"]] = Field(
+        "superlu", description="backend of the kept stage factorisations (rve.solvers.linear.get_backend): "
+                               "superlu = SuperLU in symmetric mode (MMD on A^T + A, diagonal pivots; the stage "
+                               "matrices are structurally symmetric and mass-dominated: half the fill of COLAMD, "
+                               "docs/induced_deformation.md); auto = the engine's choice (unsymmetric stage "
+                               "matrices go to SuperLU COLAMD with partial pivoting)")
 
 
 class InducedOutput(Section):

@@ -28,7 +28,7 @@ import scipy.sparse.linalg as spla
 
 from ..model.assembler import ElementState
 from ..physics.contact_forms import scalar_jump
-from ..physics.thermal_forms import capacity_matrix, conduction, joule_source
+from ..physics.thermal_forms import capacity_matrix, conduction
 from ..model.terms.elasticity import beam_strain_energy
 
 __all__ = ["ThermalOperators", "ThermalPostSolver", "StateBalances", "balance_errors"]
@@ -51,78 +51,141 @@ class ThermalOperators:
         self.h_C = float(h_C)
         self.fixed = np.asarray(fixed_nodes, np.int64)
         self.free = np.setdiff1d(np.arange(self.n), self.fixed)
+        # free / fixed blocks, built once (the post-solve and the balances slice nothing per step)
+        self.new_index = np.full(self.n, -1, np.int64)
+        self.new_index[self.free] = np.arange(self.free.size)
+        fr, fx = self.free, self.fixed
+        self.M_ff, self.M_fc = self.M[fr][:, fr].tocsc(), self.M[fr][:, fx].tocsr()
+        self.K_ff, self.K_fc = self.K[fr][:, fr].tocsc(), self.K[fr][:, fx].tocsr()
+        self._M_lu = None
+        self._memo = {}
+
+    def _memoised(self, what, key_arrays, t, compute):
+        """The last value of ``what`` if it was computed at equal arrays and time."""
+        hit = self._memo.get(what)
+        if hit is not None and hit[1] == t and all(a is b or np.array_equal(a, b)
+                                                     for a, b in zip(hit[0], key_arrays)):
+            return hit[2]
+        val = compute()
+        self._memo[what] = (tuple(np.array(a, copy=True) for a in key_arrays), t, val)
+        return val
+
+    def contact_triplets(self, x):
+        """COO triplets (rows, cols, values) of the contact heat-transfer matrix h_C a [[T]]
+        of the map's active pairs at x (exactly the monolithic contact term's T block:
+        ``rve.physics.contact_forms.scalar_jump``); empty arrays without active pairs."""
+        def compute():
+            term = self.system.term
+            e = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+            if self.h_C <= 0 or term.map is None or term.map.n_pairs == 0:
+                return e
+            act = term.active_pairs(x)
+            if act.size == 0:
+                return e
+            geo = term.geometry(x, act)
+            conn, cmap = self.base.mesh.conn, term.map
+            nn = conn.shape[1]
+            z = np.zeros((act.size, nn))
+            _, Ju, _ = scalar_jump(geo, self.base.mesh.order, z, z, term.weight[act], self.h_C, term.kappa[act],
+                                   term.g_eps, True)
+            loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)  # (Pa, 2nn)
+            m = loc.shape[1]
+            return np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel(), Ju.ravel()
+        return self._memoised("contact", (x,), 0.0, compute)
 
     def contact(self, x):
         """Contact heat-transfer matrix (n_nodes, n_nodes) at x (the map's active pairs)."""
-        term = self.system.term
-        if self.h_C <= 0 or term.map is None or term.map.n_pairs == 0:
-            return sp.csr_matrix((self.n, self.n))
-        act = term.active_pairs(x)
-        if act.size == 0:
-            return sp.csr_matrix((self.n, self.n))
-        geo = term.geometry(x, act)
-        conn, cmap = self.base.mesh.conn, term.map
-        nn = conn.shape[1]
-        z = np.zeros((act.size, nn))
-        _, Ju, _ = scalar_jump(geo, self.base.mesh.order, z, z, term.weight[act], self.h_C, term.kappa[act],
-                               term.g_eps, True)
-        loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)  # (Pa, 2nn)
-        m = loc.shape[1]
-        r = np.repeat(loc, m, axis=1).ravel()
-        c = np.tile(loc, (1, m)).ravel()
-        return sp.csr_matrix((Ju.ravel(), (r, c)), shape=(self.n, self.n))
+        r, c, v = self.contact_triplets(x)
+        return sp.csr_matrix((v, (r, c)), shape=(self.n, self.n))
+
+    def contact_blocks(self, x):
+        """(free x free CSC, free x fixed CSR) blocks of the contact matrix, or None without
+        active pairs."""
+        r, c, v = self.contact_triplets(x)
+        if v.size == 0:
+            return None
+        ri, ci = self.new_index[r], self.new_index[c]
+        nf = self.free.size
+        ff = (ri >= 0) & (ci >= 0)
+        Kff = sp.csc_matrix((v[ff], (ri[ff], ci[ff])), shape=(nf, nf))
+        fc = (ri >= 0) & (ci < 0)
+        fix_pos = np.full(self.n, -1, np.int64)
+        fix_pos[self.fixed] = np.arange(self.fixed.size)
+        Kfc = sp.csr_matrix((v[fc], (ri[fc], fix_pos[c[fc]])), shape=(nf, self.fixed.size))
+        return Kff, Kfc
 
     def joule(self, x, w, t):
-        """Nodal Joule heat (W) at the state."""
-        return self.base.joule_power(x, w, t)
+        """Nodal Joule heat (W) at the state (memoised for the last state)."""
+        return self._memoised("joule", (x, w), float(t), lambda: self.base.joule_power(x, w, t))
 
     def residual(self, T, x, w, t):
         """F_T = (K + K_c(x)) T - Q (no capacity term)."""
-        return (self.K + self.contact(x)) @ T - self.joule(x, w, t)
+        return self.K @ T + self.contact(x) @ T - self.joule(x, w, t)
 
     def rate(self, T, x, w, t):
         """dT/dt at the free nodes from the heat equation (0 at the fixed ends) and the heat
         leaving through the fixed ends (W): q_out = -sum_fixed (M dT/dt + F_T)."""
         F = self.residual(T, x, w, t)
         fr = self.free
+        if self._M_lu is None:
+            self._M_lu = spla.splu(self.M_ff)
         Tdot = np.zeros(self.n)
-        Tdot[fr] = spla.spsolve(self.M[fr][:, fr].tocsc(), -F[fr])
+        Tdot[fr] = self._M_lu.solve(-F[fr])
         q_out = -float((self.M @ Tdot + F)[self.fixed].sum())
         return Tdot, q_out
 
 
 class ThermalPostSolver:
-    """One SDIRK step of the heat equation from the mechanical/electrical stage states."""
+    """One SDIRK step of the heat equation from the mechanical/electrical stage states.
+
+    The stage matrix on the free nodes is ``(M + h a_ii K)_ff`` plus ``h a_ii`` times the
+    contact block of the active pairs; without active pairs its factorisation is kept per
+    ``h a_ii`` (one per step size), with them one sparse solve per stage."""
 
     def __init__(self, ops: ThermalOperators, tableau, T_fixed: float = 0.0):
         self.ops, self.tab = ops, tableau
         self.T_fixed = float(T_fixed)
         self.solves = 0
         self.wall = 0.0
+        self._lu = {}
+
+    def _base_lu(self, haii):
+        lu = self._lu.get(haii)
+        if lu is None:
+            if len(self._lu) > 8:
+                self._lu.clear()
+            op = self.ops
+            lu = self._lu[haii] = spla.splu((op.M_ff + haii * op.K_ff).tocsc())
+        return lu
 
     def step(self, T0, stages, t0: float, h: float):
         import time
 
         w0 = time.perf_counter()
         op, tab = self.ops, self.tab
-        fr = op.free
+        fr, fx = op.free, op.fixed
         MT0 = op.M @ T0
         Fs = []
-        T = T0
+        T_fix = np.full(fx.size, self.T_fixed)
         for i, (x, w) in enumerate(stages):
             ti = t0 + tab.c[i] * h
             haii = h * tab.A[i, i]
-            Kt = op.K + op.contact(x)
             Q = op.joule(x, w, ti)
             rhs = MT0 + haii * Q
             for j in range(i):
                 rhs = rhs - h * tab.A[i, j] * Fs[j]
-            A = (op.M + haii * Kt).tocsr()
-            T = np.full(op.n, self.T_fixed)
-            rhs_f = rhs[fr] - A[fr][:, op.fixed] @ T[op.fixed]
-            T[fr] = spla.spsolve(A[fr][:, fr].tocsc(), rhs_f)
+            blocks = op.contact_blocks(x)
+            rhs_f = rhs[fr] - (op.M_fc + haii * op.K_fc) @ T_fix
+            T = np.empty(op.n)
+            T[fx] = T_fix
+            if blocks is None:
+                T[fr] = self._base_lu(haii).solve(rhs_f)
+            else:
+                Kff, Kfc = blocks
+                rhs_f = rhs_f - haii * (Kfc @ T_fix)
+                T[fr] = spla.spsolve((op.M_ff + haii * (op.K_ff + Kff)).tocsc(), rhs_f)
             self.solves += 1
-            Fs.append(Kt @ T - Q)
+            Fs.append(op.residual(T, x, w, ti))
         self.wall += time.perf_counter() - w0
         return T
 
@@ -150,24 +213,25 @@ class StateBalances:
         V = np.array([wn[c.node, self.oV] for c in circ])
         return I, -(I * V)
 
-    def __call__(self, x, w, t, T) -> dict:
+    def __call__(self, x, w, t, T, F=None) -> dict:
+        """``F``: the system residual F(x, w, t) if the caller has it (else evaluated here)."""
         base, sysm = self.base, self.system
         wn = base.nodal(w)
         I_in_out, P_in = self._circuit_current(self.circuit_in, wn)
         I_leak, P_leak = self._circuit_current(self.circuit_leak, wn) if self.circuit_leak else (np.zeros(0),) * 2
-        F = np.asarray(sysm.evaluate(x, w, t, jacobian=False)[0], float)
+        if F is None:
+            F = sysm.evaluate(x, w, t, jacobian=False)[0]
+        F = np.asarray(F, float)
         I_out = -F[self.dirichlet_out]
         # Lorentz force on the nodes (minus the electromagnetic term's mech residual)
         state = ElementState(base.basis, base.layout, x, w, t)
-        Bt = self.em.field(t)
-        m = self.em.emf(state, Bt)
         res, _ = self.em.forms(state, False)
         P_L = 0.0
         if "mech" in res:
             Rl = res["mech"].reshape(base.mesh.n_elements, -1, 9)
             v = wn[:, :9][base.mesh.conn]  # (E, nn, 9)
             P_L = -float((Rl * v).sum())
-        joule = float(joule_source(base.ops, m, base.material.electrical_conductivity).sum())
+        joule = float(self.thermal.joule(x, w, t).sum())  # memoised: the post-solve's last stage
         Fc, _, _, _ = sysm.contact_terms(x, w, jacobian=False)
         P_cj = float(base.nodal(Fc)[:, self.oV] @ wn[:, self.oV]) if sysm.use_V else 0.0
         vm = np.asarray(w, float)[self.mech]

@@ -9,11 +9,16 @@ Contract (the scene protocol, rve.scenes.protocol)
 conditions, the initial state and the circuit bookkeeping; ``mode`` "post" (fields mech, V;
 T post-solved after every accepted step) or "monolithic" (mech, T, V).
 ``solve(cfg, record=True) -> SceneResult``: integrates from the crimped initial state at
-rest to ``time.t_end`` in chunks of ``contact.rebuild_every`` nominal steps (the contact
-map is rebuilt before every chunk, and early when a centroid has moved half the search
-margin); ``state`` ``x``, ``w``, ``T`` at t_end; ``summary`` the figures of ``run``; with
-``record`` the stored states (every ``time.store_every`` accepted steps) and the balance
-terms of every accepted step under ``"history"``.
+rest to ``time.t_end`` with ONE ``rve.solvers.dirk.integrate`` call (so the stage predictor's
+history and the kept stage factorisation of the modified Newton survive the contact-map
+rebuilds); the map is rebuilt from ``on_step`` every ``contact.rebuild_every`` accepted steps
+that end on the nominal grid (Appendix A), and at once when a centroid has moved half the
+search margin since the last rebuild. A rebuild that changes the union sparsity pattern
+leaves the stepper's mass matrix on the old pattern (same values: the solvers' triplet path
+assembles the stage matrix then; counted in ``contact_structure_changes``). ``state`` ``x``,
+``w``, ``T`` at t_end; ``summary`` the figures of ``run``; with ``record`` the stored states
+(every ``time.store_every`` accepted steps) and the balance terms of every accepted step
+under ``"history"``.
 ``run(cfg, out_dir) -> dict``: ``solve`` + ``induced_deformation.nc`` (netCDF time series),
 ``tubes/induced.pvd`` (tube meshes coloured by current and temperature), PNG frames
 (``frames.png``, ``temperature.png``) and the summary (keys of issue 11: orientation,
@@ -135,31 +140,62 @@ class _StageRecorder:
     """Wraps a system: remembers the last evaluated state at every time (the converged stage
     states of a step are the last evaluations at its stage times, rve.solvers.dirk)."""
 
-    def __init__(self, system):
+    def __init__(self, system, c):
         self.system = system
         self.n, self.mech = system.n, system.mech
         self.last: dict = {}
         self.wall = 0.0
+        self.c = [float(v) for v in c]   # stage times of the tableau (all > 0 for SDIRK)
+        self.t_accepted, self.attempts, self.accepted, self._attempt = 0.0, 0, 0, None
 
     def mass(self):
         return self.system.mass()
 
     def constraints(self, t):
+        """The stepper asks for the constraints once per stage, in stage order: a call that is
+        not the next stage time t0 + c_i h of the open attempt opens a new step attempt."""
+        tau = t - self.t_accepted
+        a = self._attempt
+        if a is not None and a[1] < len(self.c) and abs(tau - self.c[a[1]] * a[0]) <= 1e-9 * max(a[0], 1e-300):
+            self._attempt = (a[0], a[1] + 1)
+        else:
+            self.attempts += 1
+            self._attempt = (tau / self.c[0], 1)
         return self.system.constraints(t)
+
+    def accept(self, t):
+        """An attempt was accepted and ended at t."""
+        self.accepted += 1
+        self.t_accepted = t
+        self._attempt = None
+
+    @property
+    def rejected(self) -> int:
+        return self.attempts - self.accepted
 
     def admissible(self, x):
         return self.system.admissible(x)
 
     def evaluate(self, x, w, t, jacobian=True):
-        self.last[t] = (np.array(x, copy=True), np.array(w, copy=True))
         t0 = time.perf_counter()
         out = self.system.evaluate(x, w, t, jacobian)
         self.wall += time.perf_counter() - t0
+        self.last[t] = (np.array(x, copy=True), np.array(w, copy=True), np.array(out[0], dtype=float, copy=True))
         return out
 
+    def residual_at(self, x, w, t):
+        """F of the last evaluation at time t if it was at exactly (x, w), else None."""
+        hit = self.last.get(t)
+        if hit is None and self.last:
+            tk = max(self.last)  # the step's end time t0 + h may differ from t in the last bit
+            hit = self.last[tk] if abs(tk - t) <= 1e-12 * max(1.0, abs(t)) else None
+        if hit is not None and np.array_equal(hit[0], x) and np.array_equal(hit[1], w):
+            return hit[2]
+        return None
 
-class _Rebuild(Exception):
-    """Raised from on_step to end a chunk early (a centroid moved half the search margin)."""
+
+class _Restart(Exception):
+    """Raised from on_step to restart the integrator after a rebuild changed the sparsity pattern."""
 
     def __init__(self, t, x, w):
         self.t, self.x, self.w = t, x, w
@@ -189,11 +225,12 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     h0 = t_end / steps
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction}
+    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
+             "linear_backend": None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend}
     iopts.update(integrator_options or {})
     x = problem.x0.copy()
     scale = base.row_scales(h0, x, np.zeros(base.n))
-    rec = _StageRecorder(sysm)
+    rec = _StageRecorder(sysm, tab.c)
     thermal = ThermalOperators(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes)
     post = ThermalPostSolver(thermal, tab, cfg.end_temperature) if mode == "post" else None
     balances = StateBalances(sysm, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
@@ -213,23 +250,31 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     stored = {"t": [0.0], "x": [base.nodal(x)[:, :9].copy()], "w": [w.copy()], "T": [T_of(w)]}
     guard = 0.5 * float(sysm.params.margin)
     wall = {"integration": 0.0, "balances": 0.0, "thermal_post": 0.0, "rebuild": 0.0}
-    counters = {"steps": 0, "rejected": 0, "newton": 0, "linear_solves": 0, "chunks": 0, "extra_rebuilds": 0,
-                "stage_iterations": [], "since_store": 0}
+    counters = {"steps": 0, "rejected": 0, "newton": 0, "linear_solves": 0, "extra_rebuilds": 0,
+                "structure_changes": 0, "residual_reused": 0, "factorizations": 0, "jacobians": 0,
+                "integrate_calls": 0, "stage_iterations": [], "since_store": 0, "since_rebuild": 0}
+    kk = max(1, int(cfg.contact.rebuild_every))
 
     def on_step(t, x_, w_, info):
         nonlocal T
         counters["steps"] += 1
+        rec.accept(t)
         counters["stage_iterations"].append(list(info.stage_iterations))
+        counters["linear_solves"] += info.linear_solves
+        counters["factorizations"] += info.factorizations
+        counters["jacobians"] += info.jacobians
         if post is not None:
             stages = []
             for i in range(tab.stages - 1):
                 ti = info.t + tab.c[i] * info.h
-                stages.append(rec.last[ti])
+                stages.append(rec.last[ti][:2])
             stages.append((x_, w_))
             T = post.step(T, stages, info.t, info.h)
+        F_end = rec.residual_at(x_, w_, t)
+        counters["residual_reused"] += int(F_end is not None)
         rec.last.clear()
         tb = time.perf_counter()
-        b = balances(x_, w_, t, T_of(w_))
+        b = balances(x_, w_, t, T_of(w_), F_end)
         b["contact_active_pairs"] = float(sysm.term.active_pairs(x_).size) if sysm.term.map is not None else 0.0
         for k_, v in b.items():
             bal[k_].append(v)
@@ -242,33 +287,43 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
             stored["x"].append(base.nodal(x_)[:, :9].copy())
             stored["w"].append(np.array(w_, copy=True))
             stored["T"].append(T_of(w_))
-        if guard > 0 and sysm.max_displacement_since_rebuild(x_) > guard and t < t_end * (1 - 1e-12):
-            raise _Rebuild(t, x_, w_)
+        if progress and counters["steps"] % 100 == 0:
+            log.info("t = %.5g / %.5g ms: %d steps accepted, %d Newton iterations, max T %.3g K, %.1f s",
+                     t, t_end, counters["steps"], sum(map(sum, counters["stage_iterations"])),
+                     float(np.max(T_of(w_))), time.perf_counter() - wall0)
+        # contact map: rebuilt every ``rebuild_every`` accepted steps (Appendix A),
+        # and at once when a centroid has moved half the search margin since the last rebuild
+        counters["since_rebuild"] += 1
+        if t >= t_end * (1 - 1e-12):
+            return
+        early = guard > 0 and sysm.max_displacement_since_rebuild(x_) > guard
+        if early or counters["since_rebuild"] >= kk:
+            tr_ = time.perf_counter()
+            kept = sysm.assembler.reused
+            sysm.rebuild(x_)
+            changed = sysm.assembler.reused == kept
+            counters["structure_changes"] += int(changed)
+            counters["extra_rebuilds"] += int(early and counters["since_rebuild"] < kk)
+            counters["since_rebuild"] = 0
+            wall["rebuild"] += time.perf_counter() - tr_
+            if changed:  # a new sparsity pattern: restart the integrator on it (fast stage-matrix path)
+                raise _Restart(t, x_, w_)
 
     t = 0.0
-    kk = max(1, int(cfg.contact.rebuild_every))
+    sysm.rebuild(x)
     while t < t_end * (1 - 1e-12):
-        k_cur = int(math.floor(t / h0 + 1e-9))
-        k_b = min(steps, k_cur + kk)
-        t_b = t_end if k_b >= steps else k_b * h0
-        m = max(1, k_b - k_cur)
-        tr = time.perf_counter()
-        sysm.rebuild(x)
-        wall["rebuild"] += time.perf_counter() - tr
-        counters["chunks"] += 1
-        rs = RowScaledSystem(rec, scale)
+        n_left = max(1, int(math.ceil((t_end - t) / h0 - 1e-6)))   # the nominal grid from t (t on it but after an early rebuild)
         ti = time.perf_counter()
+        counters["integrate_calls"] += 1
         try:
-            res = integrate(rs, x, w, t, t_b, m, stages=tab.stages, newton_opts=nopts, max_cuts=cfg.time.max_cuts,
-                            on_step=on_step, fixed_step=not cfg.time.step_control, consistent=False, **iopts)
+            res = integrate(RowScaledSystem(rec, scale), x, w, t, t_end, n_left, stages=tab.stages,
+                            newton_opts=nopts, max_cuts=cfg.time.max_cuts, on_step=on_step,
+                            fixed_step=not cfg.time.step_control, consistent=False, **iopts)
             x, w, t = res.x, res.w, res.t
-            counters["rejected"] += res.rejected
-            counters["newton"] += res.newton_iterations
-            counters["linear_solves"] += res.linear_solves
-        except _Rebuild as stop:
+        except _Restart as stop:
             x, w, t = stop.x, stop.w, stop.t
-            counters["extra_rebuilds"] += 1
-            counters["newton"] += sum(sum(s) for s in counters["stage_iterations"][-1:])  # approx (chunk cut)
+            if progress:
+                log.info("integrator restarted at t = %.6g ms (contact pattern changed)", t)
         except IntegrationFailure as exc:
             wall["integration"] += time.perf_counter() - ti
             raise SceneFailure(
@@ -278,8 +333,7 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
                 details={"h": exc.h, "residuals": [float(r) for r in exc.residuals],
                          "history": {"stored": stored, "balances": {"t": bal_t, **bal}}}) from exc
         wall["integration"] += time.perf_counter() - ti
-        if progress:
-            log.info("t = %.5g ms, steps %d, rejected %d", t, counters["steps"], counters["rejected"])
+    counters["rejected"] = rec.rejected
     # newton iterations: count from the stage iterations of the accepted steps (+ rejected attempts)
     stage_its = counters["stage_iterations"]
     newton_acc = int(sum(sum(s) for s in stage_its))
@@ -314,6 +368,11 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         "newton_iterations": newton_acc,
         "newton_iterations_per_stage": newton_acc / n_stages,
         "linear_solves": counters["linear_solves"],
+        "factorizations": counters["factorizations"],
+        "jacobian_evaluations": counters["jacobians"],
+        "contact_structure_changes": counters["structure_changes"],
+        "integrator_restarts": counters["integrate_calls"] - 1,
+        "balance_residuals_reused": counters["residual_reused"],
         "contact_rebuilds": int(stats.get("rebuilds", 0)),
         "extra_rebuilds": counters["extra_rebuilds"],
         "dofs": {**base.dof_counts(), **({"thermal_post_solve": int(mesh.n_nodes)} if mode == "post" else {})},
@@ -344,7 +403,7 @@ def run(cfg, out_dir: Path) -> dict:
 
     out_dir = Path(out_dir)
     try:
-        res = solve(cfg, record=True)
+        res = solve(cfg, record=True, progress=True)
     except SceneFailure as failure:
         failure.save(out_dir / "induced_deformation_last_good_state.npz")
         log.error("%s", failure)
