@@ -13,8 +13,9 @@ temporary folder) and a table (``tests/data/records_v1_ci`` through ``build_tabl
 seeded) a worker process loads the damaged copy with ``rve.homogenisation.checkpoint.load_state``
 or ``rve.tables.open_table`` and the outcome is classed as *identical* (every array and
 attribute equal to the undamaged file's), *named error* (an exception whose message
-names the file), *unnamed error*, *silently different* or *hang* (no answer within
-``--timeout`` s: the worker is killed). Acceptance: silently different = hang = unnamed = 0.
+names the file), *unnamed error*, *crash* (the reading process died), *silently different* or *hang* (no
+answer within ``--timeout`` s: the worker is killed). Acceptance: silently different =
+hang = crash = unnamed = 0.
 """
 from __future__ import annotations
 
@@ -115,7 +116,13 @@ class Reader:
     def load(self, path: str, timeout: float):
         self.conn.send(path)
         if self.conn.poll(timeout):
-            return self.conn.recv()
+            try:
+                return self.conn.recv()
+            except EOFError:   # the reader died (e.g. a segfault inside HDF5)
+                self.proc.join()
+                code = self.proc.exitcode
+                self._start()
+                return ("crash", f"the reading process died (exit code {code})")
         self.proc.kill()
         self.proc.join()
         self._start()
@@ -138,7 +145,7 @@ def flip_campaign(kind: str, original: Path, n: int, seed: int, timeout: float, 
     ref = reader.load(str(original), 60)
     if ref[0] != "ok":
         raise SystemExit(f"the undamaged {kind} file does not load: {ref[1]}")
-    counts = {"identical": 0, "named error": 0, "unnamed error": 0, "silently different": 0, "hang": 0}
+    counts = {"identical": 0, "named error": 0, "unnamed error": 0, "crash": 0, "silently different": 0, "hang": 0}
     slow = 0.0
     examples: dict = {}
     damaged = work / f"damaged_{kind}{original.suffix}"
@@ -155,6 +162,8 @@ def flip_campaign(kind: str, original: Path, n: int, seed: int, timeout: float, 
             cls = "identical" if payload == ref[1] else "silently different"
         elif status == "hang":
             cls = "hang"
+        elif status == "crash":
+            cls = "crash"
         else:
             cls = "named error" if str(damaged) in payload else "unnamed error"
         counts[cls] += 1
@@ -203,7 +212,7 @@ def run_flips(args) -> bool:
                   + ", ".join(f"{k} {v}" for k, v in c.items()) + f"; slowest answer {r['slowest_s']:.2f} s")
             for k, v in r["examples"].items():
                 print(f"    e.g. {k}: {v}")
-            bad = c["silently different"] + c["hang"] + c["unnamed error"]
+            bad = c["silently different"] + c["hang"] + c["unnamed error"] + c["crash"]
             ok &= bad == 0 and r["slowest_s"] <= args.timeout
     print(f"flips: {'PASS' if ok else 'FAIL'} (none used silently, each answer within {args.timeout:g} s)")
     return ok

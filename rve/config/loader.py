@@ -369,7 +369,10 @@ def _format_error(err: dict, model: type[BaseModel], raw: dict) -> str:
     if etype.startswith("unit_"):
         return f"{key} = {format_value(raw_value if raw_value is not _MISSING else validated)}: {err['msg']}"
     shown = format_value(raw_value if raw_value is not _MISSING else validated)
-    return f"{key} = {shown}: {err.get('msg', etype)}"
+    msg = str(err.get("msg", etype))
+    if msg.startswith("Value error, "):   # pydantic's prefix of a validator's ValueError
+        msg = msg[len("Value error, "):]
+    return f"{key} = {shown}: {msg}"
 
 
 def _errors_from_validation(exc: ValidationError, model: type[BaseModel], raw: dict) -> list[str]:
