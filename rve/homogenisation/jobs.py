@@ -42,7 +42,7 @@ from ..io.provenance import logging_to
 from .sweeps import BASE_COMBO, combo_params, load_run_config
 
 __all__ = ["fabric_job", "relax_job", "strain_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
-           "recomputed_residual"]
+           "recomputed_residual", "verify_equilibrium"]
 
 log = logging.getLogger("rve.homogenisation.jobs")
 
@@ -199,9 +199,10 @@ def recomputed_residual(cfg, fab, mesh, x) -> float:
     return free_residual(mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf), xf)
 
 
-def _verify_equilibrium(cfg, fab, mesh, st, path):
-    """(recomputed, recorded) residual; refuses (quarantines) a state whose recomputed
-    residual is far above the recorded one."""
+def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
+    """(recomputed, recorded) residual; refuses (:class:`StateRefused`; with ``quarantine``
+    the file is moved to ``<name>.corrupt``) a state whose recomputed residual is far above
+    the recorded one."""
     recorded = st.solver.get("residual_N")
     recorded = float("nan") if recorded is None else float(recorded)
     tol = _stage_tolerance(cfg, st.kind)
@@ -211,11 +212,11 @@ def _verify_equilibrium(cfg, fab, mesh, st, path):
     log.info("%s: equilibrium residual recomputed %.3e N (recorded %.3e N, limit %.3e N)", path, residual,
              recorded, limit)
     if not (np.isfinite(residual) and residual <= limit):
-        from ..io.checksum import quarantine
+        from ..io.checksum import quarantine as move_aside
 
-        dest = quarantine(path)
+        dest = move_aside(path) if quarantine else None
         moved = (f"moved to {dest.name}, so the job that wrote it reruns on the next snakemake call" if dest
-                 else "delete it so the job that wrote it reruns")
+                 else "delete it (or `rve check --quarantine`) so the job that wrote it reruns")
         raise StateRefused(
             f"{path}: refused: its equilibrium residual recomputed at load is {residual:.3e} N, the file records "
             f"{recorded:.3e} N (limit {factor:g} x max(recorded, tolerance {tol:.1e} N) = {limit:.3e} N): the "
@@ -234,7 +235,7 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO) -
     fab, mesh = _fabric_mesh(cfg)
     st = load_state(state_file, quarantine=True)
     _check_state(st, mesh, state_file)
-    residual, recorded = _verify_equilibrium(cfg, fab, mesh, st, state_file)
+    residual, recorded = verify_equilibrium(cfg, fab, mesh, st, state_file)
     results = solve_probes(cfg, fab, mesh, st.x)
     rec = {
         "mode": st.mode or None,
