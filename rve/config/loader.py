@@ -234,7 +234,6 @@ _NUMBER_ERRORS = {
     "greater_than", "greater_than_equal", "less_than", "less_than_equal",
     "int_parsing", "int_from_float", "int_type", "int_parsing_size",
     "float_parsing", "float_type", "finite_number", "multiple_of",
-    "unit_not_finite",
 }
 
 
@@ -338,6 +337,8 @@ def _format_error(err: dict, model: type[BaseModel], raw: dict) -> str:
     raw_value = _raw_at(raw, loc)
     validated = err.get("input")
 
+    if etype == "full_line":
+        return (f"{key}." if key else "") + str(err.get("ctx", {}).get("text", err.get("msg", "")))
     if etype == "extra_forbidden":
         return f"{key}: unknown key (allowed: {_allowed(parent)})"
     if etype == "missing":

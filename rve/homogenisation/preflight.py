@@ -45,16 +45,9 @@ def estimate_memory_mb(cfg) -> float:
 
 
 def available_memory_mb() -> Optional[float]:
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return float(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") / 2**20
-    except (ValueError, OSError, AttributeError):
-        return None
+    from ..config.limits import available_mb
+
+    return available_mb()
 
 
 def design_overlap(fab, mesh, x0, samples: int = 8) -> tuple[float, str]:

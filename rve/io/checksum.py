@@ -22,6 +22,10 @@ Contract
   refused.
 * ``quarantine(path)`` renames a failing file to ``<name>.corrupt`` (replacing an older
   one), so Snakemake sees the output missing and reruns the job that produced it.
+* ``quarantine_failing(paths, require_seal)`` does that for every file of a list that
+  fails :func:`verify` (trailer only, no HDF5): ``workflow/rules/integrity.smk`` runs it
+  over the pipeline's states and tables before Snakemake builds its DAG, so a damaged or
+  truncated output is rebuilt by the next ``snakemake`` call instead of "Nothing to be done".
 * Fletcher-32 (``FLETCHER32``): the writers also ask HDF5 for a per-chunk Fletcher-32
   checksum on every variable (``encoding={"fletcher32": True}``); HDF5 checks it on every
   read, also in other tools (ncdump, h5dump).
@@ -41,7 +45,7 @@ from typing import Optional, Union
 
 __all__ = ["TRAILER_MAGIC", "TRAILER_SIZE", "CHECKSUM_ATTR", "CHECKSUM_ATTR_VALUE", "OPEN_TIMEOUT_S",
            "FLETCHER32", "CorruptFileError", "Seal", "seal", "verify", "open_netcdf", "quarantine",
-           "file_digest"]
+           "file_digest", "quarantine_failing"]
 
 log = logging.getLogger("rve.io.checksum")
 
@@ -217,3 +221,23 @@ def quarantine(path: PathLike) -> Optional[Path]:
         return None
     log.error("%s: moved to %s so the job that wrote it reruns", path, dest)
     return dest
+
+
+def quarantine_failing(paths, require_seal: bool = False) -> list:
+    """Move every file of ``paths`` that fails :func:`verify` (or, with ``require_seal``, has
+    no trailer) to ``<name>.corrupt``; returns ``[(path, what failed, new path)]``."""
+    moved = []
+    for p in paths:
+        p = Path(p)
+        try:
+            st = verify(p)
+            if st.sealed or not require_seal:
+                continue
+            what = "no SHA-256 trailer (truncated, or written before rve checked its files)"
+        except FileNotFoundError:
+            continue
+        except CorruptFileError as exc:
+            what = exc.what
+        dest = quarantine(p)
+        moved.append((str(p), what, str(dest) if dest else None))
+    return moved
