@@ -111,6 +111,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(scene.module.snakemake_command(args.config, args.overrides))
         return EXIT_OK
     out_dir = Path(args.out) if args.out else Path("results") / "runs" / Path(args.config).stem
+    from .io.atomic import unwritable_reason   # issue 15: before the run, not after it
+
+    if unwritable_reason(out_dir):
+        print(f"rve: output folder {out_dir}: cannot be written ({unwritable_reason(out_dir)})", file=sys.stderr)
+        return EXIT_CONFIG
     log.info("running scene %s -> %s", cfg.scene, out_dir)
     try:
         summary = run_scene(cfg, out_dir)

@@ -204,3 +204,11 @@ def test_bad_input_corrupted_table_names_the_file(tmp_path, capsys):
     rc = main(["table", "summary", str(bad)])
     err = capsys.readouterr().err
     assert rc != 0 and str(bad) in err and "Traceback" not in err
+
+
+def test_bad_input_rve_run_output_folder_checked_before_the_run(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    rc = main(["run", STATIC, "--out", str(blocker / "out")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"output folder {blocker / 'out'}: cannot be written" in err and "Traceback" not in err

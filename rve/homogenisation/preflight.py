@@ -85,15 +85,9 @@ def design_overlap(fab, mesh, x0, samples: int = 8) -> tuple[float, str]:
 
 
 def _writable(folder: Path) -> Optional[str]:
-    folder = folder.resolve()
-    probe = folder
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        return f"{probe} is not a folder"
-    if not os.access(probe, os.W_OK | os.X_OK):
-        return f"{probe} is not writable"
-    return None
+    from ..io.atomic import unwritable_reason
+
+    return unwritable_reason(folder)
 
 
 def preflight(cfg, outputs: Iterable = ()):

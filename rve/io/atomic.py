@@ -25,7 +25,8 @@ from typing import Any, Iterator, Optional, Union
 from .checksum import CHECKSUM_ATTR, CHECKSUM_ATTR_VALUE, FLETCHER32, seal
 from .provenance import to_jsonable
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_write_json", "atomic_netcdf"]
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_write_json", "atomic_netcdf",
+           "unwritable_reason"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -108,3 +109,17 @@ def atomic_netcdf(ds, path: PathLike, encoding: Optional[dict] = None) -> Path:
         out.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=enc)
         seal(tmp)
     return Path(path)
+
+
+def unwritable_reason(folder: PathLike) -> Optional[str]:
+    """None if files can be created in ``folder`` (created on demand: its nearest existing
+    ancestor must be a writable folder), else why not (one phrase). Checked before a
+    computation so an unwritable output folder is not found only at the end (issue 15)."""
+    probe = Path(folder).resolve()
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"{probe} is not a folder"
+    if not os.access(probe, os.W_OK | os.X_OK):
+        return f"{probe} is not writable"
+    return None
