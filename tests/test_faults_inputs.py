@@ -98,6 +98,7 @@ def test_bad_input_non_utf8_config(tmp_path):
     assert main(["validate", str(p)]) == 2
 
 
+@pytest.mark.slow   # two Snakemake dry runs (~10-30 s on the loaded machine)
 def test_bad_input_unknown_run_name_and_top_level_pipeline_key(tmp_path):
     """Through Snakemake (dry runs): a misspelt top-level key and an unknown run name."""
     pytest.importorskip("snakemake")
