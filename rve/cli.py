@@ -6,6 +6,8 @@
     rve schema SCENE                                         print the JSON schema of a scene's input
     rve scenes                                               list the known scenes
     rve table summary|interpolate|export|plot PATH ...       work with an RVE lookup table
+    rve check PATH... [--quarantine] [--no-residual]          verify states, tables (checksums, equilibrium)
+                                                             and configs (validation + pre-flight checks)
 
 Every scene name comes from the one registry, ``rve.scenes.registry``. Exit codes: 0
 success (also ``rve run`` of a pipeline scene, which prints the command that builds it),
@@ -109,6 +111,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(scene.module.snakemake_command(args.config, args.overrides))
         return EXIT_OK
     out_dir = Path(args.out) if args.out else Path("results") / "runs" / Path(args.config).stem
+    from .io.atomic import unwritable_reason   # issue 15: before the run, not after it
+
+    if unwritable_reason(out_dir):
+        print(f"rve: output folder {out_dir}: cannot be written ({unwritable_reason(out_dir)})", file=sys.stderr)
+        return EXIT_CONFIG
     log.info("running scene %s -> %s", cfg.scene, out_dir)
     try:
         summary = run_scene(cfg, out_dir)
@@ -342,7 +349,91 @@ def _add_table(sub) -> None:
     p.set_defaults(func=_cmd_table)
 
 
-_SUBCOMMANDS: list[Callable] = [_add_run, _add_validate, _add_schema, _add_scenes, _add_table]
+# --------------------------------------------------------------------------- check (issue 15)
+def _check_one(path: Path, residual: bool, quarantine: bool = False) -> str:
+    """One line of ``rve check`` for ``path``; raises on a failed check."""
+    from .io.checksum import CorruptFileError, open_netcdf, verify
+
+    if path.suffix in (".yaml", ".yml"):
+        cfg = load_config(path)
+        if cfg.scene == "rve":
+            from .homogenisation.preflight import estimate_memory_mb, preflight
+
+            preflight(cfg)
+            return f"config {cfg.scene}: valid; pre-flight checks passed (~{estimate_memory_mb(cfg):,.0f} MB a job)"
+        return f"config {cfg.scene}: valid"
+    seal = verify(path)
+    ds = open_netcdf(path)
+    how = f"sha256 {seal.digest[:12]}... verified" if seal.sealed else "no checksum (unverified: older file)"
+    if "rve_state_format" in ds.attrs:
+        from .homogenisation.checkpoint import load_state
+
+        st = load_state(path)
+        text = f"state {st.kind}{f' {st.mode} step {st.step}' if st.mode else ''}, {st.x.shape[0]} nodes, {how}"
+        if residual and st.config:
+            from .fabrics.setup import fabric_and_mesh
+            from .homogenisation.jobs import verify_equilibrium
+
+            cfg = load_config(st.config)
+            fab, mesh = fabric_and_mesh(cfg)
+            got, rec = (verify_equilibrium(cfg, fab, mesh, st, path, quarantine) if st.kind != "initial"
+                        else (None, None))
+            if got is not None:
+                text += f"; |F| recomputed {got:.3e} N (recorded {rec:.3e} N)"
+        return text
+    if "rve_table_format" in ds.attrs:
+        from .tables import open_table
+        from .tables.summary import unconverged_entries
+
+        tab = open_table(path)
+        bad = unconverged_entries(tab)
+        return (f"table {tab.attrs.get('rve_table_format')}, dims " + ", ".join(f"{d}={n}" for d, n in tab.sizes.items())
+                + f", {how}" + (f"; {len(bad)} entries NOT CONVERGED" if bad else ""))
+    raise CorruptFileError(path, "neither an rve state nor an rve table (no rve_state_format / rve_table_format)",
+                           hint="")
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from .io.checksum import CorruptFileError, quarantine
+
+    failed = 0
+    for name in args.paths:
+        path = Path(name)
+        try:
+            if not path.exists():
+                raise FileNotFoundError(f"{path}: no such file")
+            line = _check_one(path, not args.no_residual, args.quarantine)
+            print(f"OK   {path}: {line}")
+        except ConfigError as exc:
+            failed += 1
+            print(f"FAIL {path}: invalid configuration:" + "".join(f"\n       {e}" for e in exc.errors))
+        except (CorruptFileError, FileNotFoundError, ValueError, OSError) as exc:
+            failed += 1
+            text = str(exc)
+            print(f"FAIL {text if text.startswith(str(path)) else f'{path}: {text}'}")
+            if args.quarantine and path.exists() and path.suffix == ".nc" and "moved to" not in text:
+                dest = quarantine(path)
+                if dest is not None:
+                    print(f"     moved to {dest} (the job that wrote it reruns on the next snakemake call)")
+    print(f"rve check: {len(args.paths) - failed} of {len(args.paths)} passed", file=sys.stderr)
+    return EXIT_OK if failed == 0 else EXIT_SCENE_FAILED
+
+
+def _add_check(sub) -> None:
+    p = sub.add_parser("check", parents=[_common(False)],
+                       help="verify states and tables (checksums, equilibrium) and configs (pre-flight)",
+                       description="Verify every PATH: an RVE state (SHA-256 trailer, format, equilibrium residual "
+                                   "recomputed against the recorded one), a lookup table (trailer, format, "
+                                   "converged flags) or a config (validation; for scene rve also the pre-flight "
+                                   "checks). Exit code 0 if all pass, 1 otherwise.")
+    p.add_argument("paths", nargs="+", metavar="PATH", help="state (.nc), table (.nc) or config (.yaml)")
+    p.add_argument("--quarantine", action="store_true",
+                   help="move a failing .nc file to <name>.corrupt so Snakemake reruns the job that wrote it")
+    p.add_argument("--no-residual", action="store_true", help="do not recompute the equilibrium residual of states")
+    p.set_defaults(func=_cmd_check)
+
+
+_SUBCOMMANDS: list[Callable] = [_add_run, _add_validate, _add_schema, _add_scenes, _add_table, _add_check]
 
 
 def build_parser() -> argparse.ArgumentParser:

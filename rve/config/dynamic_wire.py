@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Literal, Optional
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from .fields import (
     Angle, DampingCoefficient, Density, Dimensionless, ElectricConductivity, Integer, Length, MagneticField,
@@ -110,3 +110,10 @@ class DynamicWireConfig(SceneConfig):
     mesh: DynamicWireMesh = Field(default_factory=DynamicWireMesh)
     time: DynamicWireTime = Field(default_factory=DynamicWireTime)
     newton: DynamicWireNewton = Field(default_factory=DynamicWireNewton)
+
+    @model_validator(mode="after")
+    def _feasible(self):
+        # issue 15: radius vs length, mesh vs memory (rve.config.limits)
+        from .limits import wire_feasibility
+
+        return wire_feasibility(self, 11)

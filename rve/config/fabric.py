@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Literal, Optional
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from .fields import (
     ContactConductance, DampingCoefficient, Density, Dimensionless, HeatTransferCoefficient, Integer, Length,
@@ -33,6 +33,14 @@ class FabricSpec(Section):
     rows: list[Integer] = Field([3, 4, 3], min_length=1, description="fibrils per stack row, bottom to top")
     knit_rows: Integer = Field(3, ge=1, description="courses (knit)")
     knit_loops: Integer = Field(4, ge=1, description="loops per course (knit)")
+
+    @field_validator("rows")
+    @classmethod
+    def _rows_hold_fibrils(cls, v):
+        # issue 15: an empty stack row used to fail only in the fabric generator
+        if any(n < 1 for n in v):
+            raise ValueError(f"every stack row must hold >= 1 fibril (got {list(v)})")
+        return v
 
 
 class FabricMaterial(Section):

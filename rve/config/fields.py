@@ -27,8 +27,12 @@ in ``rve.scenes.registry.SCENES`` (docs/configuration.md, "Adding a scene").
 """
 from __future__ import annotations
 
+import logging
+import math
+import re
 import typing
 import types
+from numbers import Real
 from typing import Annotated, Any, Literal, Optional
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
@@ -67,6 +71,7 @@ __all__ = [
     "Section",
     "SceneConfig",
     "cross_field_error",
+    "line_error",
     "scene_name",
     "field_unit",
 ]
@@ -114,6 +119,44 @@ def Quantity(unit: str):
     return Annotated[float, BeforeValidator(_convert), UnitSpec(unit)]
 
 
+# issue 15: every Temperature of rve is a difference (T = 0 is the reference or boundary
+# temperature); an offset unit ("20 degC" = 293.15 K) there is always a mistake
+_ABSOLUTE_T = re.compile(r"(?<![A-Za-z_])(degC|degF|degree_Celsius|degree_Fahrenheit|celsius|fahrenheit)\b|°[CF]",
+                         re.IGNORECASE)
+
+
+def _temperature_difference(value: Any) -> Any:
+    if isinstance(value, str) and _ABSOLUTE_T.search(value) and "delta" not in value.lower():
+        try:
+            absolute = f" = {convert(value, 'K'):.6g} K"
+        except UnitConversionError:
+            absolute = ""
+        raise PydanticCustomError(
+            "unit_absolute_temperature",
+            "an absolute temperature{absolute}, but this key is a temperature difference (rise above the "
+            "reference, T = 0): write e.g. '20 K' or '20 delta_degC'", {"absolute": absolute})
+    return value
+
+
+#: above this a bare angle is probably in degrees (a warning; bare numbers are radians)
+ANGLE_WARN_RAD = 2.0 * math.pi
+
+
+def _bare_angle(value: Any, info) -> Any:
+    bare = isinstance(value, Real) and not isinstance(value, bool)
+    if isinstance(value, str):
+        try:
+            float(value)
+            bare = True
+        except ValueError:
+            pass
+    if bare and math.isfinite(float(value)) and abs(float(value)) > ANGLE_WARN_RAD:
+        logging.getLogger("rve.config").warning(
+            "%s = %s: a bare number is an angle in radians (= %.6g deg); write '%s deg' if degrees are meant",
+            getattr(info, "field_name", "angle"), value, math.degrees(float(value)), value)
+    return value
+
+
 def _strict_integer(value: Any) -> Any:
     # pydantic's lax mode reads True as 1; a boolean for a count is always a mistake.
     if isinstance(value, bool):
@@ -131,7 +174,7 @@ Force = Quantity("N")
 Stress = Quantity("MPa")
 Energy = Quantity("mJ")
 Power = Quantity("W")
-Temperature = Quantity("K")
+Temperature = Annotated[Quantity("K"), BeforeValidator(_temperature_difference)]
 Current = Quantity("A")
 Charge = Quantity("mC")
 Voltage = Quantity("V")
@@ -148,7 +191,7 @@ SpecificHeat = Quantity("mJ/(g*K)")
 #: volumetric damping coefficient gamma of the force density -gamma v: g/(mm^3 ms) = N ms/mm^4
 DampingCoefficient = Quantity("g/(mm^3*ms)")
 #: angle in radians; "45 deg", "pi/4 rad" or a bare number (radians)
-Angle = Quantity("rad")
+Angle = Annotated[Quantity("rad"), BeforeValidator(_bare_angle)]
 #: dimensionless number; also accepts "1 %", "1e-3"
 Dimensionless = Quantity("dimensionless")
 
@@ -200,6 +243,12 @@ def cross_field_error(key: str, relation: str, other: str, value: float, other_v
         {"key": key, "relation": relation, "other": other, "value": value,
          "other_value": other_value, "u": u},
     )
+
+
+def line_error(text: str) -> PydanticCustomError:
+    """An error whose message is a whole line relative to the section that raises it
+    (``"elements = 10000000: ..."``); the loader prefixes the section's dotted key."""
+    return PydanticCustomError("full_line", "{text}", {"text": text})
 
 
 def scene_name(model: type[SceneConfig]) -> str:

@@ -41,6 +41,7 @@ __all__ = [
     "scene_models",
     "load_config",
     "read_config_source",
+    "StrictLoader",
     "apply_overrides",
     "parse_override",
     "validate_config",
@@ -51,17 +52,49 @@ __all__ = [
 
 
 # --------------------------------------------------------------------------- reading
+class DuplicateKeyError(yaml.YAMLError):
+    """A mapping of a YAML file repeats a key (YAML would silently keep the last one)."""
+
+
+class StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (issue 15: a
+    repeated section silently dropped the keys of the first one)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                hash(key)
+            except TypeError:
+                continue
+            if key in seen:
+                raise DuplicateKeyError(
+                    f"line {key_node.start_mark.line + 1}: duplicate key {key!r} (first at line {seen[key] + 1}); "
+                    "YAML would keep only the last one: merge the two")
+            seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_config_source(source: Union[str, os.PathLike, Mapping]) -> dict:
     """The raw (unvalidated) config mapping of a YAML file path or a mapping (deep copy)."""
     if isinstance(source, Mapping):
         return copy.deepcopy(dict(source))
     path = Path(source)
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"cannot read config file {str(path)!r}: {exc.strerror or exc}") from None
     try:
-        raw = yaml.safe_load(text)
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}, line {line}: {data[exc.start:exc.start + 1]!r}); "
+                          "save the file as UTF-8") from None
+    try:
+        raw = yaml.load(text, Loader=StrictLoader)
+    except DuplicateKeyError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: invalid YAML: {exc}") from None
     if raw is None:
@@ -234,7 +267,6 @@ _NUMBER_ERRORS = {
     "greater_than", "greater_than_equal", "less_than", "less_than_equal",
     "int_parsing", "int_from_float", "int_type", "int_parsing_size",
     "float_parsing", "float_type", "finite_number", "multiple_of",
-    "unit_not_finite",
 }
 
 
@@ -338,6 +370,8 @@ def _format_error(err: dict, model: type[BaseModel], raw: dict) -> str:
     raw_value = _raw_at(raw, loc)
     validated = err.get("input")
 
+    if etype == "full_line":
+        return (f"{key}." if key else "") + str(err.get("ctx", {}).get("text", err.get("msg", "")))
     if etype == "extra_forbidden":
         return f"{key}: unknown key (allowed: {_allowed(parent)})"
     if etype == "missing":
@@ -369,7 +403,10 @@ def _format_error(err: dict, model: type[BaseModel], raw: dict) -> str:
     if etype.startswith("unit_"):
         return f"{key} = {format_value(raw_value if raw_value is not _MISSING else validated)}: {err['msg']}"
     shown = format_value(raw_value if raw_value is not _MISSING else validated)
-    return f"{key} = {shown}: {err.get('msg', etype)}"
+    msg = str(err.get("msg", etype))
+    if msg.startswith("Value error, "):   # pydantic's prefix of a validator's ValueError
+        msg = msg[len("Value error, "):]
+    return f"{key} = {shown}: {msg}"
 
 
 def _errors_from_validation(exc: ValidationError, model: type[BaseModel], raw: dict) -> list[str]:

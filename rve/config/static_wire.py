@@ -100,3 +100,10 @@ class StaticWireConfig(SceneConfig):
     load: WireLoad = Field(default_factory=WireLoad)
     mesh: Mesh = Field(default_factory=Mesh)
     solver: StaticWireSolver = Field(default_factory=StaticWireSolver)
+
+    @model_validator(mode="after")
+    def _feasible(self):
+        # issue 15: radius vs length, mesh vs memory (rve.config.limits)
+        from .limits import wire_feasibility
+
+        return wire_feasibility(self, 9)

@@ -44,9 +44,16 @@ units), ``fabric_kind``, ``elements``, ``order``, ``half_widths``, ``contact_cou
 (overlapping contact points), ``solver`` (JSON: convergence, iterations, wall times),
 ``rve_version``.
 
-``write_state`` writes through ``rve.io.atomic.atomic_path`` (temporary file in the same
-directory, then a rename), so a file that exists is complete. ``load_state`` returns a
-:class:`State` with the flat dof vectors of the mechanics-only layout (9 per node).
+``write_state`` writes through ``rve.io.atomic.atomic_netcdf`` (temporary file in the
+same directory, Fletcher-32 on every variable, the SHA-256 trailer of ``rve.io.checksum``,
+then a rename), so a file that exists is complete and proves it. ``load_state`` verifies
+the trailer before HDF5 reads the file (a file without one, or with a mismatch, is a
+``rve.io.checksum.CorruptFileError`` naming the file and what failed; ``quarantine=True``
+also moves it aside as ``<name>.corrupt`` so Snakemake reruns the job that wrote it) and
+returns a :class:`State` with the flat dof vectors of the mechanics-only layout (9 per
+node). ``non_final_path(path)`` is where a job keeps a state that is not an equilibrium
+(``relaxed.unconverged.nc``: no rule's output, so Snakemake reruns the job;
+docs/fault_tolerance.md).
 """
 from __future__ import annotations
 
@@ -59,7 +66,7 @@ import numpy as np
 
 from ..io.provenance import package_version, to_jsonable
 
-__all__ = ["STATE_FORMAT", "COMPONENTS", "SIDES", "State", "write_state", "load_state", "describe"]
+__all__ = ["STATE_FORMAT", "COMPONENTS", "SIDES", "State", "write_state", "load_state", "describe", "non_final_path"]
 
 STATE_FORMAT = "rve-state/1"
 COMPONENTS = ("r_x", "r_y", "r_z", "g1_x", "g1_y", "g1_z", "g2_x", "g2_y", "g2_z")
@@ -101,7 +108,7 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
     ``contact``: a ``ContactSystem`` whose map (at ``state.x``) is stored, or None."""
     import xarray as xr
 
-    from ..io.atomic import atomic_path
+    from ..io.atomic import atomic_netcdf
 
     nn = mesh.n_nodes
     for name in ("x", "w", "origin"):
@@ -183,23 +190,50 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
     }
     ds = xr.Dataset(data, coords={"component": list(COMPONENTS), "side": list(SIDES), "xyz": ["x", "y", "z"]},
                     attrs=attrs)
-    with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+    atomic_netcdf(ds, path)
     return Path(path)
 
 
-def load_state(path) -> State:
-    """Read a checkpoint written by :func:`write_state` (raises ValueError on another format)."""
-    import xarray as xr
+def load_state(path, quarantine: bool = False) -> State:
+    """Read a checkpoint written by :func:`write_state`, verified first (module docstring).
+    Raises ``CorruptFileError`` (a ValueError naming the file and what failed) for a file
+    that fails its check, ValueError for another format. ``quarantine``: a corrupt file is
+    also renamed to ``<name>.corrupt`` (the producing job then reruns)."""
+    from ..io.checksum import CorruptFileError, open_netcdf
+    from ..io.checksum import quarantine as move_aside
 
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no RVE state at {path}")
-    with xr.open_dataset(path, engine="netcdf4") as ds:
-        ds = ds.load()
-    fmt = ds.attrs.get("rve_state_format")
-    if fmt != STATE_FORMAT:
-        raise ValueError(f"{path}: not an rve state file (rve_state_format = {fmt!r}, expected {STATE_FORMAT!r})")
+    try:
+        ds = open_netcdf(path, require_seal=True)
+        fmt = ds.attrs.get("rve_state_format")
+        if fmt != STATE_FORMAT:
+            raise CorruptFileError(path, f"not an rve state file (rve_state_format = {fmt!r}, expected "
+                                         f"{STATE_FORMAT!r})", hint="")
+        return _state_of(ds, path)
+    except CorruptFileError as exc:
+        if quarantine and exc.hint:
+            dest = move_aside(path)
+            if dest is not None:
+                raise CorruptFileError(path, exc.what, f"moved to {dest.name}: the job that wrote it reruns "
+                                                       "on the next snakemake call") from None
+        raise
+
+
+def _state_of(ds, path) -> State:
+    from ..io.checksum import CorruptFileError
+
+    missing = [v for v in ("state", "velocity", "origin", "reference", "reaction_force") if v not in ds]
+    if missing or "kind" not in ds.attrs:
+        raise CorruptFileError(path, "incomplete rve state (missing " + ", ".join(missing or ["attribute kind"]) + ")")
+    try:
+        return _build_state(ds)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CorruptFileError(path, f"unreadable rve state ({type(exc).__name__}: {exc})") from None
+
+
+def _build_state(ds) -> State:
     reac = {}
     rf = ds["reaction_force"].values
     for i, s in enumerate(ds["side"].values):
@@ -223,6 +257,13 @@ def load_state(path) -> State:
         solver=json.loads(a.get("solver", "{}")),
         reference=np.asarray(ds["reference"].values, float),
     )
+
+
+def non_final_path(path) -> Path:
+    """``states/relaxed.nc`` -> ``states/relaxed.unconverged.nc``: the name under which a job
+    keeps a state that failed its equilibrium check (matches no rule output)."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.unconverged{path.suffix}")
 
 
 def describe(path) -> dict[str, Any]:

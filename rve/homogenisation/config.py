@@ -13,7 +13,7 @@ docs/rve_pipeline.md; the config files are configs/rve/*.yaml.
 """
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, Optional
 
 from pydantic import Field, field_validator, model_validator
 
@@ -23,7 +23,7 @@ from ..config.fields import (
     Time, Voltage,
 )
 
-__all__ = ["default_probes", "thesis_probes", "RVEConfig", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
 MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
@@ -142,6 +142,26 @@ def default_probes() -> list[dict]:
                                          {"yarn": "weft", "position": -1.0, "end": "y-"}]}]
 
 
+# ---------------------------------------------------------------- issue 15: fault checks (one block)
+class FaultChecks(Section):
+    """What the jobs check before and after they compute (docs/fault_tolerance.md)."""
+
+    keep_unconverged: bool = Field(
+        False, description="false: a relax/strain job whose final |F| exceeds its tolerance (or is not finite) "
+                           "fails and keeps the state as <name>.unconverged.nc; true: the state is stored and "
+                           "the table marks it (converged = 0)")
+    residual_refuse_factor: Dimensionless = Field(
+        10.0, gt=1, description="the probe job refuses a state whose equilibrium residual, recomputed at load, "
+                                "exceeds this factor x max(recorded residual, the stage's tolerance)")
+    max_design_overlap: Dimensionless = Field(
+        0.5, gt=0, lt=1, description="largest overlap 2R - d of two fibrils of different yarns at the designed "
+                                     "state, as a fraction of the diameter 2R (the default plain weave: 25 %, "
+                                     "resolved by the relaxation)")
+    memory_limit_mb: Optional[Integer] = Field(
+        None, ge=1, description="refuse a mesh whose estimated memory exceeds this (MB); null: the machine's "
+                                "available memory")
+
+
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 
@@ -157,6 +177,7 @@ class RVEConfig(SceneConfig):
                                     min_length=1, description="probes (thesis Fig. 7.2.2 and a weft yarn end to "
                                                               "end by default)")
     probe_solver: ProbeSolver = Field(default_factory=ProbeSolver)
+    checks: FaultChecks = Field(default_factory=FaultChecks, description="fault checks (issue 15)")
 
     @model_validator(mode="after")
     def _unique_probe_names(self):

@@ -12,6 +12,17 @@ and the run spec (``rve.homogenisation.sweeps``), logs to the rule's log file
 ==================  ====================================================================
 
 ``probe_record`` is the probe job without the file: the record ``rve.tables`` builds from.
+
+Fault checks (issue 15, docs/fault_tolerance.md): every job reads its input state with
+``load_state(..., quarantine=True)`` (a file that fails its checksum is a
+``CorruptFileError`` naming it and is moved to ``<name>.corrupt``, so the next snakemake
+call reruns the job that wrote it); ``fabric_job`` runs ``rve.homogenisation.preflight``
+(geometry, probe terminals, memory, output folder) before anything is computed; the relax
+and strain jobs store only equilibria (final |F| finite and within the stage's tolerance;
+otherwise the state goes to ``<name>.unconverged.nc`` and :class:`NotAnEquilibrium` is
+raised, unless ``checks.keep_unconverged``); the probe job recomputes the state's
+equilibrium residual and refuses (:class:`StateRefused`, file quarantined) a state whose
+residual is more than ``checks.residual_refuse_factor`` x max(recorded, tolerance).
 The table rules (``rve_gather``, ``rve_report``) are ``rve.tables.jobs``: the tables are the
 higher layer and import this package, never the other way round. A re-run of any job
 gives the same bytes of data, so a killed run resumes from the last complete step with an
@@ -30,7 +41,8 @@ from ..io.atomic import atomic_write_json
 from ..io.provenance import logging_to
 from .sweeps import BASE_COMBO, combo_params, load_run_config
 
-__all__ = ["fabric_job", "relax_job", "strain_job", "probe_record", "probe_job"]
+__all__ = ["fabric_job", "relax_job", "strain_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
+           "recomputed_residual", "verify_equilibrium"]
 
 log = logging.getLogger("rve.homogenisation.jobs")
 
@@ -43,10 +55,48 @@ def _fabric_mesh(cfg):
     return fabric_and_mesh(cfg)
 
 
+class NotAnEquilibrium(RuntimeError):
+    """A relax or strain job ended with |F| above its tolerance or not finite; the state was
+    kept under a non-final name (``checkpoint.non_final_path``)."""
+
+
+class StateRefused(ValueError):
+    """The probe job's recomputed equilibrium residual contradicts the one the file records."""
+
+
 def _write(path, state, fab, mesh, system=None):
     from .checkpoint import write_state
 
     write_state(path, state, fab, mesh, contact=system)
+
+
+def _stage_tolerance(cfg, kind: str) -> float:
+    return float(cfg.relaxation.static_atol if kind == "relaxed" else cfg.strain.static_atol)
+
+
+def _store_equilibrium(cfg, out_state, st, fab, mesh, system, what: str) -> None:
+    """Write ``st`` as the job's output if it is an equilibrium (or the config keeps
+    unconverged states); else keep it as ``<name>.unconverged.nc`` and raise."""
+    from .checkpoint import non_final_path
+
+    tol = _stage_tolerance(cfg, st.kind)
+    res = st.solver.get("residual_N")
+    res = float("nan") if res is None else float(res)
+    ok = bool(np.isfinite(res) and res <= tol)
+    st.solver["converged"] = bool(ok and st.solver.get("converged", True) is not False)
+    st.solver["tolerance_N"] = tol
+    if ok or cfg.checks.keep_unconverged:
+        if not ok:
+            log.warning("%s: |F| = %.3e N exceeds the tolerance %.1e N; stored because checks.keep_unconverged "
+                        "is true (the table marks it converged = 0)", what, res, tol)
+        _write(out_state, st, fab, mesh, system)
+        return
+    kept = non_final_path(out_state)
+    _write(kept, st, fab, mesh, system)
+    raise NotAnEquilibrium(
+        f"{what}: final |F| = {res:.3e} N {'is not finite' if not np.isfinite(res) else f'exceeds the tolerance {tol:.1e} N'}"
+        f": not an equilibrium, not stored as {out_state}; the state is kept as {kept} for inspection "
+        "(set checks.keep_unconverged: true to store it; the table then marks it converged = 0)")
 
 
 def _config_dict(cfg) -> dict:
@@ -62,7 +112,9 @@ def fabric_job(out_state: PathLike, log_path: Optional[PathLike], spec: Mapping,
     with logging_to(log_path):
         t0 = time.perf_counter()
         cfg = load_run_config(spec, combo)
-        fab, mesh = _fabric_mesh(cfg)
+        from .preflight import preflight
+
+        fab, mesh = preflight(cfg, outputs=[out_state])
         x0 = fab.initial_state(mesh)
         st = State(x=x0, w=np.zeros_like(x0), origin=x0, kind="initial", combo=combo,
                    params=combo_params(spec, combo), config=_config_dict(cfg),
@@ -90,7 +142,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
     with logging_to(log_path):
         cfg = load_run_config(spec, combo)
         fab, mesh = _fabric_mesh(cfg)
-        st0 = load_state(in_state)
+        st0 = load_state(in_state, quarantine=True)
         _check_state(st0, mesh, in_state)
         x, system, info = relax_fabric(cfg, fab, mesh, st0.x)
         reac = clamp_reactions(fab, system, x)
@@ -99,7 +151,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
                    time=float(cfg.relaxation.duration), combo=combo, params=combo_params(spec, combo),
                    config=_config_dict(cfg), reaction_force=reac, contact_count=int(cstate["active_points"]),
                    solver=info)
-        _write(out_state, st, fab, mesh, system)
+        _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"relax job ({combo})")
         log.info("relaxed: converged=%s (|F| = %.3e N), %d active contact points, reactions %s, %.1f s -> %s",
                  info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"], out_state)
     return st
@@ -118,7 +170,7 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
         if mode not in cfg.strain.modes:
             raise ValueError(f"mode {mode!r} is not in the config's strain.modes {cfg.strain.modes}")
         fab, mesh = _fabric_mesh(cfg)
-        prev = load_state(in_state)
+        prev = load_state(in_state, quarantine=True)
         _check_state(prev, mesh, in_state)
         expect = "relaxed" if step == 1 else "strained"
         if prev.kind != expect or (step > 1 and (prev.mode != mode or prev.step != step - 1)):
@@ -131,11 +183,45 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
                    strain=float(info["strain"]), time=prev.time + cfg.strain.t_step + cfg.strain.t_relax,
                    combo=combo, params=combo_params(spec, combo), config=_config_dict(cfg), reaction_force=reac,
                    contact_count=int(cstate["active_points"]), solver=info)
-        _write(out_state, st, fab, mesh, system)
+        _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"{mode} step {step} ({combo})")
         log.info("%s step %d (strain %g): converged=%s (|F| = %.3e N), %d contact points, reactions %s, %.1f s -> %s",
                  mode, step, st.strain, info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"],
                  out_state)
     return st
+
+
+def recomputed_residual(cfg, fab, mesh, x) -> float:
+    """|F(x, 0)| on the free dofs (N) of a stored state, from scratch: the strain path's
+    mechanics system (``strain.mech_system``, contact map built at ``x``)."""
+    from .strain import free_residual, mech_system
+
+    xf = np.asarray(x, float).reshape(-1)
+    return free_residual(mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf), xf)
+
+
+def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
+    """(recomputed, recorded) residual; refuses (:class:`StateRefused`; with ``quarantine``
+    the file is moved to ``<name>.corrupt``) a state whose recomputed residual is far above
+    the recorded one."""
+    recorded = st.solver.get("residual_N")
+    recorded = float("nan") if recorded is None else float(recorded)
+    tol = _stage_tolerance(cfg, st.kind)
+    residual = recomputed_residual(cfg, fab, mesh, st.x)
+    factor = float(cfg.checks.residual_refuse_factor)
+    limit = factor * max(recorded if np.isfinite(recorded) else 0.0, tol)
+    log.info("%s: equilibrium residual recomputed %.3e N (recorded %.3e N, limit %.3e N)", path, residual,
+             recorded, limit)
+    if not (np.isfinite(residual) and residual <= limit):
+        from ..io.checksum import quarantine as move_aside
+
+        dest = move_aside(path) if quarantine else None
+        moved = (f"moved to {dest.name}, so the job that wrote it reruns on the next snakemake call" if dest
+                 else "delete it (or `rve check --quarantine`) so the job that wrote it reruns")
+        raise StateRefused(
+            f"{path}: refused: its equilibrium residual recomputed at load is {residual:.3e} N, the file records "
+            f"{recorded:.3e} N (limit {factor:g} x max(recorded, tolerance {tol:.1e} N) = {limit:.3e} N): the "
+            f"stored state is not the equilibrium it claims to be (damaged or edited); {moved}")
+    return residual, recorded
 
 
 def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO) -> dict:
@@ -147,8 +233,9 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO) -
     t0 = time.perf_counter()
     cfg = load_run_config(spec, combo)
     fab, mesh = _fabric_mesh(cfg)
-    st = load_state(state_file)
+    st = load_state(state_file, quarantine=True)
     _check_state(st, mesh, state_file)
+    residual, recorded = verify_equilibrium(cfg, fab, mesh, st, state_file)
     results = solve_probes(cfg, fab, mesh, st.x)
     rec = {
         "mode": st.mode or None,
@@ -158,7 +245,8 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO) -
         "contact_count": int(st.contact_count),
         "probes": {name: r.record() for name, r in results.items()},
         "state": {"file": str(state_file), "kind": st.kind, "step": int(st.step), "combo": st.combo,
-                  "converged": st.solver.get("converged"), "residual_N": st.solver.get("residual_N")},
+                  "converged": st.solver.get("converged"), "residual_N": residual,
+                  "residual_N_recorded": recorded},
         "wall_s": time.perf_counter() - t0,
     }
     return rec

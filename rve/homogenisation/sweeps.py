@@ -120,7 +120,15 @@ def combos(spec: Mapping) -> list[Combo]:
         dim, path, factor = _sweep_key(str(key))
         if dim in dims:
             raise ValueError(f"sweep: parameter {dim!r} given twice")
-        vals = [_sweep_value(v, path) for v in (values if isinstance(values, (list, tuple)) else [values])]
+        vals = []
+        for v in (values if isinstance(values, (list, tuple)) else [values]):
+            try:
+                vals.append(_sweep_value(v, path))
+            except ValueError as exc:   # issue 15: name the sweep key (UnitConversionError is a ValueError)
+                from ..config import ConfigError
+
+                raise ConfigError(f"sweep.{key} = {v!r}: {getattr(exc, 'message', exc)} (sweep parameter {key} "
+                                  f"sets {path}, unit {_path_unit(path) or '1'})") from None
         if not vals or len(set(map(_token, vals))) != len(vals):
             raise ValueError(f"sweep {key}: needs distinct values, got {values!r}")
         keys.append((dim, path, factor))

@@ -5,6 +5,12 @@ Every writer goes to a temporary file in the destination's directory (so the fin
 over the destination only when writing succeeded. A killed run therefore never leaves a
 truncated ``summary.json``, netCDF table or PNG behind, which is what lets Snakemake and
 checkpoint/resume logic trust any file that exists.
+
+``atomic_netcdf(ds, path, encoding)`` is the one writer of the netCDF files the pipeline
+reads back (states, tables): Fletcher-32 on every variable, the ``rve_checksum``
+attribute, and the SHA-256 trailer of ``rve.io.checksum`` appended to the temporary file
+before the rename, so a file that exists is complete *and* proves it
+(docs/fault_tolerance.md).
 """
 from __future__ import annotations
 
@@ -14,11 +20,13 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any, Iterator, Union
+from typing import Any, Iterator, Optional, Union
 
+from .checksum import CHECKSUM_ATTR, CHECKSUM_ATTR_VALUE, FLETCHER32, seal
 from .provenance import to_jsonable
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_write_json"]
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_write_json", "atomic_netcdf",
+           "unwritable_reason"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -85,3 +93,33 @@ def atomic_write_json(path: PathLike, obj: Any, indent: int = 2, sort_keys: bool
     """Write ``obj`` as JSON to ``path`` atomically (numpy types are converted)."""
     text = json.dumps(to_jsonable(obj), indent=indent, sort_keys=sort_keys) + "\n"
     return atomic_write_text(path, text)
+
+
+def atomic_netcdf(ds, path: PathLike, encoding: Optional[dict] = None) -> Path:
+    """Write the xarray Dataset ``ds`` as netCDF-4 to ``path`` atomically, with HDF5
+    Fletcher-32 on every variable (merged into ``encoding``), the global attribute
+    ``rve_checksum`` and the SHA-256 trailer (``rve.io.checksum.seal``) sealed before the
+    rename. The stored numbers are those of ``ds`` (checksums only add bytes)."""
+    enc = {name: dict(FLETCHER32) for name in ds.variables}
+    for name, e in (encoding or {}).items():
+        enc[name] = {**enc.get(name, {}), **e}
+    out = ds.copy()
+    out.attrs[CHECKSUM_ATTR] = CHECKSUM_ATTR_VALUE
+    with atomic_path(path) as tmp:
+        out.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=enc)
+        seal(tmp)
+    return Path(path)
+
+
+def unwritable_reason(folder: PathLike) -> Optional[str]:
+    """None if files can be created in ``folder`` (created on demand: its nearest existing
+    ancestor must be a writable folder), else why not (one phrase). Checked before a
+    computation so an unwritable output folder is not found only at the end (issue 15)."""
+    probe = Path(folder).resolve()
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"{probe} is not a folder"
+    if not os.access(probe, os.W_OK | os.X_OK):
+        return f"{probe} is not writable"
+    return None

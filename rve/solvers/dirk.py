@@ -27,6 +27,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
@@ -202,8 +203,11 @@ class IntegrationFailure(RuntimeError):
     """The integration gave up. Carries the last good state ``(x, w, t)``."""
 
     def __init__(self, message: str, x, w, t, h, residuals, step_failure: Optional[StepFailure] = None,
-                 result: "Optional[IntegrationResult]" = None):
+                 result: "Optional[IntegrationResult]" = None, cause: str = "failure"):
         super().__init__(message)
+        #: why the loop ended: "fixed_step", "max_cuts", "min_step", "rejections", "wall_time",
+        #: "initialisation" or "failure"
+        self.cause = cause
         self.x = x
         self.w = w
         self.t = t
@@ -577,6 +581,10 @@ def integrate(
     reuse_contraction: float = 0.5,
     reuse_h_rtol: float = 0.1,
     linear_backend: Optional[str] = None,
+    min_step_rel: float = 1e-6,
+    min_step_t_rel: float = 1e-12,
+    max_rejections: Optional[int] = None,
+    wall_budget_s: Optional[float] = None,
 ) -> IntegrationResult:
     """Integrate from ``t0`` to ``t_end`` with nominal step ``h0 = (t_end − t0)/n_steps``.
 
@@ -588,6 +596,15 @@ def integrate(
     ``IntegrationFailure`` (message: time, step size, residual history; attributes: last
     good ``x, w, t``). With ``fixed_step=True`` every step is ``h0`` and the first failure
     raises ``IntegrationFailure`` at once.
+
+    Every loop ends (issue 15, docs/fault_tolerance.md): besides ``max_cuts`` (consecutive
+    cuts, reset by every accepted step, however small), the run raises the same
+    ``IntegrationFailure`` (``cause`` names which budget) when a cut would take the step
+    below ``h_min = max(min_step_rel * h0, min_step_t_rel * |t|)`` (``"min_step"``: the
+    step no longer advances t in any useful way; with ``min_step_t_rel`` >= 1e-12, t + h
+    is always > t), after ``max_rejections`` rejected attempts in total (``"rejections"``;
+    default ``max(64, 2 n_steps)``) and, if ``wall_budget_s`` is set, when the loop has run
+    that long (``"wall_time"``; off by default so results depend on the input only).
 
     ``on_step(t, x, w, info)`` is called after every accepted step. With ``consistent``
     the massless dofs are first solved for at t0 (``consistent_initialization``).
@@ -619,6 +636,8 @@ def integrate(
             out.add(_counts([res0]))
     h0 = (float(t_end) - float(t0)) / int(n_steps)
     h = h0
+    budget_rejections = max(64, 2 * int(n_steps)) if max_rejections is None else int(max_rejections)
+    wall0 = time.perf_counter()
     k_next = 1                   # index of the next nominal grid point
     cuts = 0                     # consecutive cuts
     successes = 0                # consecutive successes since the last cut
@@ -645,14 +664,28 @@ def integrate(
                 out.add(fail.counts)
                 log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)",
                          out.steps + 1, t, h_try, fail.stage, fail.reason)
-                if fixed_step or cuts >= max_cuts:
-                    why = ("fixed-step mode" if fixed_step
-                           else f"{cuts} consecutive step cuts (max_cuts = {max_cuts})")
+                h_floor = max(float(min_step_rel) * h0, float(min_step_t_rel) * abs(t))
+                cause = None
+                if fixed_step:
+                    cause, why = "fixed_step", "fixed-step mode"
+                elif cuts >= max_cuts:
+                    cause, why = "max_cuts", f"{cuts} consecutive step cuts (max_cuts = {max_cuts})"
+                elif h_try / 2.0 < h_floor:
+                    cause, why = "min_step", (f"the next step h/2 = {h_try / 2.0:.3g} would be below the minimum "
+                                              f"step {h_floor:.3g} (max(min_step_rel {min_step_rel:g} x h0 "
+                                              f"{h0:.3g}, min_step_t_rel {min_step_t_rel:g} x t))")
+                elif out.rejected >= budget_rejections:
+                    cause, why = "rejections", (f"{out.rejected} rejected steps in total (max_rejections = "
+                                                f"{budget_rejections})")
+                elif wall_budget_s is not None and time.perf_counter() - wall0 > wall_budget_s:
+                    cause, why = "wall_time", f"the wall-time budget of {wall_budget_s:g} s"
+                if cause is not None:
                     raise IntegrationFailure(
                         f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
                         f"after {why}: stage {fail.stage}: {fail.reason}; Newton residuals "
-                        f"{_fmt_res(fail.residuals)}; last good state at t = {t:.9g}",
-                        x.copy(), w.copy(), t, h_try, fail.residuals, fail, out) from fail
+                        f"{_fmt_res(fail.residuals)}; {out.steps} steps accepted, {out.rejected} rejected; "
+                        f"last good state at t = {t:.9g}",
+                        x.copy(), w.copy(), t, h_try, fail.residuals, fail, out, cause=cause) from fail
                 cuts += 1
                 successes = 0
                 h = h_try / 2.0
@@ -683,6 +716,12 @@ def integrate(
             if not fixed_step and h < h0 and successes >= grow_after:
                 h = min(2.0 * h, h0)
                 successes = 0
+            if wall_budget_s is not None and k_next <= n_steps and time.perf_counter() - wall0 > wall_budget_s:
+                raise IntegrationFailure(
+                    f"time integration stopped at t = {t:.9g} (step size h = {h_try:.6g}) after the wall-time "
+                    f"budget of {wall_budget_s:g} s; {out.steps} steps accepted, {out.rejected} rejected; "
+                    f"last good state at t = {t:.9g}", x.copy(), w.copy(), t, h_try, info.stage_residuals[-1],
+                    None, out, cause="wall_time")
     finally:
         if bar is not None:
             bar.close()

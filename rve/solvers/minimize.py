@@ -203,7 +203,8 @@ class MinimizeResult(NewtonResult):
 
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
-                    label="minimize", time_budget=None, backtrack=0, backend=None):
+                    label="minimize", time_budget=None, backtrack=0, backend=None, max_rejections=None,
+                    max_sigma_rel=1e16):
     """Static equilibrium of a mechanics-only ``ContactRelaxable`` system (e.g. a
     ``ContactSystem``) as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
@@ -229,17 +230,27 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     one instance for the whole run, so PARDISO's analysis is reused while the pattern is
     unchanged; default ``rve.solvers.linear.resolve_backend()``).
 
+    Every loop ends (issue 15, docs/fault_tolerance.md): ``max_iter`` accepted iterations,
+    ``max_rejections`` rejected trials in total (default ``max(200, 2 max_iter)``), a
+    regularisation above ``max_sigma_rel`` x the stiffest mode's sigma (the trial steps
+    have shrunk to nothing: the minimum step) and the optional wall-time budget
+    ``time_budget`` (s; off by default so results depend on the input only). On
+    exhaustion the result is not converged, ``reason`` says which budget, ``residuals``
+    is the history and ``x`` the last accepted iterate.
+
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
     """
     solver, owned = run_backend(backend)
+    budget = max(200, 2 * int(max_iter)) if max_rejections is None else int(max_rejections)
     try:
         return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
-                                backtrack, solver)
+                                backtrack, solver, budget, float(max_sigma_rel))
     finally:
         _release(solver, owned)
 
 
-def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, solver):
+def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, solver,
+                     max_rejections=None, max_sigma_rel=1e16):
     t0 = time.perf_counter()
     keep = KEEP_STORED_PATTERN and solver.name == "pardiso"
     analyses0 = int(getattr(solver, "analyses", 0))
@@ -279,10 +290,18 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
             out.reason = f"no convergence in {max_iter} iterations (|F| = {rn:.3e})"
             break
         if time_budget is not None and time.perf_counter() - t0 > time_budget:
-            out.reason = f"time budget {time_budget:.0f} s spent (|F| = {rn:.3e})"
+            out.reason = f"time budget {time_budget:g} s (wall time) spent after {it} iterations (|F| = {rn:.3e})"
             break
         if not np.isfinite(rn):
             out.reason = "non-finite residual"
+            break
+        if max_rejections is not None and out.rejections >= max_rejections:
+            out.reason = (f"{out.rejections} rejected trials in total (max_rejections = {max_rejections}) after "
+                          f"{it} iterations (|F| = {rn:.3e})")
+            break
+        if sigma > max_sigma_rel * scale:
+            out.reason = (f"no descent step: the regularisation sigma = {sigma:.3g} exceeds {max_sigma_rel:g} x the "
+                          f"stiffest mode's (the trial steps shrank below the minimum step; |F| = {rn:.3e})")
             break
         # factorise K + sigma M, raising sigma until it is positive definite
         for _ in range(60):

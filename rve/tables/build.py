@@ -45,6 +45,7 @@ Output of :func:`build_table`: an :class:`xarray.Dataset` with dimensions ``mode
 reaction_force             (mode, strain, *swept, side, component)  N
 contact_count              (mode, strain, *swept)                  1
 equilibrium_residual       (mode, strain, *swept)                  N
+converged                  (mode, strain, *swept)                  1   (1 equilibrium, 0 kept unconverged)
 probe_voltage              (mode, strain, *swept, probe)           V
 probe_current              (mode, strain, *swept, probe, terminal) A
 probe_resistance           (mode, strain, *swept, probe)           ohm
@@ -286,6 +287,9 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
         resid = rec.get("equilibrium_residual", (rec.get("state") or {}).get("residual_N"))
         if resid is not None:
             data["equilibrium_residual"][idx] = float(resid)
+        conv = rec.get("converged", (rec.get("state") or {}).get("converged"))
+        if conv is not None:
+            data["converged"][idx] = 1.0 if conv else 0.0
         for pname, pr in (rec.get("probes") or {}).items():
             k = idx + (pidx[str(pname)],)
             pw = f"{where}, probe {pname}"

@@ -9,10 +9,15 @@ a coordinate variable and its labels as the auxiliary coordinate ``d_label`` (a 
 array, dimension ``d_strlen``), listed in the data variables' ``coordinates``;
 ``open_table`` restores the index coordinates.
 
-``write_table(ds, path)`` writes netCDF-4 through ``rve.io.atomic.atomic_path`` (a file
-that exists is complete), zlib level 4 with shuffle on numeric variables, no fill value
-on coordinates (CF). ``open_table(path)`` reads any table written so far into memory (the
-file is closed) and checks that it has the ``mode`` and ``strain`` dimensions; a version-1
+``write_table(ds, path)`` writes netCDF-4 through ``rve.io.atomic.atomic_netcdf`` (a file
+that exists is complete; Fletcher-32 on every variable and the SHA-256 trailer of
+``rve.io.checksum``), zlib level 4 with shuffle on numeric variables, no fill value on
+coordinates (CF). ``open_table(path)`` verifies the trailer before HDF5 reads the file
+(a table without one, e.g. ``tests/data/table_v1_ci.nc``, is opened in a child process
+with a time limit first and used with a warning; every failure is a
+``rve.io.checksum.CorruptFileError`` naming the file and what failed), reads it into
+memory (the file is closed) and checks that it has the ``mode`` and ``strain``
+dimensions; a version-1
 table (string coordinate variables, no macro quantities) is read as it was stored plus the
 macro quantities derived by ``rve.tables.macro.add_macro_quantities`` (its attribute
 ``rve_table_format`` stays version 1; ``rve_table_upgraded`` says what was added).
@@ -26,7 +31,7 @@ from typing import Union
 import numpy as np
 import xarray as xr
 
-from ..io.atomic import atomic_path
+from ..io.atomic import atomic_netcdf
 
 __all__ = ["write_table", "open_table", "LABEL_SUFFIX", "to_cf", "from_cf"]
 
@@ -90,8 +95,7 @@ def write_table(ds: xr.Dataset, path: PathLike) -> Path:
     """Write ``ds`` atomically as CF-1.11 netCDF-4 (module docstring)."""
     path = Path(path)
     disk = to_cf(ds)
-    with atomic_path(path) as tmp:
-        disk.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=_encoding(disk))
+    atomic_netcdf(disk, path, encoding=_encoding(disk))
     return path
 
 
@@ -101,15 +105,19 @@ def open_table(path: PathLike) -> xr.Dataset:
     from .macro import MACRO_VARIABLES, add_macro_quantities
     from .schema import TABLE_FORMAT_V1
 
+    from ..io.checksum import CorruptFileError, open_netcdf
+
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no lookup table at {path}")
-    with xr.open_dataset(path, engine="netcdf4") as ds:
-        ds = ds.load()
-    ds = from_cf(ds)
+    ds = open_netcdf(path)
+    try:
+        ds = from_cf(ds)
+    except Exception as exc:  # noqa: BLE001 - a damaged label coordinate of an unsealed file
+        raise CorruptFileError(path, f"unreadable table labels ({type(exc).__name__}: {exc})") from None
     for name in ("mode", "strain"):
         if name not in ds.dims:
-            raise ValueError(f"{path} is not an rve lookup table (no {name!r} dimension)")
+            raise CorruptFileError(path, f"not an rve lookup table (no {name!r} dimension)", hint="")
     if ds.attrs.get("rve_table_format") == TABLE_FORMAT_V1 and "membrane_force" not in ds:
         ds = add_macro_quantities(ds)
         ds.attrs["rve_table_upgraded"] = ("read as rve-lookup-table/1; derived on reading: "

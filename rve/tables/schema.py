@@ -74,6 +74,9 @@ VARIABLES: dict[str, tuple[tuple[str, ...], str, str, dict]] = {
     "equilibrium_residual": ((), "N",
                              "norm of the out-of-balance force on the free dofs of the stored "
                              "state (static equilibrium: ~0; NaN if not recorded)", {}),
+    "converged": ((), DIMENSIONLESS,
+                  "1 if the stored state is a static equilibrium (final |F| within the stage's tolerance), "
+                  "0 if it is not and was kept on purpose (checks.keep_unconverged); NaN if not recorded", {}),
     "probe_voltage": (("probe",), "V", "test voltage applied across the probe terminals", {}),
     "probe_current": (("probe", "terminal"), "A",
                       "electric current into the fabric through the probe terminal", {}),

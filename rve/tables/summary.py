@@ -2,7 +2,9 @@
 
 Input: a table Dataset; output: text with the dimensions, the strain range per mode, the
 swept values, the probe resistance ranges, the network resistances, the worst equilibrium
-residual and the reaction forces at the smallest strain (docs/lookup_tables.md).
+residual and the reaction forces at the smallest strain (docs/lookup_tables.md). Entries
+whose state is not an equilibrium (``converged`` = 0, kept by ``checks.keep_unconverged``)
+are listed first, before anything else (docs/fault_tolerance.md).
 """
 from __future__ import annotations
 
@@ -11,7 +13,26 @@ import xarray as xr
 
 from .schema import lead_dims
 
-__all__ = ["summarize"]
+__all__ = ["summarize", "unconverged_entries"]
+
+
+def unconverged_entries(ds: xr.Dataset) -> list[str]:
+    """``["uniaxial strain 0.05 (|F| = 3.1e-02 N)", ...]``: the entries with converged == 0."""
+    if "converged" not in ds:
+        return []
+    conv = ds["converged"]
+    bad = (conv == 0).values
+    if not bad.any():
+        return []
+    dims = conv.dims
+    resid = ds["equilibrium_residual"].transpose(*dims).values if "equilibrium_residual" in ds else None
+    out = []
+    for idx in zip(*np.nonzero(bad)):
+        where = " ".join(f"{d} {ds[d].values[i]:g}" if ds[d].dtype.kind in "fiu" else f"{d} {ds[d].values[i]}"
+                         for d, i in zip(dims, idx) if d in ds.coords)
+        r = f" (|F| = {resid[idx]:.3g} N)" if resid is not None and np.isfinite(resid[idx]) else ""
+        out.append(where.replace("mode ", "", 1) + r)
+    return out
 
 
 def _rng(a) -> str:
@@ -25,7 +46,10 @@ def _rng(a) -> str:
 def summarize(ds: xr.Dataset) -> str:
     """Human-readable summary: dims, strain range per mode, swept values, per-probe
     resistance range, network resistances and the reaction forces at zero strain."""
-    lines = [f"rve lookup table: {ds.attrs.get('title', '(untitled)')}"]
+    bad = unconverged_entries(ds)
+    lines = [f"NOT CONVERGED: {len(bad)} table entr{'y' if len(bad) == 1 else 'ies'} whose state is not a static equilibrium "
+             "(kept by checks.keep_unconverged; converged = 0):"] + [f"  {b}" for b in bad] if bad else []
+    lines.append(f"rve lookup table: {ds.attrs.get('title', '(untitled)')}")
     lines.append(f"  created {ds.attrs.get('date_created', '?')} by rve {ds.attrs.get('rve_version', '?')}"
                  f" ({ds.attrs.get('rve_table_format', '?')})")
     lines.append("  dims: " + ", ".join(f"{d}={n}" for d, n in ds.sizes.items()))
