@@ -332,8 +332,9 @@ def shifted(J, M, sigma: float, keep_pattern: bool = False):
         slots = c["slots"]
     else:
         slots = _slots_in(J, M)
-        c.update(J=(J.shape, J.indptr.copy(), J.indices.copy()), M=(M.shape, M.indptr.copy(), M.indices.copy()),
-                 slots=slots)
+        # the arrays themselves are kept (not copies): matrices restricted through one plan
+        # share them, so the next call is an identity check
+        c.update(J=(J.shape, J.indptr, J.indices), M=(M.shape, M.indptr, M.indices), slots=slots)
     if slots is None:
         return (J + sigma * M).tocsc()
     data = J.data.copy()
@@ -346,6 +347,8 @@ _SLOT_CACHE: dict = {}
 
 def _same_arrays(key, X) -> bool:
     shape, indptr, indices = key
+    if X.indices is indices and X.indptr is indptr:
+        return True
     return (X.shape == shape and X.indptr.size == indptr.size and X.indices.size == indices.size
             and np.array_equal(X.indptr, indptr) and np.array_equal(X.indices, indices))
 
