@@ -13,8 +13,8 @@ machine load. Per process: wall time (launch to exit), CPU time (user + system o
 process alone, ``os.wait4``), peak RSS, and what the worker prints (energy, overlap,
 stability, iterations, factorisations). Printed: medians per side, the ratios base / new
 of wall and CPU time, and the relative energy difference and max |x_new - x_base| of the
-final states. ``--variant NAME=K=V,K=V`` adds a further side: this tree with the given
-environment (e.g. ``superlu=RVE_LINEAR_BACKEND=superlu,RVE_KERNELS=numpy``).
+final states. ``--variant "NAME=K=V;K=V"`` adds a further side: this tree with the given
+environment (e.g. ``"superlu=RVE_LINEAR_BACKEND=superlu;RVE_KERNELS=numpy"``).
 
 The relaxation is configs/scenes/plain_weave_relax.yaml with ``mesh.elements = N`` (at 12
 the coarse stage is the run itself; at 30 the shipped mesh sequencing 12 -> 30); the
@@ -46,6 +46,23 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
         prof.start()
     from rve.config import load_config
 
+    opts = os.environ.get("RVE_AB_PARDISO")  # a variant of the minimiser's PARDISO options (JSON)
+    if opts:
+        from rve.solvers import minimize
+
+        minimize.PARDISO_OPTIONS.clear()
+        minimize.PARDISO_OPTIONS.update(json.loads(opts))
+    eps = float(os.environ.get("RVE_AB_PERTURB", "0") or 0)  # perturb the coarse minimum (mm), path test
+    if eps:
+        from rve.fabrics import relaxation as _rx
+
+        _coarse = _rx._coarse_stage
+
+        def _perturbed(cfg, system):
+            x, cres, dofs = _coarse(cfg, system)
+            return x + eps * np.random.default_rng(1).uniform(-1.0, 1.0, x.size), cres, dofs
+
+        _rx._coarse_stage = _perturbed
     rec = {"kind": kind, "arg": arg}
     if kind == "relax":
         from rve.scenes import fabric_relax
@@ -64,6 +81,9 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
                    factorizations=int(sum(h.get("factorizations", 0) for h in stages)),
                    stage_its=[int(h.get("newton_iterations", 0)) for h in stages],
                    stage_energies=[float(h["energies"][-1]) for h in stages if h.get("energies")])
+        Path(str(out_npy) + ".history.json").write_text(json.dumps(
+            [{k: h.get(k) for k in ("mesh_elements", "onset_over_R", "energies", "residuals", "sigmas", "steps",
+                                    "factorizations", "analyses", "linear_backend")} for h in stages]))
     else:
         from rve.homogenisation.strain import strain_step
         from rve.solvers.static import StaticProblem
@@ -148,7 +168,7 @@ def main(argv=None):
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--baseline", default="/work/baseline")
     ap.add_argument("--baseline-python", default="/work/venv_base/bin/python")
-    ap.add_argument("--variant", action="append", default=[], help="NAME=K=V,K=V: this tree with that environment")
+    ap.add_argument("--variant", action="append", default=[], help="NAME=K=V;K=V: this tree with that environment")
     ap.add_argument("--no-baseline", action="store_true")
     ap.add_argument("--out", default=str(ROOT / "results/engine/ab"))
     ap.add_argument("--json", default=None)
@@ -160,7 +180,7 @@ def main(argv=None):
     sides.append(("new", sys.executable, ROOT, {}))
     for v in a.variant:
         name, _, rest = v.partition("=")
-        env = dict(kv.split("=", 1) for kv in rest.split(",") if kv)
+        env = dict(kv.split("=", 1) for kv in rest.split(";") if kv)
         sides.append((name, sys.executable, ROOT, env))
     recs = {s[0]: [] for s in sides}
     xs = {}

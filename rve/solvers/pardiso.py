@@ -91,7 +91,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .linear import SingularFactorError
+from .linear import SingularFactorError, _same_buffer
 
 __all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
 
@@ -211,7 +211,7 @@ def _sorted_unique(keys):
 
 def _same_structure(A, indptr, indices) -> bool:
     """``A`` has exactly these index arrays (identity first, then contents)."""
-    if A.indices is indices and A.indptr is indptr:
+    if _same_buffer(A.indices, indices) and _same_buffer(A.indptr, indptr):
         return True
     return (A.indptr.size == indptr.size and A.indices.size == indices.size
             and np.array_equal(A.indptr, indptr) and np.array_equal(A.indices, indices))

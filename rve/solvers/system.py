@@ -279,10 +279,16 @@ class FreeDofs:
         return fd
 
 
+def _same_buffer(a, b) -> bool:
+    """The same array, or views of the very same memory with the same layout."""
+    return a is b or (a.shape == b.shape and a.dtype == b.dtype and a.strides == b.strides
+                      and a.ctypes.data == b.ctypes.data)
+
+
 def _same_structure(A, indptr, indices) -> bool:
     """True when CSR/CSC ``A`` has exactly the index arrays ``indptr``/``indices``
     (identity first, then contents)."""
-    if A.indices is indices and A.indptr is indptr:
+    if _same_buffer(A.indices, indices) and _same_buffer(A.indptr, indptr):
         return True
     return (A.indptr.size == indptr.size and A.indices.size == indices.size
             and np.array_equal(A.indptr, indptr) and np.array_equal(A.indices, indices))
