@@ -4,7 +4,8 @@
         [--baseline-python /work/venv_base/bin/python] [--env RVE_LINEAR_BACKEND=superlu ...]
     python benchmarks/engine_ab.py relax 30 --runs 1
     python benchmarks/engine_ab.py strain STATE.nc        # one strain step (uniaxial 1, default config)
-    python benchmarks/engine_ab.py --worker relax 12 OUT.npy [--profile FILE.html]
+    python benchmarks/engine_ab.py --worker relax 12 OUT.npy [--profile FILE.txt]
+    python benchmarks/engine_ab.py paths A.npy.history.json B.npy.history.json   # two paths step by step
 
 Every run is a fresh process: the baseline tree with its own interpreter (``--baseline``,
 ``--baseline-python``: today's main, SuperLU and numpy kernels) and this tree with the
@@ -88,10 +89,12 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
         from rve.homogenisation.strain import strain_step
         from rve.solvers.static import StaticProblem
 
+        import rve.homogenisation.config  # noqa: F401  (registers the RVE config with load_config)
+
         try:
             from rve.fabrics.setup import fabric_and_mesh
         except ImportError:
-            from rve.homogenisation.pipeline import fabric_and_mesh  # today's main
+            from rve.homogenisation.strain import build_fabric as fabric_and_mesh  # today's main
         try:
             from rve.solvers.linear import factor_inertia
         except ImportError:
@@ -117,6 +120,29 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
         Path(profile).write_text(prof.output_text(unicode=False, color=False, show_all=False))
     np.save(out_npy, x)
     return rec
+
+
+def compare_paths(file_a: str, file_b: str) -> None:
+    """Step-by-step energies of two runs' minimiser stages (the ``.history.json`` files the
+    worker writes): per stage the iterations, the first accepted iteration at which the
+    energies differ by more than 1e-14 ... 1e-3 relative, and the energies around there."""
+    ha, hb = json.loads(Path(file_a).read_text()), json.loads(Path(file_b).read_text())
+    for k, (a, b) in enumerate(zip(ha, hb)):
+        ea, eb = np.asarray(a["energies"]), np.asarray(b["energies"])
+        m = min(ea.size, eb.size)
+        rel = np.abs(ea[:m] - eb[:m]) / np.abs(ea[:m])
+        first = {t: (int(np.argmax(rel > t)) if np.any(rel > t) else None) for t in (1e-14, 1e-12, 1e-9, 1e-6, 1e-3)}
+        print(f"stage {k + 1} ({a.get('mesh_elements')} el, onset {a.get('onset_over_R')} R): iterations "
+              f"{ea.size - 1} vs {eb.size - 1}, final energies {ea[-1]:.12e} vs {eb[-1]:.12e} mJ "
+              f"(rel {abs(ea[-1] - eb[-1]) / abs(ea[-1]):.1e}); max rel. difference on the common iterations "
+              f"{rel.max():.1e}; first iteration above " + ", ".join(f"{t:.0e}: {v}" for t, v in first.items()))
+        if first[1e-14] is not None:
+            i0 = first[1e-14]
+            show = sorted({i for i in (i0 - 1, i0, i0 + 1, i0 + 5, i0 + 10, i0 + 20, i0 + 40, i0 + 80, m - 1)
+                           if 0 <= i < m})
+            for i in show:
+                print(f"    it {i:4d}: {ea[i]:.15e} {eb[i]:.15e}  rel {rel[i]:.1e}  sigma {a['sigmas'][i - 1] if i else 0:.3g}"
+                      f" / {b['sigmas'][i - 1] if i else 0:.3g}")
 
 
 def run_one(python: str, tree: Path, kind: str, arg: str, out_npy: Path, env_extra: dict) -> dict:
@@ -161,6 +187,9 @@ def main(argv=None):
 
         rec["rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
         print(json.dumps(rec))
+        return
+    if argv and argv[0] == "paths":
+        compare_paths(argv[1], argv[2])
         return
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("kind", choices=("relax", "strain"))
