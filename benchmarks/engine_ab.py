@@ -141,8 +141,8 @@ def compare_paths(file_a: str, file_b: str) -> None:
             show = sorted({i for i in (i0 - 1, i0, i0 + 1, i0 + 5, i0 + 10, i0 + 20, i0 + 40, i0 + 80, m - 1)
                            if 0 <= i < m})
             for i in show:
-                print(f"    it {i:4d}: {ea[i]:.15e} {eb[i]:.15e}  rel {rel[i]:.1e}  sigma {a['sigmas'][i - 1] if i else 0:.3g}"
-                      f" / {b['sigmas'][i - 1] if i else 0:.3g}")
+                sa, sb = (a["sigmas"][i - 1], b["sigmas"][i - 1]) if i else (0.0, 0.0)
+                print(f"    it {i:4d}: {ea[i]:.15e} {eb[i]:.15e}  rel {rel[i]:.1e}  sigma {sa:.3g} / {sb:.3g}")
 
 
 def run_one(python: str, tree: Path, kind: str, arg: str, out_npy: Path, env_extra: dict) -> dict:

@@ -40,6 +40,10 @@ backend (registry name ``"pardiso"``) with the interface of the linear-solver la
   candidate pairs), so later nonzero patterns under the same map lie in it. Measured on
   the 80-fibril relaxation (docs/engine.md): 30 analyses for 491 factorisations at 30
   el/fibril with ``analyse_stored`` against 283 without.
+* Stored-structure fast path: when a matrix has the stored structure of the previous call
+  and all of it lies in the analysed pattern, its values are gathered straight onto the
+  analysed pattern (explicit zeros included: the same numbers as the nonzero path), with
+  no zero elimination or pattern search (``stored_fast`` counts these calls).
 * ``solve(b)``: phase 33 (b of shape (n,) or (n, k)); ``refinement_steps`` is the number
   of iterative refinement steps PARDISO performed (iparm(7)). ``refinement=0`` is MKL's
   default: two steps automatically when pivots were perturbed, none otherwise.

@@ -247,7 +247,7 @@ class FreeDofs:
             if _same_structure(A, ref_indptr, ref_indices):
                 return plan
         shared = FreeDofs._SHARED
-        for i, (key, ref_indptr, ref_indices, plan) in enumerate(shared):
+        for key, ref_indptr, ref_indices, plan in shared:
             if key == self.key and _same_structure(A, ref_indptr, ref_indices):
                 plans[len(plans)] = (ref_indptr, ref_indices, plan)
                 return plan
