@@ -154,3 +154,44 @@ def test_static_problem_state_round_trip_and_prescribed_values():
     F, J = prob(u)
     np.testing.assert_allclose(J.toarray(), s.K.toarray()[np.ix_(prob.free, prob.free)], rtol=1e-15)
     np.testing.assert_allclose(F, (s.K @ np.where(s.mech, xs, ws))[prob.free], rtol=1e-15)
+
+
+def test_plan_is_keyed_on_the_whole_structure():
+    """Two structures with the same size, the same first row entries and the same trailing
+    row pointers (the fields of the former digest key) but one entry moved in a middle
+    row: each gets its own plan and its own, correct restriction (the former key handed the
+    first one's plan to the second: a silently wrong matrix)."""
+    n = 200
+    rows = np.arange(n)
+    A = sp.csr_matrix((np.ones(2 * n), (np.r_[rows, rows], np.r_[rows, (rows + 1) % n])), shape=(n, n))
+    B = A.copy()
+    r = 100  # row 100: entry (100, 101) moved to (100, 150)
+    k = B.indptr[r] + 1
+    assert B.indices[k] == 101
+    B.indices = B.indices.copy()
+    B.indices[k] = 150
+    B.data = np.arange(1.0, B.nnz + 1.0)
+    assert A.nnz == B.nnz and np.array_equal(A.indptr, B.indptr)
+    assert np.array_equal(A.indices[:64], B.indices[:64]) and B.has_canonical_format
+    fd = FreeDofs(n, [0, 7])
+    for M in (A, B, A, B):
+        np.testing.assert_array_equal(fd.combine([(M, 1.0, None)]).toarray(),
+                                      M.toarray()[np.ix_(fd.free, fd.free)])
+        np.testing.assert_array_equal(fd.matrix(M).toarray(), M.toarray()[np.ix_(fd.free, fd.free)])
+    # a second restriction of the same constraint set finds the plans already built
+    fd2 = FreeDofs(n, [7, 0])
+    np.testing.assert_array_equal(fd2.matrix(B).toarray(), B.toarray()[np.ix_(fd.free, fd.free)])
+
+
+def test_combine_skips_a_zero_mask_and_equals_the_masked_sum():
+    n = 40
+    P = _random_csr(n, 3)
+    Q = sp.csr_matrix((np.random.default_rng(4).normal(size=P.nnz), P.indices, P.indptr), shape=P.shape)
+    fd = FreeDofs(n, [1, 5])
+    ones, zeros = np.ones(n), np.zeros(n)
+    out = fd.combine([(P, 1.0, ones), (Q, 1.0, zeros)])
+    np.testing.assert_array_equal(out.toarray(), P.toarray()[np.ix_(fd.free, fd.free)])
+    mask = (np.arange(n) % 2).astype(float)
+    out = fd.combine([(P, 2.0, mask), (Q, 0.5, 1.0 - mask)])
+    np.testing.assert_allclose(out.toarray(), _dense_combination(fd, [(P, 2.0, mask), (Q, 0.5, 1.0 - mask)]),
+                               rtol=1e-15, atol=1e-15)

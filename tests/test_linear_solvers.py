@@ -265,6 +265,16 @@ def test_shifted_keeps_the_stored_pattern():
     # an M entry outside J's pattern: scipy's sum
     M2 = sp.csc_matrix(np.eye(50) + np.eye(50, k=40))
     np.testing.assert_array_equal(shifted(J, M2, 0.3, keep_pattern=True).toarray(), (J + 0.3 * M2).toarray())
+    # M stored on J's very index arrays (the contact system's mass on the union pattern):
+    # the direct sum, the same entries as the slot path
+    J = sp.csc_matrix(J)
+    Mj = sp.csc_matrix((np.where(np.arange(J.nnz) % 3 == 0, 1.5, 0.0), J.indices, J.indptr), shape=J.shape)
+    assert np.shares_memory(Mj.indices, J.indices)
+    S2 = shifted(J, Mj, 0.3, keep_pattern=True)
+    assert S2.nnz == J.nnz
+    np.testing.assert_array_equal(S2.toarray(), (J + 0.3 * Mj).toarray())
+    Mcopy = sp.csc_matrix((Mj.data, Mj.indices.copy(), Mj.indptr.copy()), shape=J.shape)
+    np.testing.assert_array_equal(S2.data, shifted(J, Mcopy, 0.3, keep_pattern=True).data)
 
 
 def test_stage_factorisation_sends_unsymmetric_matrices_past_pardiso():

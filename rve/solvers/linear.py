@@ -327,13 +327,18 @@ def shifted(J, M, sigma: float, keep_pattern: bool = False):
         return (J + sigma * M).tocsc()
     J = sp.csc_matrix(J)
     M = sp.csc_matrix(M)
+    if _same_buffer(M.indices, J.indices) and _same_buffer(M.indptr, J.indptr) and J.has_canonical_format:
+        # M on J's very structure (both restricted through one plan: the contact system's mass
+        # lives on the union pattern): entry by entry, the same sums as the slot path
+        return sp.csc_matrix((J.data + sigma * M.data, J.indices, J.indptr), shape=J.shape)
     c = _SLOT_CACHE
     if c and all(_same_arrays(c[k], X) for k, X in (("J", J), ("M", M))):
         slots = c["slots"]
     else:
         slots = _slots_in(J, M)
-        c.update(J=(J.shape, J.indptr.copy(), J.indices.copy()), M=(M.shape, M.indptr.copy(), M.indices.copy()),
-                 slots=slots)
+        # the arrays themselves are kept (not copies): matrices restricted through one plan
+        # share them, so the next call is an identity check
+        c.update(J=(J.shape, J.indptr, J.indices), M=(M.shape, M.indptr, M.indices), slots=slots)
     if slots is None:
         return (J + sigma * M).tocsc()
     data = J.data.copy()
@@ -344,8 +349,17 @@ def shifted(J, M, sigma: float, keep_pattern: bool = False):
 _SLOT_CACHE: dict = {}
 
 
+def _same_buffer(a, b) -> bool:
+    """``a`` and ``b`` are the same array or views of the very same memory with the same
+    layout (scipy's constructors wrap index arrays in new views: identity alone misses)."""
+    return a is b or (a.shape == b.shape and a.dtype == b.dtype and a.strides == b.strides
+                      and a.ctypes.data == b.ctypes.data)
+
+
 def _same_arrays(key, X) -> bool:
     shape, indptr, indices = key
+    if _same_buffer(X.indices, indices) and _same_buffer(X.indptr, indptr):
+        return True
     return (X.shape == shape and X.indptr.size == indptr.size and X.indices.size == indices.size
             and np.array_equal(X.indptr, indptr) and np.array_equal(X.indices, indices))
 

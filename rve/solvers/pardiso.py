@@ -40,6 +40,10 @@ backend (registry name ``"pardiso"``) with the interface of the linear-solver la
   candidate pairs), so later nonzero patterns under the same map lie in it. Measured on
   the 80-fibril relaxation (docs/engine.md): 30 analyses for 491 factorisations at 30
   el/fibril with ``analyse_stored`` against 283 without.
+* Stored-structure fast path: when a matrix has the stored structure of the previous call
+  and all of it lies in the analysed pattern, its values are gathered straight onto the
+  analysed pattern (explicit zeros included: the same numbers as the nonzero path), with
+  no zero elimination or pattern search (``stored_fast`` counts these calls).
 * ``solve(b)``: phase 33 (b of shape (n,) or (n, k)); ``refinement_steps`` is the number
   of iterative refinement steps PARDISO performed (iparm(7)). ``refinement=0`` is MKL's
   default: two steps automatically when pivots were perturbed, none otherwise.
@@ -91,7 +95,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .linear import SingularFactorError
+from .linear import SingularFactorError, _same_buffer
 
 __all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
 
@@ -209,6 +213,14 @@ def _sorted_unique(keys):
     return k
 
 
+def _same_structure(A, indptr, indices) -> bool:
+    """``A`` has exactly these index arrays (identity first, then contents)."""
+    if _same_buffer(A.indices, indices) and _same_buffer(A.indptr, indptr):
+        return True
+    return (A.indptr.size == indptr.size and A.indices.size == indices.size
+            and np.array_equal(A.indptr, indptr) and np.array_equal(A.indices, indices))
+
+
 def _upper_entries(A):
     """``(keys, positions)`` of the upper-triangle entries of the canonical square CSR
     matrix ``A`` (CSC: of Aᵀ, the same pattern for a symmetric matrix): sorted keys
@@ -262,6 +274,8 @@ class PardisoFactorization:
         self._plan = None                # (indptr, indices, src, n_missing) of the analysed upper pattern
         self._keys = None                # sorted keys row * n + col of the analysed upper pattern
         self.subpattern_reuses = 0
+        self._stored_fast = None         # (format, indptr, indices, src, has_missing) of a stored structure
+        self.stored_fast = 0             # factorisations that took that fast path
         self._a = None                   # values handed to PARDISO (kept alive for phase 33)
         self._factored = False
         self._alive = False
@@ -337,6 +351,20 @@ class PardisoFactorization:
         src[pos] = keep
         return src
 
+    def _remember_stored(self) -> None:
+        """Map the stored structure of the matrix just factorised onto the analysed pattern
+        when all of it lies there (the fast path of the next ``factorize`` with that
+        structure); else forget the fast path."""
+        S, old = self._stored, self._stored_fast
+        if S is None or S.shape[0] != self.n or not (self.drop_zeros and self.reuse_subpattern):
+            self._stored_fast = None
+            return
+        if old is not None and old[3] is None and S.format == old[0] and _same_structure(S, old[1], old[2]):
+            return  # this structure was found not to lie in the analysed pattern
+        keys, keep = _upper_entries(S)
+        src = self._map(S, keys, keep)
+        self._stored_fast = (S.format, S.indptr, S.indices, src, src is not None and bool(np.any(src < 0)))
+
     # ------------------------------------------------------------------ interface
     def analyse(self, A, _extra_keys=None) -> "PardisoFactorization":
         """Phase 11 on the pattern (and, with ``matching``, the values) of ``A`` (every
@@ -373,6 +401,27 @@ class PardisoFactorization:
         ``rve.solvers.linear.SingularFactorError`` when a pivot was perturbed (a
         near-singular matrix; the factorisation stays usable). A non-finite entry raises
         ``SingularFactorError`` too."""
+        fast = self._stored_fast
+        if (fast is not None and fast[3] is not None and self._alive and sp.issparse(A) and A.format == fast[0]
+                and A.shape == (self.n, self.n) and _same_structure(A, fast[1], fast[2])):
+            # the stored structure of the last call, all of it in the analysed pattern: its
+            # values go straight onto the analysed pattern (its explicit zeros are the zeros
+            # the nonzero pattern would leave there): the same numbers as the general path
+            if not np.all(np.isfinite(A.data)):
+                self._factored = False
+                raise SingularFactorError("non-finite matrix entry")
+            self._stored = A
+            src = fast[3]
+            self._a = np.where(src >= 0, A.data[np.maximum(src, 0)], 0.0) if fast[4] else A.data[src]
+            self._factored = False
+            self._call(22)
+            self._factored = True
+            self.factorizations += 1
+            self.stored_fast += 1
+            if inertia and self.perturbed_pivots:
+                raise SingularFactorError(f"{self.perturbed_pivots} pivot(s) perturbed (near-singular matrix): "
+                                          "the inertia is not SuperLU's")
+            return self
         A = self._canonical(A)
         if not np.all(np.isfinite(A.data)):
             self._factored = False
@@ -406,6 +455,7 @@ class PardisoFactorization:
         self._call(22)
         self._factored = True
         self.factorizations += 1
+        self._remember_stored()
         if inertia and self.perturbed_pivots:
             raise SingularFactorError(f"{self.perturbed_pivots} pivot(s) perturbed (near-singular matrix): "
                                       "the inertia is not SuperLU's")
@@ -456,7 +506,7 @@ class PardisoFactorization:
 
     def stats(self) -> dict:
         return {"analyses": self.analyses, "factorizations": self.factorizations, "solves": self.solves,
-                "subpattern_reuses": self.subpattern_reuses,
+                "subpattern_reuses": self.subpattern_reuses, "stored_fast": self.stored_fast,
                 "negative_pivots": int(self.iparm[22]), "perturbed_pivots": self.perturbed_pivots,
                 "refinement_steps": self.refinement_steps, "factor_nnz": self.factor_nnz, **self.memory_kb}
 
@@ -471,6 +521,7 @@ class PardisoFactorization:
                 log.warning("PARDISO release failed: %s", exc)
         self._pattern = None
         self._keys = None
+        self._stored_fast = None
 
     def __enter__(self):
         return self
