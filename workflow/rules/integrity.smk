@@ -18,7 +18,7 @@ if workflow.is_main_process:
         # see the finished targets as up to date ("Nothing to be done") and skips the rebuild
         p = _Path(path)
         if p.exists():
-            p.replace(p.with_name(p.name + ".stale"))
+            p.replace(p.with_name(f"{p.name}.stale"))
             return [str(p)]
         return []
 
