@@ -13,7 +13,7 @@ docs/rve_pipeline.md; the config files are configs/rve/*.yaml.
 """
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, Optional
 
 from pydantic import Field, field_validator, model_validator
 
@@ -23,7 +23,7 @@ from ..config.fields import (
     Time, Voltage,
 )
 
-__all__ = ["default_probes", "thesis_probes", "RVEConfig", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "RVEOutput", "Packing"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
 MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
@@ -142,6 +142,29 @@ def default_probes() -> list[dict]:
                                          {"yarn": "weft", "position": -1.0, "end": "y-"}]}]
 
 
+# --- issue 14 (pictures, perturbed packings): the `output` and `packing` sections --------------
+class RVEOutput(Section):
+    """Pictures of every stored state (``rve.homogenisation.pictures``): a tube mesh per
+    state (.vtp, written by its probe job), a .pvd series per mode and PNG renders."""
+
+    pictures: bool = Field(True, description="write the tube meshes, .pvd series and PNG renders of the states")
+    n_theta: Integer = Field(12, ge=3, le=64, description="points around each fibril section of the tube meshes")
+
+
+class Packing(Section):
+    """A perturbed packing of the fibrils (thesis §7.5; ``rve.fabrics.perturb``): every
+    fibril of a stack is moved in its section plane by a random offset and the crimp of
+    every yarn shifted along it by a random phase, both uniform in [-a R, a R], drawn from
+    ``numpy.random.default_rng(seed)``. ``perturbation: 0`` (the default) is the designed
+    packing itself: the fabric is not touched, so the default run is unchanged."""
+
+    seed: Integer = Field(0, ge=0, description="seed of the random offsets (one realisation per seed)")
+    perturbation: Dimensionless = Field(0.0, ge=0, le=0.5, description="in-plane offset amplitude a of the "
+                                        "fibrils in each stack, fraction of R (0: the designed packing)")
+    crimp_phase: Optional[Dimensionless] = Field(None, ge=0, le=5, description="crimp phase shift amplitude along "
+                                                 "each yarn, fraction of R (null: = perturbation)")
+
+
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 
@@ -157,6 +180,8 @@ class RVEConfig(SceneConfig):
                                     min_length=1, description="probes (thesis Fig. 7.2.2 and a weft yarn end to "
                                                               "end by default)")
     probe_solver: ProbeSolver = Field(default_factory=ProbeSolver)
+    output: RVEOutput = Field(default_factory=RVEOutput)
+    packing: Packing = Field(default_factory=Packing)
 
     @model_validator(mode="after")
     def _unique_probe_names(self):
