@@ -276,3 +276,57 @@ rule rve_ensemble:
     input:
         **rve_layout.table_outputs(ENSEMBLE_RUN),
         **rve_layout.ensemble_report_outputs(ENSEMBLE_RUN),
+
+
+# --------------------------------------------------------------------------- table convergence (issue 14)
+# A study {study} is two sweep runs: {study}_mesh over mesh.elements and {study}_penalty over
+# contact_penalty (configs/pipeline.yaml: table_convergence_*; the CI config: ci_table_convergence_*).
+# The report compares every table quantity with the finest / stiffest run at every strain, fits the
+# observed rate with the mesh size and sets it against each run's summed job time
+# (rve.studies.table_convergence; docs/table_accuracy.md).
+#   snakemake -j2 rve_table_convergence          # the default RVE: 12/18/24/30 elements, P* 5/15/50/150
+def _convergence_outputs(study):
+    d = f"{rve_layout.RVE_DIR}/convergence/{study}"
+    return {"csv": f"{d}/table_convergence.csv", "md": f"{d}/table_convergence.md",
+            "png": f"{d}/table_convergence.png", "json": f"{d}/accuracy.json"}
+
+
+def _convergence_default(study):
+    """The default run's mesh and penalty: the study runs' configs without their sweeps."""
+    runs = config["rve"]["runs"]
+    cm = rve_layout.load_run_config({**runs[f"{study}_mesh"], "sweep": {}})
+    cp = rve_layout.load_run_config({**runs[f"{study}_penalty"], "sweep": {}})
+    return {"mesh_elements": float(cm.mesh.elements), "contact_penalty": float(cp.contact.penalty)}
+
+
+rule rve_table_convergence_report:
+    """Mesh and penalty convergence of a table: errors to the finest run, rates, work-precision."""
+    input:
+        mesh=lambda w: rve_layout.table_outputs(f"{w.study}_mesh")["table"],
+        penalty=lambda w: rve_layout.table_outputs(f"{w.study}_penalty")["table"],
+    output:
+        **_convergence_outputs("{study}"),
+    log:
+        f"{rve_layout.LOG_DIR}/convergence/{{study}}.log",
+    benchmark:
+        f"{rve_layout.BENCHMARK_DIR}/convergence/{{study}}.tsv"
+    wildcard_constraints:
+        study=r"[A-Za-z0-9_]+",
+    params:
+        default=lambda w: _convergence_default(w.study),
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+    run:
+        from rve.studies.table_convergence import table_convergence_job
+        from rve.tables import open_table
+
+        table_convergence_job(open_table(input.mesh), open_table(input.penalty),
+                              {"mesh": f"{wildcards.study}_mesh", "penalty": f"{wildcards.study}_penalty"},
+                              dict(output.items()), log[0], params.default)
+
+
+rule rve_table_convergence:
+    """`snakemake -j2 rve_table_convergence`: the default RVE's mesh and penalty study."""
+    input:
+        **_convergence_outputs("table_convergence"),
