@@ -191,7 +191,7 @@ def write_mode_series(pvd: PathLike, entries: Sequence[tuple[float, PathLike]]) 
 
 
 # ============================================================================ renders
-def _camera(bounds, elevation=_VIEW_ELEVATION_DEG, azimuth=_VIEW_AZIMUTH_DEG, distance=2.2, shift=0.12):
+def _camera(bounds, elevation=_VIEW_ELEVATION_DEG, azimuth=_VIEW_AZIMUTH_DEG, distance=2.35, shift=0.08):
     """Camera [position, focal point, view up] looking at the box ``bounds`` from
     ``elevation``/``azimuth`` (deg); the focal point moved by ``shift`` x the box size to
     the screen's right, so the colour bar on the right leaves the fabric free."""
