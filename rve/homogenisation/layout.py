@@ -47,7 +47,7 @@ __all__ = [
     "RVE_DIR", "LOG_DIR", "BENCHMARK_DIR", "STAGES", "state_name", "state_names", "state_path", "record_path",
     "previous_state", "run_record_paths", "table_outputs", "export_outputs", "report_prefix", "report_outputs", "job_name",
     "log_path", "benchmark_path", "default_targets", "tubes_path", "picture_outputs", "picture_targets",
-    "ensemble_report_outputs",
+    "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -155,6 +155,26 @@ def picture_targets(spec: Mapping, run: str, root: PathLike = RVE_DIR) -> list[s
         for m in cfg.strain.modes:
             out += list(picture_outputs(run, c.id, m, root).values())
     return out
+
+
+def mode_state_names(spec: Mapping, combo: str, mode: str) -> list[str]:
+    """The relaxed state and every step of ``mode`` of one combination, in order."""
+    steps = load_run_config(spec, combo).strain.steps
+    return ["relaxed"] + [state_name(mode, i) for i in range(1, steps + 1)]
+
+
+def convergence_outputs(study: str, root: PathLike = RVE_DIR) -> dict:
+    """Files of the table-convergence report of ``study`` (``rve.studies.table_convergence``)."""
+    d = f"{root}/convergence/{study}"
+    return {"csv": f"{d}/table_convergence.csv", "md": f"{d}/table_convergence.md",
+            "png": f"{d}/table_convergence.png", "json": f"{d}/accuracy.json"}
+
+
+def convergence_default(runs: Mapping, study: str) -> dict:
+    """The default run's mesh and penalty of a study: its runs' configs without their sweeps."""
+    cm = load_run_config({**runs[f"{study}_mesh"], "sweep": {}})
+    cp = load_run_config({**runs[f"{study}_penalty"], "sweep": {}})
+    return {"mesh_elements": float(cm.mesh.elements), "contact_penalty": float(cp.contact.penalty)}
 
 
 def ensemble_report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:

@@ -116,13 +116,6 @@ rule rve_probes:
         probe_job(input.state, output.record, log[0], params.spec, wildcards.combo, params.tubes)
 
 
-def _rve_mode_states(w):
-    """The relaxed state and every step of mode w.mode of one combination, in order."""
-    spec = config["rve"]["runs"][w.run]
-    steps = rve_layout.load_run_config(spec, w.combo).strain.steps
-    return ["relaxed"] + [rve_layout.state_name(w.mode, i) for i in range(1, steps + 1)]
-
-
 rule rve_pictures_relaxed:
     """Initial and relaxed state by axial force, the cross-section of a centre yarn (Figs. 7.4.1-2)."""
     input:
@@ -151,8 +144,14 @@ rule rve_pictures_relaxed:
 rule rve_pictures_mode:
     """A mode's .pvd series over strain and the renders of its final state (Figs. 7.4.5-7.4.7)."""
     input:
-        states=lambda w: [rve_layout.state_path(w.run, w.combo, n) for n in _rve_mode_states(w)],
-        records=lambda w: [rve_layout.record_path(w.run, w.combo, n) for n in _rve_mode_states(w)],
+        states=lambda w: [
+            rve_layout.state_path(w.run, w.combo, n)
+            for n in rve_layout.mode_state_names(config["rve"]["runs"][w.run], w.combo, w.mode)
+        ],
+        records=lambda w: [
+            rve_layout.record_path(w.run, w.combo, n)
+            for n in rve_layout.mode_state_names(config["rve"]["runs"][w.run], w.combo, w.mode)
+        ],
     output:
         **rve_layout.picture_outputs("{run}", "{combo}", "{mode}"),
     log:
@@ -161,15 +160,17 @@ rule rve_pictures_mode:
         rve_layout.benchmark_path("{run}", "pictures", "{combo}", "{mode}")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
-        tubes=lambda w: [rve_layout.tubes_path(w.run, w.combo, n) for n in _rve_mode_states(w)],
+        tubes=lambda w: [
+            rve_layout.tubes_path(w.run, w.combo, n)
+            for n in rve_layout.mode_state_names(config["rve"]["runs"][w.run], w.combo, w.mode)
+        ],
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
     run:
         from rve.homogenisation.pictures import pictures_mode_job
 
-        pictures_mode_job(wildcards.mode, list(input.states), list(params.tubes), dict(output.items()), log[0],
-                          params.spec, wildcards.combo)
+        pictures_mode_job(wildcards.mode, input.states, params.tubes, dict(output), log[0], params.spec, wildcards.combo)
 
 
 rule rve_gather:
@@ -285,27 +286,13 @@ rule rve_ensemble:
 # observed rate with the mesh size and sets it against each run's summed job time
 # (rve.studies.table_convergence; docs/table_accuracy.md).
 #   snakemake -j2 rve_table_convergence          # the default RVE: 12/18/24/30 elements, P* 5/15/50/150
-def _convergence_outputs(study):
-    d = f"{rve_layout.RVE_DIR}/convergence/{study}"
-    return {"csv": f"{d}/table_convergence.csv", "md": f"{d}/table_convergence.md",
-            "png": f"{d}/table_convergence.png", "json": f"{d}/accuracy.json"}
-
-
-def _convergence_default(study):
-    """The default run's mesh and penalty: the study runs' configs without their sweeps."""
-    runs = config["rve"]["runs"]
-    cm = rve_layout.load_run_config({**runs[f"{study}_mesh"], "sweep": {}})
-    cp = rve_layout.load_run_config({**runs[f"{study}_penalty"], "sweep": {}})
-    return {"mesh_elements": float(cm.mesh.elements), "contact_penalty": float(cp.contact.penalty)}
-
-
 rule rve_table_convergence_report:
     """Mesh and penalty convergence of a table: errors to the finest run, rates, work-precision."""
     input:
         mesh=lambda w: rve_layout.table_outputs(f"{w.study}_mesh")["table"],
         penalty=lambda w: rve_layout.table_outputs(f"{w.study}_penalty")["table"],
     output:
-        **_convergence_outputs("{study}"),
+        **rve_layout.convergence_outputs("{study}"),
     log:
         f"{rve_layout.LOG_DIR}/convergence/{{study}}.log",
     benchmark:
@@ -313,7 +300,8 @@ rule rve_table_convergence_report:
     wildcard_constraints:
         study=r"[A-Za-z0-9_]+",
     params:
-        default=lambda w: _convergence_default(w.study),
+        default=lambda w: rve_layout.convergence_default(config["rve"]["runs"], w.study),
+        runs=lambda w: {"mesh": f"{w.study}_mesh", "penalty": f"{w.study}_penalty"},
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
@@ -321,12 +309,11 @@ rule rve_table_convergence_report:
         from rve.studies.table_convergence import table_convergence_job
         from rve.tables import open_table
 
-        table_convergence_job(open_table(input.mesh), open_table(input.penalty),
-                              {"mesh": f"{wildcards.study}_mesh", "penalty": f"{wildcards.study}_penalty"},
-                              dict(output.items()), log[0], params.default)
+        table_convergence_job(open_table(input.mesh), open_table(input.penalty), params.runs, dict(output), log[0],
+                              params.default)
 
 
 rule rve_table_convergence:
     """`snakemake -j2 rve_table_convergence`: the default RVE's mesh and penalty study."""
     input:
-        **_convergence_outputs("table_convergence"),
+        **rve_layout.convergence_outputs("table_convergence"),
