@@ -50,8 +50,14 @@ def make_fabric(spec) -> Fabric:
 
 def fabric_and_mesh(cfg, elements=None):
     """``(fabric, mesh)`` of a config with ``fabric`` and ``mesh`` sections (``elements``
-    per fibril: ``cfg.mesh.elements`` unless given)."""
+    per fibril: ``cfg.mesh.elements`` unless given); a ``packing`` section with a
+    perturbation (the RVE config) perturbs the packing (``rve.fabrics.perturb``)."""
     fab = make_fabric(cfg.fabric)
+    packing = getattr(cfg, "packing", None)  # RVEConfig.packing: a perturbed packing (rve.fabrics.perturb)
+    if packing is not None and (packing.perturbation > 0 or (packing.crimp_phase or 0) > 0):
+        from .perturb import perturb_packing
+
+        fab = perturb_packing(fab, packing.seed, packing.perturbation, packing.crimp_phase)
     mesh = fab.mesh(cfg.mesh.elements if elements is None else elements, cfg.mesh.order)
     return fab, mesh
 

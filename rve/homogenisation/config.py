@@ -23,7 +23,7 @@ from ..config.fields import (
     Time, Voltage,
 )
 
-__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "RVEOutput", "Packing"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
 MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
@@ -162,6 +162,29 @@ class FaultChecks(Section):
                                 "available memory")
 
 
+# --- issue 14 (pictures, perturbed packings): the `output` and `packing` sections --------------
+class RVEOutput(Section):
+    """Pictures of every stored state (``rve.homogenisation.pictures``): a tube mesh per
+    state (.vtp, written by its probe job), a .pvd series per mode and PNG renders."""
+
+    pictures: bool = Field(True, description="write the tube meshes, .pvd series and PNG renders of the states")
+    n_theta: Integer = Field(12, ge=3, le=64, description="points around each fibril section of the tube meshes")
+
+
+class Packing(Section):
+    """A perturbed packing of the fibrils (thesis §7.5; ``rve.fabrics.perturb``): every
+    fibril of a stack is moved in its section plane by a random offset and the crimp of
+    every yarn shifted along it by a random phase, both uniform in [-a R, a R], drawn from
+    ``numpy.random.default_rng(seed)``. ``perturbation: 0`` (the default) is the designed
+    packing itself: the fabric is not touched, so the default run is unchanged."""
+
+    seed: Integer = Field(0, ge=0, description="seed of the random offsets (one realisation per seed)")
+    perturbation: Dimensionless = Field(0.0, ge=0, le=0.5, description="in-plane offset amplitude a of the "
+                                        "fibrils in each stack, fraction of R (0: the designed packing)")
+    crimp_phase: Optional[Dimensionless] = Field(None, ge=0, le=5, description="crimp phase shift amplitude along "
+                                                 "each yarn, fraction of R (null: = perturbation)")
+
+
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 
@@ -178,6 +201,8 @@ class RVEConfig(SceneConfig):
                                                               "end by default)")
     probe_solver: ProbeSolver = Field(default_factory=ProbeSolver)
     checks: FaultChecks = Field(default_factory=FaultChecks, description="fault checks (issue 15)")
+    output: RVEOutput = Field(default_factory=RVEOutput)
+    packing: Packing = Field(default_factory=Packing)
 
     @model_validator(mode="after")
     def _unique_probe_names(self):

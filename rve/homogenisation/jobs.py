@@ -224,9 +224,12 @@ def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
     return residual, recorded
 
 
-def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO) -> dict:
+def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
+                 tubes_path: Optional[PathLike] = None) -> dict:
     """The probe solves on one stored state -> its table record (rve.tables format,
-    plus diagnostics: state file, kind, step, convergence, wall times)."""
+    plus diagnostics: state file, kind, step, convergence, wall times). With
+    ``tubes_path`` and the config's ``output.pictures``, also the state's tube mesh
+    (``rve.homogenisation.pictures``) from the same probe fields."""
     from .checkpoint import load_state
     from .probes import solve_probes
 
@@ -236,7 +239,12 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO) -
     st = load_state(state_file, quarantine=True)
     _check_state(st, mesh, state_file)
     residual, recorded = verify_equilibrium(cfg, fab, mesh, st, state_file)
-    results = solve_probes(cfg, fab, mesh, st.x)
+    pictures = tubes_path is not None and cfg.output.pictures
+    results = solve_probes(cfg, fab, mesh, st.x, with_fields=pictures)
+    if pictures:
+        from .pictures import write_state_tubes
+
+        write_state_tubes(tubes_path, cfg, fab, mesh, st, results)
     rec = {
         "mode": st.mode or None,
         "strain": float(st.strain),
@@ -253,10 +261,12 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO) -
 
 
 def probe_job(in_state: PathLike, out_record: PathLike, log_path: Optional[PathLike], spec: Mapping,
-              combo: str = BASE_COMBO) -> dict:
-    """Probe solves of one stored state; write its record (JSON, atomic)."""
+              combo: str = BASE_COMBO, tubes_path: Optional[PathLike] = None) -> dict:
+    """Probe solves of one stored state; write its record (JSON, atomic) and, with
+    ``output.pictures``, first its tube mesh ``tubes_path`` (so a record on disk means
+    its tube file is too)."""
     with logging_to(log_path):
-        rec = probe_record(in_state, spec, combo)
+        rec = probe_record(in_state, spec, combo, tubes_path)
         worst = max((p["conservation_error"] for p in rec["probes"].values()), default=0.0)
         log.info("%s: %s; worst charge-conservation error %.2e; %.1f s", in_state,
                  ", ".join(f"{k} R={v['resistance']:.6g} ohm Tmax={v['temperature_max']:.4g} K"

@@ -16,12 +16,18 @@ rule's pattern: ``state_path("{run}", "{combo}", "{state}")`` ->
 ``{RVE_DIR}/{run}/table_abaqus.inc``, ``table_lsdyna.k``,  macro-FE exports (rve_exports;
 ``table_hermite.json``, ``table_curves/{curve}.csv``      docs/macro_export.md)
 ``{RVE_DIR}/{run}/plots/table_*.png``                   figures (rve_report)
+``{RVE_DIR}/{run}/{combo}/tubes/{state}.vtp``           tube mesh of a state (rve_probes,
+                                                        with ``output.pictures``)
+``{RVE_DIR}/{run}/{combo}/pictures/{mode}.pvd``, ``*.png``  series and renders
+                                                        (rve_pictures_relaxed, rve_pictures_mode)
+``{RVE_DIR}/{run}/plots/ensemble_*.png``, ``ensemble.txt``  ensemble bands (rve_ensemble_report)
 ``{LOG_DIR}/{run}/{job}.log``                           log of a job (every rule)
 ``{BENCHMARK_DIR}/{run}/{job}.tsv``                     benchmark of a job (every rule)
 ======================================================  =================================
 
 ``{job}`` (``job_name``): ``{combo}/fabric``, ``{combo}/relax``,
-``{combo}/strain/{state}``, ``{combo}/probes/{state}``, ``gather``, ``exports``, ``report``.
+``{combo}/strain/{state}``, ``{combo}/probes/{state}``, ``{combo}/pictures/{relaxed|mode}``, ``gather``,
+``exports``, ``report``, ``ensemble_report``.
 ``RVE_DIR`` = results/rve, ``LOG_DIR`` = results/logs/rve, ``BENCHMARK_DIR`` =
 results/benchmarks/rve; every function takes ``root`` to place a run elsewhere.
 
@@ -40,7 +46,8 @@ from .sweeps import combos, load_run_config
 __all__ = [
     "RVE_DIR", "LOG_DIR", "BENCHMARK_DIR", "STAGES", "state_name", "state_names", "state_path", "record_path",
     "previous_state", "run_record_paths", "table_outputs", "export_outputs", "report_prefix", "report_outputs", "job_name",
-    "log_path", "benchmark_path", "default_targets",
+    "log_path", "benchmark_path", "default_targets", "tubes_path", "picture_outputs", "picture_targets",
+    "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -50,7 +57,7 @@ LOG_DIR = "results/logs/rve"
 BENCHMARK_DIR = "results/benchmarks/rve"
 
 #: the jobs of a run, in DAG order (one Snakemake rule each)
-STAGES = ("fabric", "relax", "strain", "probes", "gather", "exports", "report")
+STAGES = ("fabric", "relax", "strain", "probes", "pictures", "gather", "exports", "report", "ensemble_report")
 
 
 # ============================================================================ state names
@@ -120,6 +127,64 @@ def report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
             "temperature_rise": f"{pre}_temperature_rise.png"}
 
 
+# ============================================================================ pictures (issue 14)
+def tubes_path(run: str, combo: str, name: str, root: PathLike = RVE_DIR) -> str:
+    """Tube mesh (.vtp) of state ``name``, written by its probe job (``output.pictures``)."""
+    return f"{root}/{run}/{combo}/tubes/{name}.vtp"
+
+
+def picture_outputs(run: str, combo: str, mode: Optional[str] = None, root: PathLike = RVE_DIR) -> dict:
+    """Files of ``rve_pictures_relaxed`` (``mode`` None: ``relaxed_axial_force``,
+    ``cross_section``) or of ``rve_pictures_mode`` (``pvd``, ``axial_force``, ``current``,
+    ``temperature``) in ``{run}/{combo}/pictures/``."""
+    d = f"{root}/{run}/{combo}/pictures"
+    if mode is None:
+        return {"relaxed_axial_force": f"{d}/relaxed_axial_force.png", "cross_section": f"{d}/cross_section.png"}
+    return {"pvd": f"{d}/{mode}.pvd", "axial_force": f"{d}/{mode}_axial_force.png",
+            "current": f"{d}/{mode}_current.png", "temperature": f"{d}/{mode}_temperature.png"}
+
+
+def picture_targets(spec: Mapping, run: str, root: PathLike = RVE_DIR) -> list[str]:
+    """Every picture file of a run whose combinations have ``output.pictures`` on."""
+    out: list[str] = []
+    for c in combos(spec):
+        cfg = load_run_config(spec, c.id)
+        if not cfg.output.pictures:
+            continue
+        out += list(picture_outputs(run, c.id, None, root).values())
+        for m in cfg.strain.modes:
+            out += list(picture_outputs(run, c.id, m, root).values())
+    return out
+
+
+def mode_state_names(spec: Mapping, combo: str, mode: str) -> list[str]:
+    """The relaxed state and every step of ``mode`` of one combination, in order."""
+    steps = load_run_config(spec, combo).strain.steps
+    return ["relaxed"] + [state_name(mode, i) for i in range(1, steps + 1)]
+
+
+def convergence_outputs(study: str, root: PathLike = RVE_DIR) -> dict:
+    """Files of the table-convergence report of ``study`` (``rve.studies.table_convergence``)."""
+    d = f"{root}/convergence/{study}"
+    return {"csv": f"{d}/table_convergence.csv", "md": f"{d}/table_convergence.md",
+            "png": f"{d}/table_convergence.png", "json": f"{d}/accuracy.json"}
+
+
+def convergence_default(runs: Mapping, study: str) -> dict:
+    """The default run's mesh and penalty of a study: its runs' configs without their sweeps."""
+    cm = load_run_config({**runs[f"{study}_mesh"], "sweep": {}})
+    cp = load_run_config({**runs[f"{study}_penalty"], "sweep": {}})
+    return {"mesh_elements": float(cm.mesh.elements), "contact_penalty": float(cp.contact.penalty)}
+
+
+def ensemble_report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
+    """Figures of an ensemble table (``rve.tables.ensemble.plot_ensemble``) and its text
+    report (``report``: the band against the step-to-step wiggle)."""
+    pre = f"{root}/{run}/plots/ensemble"
+    return {"probe_resistance": f"{pre}_probe_resistance.png", "reaction_force": f"{pre}_reaction_force.png",
+            "network": f"{pre}_network.png", "report": f"{root}/{run}/ensemble.txt"}
+
+
 # ============================================================================ logs, benchmarks
 def job_name(stage: str, combo: Optional[str] = None, state: Optional[str] = None) -> str:
     """Name of a job within its run (the relative path of its log and benchmark):
@@ -127,7 +192,7 @@ def job_name(stage: str, combo: Optional[str] = None, state: Optional[str] = Non
     ``{combo}/probes/{state}``, ``gather``, ``report``."""
     if stage not in STAGES:
         raise ValueError(f"unknown stage {stage!r} (have {', '.join(STAGES)})")
-    if stage in ("gather", "exports", "report"):
+    if stage in ("gather", "exports", "report", "ensemble_report"):
         return stage
     if combo is None:
         raise ValueError(f"stage {stage!r}: a job of one combination needs its combo")
@@ -165,6 +230,7 @@ def default_targets(config: Mapping, extra: Optional[Mapping[str, Sequence[str]]
             rve = config.get("rve") or {}
             for run in rve.get("default_runs") or []:
                 out += list(table_outputs(run).values()) + list(report_outputs(run).values())
+                out += picture_targets(rve.get("runs", {}).get(run) or {}, run)
                 if not (rve.get("runs", {}).get(run) or {}).get("sweep"):
                     out += list(export_outputs(run).values())
         elif name in extra:

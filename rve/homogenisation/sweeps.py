@@ -15,7 +15,8 @@ paths (``SWEEP_ALIASES``): ``fibril_radius`` / ``fibril.radius`` (sets
 ``fabric.fibril_diameter`` = 2 R), ``contact_conductance`` / ``contact.sigma_c``
 (``contact.conductance``), ``thermal_contact_conductance`` / ``contact.h_c``,
 ``contact_penalty``, ``weave`` (``fabric.kind``), ``youngs_modulus``, ``conductivity``,
-``thermal_conductivity``, ``spacing``, ``amplitude``, or any dotted RVEConfig path
+``thermal_conductivity``, ``spacing``, ``amplitude``, ``realization`` (``packing.seed``: an
+ensemble of perturbed packings, ``rve.tables.ensemble``), or any dotted RVEConfig path
 (dimension = the path with dots replaced by underscores). Numeric values are in internal
 units or strings with units (converted with the unit of the config field).
 
@@ -58,6 +59,7 @@ SWEEP_ALIASES: dict[str, tuple[str, str, Optional[float]]] = {
     "thermal_conductivity": ("thermal_conductivity", "material.thermal_conductivity", 1.0),
     "spacing": ("spacing", "fabric.spacing", 1.0),
     "amplitude": ("amplitude", "fabric.amplitude", 1.0),
+    "realization": ("realization", "packing.seed", 1.0),  # an ensemble of packings (rve.tables.ensemble)
 }
 
 

@@ -92,6 +92,10 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
             log.warning("table %s: %d state(s) are not static equilibria (see equilibrium_residual): %s",
                         out_table, len(unconverged), ", ".join(unconverged))
         ds.attrs["probe_definitions"] = json.dumps([p.model_dump() for p in first.probes])
+        if "realization" in ds.dims:  # a sweep over packing realizations (issue 14): mean, std, 90 % band
+            from .ensemble import add_ensemble_statistics
+
+            ds = add_ensemble_statistics(ds, packing=first.packing.model_dump(exclude={"seed"}))
         write_table(ds, out_table)
         export_table(ds, out_csv, "csv")
         text = summarize(ds)

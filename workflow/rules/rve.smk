@@ -6,6 +6,8 @@
 #   rve_fabric -> rve_relax -> rve_strain_step (step i from step i-1, per mode)
 #   -> rve_probes (one job per stored state, independent) -> rve_gather -> rve_report
 #                                                                      -> rve_exports (macro-FE files)
+#   -> rve_pictures_relaxed, rve_pictures_mode (per mode; with output.pictures: the probe jobs
+#      write each state's tube mesh, these draw the .pvd series and the PNG renders)
 # Every output is written atomically, so a killed run resumes from the last complete step.
 # The strain steps (the critical path: two chains) have priority; the probe jobs fill in.
 # The job modules are imported in the rule bodies: parsing the workflow stays cheap.
@@ -103,13 +105,72 @@ rule rve_probes:
         rve_layout.benchmark_path("{run}", "probes", "{combo}", "{state}")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
+        # side output with output.pictures (rve.homogenisation.pictures): the state's tube mesh
+        tubes=lambda w: rve_layout.tubes_path(w.run, w.combo, w.state),
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
     run:
         from rve.homogenisation.jobs import probe_job
 
-        probe_job(input.state, output.record, log[0], params.spec, wildcards.combo)
+        probe_job(input.state, output.record, log[0], params.spec, wildcards.combo, params.tubes)
+
+
+rule rve_pictures_relaxed:
+    """Initial and relaxed state by axial force, the cross-section of a centre yarn (Figs. 7.4.1-2)."""
+    input:
+        initial=rve_layout.state_path("{run}", "{combo}", "initial"),
+        relaxed=rve_layout.state_path("{run}", "{combo}", "relaxed"),
+        record=rve_layout.record_path("{run}", "{combo}", "relaxed"),
+    output:
+        **rve_layout.picture_outputs("{run}", "{combo}"),
+    log:
+        rve_layout.log_path("{run}", "pictures", "{combo}", "relaxed"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pictures", "{combo}", "relaxed")
+    params:
+        spec=lambda w: config["rve"]["runs"][w.run],
+        tubes=lambda w: rve_layout.tubes_path(w.run, w.combo, "relaxed"),
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["rve_mem_mb"],
+    run:
+        from rve.homogenisation.pictures import pictures_relaxed_job
+
+        pictures_relaxed_job(input.initial, input.relaxed, params.tubes, dict(output.items()), log[0], params.spec,
+                             wildcards.combo)
+
+
+rule rve_pictures_mode:
+    """A mode's .pvd series over strain and the renders of its final state (Figs. 7.4.5-7.4.7)."""
+    input:
+        states=lambda w: [
+            rve_layout.state_path(w.run, w.combo, n)
+            for n in rve_layout.mode_state_names(config["rve"]["runs"][w.run], w.combo, w.mode)
+        ],
+        records=lambda w: [
+            rve_layout.record_path(w.run, w.combo, n)
+            for n in rve_layout.mode_state_names(config["rve"]["runs"][w.run], w.combo, w.mode)
+        ],
+    output:
+        **rve_layout.picture_outputs("{run}", "{combo}", "{mode}"),
+    log:
+        rve_layout.log_path("{run}", "pictures", "{combo}", "{mode}"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pictures", "{combo}", "{mode}")
+    params:
+        spec=lambda w: config["rve"]["runs"][w.run],
+        tubes=lambda w: [
+            rve_layout.tubes_path(w.run, w.combo, n)
+            for n in rve_layout.mode_state_names(config["rve"]["runs"][w.run], w.combo, w.mode)
+        ],
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["rve_mem_mb"],
+    run:
+        from rve.homogenisation.pictures import pictures_mode_job
+
+        pictures_mode_job(wildcards.mode, input.states, params.tubes, dict(output), log[0], params.spec, wildcards.combo)
 
 
 rule rve_gather:
@@ -182,3 +243,77 @@ rule rve_report:
         from rve.tables.jobs import report_job
 
         report_job(input.table, params.prefix, log[0])
+
+
+# --------------------------------------------------------------------------- ensembles (issue 14)
+# A run with `sweep: {realization: [...]}` (packing.seed) and a packing.perturbation is an
+# ensemble of perturbed packings: its table has a `realization` dimension with mean, std and
+# the 90 % band (rve.tables.ensemble, hooked into rve_gather); this rule draws the bands and
+# reports them against the step-to-step wiggle of one realization.
+ENSEMBLE_RUN = "plain_weave_ensemble"
+
+
+rule rve_ensemble_report:
+    """Ensemble bands of a realization sweep's table (probe resistances, reactions, R_y/R_c)."""
+    input:
+        table=rve_layout.table_outputs("{run}")["table"],
+    output:
+        **rve_layout.ensemble_report_outputs("{run}"),
+    log:
+        rve_layout.log_path("{run}", "ensemble_report"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "ensemble_report")
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+    run:
+        from rve.tables.ensemble import ensemble_report_job
+
+        ensemble_report_job(input.table, dict(output.items()), log[0])
+
+
+rule rve_ensemble:
+    """`snakemake -j2 rve_ensemble`: the 8 perturbed packings of the plain weave (run plain_weave_ensemble)."""
+    input:
+        **rve_layout.table_outputs(ENSEMBLE_RUN),
+        **rve_layout.ensemble_report_outputs(ENSEMBLE_RUN),
+
+
+# --------------------------------------------------------------------------- table convergence (issue 14)
+# A study {study} is two sweep runs: {study}_mesh over mesh.elements and {study}_penalty over
+# contact_penalty (configs/pipeline.yaml: table_convergence_*; the CI config: ci_table_convergence_*).
+# The report compares every table quantity with the finest / stiffest run at every strain, fits the
+# observed rate with the mesh size and sets it against each run's summed job time
+# (rve.studies.table_convergence; docs/table_accuracy.md).
+#   snakemake -j2 rve_table_convergence          # the default RVE: 12/18/24/30 elements, P* 5/15/50/150
+rule rve_table_convergence_report:
+    """Mesh and penalty convergence of a table: errors to the finest run, rates, work-precision."""
+    input:
+        mesh=lambda w: rve_layout.table_outputs(f"{w.study}_mesh")["table"],
+        penalty=lambda w: rve_layout.table_outputs(f"{w.study}_penalty")["table"],
+    output:
+        **rve_layout.convergence_outputs("{study}"),
+    log:
+        f"{rve_layout.LOG_DIR}/convergence/{{study}}.log",
+    benchmark:
+        f"{rve_layout.BENCHMARK_DIR}/convergence/{{study}}.tsv"
+    wildcard_constraints:
+        study=r"[A-Za-z0-9_]+",
+    params:
+        default=lambda w: rve_layout.convergence_default(config["rve"]["runs"], w.study),
+        runs=lambda w: {"mesh": f"{w.study}_mesh", "penalty": f"{w.study}_penalty"},
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+    run:
+        from rve.studies.table_convergence import table_convergence_job
+        from rve.tables import open_table
+
+        table_convergence_job(open_table(input.mesh), open_table(input.penalty), params.runs, dict(output), log[0],
+                              params.default)
+
+
+rule rve_table_convergence:
+    """`snakemake -j2 rve_table_convergence`: the default RVE's mesh and penalty study."""
+    input:
+        **rve_layout.convergence_outputs("table_convergence"),

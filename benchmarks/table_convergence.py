@@ -1,0 +1,78 @@
+"""Benchmark: convergence of the RVE table with the mesh and the contact penalty (issue 14).
+
+Runs (``--run``) or reads the study ``{study}`` of the pipeline (rule
+``rve_table_convergence_report``; runs ``{study}_mesh`` over ``mesh.elements`` and
+``{study}_penalty`` over ``contact_penalty``, configs/pipeline.yaml) and prints, per table
+quantity, the error of every run against the finest/stiffest one (max over labels, modes and
+strains), the observed rate with mesh size, each run's summed job time, and the default
+run's accuracy against the targets (docs/table_accuracy.md). ``--docs`` copies the
+work-precision plot to docs/img/rve_table_convergence.png.
+
+    python benchmarks/table_convergence.py --run                 # the default RVE (long: ~1-2 h)
+    python benchmarks/table_convergence.py --run --ci            # the CI study (2 x 2 weave, minutes)
+    python benchmarks/table_convergence.py [--study NAME] [--docs]
+
+Run from the repository root; ``--run`` uses ``nice -n 15 snakemake -j2``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--run", action="store_true", help="run the study with snakemake -j2 first")
+    ap.add_argument("--ci", action="store_true", help="the CI study (configs/tests/pipeline_ci.yaml)")
+    ap.add_argument("--study", default=None, help="study name (default: table_convergence, with --ci "
+                                                  "ci_table_convergence)")
+    ap.add_argument("--docs", action="store_true", help="copy the plot to docs/img/rve_table_convergence.png")
+    ap.add_argument("--results", default="results", help="results folder")
+    a = ap.parse_args(argv)
+    study = a.study or ("ci_table_convergence" if a.ci else "table_convergence")
+    d = Path(a.results) / "rve" / "convergence" / study
+    target = str(d / "table_convergence.md")
+    if a.run:
+        cmd = ["nice", "-n", "15", sys.executable, "-m", "snakemake", "-j2", target]
+        if a.ci:
+            cmd += ["--configfile", "configs/tests/pipeline_ci.yaml"]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd)
+        print(f"snakemake -j2 {target}: exit {proc.returncode}, {time.perf_counter() - t0:.0f} s wall")
+        if proc.returncode:
+            return proc.returncode
+    if not Path(target).exists():
+        print(f"{target} does not exist: run with --run (or snakemake -j2 rve_table_convergence)")
+        return 1
+    print(Path(target).read_text())
+    acc = json.loads((d / "accuracy.json").read_text())
+    for name in ("mesh", "penalty"):
+        st = acc.get(name)
+        if not st:
+            continue
+        dim = "mesh_elements" if name == "mesh" else "contact_penalty"
+        print(f"default {dim} = {acc['default'][dim]:g} vs reference {st['reference']:g}:")
+        for q, e in st["estimated_relative_error"].items():
+            tgt = acc["targets"].get(q)
+            rate = st["observed_rate"].get(q)
+            print(f"  {q:22s} error {100 * e:8.3f} %  target {100 * tgt:4.1f} %  "
+                  f"{'met' if st['meets_targets'][q] else 'NOT met':7s}  rate {rate:.2f}" if e is not None else
+                  f"  {q:22s} n/a")
+        r = st.get("wall_time_ratio_default_to_reference")
+        if r:
+            print(f"  wall time default / reference: {r:.3f}")
+    if a.docs:
+        dst = Path("docs/img/rve_table_convergence.png")
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(d / "table_convergence.png", dst)
+        print(f"plot -> {dst}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
