@@ -91,6 +91,9 @@ def reference(tmp_path_factory):
     return work, _table(work)
 
 
+# long: one pipeline run per stage (~1-3 min each); the default test run keeps the CI DAG's kill test
+# (tests/test_rve_pipeline.py); `pytest -m long` or benchmarks/fault_injection.py kills runs these
+@pytest.mark.long
 @pytest.mark.parametrize("stage,sig", [(s, "KILL") for s in STAGES] + [("strain", "TERM")])
 def test_kill_at_each_stage_resumes_bit_identically(stage, sig, reference, tmp_path):
     work = _work(tmp_path)
