@@ -10,7 +10,7 @@ from rve.config import ConfigError, SceneConfig, json_schema, load_config, scene
 from rve.scenes.registry import SCENES, get_scene, scene_names
 
 ROOT = Path(__file__).resolve().parents[1]
-EXPECTED = ("static_wire", "dynamic_wire", "fabric_relax", "rve", "induced_deformation")
+EXPECTED = ("static_wire", "dynamic_wire", "fabric_relax", "rve", "induced_deformation", "impact")
 
 
 def test_the_registry_names_every_scene():
