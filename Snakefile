@@ -26,6 +26,7 @@ include: "workflow/rules/verification.smk"
 include: "workflow/rules/dynamic_wire.smk"
 include: "workflow/rules/rve.smk"
 include: "workflow/rules/induced_deformation.smk"
+include: "workflow/rules/impact.smk"
 
 
 rule all:

@@ -29,13 +29,22 @@ class ImpactGeometry(Section):
     n_weft: Integer = Field(32, ge=1, description="weft yarns (along y, single fibril, insulated)")
     span: Length = Field("50.8 mm", gt=0, description="L: distance between the pinned ends of every yarn")
     crimp_clearance: Length = Field(
-        "-0.02 mm", description="centreline distance at a crossing minus R_warp + R_weft of the crimped start "
-                                "(< 0: the yarns start pressed into each other and the relaxation settles them)")
+        "0.01 mm", description="crimped reference: distance of the element chords at the crossings minus "
+                                "R_warp + R_weft (> 0: the yarns start apart); straight: of the crimp curves")
+    reference: Literal["crimped", "straight"] = Field(
+        "crimped", description="natural configuration of the yarns: the crimped weave (stress-free start) or "
+                               "straight (the start is bent; docs/impact.md 'Fabric')")
+    pretension: Dimensionless = Field(0.0, ge=0, lt=0.2, description="straight reference only: the yarns start "
+                                                                      "stretched by this (L0 = crimped length / "
+                                                                      "(1 + it))")
 
     @model_validator(mode="after")
     def _equal_counts(self):
         if self.n_warp != self.n_weft:
             raise cross_field_error("geometry.n_weft", "==", "geometry.n_warp", self.n_weft, self.n_warp)
+        if self.reference == "crimped" and self.pretension != 0:
+            raise ValueError("geometry.pretension needs geometry.reference = 'straight' (the crimped reference "
+                             "is stress-free)")
         return self
 
 

@@ -46,23 +46,13 @@ from ..model.terms.projectile_contact import SphereContactTerm
 from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate, sdirk
 from .impact_balances import ImpactBalances, impact_balance_errors
 from .induced_balances import ThermalOperators, ThermalPostSolver
-from .induced_fabric import slack_weave
+from .impact_fabric import chord_clearance, taut_weave, weave_with_chord_clearance
 from .protocol import SceneFailure, SceneResult
 
 __all__ = ["ImpactProblem", "setup", "relax", "load_or_relax", "solve", "run", "time_step_rule",
            "angular_velocity", "config_digest"]
 
 log = logging.getLogger("rve.scenes.impact")
-
-_QUAD = np.polynomial.legendre.leggauss(64)
-
-
-def _half_wave_length(A: float, s: float) -> float:
-    xg, wg = _QUAD
-    u = 0.5 * s * (xg + 1.0)
-    dz = A * np.pi / s * np.sin(np.pi * u / s)
-    return float(0.5 * s * (wg * np.sqrt(1.0 + dz * dz)).sum())
-
 
 def time_step_rule(cfg) -> float:
     """Thesis §8.4: dt_max = R_min / (20 v_max), v_max the impact speed (ms)."""
@@ -82,7 +72,11 @@ def config_digest(cfg, sections=("geometry", "warp", "weft", "material", "projec
     impact speed excluded)."""
     d = {k: cfg.model_dump(mode="json")[k] for k in sections}
     d.get("relaxation", {}).pop("state_file", None)
-    d.get("projectile", {}).pop("speed", None)
+    if "time" not in sections:  # a relaxed state: B is off, the circuits and the speed do not matter
+        d.get("projectile", {}).pop("speed", None)
+        for y in ("warp", "weft", "projectile"):
+            d.get(y, {}).pop("J_bar", None)
+            d.get(y, {}).pop("r_bar", None)
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -119,13 +113,11 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
     if phase not in ("impact", "relax"):
         raise ValueError(f"phase must be 'impact' or 'relax', got {phase!r}")
     g, R_w, R_f = cfg.geometry, cfg.warp.radius, cfg.weft.radius
-    n = g.n_warp
-    s = g.span / n
-    A = 0.5 * (R_w + R_f + g.crimp_clearance)
-    if not A > 0:
-        raise ValueError("geometry.crimp_clearance is below -(R_warp + R_weft): no crimp")
-    L0 = n * _half_wave_length(A, s)
-    weave = slack_weave(n, n, g.span, L0, R_w, R_f, cfg.mesh.elements)
+    if g.reference == "crimped":
+        weave = weave_with_chord_clearance(g.n_warp, g.span, R_w, R_f, cfg.mesh.elements, g.crimp_clearance)
+    else:
+        weave = taut_weave(g.n_warp, g.span, R_w, R_f, cfg.mesh.elements, g.crimp_clearance, g.pretension, "straight")
+    A, L0 = weave.amplitude_warp, float(weave.mesh.elem_length.sum() / weave.mesh.n_fibrils)
     mesh = weave.mesh
     fields = ("mech", "V")
     layout = DofLayout(mesh.n_nodes, fields)
@@ -184,6 +176,7 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
     sampled = {"minus_y": int(np.argmin(np.abs(ywarp - (yc - 0.5 * pr.radius)))),
                "plus_y": int(np.argmin(np.abs(ywarp - (yc + 0.5 * pr.radius)))), "edge": 0}
     info = {"crimp_amplitude_mm": A, "natural_length_mm": L0, "initial_clearance_mm": weave.clearance,
+            "initial_chord_clearance_mm": chord_clearance(weave),
             "B_kT": [float(v) for v in B], "projectile_length_mm": Lp, "projectile_bottom_mm": list(bottom),
             "projectile_mass_g": float(pr.density * parea * Lp), "sampled_warp_y_mm":
                 {k_: float(ywarp[v]) for k_, v in sampled.items()}}
@@ -574,3 +567,67 @@ def run(cfg, out_dir: Path) -> dict:
     hist = summary.pop("history")
     summary["files"] = write_outputs(cfg, res, hist, out_dir)
     return summary
+
+
+def impact_job(config_path, out_dir, summary_path, log_path, overrides=(), relaxed=None, relax_only=False) -> dict:
+    """One Snakemake job (workflow/rules/impact.smk): the scene of ``config_path`` (+
+    ``overrides``), outputs under ``out_dir``, the summary written atomically to
+    ``summary_path``, the log to ``log_path``; ``relaxed`` the relaxed-state file to use
+    (made if missing); ``relax_only``: only the relaxation (the summary is its record)."""
+    from ..config.loader import load_config
+    from ..io.atomic import atomic_write_text
+    from ..io.provenance import to_jsonable
+
+    handler = logging.FileHandler(log_path, mode="w")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    root = logging.getLogger("rve")
+    root.addHandler(handler)
+    root.setLevel(logging.INFO)
+    try:
+        ov = list(overrides)
+        if relaxed is not None:
+            ov.append(f"relaxation.state_file={relaxed}")
+        cfg = load_config(config_path, ov)
+        if relax_only:
+            _, info = load_or_relax(cfg, Path(relaxed) if relaxed else Path(out_dir) / "relaxed_state.npz")
+            summary = {"relaxation": info, "digest": config_digest(cfg)}
+        else:
+            summary = run(cfg, Path(out_dir))
+        atomic_write_text(Path(summary_path), json.dumps(to_jsonable(summary), indent=2, default=str))
+        return summary
+    finally:
+        root.removeHandler(handler)
+        handler.close()
+
+
+def sweep_curve(summary_paths, currents, out_png, out_json) -> dict:
+    """The designer's curve of a current-density sweep: final projectile speed, tilt rate and
+    peak temperature against |J_bar| (one summary.json per current)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io.atomic import atomic_path, atomic_write_text
+
+    rows = []
+    for p, J in zip(summary_paths, currents):
+        s = json.loads(Path(p).read_text())
+        rows.append({"J_A_per_mm2": float(J), "speed_mm_per_ms": -float(s["projectile_velocity_mm_per_ms"][2]),
+                     "omega_x_rad_per_ms": float(s["projectile_angular_velocity_x_rad_per_ms"]),
+                     "max_temperature_K": float(s["max_temperature_K"])})
+    J = [r["J_A_per_mm2"] for r in rows]
+    fig, ax = plt.subplots(1, 3, figsize=(12, 3.6), dpi=110)
+    for a, key, lab in zip(ax, ("speed_mm_per_ms", "omega_x_rad_per_ms", "max_temperature_K"),
+                           ("final speed (m/s)", "omega_x at t_end (rad/ms)", "max T (K)")):
+        a.plot(J, [r[key] for r in rows], "o-")
+        a.set_xlabel("|J_bar| warp (A/mm^2)")
+        a.set_ylabel(lab)
+        a.grid(alpha=0.3)
+    fig.suptitle("Impact: current-density sweep", fontsize=10)
+    fig.tight_layout()
+    with atomic_path(Path(out_png)) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    atomic_write_text(Path(out_json), json.dumps(rows, indent=2))
+    return {"rows": rows}
