@@ -130,15 +130,25 @@ def chord_clearance(weave) -> float:
     return float((d - R[pairs[:, 0]] - R[pairs[:, 1]]).min())
 
 
-def weave_with_chord_clearance(n, span, R_warp, R_weft, elements, clearance, iterations: int = 8):
+def weave_with_chord_clearance(n, span, R_warp, R_weft, elements, clearance, xtol: float = 1e-7):
     """``taut_weave`` (crimped reference) whose discrete chords at the crossings are
-    ``clearance`` apart (the crimp amplitude raised by the chord sag, by a few secant steps)."""
-    c = clearance
-    weave = taut_weave(n, span, R_warp, R_weft, elements, c)
-    for _ in range(iterations):
-        err = chord_clearance(weave) - clearance
-        if abs(err) < 1e-6:
+    ``clearance`` apart: the crimp-curve clearance found by Brent's method (the chords of the
+    linear elements cut inside the curve, so it is larger than ``clearance``)."""
+    from scipy.optimize import brentq
+
+    def f(c):
+        return chord_clearance(taut_weave(n, span, R_warp, R_weft, elements, c)) - clearance
+
+    lo = clearance
+    if f(lo) >= 0:
+        return taut_weave(n, span, R_warp, R_weft, elements, lo)
+    grid = lo + (R_warp + R_weft) * np.linspace(0.05, 3.0, 60)
+    for hi in grid:  # the first crimp that clears (f is not monotone on coarse meshes)
+        if f(hi) > 0:
             break
-        c -= err
-        weave = taut_weave(n, span, R_warp, R_weft, elements, c)
-    return weave
+        lo = hi
+    else:
+        raise ValueError(f"no crimp amplitude gives a chord clearance of {clearance} mm with {elements} elements "
+                         f"per yarn: the mesh is too coarse for the yarn spacing {span / n:.4g} mm")
+    c = brentq(f, lo, hi, xtol=xtol)
+    return taut_weave(n, span, R_warp, R_weft, elements, c)
