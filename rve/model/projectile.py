@@ -98,17 +98,10 @@ class ImpactSystem:
         self.sphere_dofs = np.concatenate([self._r_end[sp_.centre], self._r_fab[sp_.node_a], self._r_fab[sp_.node_b]],
                                           axis=1)  # (P, 9)
         Mf = sp.csr_matrix(self.fabric.mass())
-        rows_f = np.repeat(np.arange(self.nf), np.diff(Mf.indptr))
-        pd = self.nf + np.arange(self.np_)
-        rows = [rows_f, np.repeat(pd, self.np_), np.repeat(self.sphere_dofs, 9, axis=1).ravel()]
-        cols = [Mf.indices, np.tile(pd, self.np_), np.tile(self.sphere_dofs, (1, 9)).ravel()]
-        key = np.unique(np.concatenate(rows).astype(np.int64) * self.n + np.concatenate(cols))
-        self._keys = key
-        r_u, c_u = key // self.n, key % self.n
-        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(r_u, minlength=self.n))]).astype(np.int32)
-        self.indices = c_u.astype(np.int32)
-        self.nnz = key.size
-        self._maps = {}
+        if not Mf.has_sorted_indices:  # the union needs sorted rows (the fabric's arrays stay as they are)
+            Mf = Mf.copy()
+            Mf.sort_indices()
+        self._build_union(Mf)
         self._pos_sphere = self._positions_of(self.sphere_dofs.repeat(9, axis=1).ravel(),
                                               np.tile(self.sphere_dofs, (1, 9)).ravel()).reshape(-1, 81)
         Mp = sp.csr_matrix(self.projectile.mass())
@@ -119,6 +112,53 @@ class ImpactSystem:
         self.structure_version += 1
         self.stats["sphere_s"] += time.perf_counter() - t0
         return self.fabric.map
+
+    def _build_union(self, Mf):
+        """Union CSR of the fabric pattern (rows < nf), the fabric-row x projectile-column
+        entries of the sphere pairs (appended to their rows: columns >= nf keep the rows
+        sorted) and the projectile rows (dense projectile block + sphere-pair columns),
+        without sorting the fabric's entries again; the fabric pattern's positions in the
+        union are recorded for ``_add``."""
+        nf, n = self.nf, self.n
+        sd = self.sphere_dofs
+        pd = nf + np.arange(self.np_)
+        # fabric rows x projectile columns: (fabric dof, end dof) of every pair
+        fr = np.repeat(sd[:, 3:], 3, axis=1).ravel()
+        fc = np.tile(sd[:, :3], (1, 6)).ravel()
+        key = np.unique(fr.astype(np.int64) * n + fc)
+        er, ec = key // n, key % n
+        cnt_f = np.diff(Mf.indptr).astype(np.int64)
+        cnt_e = np.bincount(er, minlength=nf).astype(np.int64)
+        # projectile rows: all projectile dofs + the fabric dofs of the pairs (the end rows)
+        p_rows, p_cols = [], []
+        for i, d in enumerate(pd):
+            extra = sd[(sd[:, :3] == d).any(axis=1), 3:].ravel()
+            cols = np.unique(np.concatenate([extra.astype(np.int64), pd]))
+            p_rows.append(np.full(cols.size, d))
+            p_cols.append(cols)
+        cnt_p = np.array([c.size for c in p_cols], np.int64)
+        counts = np.concatenate([cnt_f + cnt_e, cnt_p])
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        nnz = int(indptr[-1])
+        indices = np.empty(nnz, np.int64)
+        rows_f = np.repeat(np.arange(nf), cnt_f)
+        pos_f = np.arange(Mf.nnz) + (indptr[:-1][:nf] - Mf.indptr[:-1].astype(np.int64))[rows_f]
+        indices[pos_f] = Mf.indices
+        if er.size:
+            start_e = indptr[er] + cnt_f[er]
+            rank = np.arange(er.size) - np.concatenate([[0], np.cumsum(cnt_e)])[er]
+            indices[start_e + rank] = ec
+        off = indptr[nf]
+        if cnt_p.size:
+            indices[off:] = np.concatenate(p_cols)
+        self.indptr = indptr.astype(np.int32) if nnz < 2**31 else indptr
+        self.indices = indices.astype(np.int32)
+        self.nnz = nnz
+        rows = np.repeat(np.arange(n), counts)
+        self._keys = rows * n + indices
+        self._maps = {id(Mf.indices): (Mf.indices, Mf.indptr, pos_f)}
+        if np.any(np.diff(self._keys) <= 0):  # pragma: no cover - construction invariant
+            raise RuntimeError("ImpactSystem: the union pattern is not sorted / has duplicates")
 
     def _positions_of(self, rows, cols):
         keys = np.asarray(rows, np.int64) * self.n + np.asarray(cols, np.int64)

@@ -252,6 +252,14 @@ def _chunked(sysm, x, w, t0, t_end, steps, cfg, tab, nopts, iopts, on_step, scal
         yield t, x, w
 
 
+def _integrator_options(cfg) -> dict:
+    from .impact_solver import register
+
+    register()
+    return {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
+            "linear_backend": cfg.newton.linear_backend}
+
+
 def _initial_w(sysm, x, scale, nopts, t=0.0, w=None):
     w0 = np.zeros(sysm.n) if w is None else w
     return consistent_initialization(RowScaledSystem(sysm, scale), x, w0, t, nopts)
@@ -265,7 +273,7 @@ def relax(cfg, progress: bool = False):
     r = cfg.relaxation
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction}
+    iopts = _integrator_options(cfg)
     x = problem.x0.copy()
     scale = sysm.row_scales(r.t_end / r.steps, x, np.zeros(sysm.n))
     w, _ = _initial_w(sysm, x, scale, nopts)
@@ -367,7 +375,7 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     h0 = t_end / steps
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction}
+    iopts = _integrator_options(cfg)
     iopts.update(integrator_options or {})
     X0p = proj.nodal(sysm.split(problem.x0)[1])[:, :9].copy()
     L = float(problem.info["projectile_length_mm"])
