@@ -51,12 +51,30 @@ def _em_force_and_power(model, x, w, t):
     return f, P, joule
 
 
+class _Remembering:
+    """The fabric system for ``StateBalances``, remembering its last residual (so the clamp
+    forces need no second evaluation of the fabric)."""
+
+    def __init__(self, system):
+        self._system = system
+        self.last_F = None
+
+    def evaluate(self, x, w, t, jacobian=True):
+        out = self._system.evaluate(x, w, t, jacobian)
+        self.last_F = out[0]
+        return out
+
+    def __getattr__(self, name):
+        return getattr(self._system, name)
+
+
 class ImpactBalances:
     def __init__(self, problem, thermal):
         self.p = problem
         sysm = problem.system
         self.sysm = sysm
-        self.fab = StateBalances(sysm.fabric, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
+        self._fabric = _Remembering(sysm.fabric)
+        self.fab = StateBalances(self._fabric, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
         proj = sysm.projectile
         self.proj = proj
         self.Mf = sp.csr_matrix(sysm.fabric.base.assembler.mass())
@@ -99,7 +117,8 @@ class ImpactBalances:
         P_f = Mw_f[self.rf].sum(axis=0)
         fS = sysm.sphere_forces(x).sum(axis=0)
         fL_f, _, _ = _em_force_and_power(sysm.fabric.base, xf, wf, t)
-        F = np.asarray(sysm.evaluate(x, w, t, jacobian=False)[0], float)
+        Fs, _, _ = sysm.sphere_terms(x, jacobian=False)
+        F = np.asarray(self._fabric.last_F, float) + Fs[: sysm.nf]  # fabric rows of the whole residual
         b.update({
             "momentum_projectile": P_p, "momentum_total": P_f + P_p, "momentum_pinned": Mw_f[self.pinned].sum(axis=0),
             "force_sphere_on_projectile": fS, "force_lorentz_projectile": fL_p, "force_lorentz": fL_f + fL_p,

@@ -3,15 +3,18 @@
 # Target `impact`: the relaxation (saved, reused by every impact run), the full thesis impact
 # (32 x 32 yarns, 80 elements, 0.5 ms in 1000 SDIRK2 steps) and its figures.
 # Target `impact_sweep`: final speed, tilt rate and peak temperature against the warp current
-# density (config impact.currents), on the reduced case of impact.sweep_overrides (each point
-# of the full size costs as much as the full run).
+# density (config impact.currents), on the reduced case of impact.sweep_overrides: the weave,
+# the projectile and the horizon scaled by 1/4 (same yarn spacing, elements of 0.64 mm, the
+# same deflection-to-span ratio at t_end); each point of the full size costs as much as the
+# full run.
 # Optional pipeline config key impact: {scene_config, overrides, sweep_overrides, currents}.
 
 from rve.scenes import impact as impact_scene
 
 IMPACT = {"scene_config": "configs/scenes/impact.yaml", "overrides": [],
-          "sweep_overrides": ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=16",
-                              "projectile.radius=4.5 mm", "output.vtk=false"],
+          "sweep_overrides": ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=20",
+                              "projectile.radius=4.5 mm", "time.t_end=0.125 ms", "time.steps=250",
+                              "output.vtk=false"],
           "currents": [0, 50, 100, 200], **config.get("impact", {})}
 IMPACT_DIR = "results/impact"
 
