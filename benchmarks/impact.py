@@ -5,8 +5,8 @@ thesis size (32 x 32, 80 elements) over ``--full-steps`` of its 1000 steps: dofs
 pairs (fabric and sphere, max active), steps accepted/rejected, Newton iterations and
 factorisations per stage, wall time per phase (contact search/rebuild, fabric assembly,
 fabric contact forms, sphere contact, matrix composition, linear solve + Newton, T
-post-solve, balances), the relaxation separately, peak memory (ru_maxrss of the process and
-tracemalloc's Python peak) and the extrapolation of the per-step cost to the 0.5 ms impact.
+post-solve, balances), the relaxation separately, peak memory (ru_maxrss of the process;
+the process's peak RSS) and the extrapolation of the per-step cost to the 0.5 ms impact.
 
     python benchmarks/impact.py [--reduced-steps 100] [--full] [--full-steps 20]
 """
@@ -26,8 +26,7 @@ def report(tag, cfg, t_end, steps, nominal):
     t0 = time.perf_counter()
     x, rinfo = impact.relax(cfg)
     t_relax = time.perf_counter() - t0
-    s = impact.solve(cfg, x_start=x, relax_info=rinfo, record=False, t_end=t_end, steps=steps,
-                     measure_memory=True).summary
+    s = impact.solve(cfg, x_start=x, relax_info=rinfo, record=False, t_end=t_end, steps=steps).summary
     w = s["wall_time_s"]
     per_step = w["total"] / max(1, s["steps_accepted"])
     print(f"[{tag}] dofs {s['dofs']}")
@@ -41,8 +40,8 @@ def report(tag, cfg, t_end, steps, nominal):
     print(f"[{tag}] wall (s): " + ", ".join(f"{k} {w[k]:.2f}" for k in keys))
     print(f"[{tag}] relaxation {t_relax:.1f} s ({rinfo['steps']} steps); per impact step {per_step * 1e3:.0f} ms; "
           f"extrapolated to {nominal} steps: {per_step * nominal / 60:.1f} min")
-    print(f"[{tag}] peak memory: ru_maxrss {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB, "
-          f"tracemalloc {s.get('peak_memory_MiB', float('nan')):.0f} MiB")
+    print(f"[{tag}] peak memory: ru_maxrss {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB "
+          f"(the process so far)")
     print(f"[{tag}] balance errors {json.dumps({k: float(f'{v:.3g}') for k, v in s['balance_errors'].items()})}")
     print(f"[{tag}] v_com {s['projectile_velocity_mm_per_ms']}, omega_x {s['projectile_angular_velocity_x_rad_per_ms']:.4g}, "
           f"currents {s['yarn_current_A']}, max T {s['max_temperature_K']:.4g} K")

@@ -544,6 +544,9 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
         "geometry": problem.info, "sampled_yarns": problem.sampled, "relaxation": relax_info,
         "resumed_from_ms": resumed, "wall_time_s": wall,
     }
+    import resource
+
+    summary["peak_rss_MiB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     if peak is not None:
         summary["peak_memory_MiB"] = peak
     if record:
