@@ -89,7 +89,7 @@ def test_balances_on_the_reduced_run(runs):
     assert s["steps_accepted"] == 100
     assert e["momentum_projectile"] < 1e-2 and e["momentum_total"] < 1e-2
     assert e["charge"] < 1e-8 and e["electrical"] < 1e-6
-    assert e["mechanical"] < 1e-2
+    assert e["mechanical"] < 1e-2 and e["thermal"] < 1e-2
     assert s["sphere_pairs_active_max"] > 0
     # the fabric slows the projectile (the impulse on it points up) and momentum is exchanged
     assert s["projectile_velocity_mm_per_ms"][2] > -30.0
@@ -143,3 +143,40 @@ def test_relaxed_state_is_saved_and_reused(tmp_path, monkeypatch):
     assert len(calls) == 1
     impact.load_or_relax(load_config("configs/scenes/impact.yaml", TINY + ["mesh.elements=10"]), f)
     assert len(calls) == 2
+
+
+def test_projectile_heat_sink_matrix():
+    """Sphere pairs in contact conduct h_C a(g) l_e to the projectile (T = 0): the sink matrix
+    is G beta beta^T per pair and the heat into the projectile is sum G T(closest point)."""
+    from rve.physics.contact_forms import effective_radius, hertz_kappa, hertz_width
+    from rve.physics.sphere_contact_forms import sphere_segment_geometry
+    from rve.scenes.impact_thermal import ImpactThermal
+
+    cfg = load_config("configs/scenes/impact.yaml", TINY)
+    p = impact.setup(cfg)
+    sysm = p.system
+    x = p.x0.copy()
+    x[sysm._r_end[:, 2]] -= 0.5  # press the lower hemisphere 0.3 mm into the fabric
+    sysm.rebuild(x)
+    th = ImpactThermal(sysm, 0.1, p.fixed_T_nodes)
+    xf = sysm.split(x)[0]
+    th.set_state(x)
+    K = th.sink_matrix(xf).toarray()
+    c, r = sysm.positions(x)
+    term = sysm.sphere
+    geo = sphere_segment_geometry(c[term.centre], r[term.node_a], r[term.node_b], term.gap_radius)
+    act = np.flatnonzero(geo["g"] > 0)
+    assert act.size > 0
+    ref = np.zeros_like(K)
+    for q in act:
+        kap = hertz_kappa(effective_radius(0.4, 2.0), term.penalty, sysm.fabric.E_star)
+        a, _ = hertz_width(geo["g"][q], kap, sysm.fabric.g_eps)
+        G = 0.1 * a * sysm.mesh.elem_length[term.element[q]]
+        s = geo["s"][q]
+        na, nb = term.node_a[q], term.node_b[q]
+        ref[np.ix_([na, nb], [na, nb])] += G * np.outer([1 - s, s], [1 - s, s])
+    assert np.abs(K - ref).max() <= 1e-14 * np.abs(ref).max()
+    T = np.random.default_rng(0).uniform(size=K.shape[0])
+    assert th.sink_heat(T, xf) == pytest.approx(float((ref @ T).sum()), rel=1e-13)
+    # the full state gives the same operator as the fabric part with the remembered centres
+    assert np.abs(th.contact(x).toarray() - th.contact(xf).toarray()).max() == 0.0

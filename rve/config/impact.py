@@ -101,6 +101,8 @@ class ImpactContact(Section):
                                                             "sphere contact uses the point penalty P* l_e")
     heat_transfer: HeatTransferCoefficient = Field("0.1 W/(mm^2*K)", ge=0, description="h_C (fabric-fabric)")
     conductance: ContactConductance = Field("0 A/(mm^2*V)", ge=0, description="sigma_C (Table 8.2: 0)")
+    projectile_heat_sink: bool = Field(True, description="heat transfer h_C a l_e from the fibrils to the projectile "
+                                                         "(a reservoir at T = 0) through the sphere contact")
     n_gp: Integer = Field(4, ge=1, description="contact points per fibril element pair")
     margin: Length = Field("0.3 mm", ge=0, description="search margin (fibrils: cutoff 2R + margin; spheres: "
                                                        "R_p + R_f + margin)")

@@ -45,7 +45,8 @@ from ..model.projectile import ImpactSystem, projectile_mesh
 from ..model.terms.projectile_contact import SphereContactTerm
 from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate, sdirk
 from .impact_balances import ImpactBalances, impact_balance_errors
-from .induced_balances import ThermalOperators, ThermalPostSolver
+from .impact_thermal import ImpactThermal
+from .induced_balances import ThermalPostSolver
 from .impact_fabric import chord_clearance, taut_weave, weave_with_chord_clearance
 from .protocol import SceneFailure, SceneResult
 
@@ -384,7 +385,8 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     w[sysm._r_end[:, 2]] = -cfg.projectile.speed
     scale = sysm.row_scales(h0, x, w)
     rec = _StageRecorder(sysm)
-    thermal = ThermalOperators(fab, cfg.contact.heat_transfer, problem.fixed_T_nodes)
+    thermal = ImpactThermal(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes,
+                            sink=cfg.contact.projectile_heat_sink)
     post = ThermalPostSolver(thermal, tab, cfg.end_temperature)
     balances = ImpactBalances(problem, thermal)
     digest = config_digest(cfg, ("geometry", "warp", "weft", "material", "projectile", "contact", "field", "mesh",
@@ -450,11 +452,10 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
         counters["steps"] += 1
         stage_its.append(list(info.stage_iterations))
         tp = time.perf_counter()
-        stages = []
+        stages = []  # full states: the thermal operators take the sphere centres from them
         for i in range(tab.stages - 1):
-            xs, ws = rec.last[info.t + tab.c[i] * info.h]
-            stages.append((sysm.split(xs)[0], sysm.split(ws)[0]))
-        stages.append((sysm.split(x_)[0], sysm.split(w_)[0]))
+            stages.append(rec.last[info.t + tab.c[i] * info.h])
+        stages.append((x_, w_))
         T = post.step(T, stages, info.t, info.h)
         rec.last.clear()
         wall["thermal_post"] += time.perf_counter() - tp

@@ -6,7 +6,8 @@ Contract
 ``ImpactBalances(problem, thermal)``: ``__call__(x, w, t, T)`` -> dict of one state: the
 fabric terms of ``rve.scenes.induced_balances.StateBalances`` (fabric slice of the state),
 plus ``energy_kinetic``/``energy_strain``/``energy_contact`` including the projectile and
-the sphere contact, the projectile's circuit, Joule and Lorentz power, and the momentum
+the sphere contact, the projectile's circuit, Joule and Lorentz power, ``heat_sink`` (W into
+the projectile through the sphere contact, ``rve.scenes.impact_thermal``), and the momentum
 terms (3-vectors): ``momentum_projectile`` (sum over the centroid rows of M w),
 ``momentum_total``, ``force_sphere_on_projectile`` (N), ``force_lorentz_projectile``,
 ``force_lorentz`` (fabric + projectile), ``force_damping``, ``force_clamp_static`` (the
@@ -73,6 +74,7 @@ class ImpactBalances:
         self.p = problem
         sysm = problem.system
         self.sysm = sysm
+        self.thermal = thermal
         self._fabric = _Remembering(sysm.fabric)
         self.fab = StateBalances(self._fabric, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
         proj = sysm.projectile
@@ -91,7 +93,10 @@ class ImpactBalances:
         sysm = self.sysm
         xf, xp = sysm.split(x)
         wf, wp = sysm.split(w)
+        if hasattr(self.thermal, "set_state"):
+            self.thermal.set_state(x)
         b = self.fab(xf, wf, t, T)
+        b["heat_sink"] = self.thermal.sink_heat(T, xf) if hasattr(self.thermal, "sink_heat") else 0.0
         # projectile: kinetic, strain, circuits, EM
         vm = np.asarray(wp, float)[self.pmech]
         kin_p = 0.5 * float(vm @ (self.Mpm @ vm))
@@ -151,8 +156,11 @@ def impact_balance_errors(s: dict) -> dict:
     out["impulse_sphere_on_projectile_Nms"] = [float(v) for v in J[-1]]
     out["impulse_clamp_Nms"] = [float(v) for v in Jc[-1]]
     out["impulse_lorentz_Nms"] = [float(v) for v in JL[-1]]
-    e = balance_errors({k: v for k, v in s.items() if k not in _VEC and not k.startswith("energy_kinetic_")
-                        and k not in ("energy_strain_projectile", "energy_sphere_contact")})
+    sel = {k: v for k, v in s.items() if k not in _VEC and not k.startswith("energy_kinetic_")
+           and k not in ("energy_strain_projectile", "energy_sphere_contact", "heat_sink")}
+    if "heat_sink" in s:  # heat leaves through the clamped ends and into the projectile
+        sel["heat_out"] = np.asarray(s["heat_out"], float) + np.asarray(s["heat_sink"], float)
+    e = balance_errors(sel)
     out.update(e)
     out["series"] = dict(e["series"], momentum_projectile_residual=res_p, momentum_total_residual=res_t)
     return out
