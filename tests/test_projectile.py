@@ -110,7 +110,6 @@ def small_impact_system(height=18.3, B=(0.0, 0.0007071, 0.0007071), with_fabric_
     base.nodal(x0)[:, :9] = mesh.X0
     fabric = ContactSystem(base, ContactParams(penalty=20.0, n_gp=2, margin=0.3), x0)
     pmesh = projectile_mesh(18.0, 41.5, (0.1, -0.05, height))
-    pl = DofLayout(pmesh.n_nodes, fields)
     pmat = BeamMaterial(youngs_modulus=1.26, density=0.01, damping=0.0, electrical_conductivity=1.0)
     pcirc = [CircuitBC(n, 1e-3, 0.0, np.pi * 18.0**2) for n in pmesh.end_nodes(0)]
     proj = BeamModel(pmesh, pmat, fields=fields, couplings=cpl, circuits=pcirc)
