@@ -253,10 +253,17 @@ def _chunked(sysm, x, w, t0, t_end, steps, cfg, tab, nopts, iopts, on_step, scal
         yield t, x, w
 
 
-def _integrator_options(cfg) -> dict:
+def _integrator_options(cfg, sysm=None) -> dict:
+    """Integrator options; the linear backend eliminates the projectile's free dofs (the last
+    ones of the restricted stage matrix: its dofs come last and ``FreeDofs`` keeps the order)
+    by a Schur complement (rve.scenes.impact_solver)."""
     from .impact_solver import register
 
-    register()
+    border = 0
+    if sysm is not None:
+        idx, _ = sysm.constraints(0.0)
+        border = int(sysm.n - sysm.nf - np.count_nonzero(np.asarray(idx) >= sysm.nf))
+    register(border)
     return {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
             "linear_backend": cfg.newton.linear_backend}
 
@@ -274,7 +281,7 @@ def relax(cfg, progress: bool = False):
     r = cfg.relaxation
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = _integrator_options(cfg)
+    iopts = _integrator_options(cfg, sysm)
     x = problem.x0.copy()
     scale = sysm.row_scales(r.t_end / r.steps, x, np.zeros(sysm.n))
     w, _ = _initial_w(sysm, x, scale, nopts)
@@ -376,7 +383,7 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     h0 = t_end / steps
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = _integrator_options(cfg)
+    iopts = _integrator_options(cfg, sysm)
     iopts.update(integrator_options or {})
     X0p = proj.nodal(sysm.split(problem.x0)[1])[:, :9].copy()
     L = float(problem.info["projectile_length_mm"])
