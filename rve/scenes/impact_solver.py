@@ -9,7 +9,7 @@ drops the explicit zeros of the stage matrix (the inactive candidate contact pai
 contact maps, the uncoupled field blocks: 24 % of the stored entries measured on a 16 x 16
 impact weave), eliminates the last ``border`` unknowns (the projectile's free dofs, set by ``register``) by a
 Schur complement, then factorises the rest with SuperLU's minimum-degree ordering of A^T + A and
-threshold pivoting (``DiagPivotThresh = 0.1``: diagonal pivots unless one is below a tenth of
+threshold pivoting (``DiagPivotThresh = 0.01``: diagonal pivots unless one is below 1 % of
 its column, so the nearly symmetric but unsymmetric stage matrices of the Lorentz /
 back-EMF couplings are factorised stably); a singular pivot falls back to COLAMD with
 partial pivoting on the same pruned matrix. Measured (16 x 16 yarns, 40 elements, 12.9k
@@ -32,7 +32,7 @@ NAME = "superlu_pruned"
 
 def _splu(J):
     try:
-        return spla.splu(J, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options=dict(SymmetricMode=True))
+        return spla.splu(J, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01, options=dict(SymmetricMode=True))
     except RuntimeError:
         try:
             return spla.splu(J, permc_spec="COLAMD")
