@@ -27,6 +27,7 @@ include: "workflow/rules/dynamic_wire.smk"
 include: "workflow/rules/rve.smk"
 include: "workflow/rules/induced_deformation.smk"
 include: "workflow/rules/integrity.smk"
+include: "workflow/rules/impact.smk"
 
 
 rule all:

@@ -73,6 +73,7 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
     Scene("rve", "rve.homogenisation.config:RVEConfig", "rve.scenes.rve_pipeline", kind="pipeline"),
     Scene("induced_deformation", "rve.config.induced_deformation:InducedDeformationConfig",
           "rve.scenes.induced_deformation"),
+    Scene("impact", "rve.config.impact:ImpactConfig", "rve.scenes.impact"),
 )}
 
 
