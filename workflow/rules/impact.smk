@@ -9,6 +9,8 @@
 # full run.
 # Optional pipeline config key impact: {scene_config, overrides, sweep_overrides, currents}.
 
+import os
+
 from rve.scenes import impact as impact_scene
 
 IMPACT = {"scene_config": "configs/scenes/impact.yaml", "overrides": [],
@@ -59,7 +61,7 @@ rule impact_full:
         "results/benchmarks/impact/full.tsv"
     params:
         overrides=IMPACT["overrides"],
-        out=f"{IMPACT_DIR}/full",
+        out=lambda w, output: os.path.dirname(output.summary),
     threads: 1
     resources:
         mem_mb=4000,
