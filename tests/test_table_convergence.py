@@ -81,7 +81,10 @@ def test_job_writes_report_plot_and_accuracy(tmp_path):
     assert len(outs["csv"].read_text().splitlines()) > 30
 
 
+# long: seven CI-size RVE runs (~5-10 min); the study code is tested above on stored tables,
+# `pytest -m long` runs the whole study through Snakemake
 @pytest.mark.slow
+@pytest.mark.long
 def test_ci_study_through_snakemake(tmp_path):
     pytest.importorskip("snakemake")
     from workflow_copy import workflow_copy
