@@ -14,7 +14,9 @@ def workflow_copy(dest: Path) -> Path:
     """Snakefile, workflow/ and the configs the CI DAGs read, copied into ``dest``."""
     shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
     shutil.copytree(ROOT / "workflow", dest / "workflow")
+    # the whole configs/ tree: the default pipeline config names scene configs that the DAG
+    # reads at parse time (e.g. the picture targets of configs/rve/plain_weave.yaml)
+    shutil.copytree(ROOT / "configs", dest / "configs", dirs_exist_ok=True)
     for rel in CONFIGS:
-        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(ROOT / rel, dest / rel)
+        assert (dest / rel).exists(), rel
     return dest
