@@ -72,10 +72,19 @@ class ImpactThermal(ThermalOperators):
         cols = np.tile(nodes, (1, 2)).ravel()
         return sp.csr_matrix((vals.ravel(), (rows, cols)), shape=(self.n, self.n))
 
-    def contact(self, x):
+    def contact_triplets(self, x):
+        """The fabric's contact triplets at the fabric part of x plus the sink's: every path of
+        ``ThermalOperators`` (``contact``, ``contact_blocks``) goes through here, so the full
+        ``ImpactSystem`` state is split once and the sink is never left out."""
         xf = self._split(x)
-        K = super().contact(xf)
-        return K + self.sink_matrix(xf) if self.sink else K
+        r, c, v = super().contact_triplets(xf)
+        if not self.sink:
+            return r, c, v
+        S = self.sink_matrix(xf).tocoo()
+        if S.nnz == 0:
+            return r, c, v
+        return (np.concatenate([r, S.row.astype(np.int64)]), np.concatenate([c, S.col.astype(np.int64)]),
+                np.concatenate([v, S.data]))
 
     def joule(self, x, w, t):
         xf = self._split(x)
