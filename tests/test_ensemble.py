@@ -157,7 +157,10 @@ def test_ensemble_table_is_cf_clean_on_disk(tmp_path):
 
 
 # --------------------------------------------------------------------------- through Snakemake
+# long: three CI realisations through Snakemake (~3 min); the statistics and the gather are
+# tested above, `pytest -m long` runs the sweep end to end
 @pytest.mark.slow
+@pytest.mark.long
 def test_ci_ensemble_through_snakemake(tmp_path):
     """3 realizations of a 2 x 2 weave with 2 fibrils per yarn: one chain each, a table with a
     `realization` dimension and bands, the figures and the band/wiggle report."""
