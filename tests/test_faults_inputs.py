@@ -215,3 +215,20 @@ def test_bad_input_rve_run_output_folder_checked_before_the_run(tmp_path, capsys
     rc = main(["run", STATIC, "--out", str(blocker / "out")])
     err = capsys.readouterr().err
     assert rc == 2 and f"output folder {blocker / 'out'}: cannot be written" in err and "Traceback" not in err
+
+
+@pytest.mark.slow   # one Snakemake dry run
+def test_bad_input_duplicate_section_in_the_pipeline_config(tmp_path):
+    """A pipeline config with a section given twice (Snakemake's loader keeps the last one)."""
+    pytest.importorskip("snakemake")
+    from workflow_copy import workflow_copy
+
+    work = workflow_copy(tmp_path)
+    text = (work / "configs/tests/pipeline_ci.yaml").read_text()
+    (work / "dup.yaml").write_text(text + "\nresources:\n  rve_mem_mb: 900\nresources:\n  gather_mem_mb: 400\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    p = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--configfile", "dup.yaml"], cwd=work, env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode != 0
+    out = p.stdout + p.stderr
+    assert "dup.yaml" in out and "duplicate key 'resources'" in out, out[-2000:]

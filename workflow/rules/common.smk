@@ -6,6 +6,14 @@ from snakemake.utils import validate
 from rve.studies import static_wire as static_wire_study
 
 
+# Snakemake's own YAML load keeps the last of two equal keys (a duplicated section drops the
+# first one's keys without a word): every config file is re-read strictly, and a duplicate is
+# an error naming the file, the line and the key (docs/fault_tolerance.md).
+from rve.config.loader import read_config_source as _read_config_source
+
+for _configfile in workflow.configfiles:
+    _read_config_source(_configfile)
+
 validate(config, schema="../schemas/pipeline.schema.yaml")
 
 
