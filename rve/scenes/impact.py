@@ -47,6 +47,7 @@ from ..solvers.dirk import IntegrationFailure, consistent_initialization, integr
 from .impact_balances import ImpactBalances, impact_balance_errors
 from .impact_thermal import ImpactThermal
 from .induced_balances import ThermalPostSolver
+from .induced_deformation import warp_circuit
 from .impact_fabric import chord_clearance, taut_weave, weave_with_chord_clearance
 from .protocol import SceneFailure, SceneResult
 
@@ -124,16 +125,7 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
     layout = DofLayout(mesh.n_nodes, fields)
     ends = np.array([mesh.end_nodes(f) for f in range(mesh.n_fibrils)], dtype=np.int64)
     bcs = [DirichletBC(layout.dofs("r", ends.ravel()), 0.0)]
-    circuit_in, circuit_leak, dir_nodes = [], [], []
-    for f in weave.warp:
-        first, last = ends[f]
-        area = float(np.pi * mesh.radius[f] ** 2)
-        circuit_in.append(CircuitBC(int(first), cfg.warp.r_bar, cfg.warp.J_bar, area))
-        dir_nodes.append(int(last))
-    for f in weave.weft:
-        area = float(np.pi * mesh.radius[f] ** 2)
-        circuit_leak.append(CircuitBC(int(ends[f, 0]), cfg.weft.r_bar, cfg.weft.J_bar, area))
-    dirichlet_V = layout.dofs("V", dir_nodes)
+    circuit_in, circuit_leak, dirichlet_V = warp_circuit(weave, layout, ends, cfg)
     bcs.append(DirichletBC(dirichlet_V, 0.0))
     m = cfg.material
     relaxing = phase == "relax"

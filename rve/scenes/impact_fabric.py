@@ -22,43 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fabrics.fabric import minimal_rotation
 from ..fem.mesh import Fibril, fibril_mesh, orthonormal_directors, straight_fibril
-from .induced_fabric import SlackWeave
+from .induced_fabric import SlackWeave, crimped_frame, half_wave_length
 
-__all__ = ["taut_weave", "half_wave_length"]
-
-_QUAD = np.polynomial.legendre.leggauss(64)
-
-
-def half_wave_length(A: float, s: float) -> float:
-    """Arc length of z = A cos(pi u / s) over one spacing s (Gauss-Legendre)."""
-    xg, wg = _QUAD
-    u = 0.5 * s * (xg + 1.0)
-    dz = A * np.pi / s * np.sin(np.pi * u / s)
-    return float(0.5 * s * (wg * np.sqrt(1.0 + dz * dz)).sum())
-
-
-def _crimped(s_nodes, span, A, spacing, sign, t_ref, lat_axis, pos, g1_ref, g2_ref, length=None):
-    """Nodes spread uniformly (in arc length) over the crimped yarn between its ends; the
-    reference arc length ``length`` (default: s_nodes.max()) maps onto the whole yarn."""
-    u = np.linspace(-span / 2, span / 2, 4001)
-    u0 = -span / 2 + spacing / 2  # first crossing
-    k = np.pi / spacing
-    dz = -sign * A * k * np.sin(k * (u - u0))
-    q = np.sqrt(1.0 + dz * dz)
-    arc = np.concatenate([[0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * np.diff(u))])
-    arc *= (s_nodes.max() if length is None else length) / arc[-1]  # reference -> crimped arc length
-    uu = np.interp(s_nodes, arc, u)
-    z = sign * A * np.cos(k * (uu - u0))
-    dzz = -sign * A * k * np.sin(k * (uu - u0))
-    r = uu[:, None] * t_ref + pos * lat_axis + z[:, None] * np.array([0.0, 0.0, 1.0])
-    t = t_ref + dzz[:, None] * np.array([0.0, 0.0, 1.0])
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    tr = np.broadcast_to(t_ref, t.shape)
-    g1 = minimal_rotation(tr, t, np.broadcast_to(g1_ref, t.shape))
-    g2 = minimal_rotation(tr, t, np.broadcast_to(g2_ref, t.shape))
-    return np.hstack([r, g1, g2])
+__all__ = ["taut_weave", "half_wave_length"]  # half_wave_length: re-exported from induced_fabric
 
 
 def _crimped_fibril(span, A, spacing, sign, t_ref, lat, pos, radius, length, name):
@@ -67,7 +34,7 @@ def _crimped_fibril(span, A, spacing, sign, t_ref, lat, pos, radius, length, nam
 
     def frame(sv):
         sv = np.asarray(sv, float)
-        X = _crimped(sv, span, A, spacing, sign, t_ref, lat, pos, g1r[0], g2r[0], length)
+        X = crimped_frame(sv, span, A, spacing, sign, t_ref, lat, pos, g1r[0], g2r[0], length)
         return X[:, 0:3], X[:, 3:6], X[:, 6:9]
 
     return Fibril(length=float(length), radius=float(radius), frame=frame, name=name)
@@ -107,7 +74,7 @@ def taut_weave(n: int, span: float, R_warp: float, R_weft: float, elements: int,
             x0[nodes] = mesh.X0[nodes]
             continue
         g1r, g2r = orthonormal_directors(np.asarray(t_ref, float)[None, :])
-        x0[nodes] = _crimped(mesh.node_s[nodes], span, A, s, sign, t_ref, lat, p, g1r[0], g2r[0],
+        x0[nodes] = crimped_frame(mesh.node_s[nodes], span, A, s, sign, t_ref, lat, p, g1r[0], g2r[0],
                              mesh.node_s[nodes].max())
     direction = ("warp",) * n + ("weft",) * n
     return SlackWeave(mesh, x0, A, A, direction, np.arange(n), n + np.arange(n), float(span),

@@ -54,7 +54,7 @@ from .induced_balances import StateBalances, ThermalOperators, ThermalPostSolver
 from .induced_fabric import slack_weave
 from .protocol import SceneFailure, SceneResult
 
-__all__ = ["InducedProblem", "setup", "solve", "run", "field_vector", "field_ramp"]
+__all__ = ["InducedProblem", "setup", "solve", "run", "field_vector", "field_ramp", "warp_circuit"]
 
 log = logging.getLogger("rve.scenes.induced_deformation")
 
@@ -86,6 +86,19 @@ class InducedProblem:
         return self.system.base
 
 
+def warp_circuit(weave, layout, ends, cfg):
+    """The circuit of §8.3 on a weave: every warp driven at its first end (``CircuitBC``
+    with ``cfg.warp.r_bar``, ``cfg.warp.J_bar``) and grounded at its last (returned as the
+    V dofs to hold at 0), every weft on the weakened insulation at its first end
+    (``cfg.weft``). ``ends``: (n_fibrils, 2) end nodes. -> (circuit_in, circuit_leak, dirichlet_V)."""
+    mesh = weave.mesh
+    area = np.pi * mesh.radius ** 2
+    circuit_in = [CircuitBC(int(ends[f, 0]), cfg.warp.r_bar, cfg.warp.J_bar, float(area[f])) for f in weave.warp]
+    circuit_leak = [CircuitBC(int(ends[f, 0]), cfg.weft.r_bar, cfg.weft.J_bar, float(area[f])) for f in weave.weft]
+    dirichlet_V = layout.dofs("V", [int(ends[f, 1]) for f in weave.warp])
+    return circuit_in, circuit_leak, dirichlet_V
+
+
 def setup(cfg, mode: str | None = None) -> InducedProblem:
     """The problem of the scene (module docstring); no solve."""
     mode = mode or cfg.coupling.temperature
@@ -102,16 +115,7 @@ def setup(cfg, mode: str | None = None) -> InducedProblem:
     layout = DofLayout(mesh.n_nodes, fields)
     ends = np.array([mesh.end_nodes(f) for f in range(mesh.n_fibrils)], dtype=np.int64)  # (nf, 2)
     bcs = [DirichletBC(layout.dofs("r", ends.ravel()), 0.0)]
-    circuit_in, circuit_leak, dir_nodes = [], [], []
-    for f in weave.warp:
-        first, last = ends[f]
-        area = float(np.pi * mesh.radius[f] ** 2)
-        circuit_in.append(CircuitBC(int(first), cfg.warp.r_bar, cfg.warp.J_bar, area))
-        dir_nodes.append(int(last))
-    for f in weave.weft:
-        area = float(np.pi * mesh.radius[f] ** 2)
-        circuit_leak.append(CircuitBC(int(ends[f, 0]), cfg.weft.r_bar, cfg.weft.J_bar, area))
-    dirichlet_V = layout.dofs("V", dir_nodes)
+    circuit_in, circuit_leak, dirichlet_V = warp_circuit(weave, layout, ends, cfg)
     bcs.append(DirichletBC(dirichlet_V, 0.0))
     if mode == "monolithic":
         bcs.append(DirichletBC(layout.dofs("T", ends.ravel()), cfg.end_temperature))

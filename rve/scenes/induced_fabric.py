@@ -29,12 +29,12 @@ from scipy.optimize import brentq
 from ..fabrics.fabric import minimal_rotation
 from ..fem.mesh import FibrilMesh, fibril_mesh, straight_fibril
 
-__all__ = ["SlackWeave", "slack_weave", "crimp_amplitude"]
+__all__ = ["SlackWeave", "slack_weave", "crimp_amplitude", "half_wave_length", "crimped_frame"]
 
 _QUAD = np.polynomial.legendre.leggauss(64)
 
 
-def _half_wave_length(A: float, s: float) -> float:
+def half_wave_length(A: float, s: float) -> float:
     """Arc length of z = A cos(pi u / s) over one spacing s (Gauss-Legendre, smooth integrand)."""
     xg, wg = _QUAD
     u = 0.5 * s * (xg + 1.0)
@@ -46,7 +46,7 @@ def crimp_amplitude(span: float, natural_length: float, n_crossings: int) -> flo
     """A such that n half waves of z = A cos(pi u / s), s = span / n, have length L0."""
     s = span / n_crossings
     target = natural_length / n_crossings
-    return float(brentq(lambda A: _half_wave_length(A, s) - target, 0.0, natural_length))
+    return float(brentq(lambda A: half_wave_length(A, s) - target, 0.0, natural_length))
 
 
 @dataclass(frozen=True)
@@ -62,8 +62,10 @@ class SlackWeave:
     clearance: float
 
 
-def _crimped_frame(s_nodes, span, A, spacing, sign, t_ref, lat_axis, pos, g1_ref, g2_ref):
-    """Nodes at reference arc length s on the crimped yarn (module docstring)."""
+def crimped_frame(s_nodes, span, A, spacing, sign, t_ref, lat_axis, pos, g1_ref, g2_ref, length=None):
+    """Nodes at reference arc length s on the crimped yarn (module docstring), spread uniformly
+    in arc length between its ends; the reference length ``length`` (default s_nodes.max())
+    maps onto the whole crimped yarn."""
     n_fine = 4001
     u = np.linspace(-span / 2, span / 2, n_fine)
     u0 = -span / 2 + spacing / 2  # first crossing
@@ -71,7 +73,8 @@ def _crimped_frame(s_nodes, span, A, spacing, sign, t_ref, lat_axis, pos, g1_ref
     dz = -sign * A * k * np.sin(k * (u - u0))
     q = np.sqrt(1.0 + dz * dz)
     arc = np.concatenate([[0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * np.diff(u))])
-    arc *= s_nodes.max() / arc[-1]  # remove the (tiny) trapezoid error: ends exactly on the faces
+    # reference -> crimped arc length (also removes the tiny trapezoid error: ends exactly on the faces)
+    arc *= (s_nodes.max() if length is None else length) / arc[-1]
     uu = np.interp(s_nodes, arc, u)
     z = sign * A * np.cos(k * (uu - u0))
     dzz = -sign * A * k * np.sin(k * (uu - u0))
@@ -108,7 +111,7 @@ def slack_weave(n_warp: int, n_weft: int, span: float, natural_length: float, R_
     for f, (kind, A, spc, sign, t_ref, lat, pos) in enumerate(specs):
         nodes = mesh.fibril_nodes(f)
         G = mesh.X0[nodes[0]]
-        x0[nodes] = _crimped_frame(mesh.node_s[nodes], span, A, spc, sign, t_ref, lat, pos, G[3:6], G[6:9])
+        x0[nodes] = crimped_frame(mesh.node_s[nodes], span, A, spc, sign, t_ref, lat, pos, G[3:6], G[6:9])
     direction = tuple(s[0] for s in specs)
     clearance = (A_warp + A_weft) - (R_warp + R_weft)
     return SlackWeave(mesh, x0, A_warp, A_weft, direction, np.arange(n_warp), n_warp + np.arange(n_weft),
