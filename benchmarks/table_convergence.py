@@ -6,7 +6,10 @@ Runs (``--run``) or reads the study ``{study}`` of the pipeline (rule
 quantity, the error of every run against the finest/stiffest one (max over labels, modes and
 strains), the observed rate with mesh size, each run's summed job time, and the default
 run's accuracy against the targets (docs/table_accuracy.md). ``--docs`` copies the
-work-precision plot to docs/img/rve_table_convergence.png.
+work-precision plot to docs/img/rve_table_convergence.png. ``--write-accuracy PATH`` copies
+the study's accuracy.json (with the date and commit) to PATH, the file a run spec's
+``accuracy`` key names (configs/rve/plain_weave_accuracy.json for the default run): the
+gather job then writes it into the table's ``estimated_relative_error`` attributes.
 
     python benchmarks/table_convergence.py --run                 # the default RVE (long: ~1-2 h)
     python benchmarks/table_convergence.py --run --ci            # the CI study (2 x 2 weave, minutes)
@@ -33,6 +36,8 @@ def main(argv=None) -> int:
                                                   "ci_table_convergence)")
     ap.add_argument("--docs", action="store_true", help="copy the plot to docs/img/rve_table_convergence.png")
     ap.add_argument("--results", default="results", help="results folder")
+    ap.add_argument("--write-accuracy", default=None, metavar="PATH",
+                    help="copy accuracy.json (+ date, commit) to PATH (the run spec's `accuracy` file)")
     a = ap.parse_args(argv)
     study = a.study or ("ci_table_convergence" if a.ci else "table_convergence")
     d = Path(a.results) / "rve" / "convergence" / study
@@ -66,6 +71,13 @@ def main(argv=None) -> int:
         r = st.get("wall_time_ratio_default_to_reference")
         if r:
             print(f"  wall time default / reference: {r:.3f}")
+    if a.write_accuracy:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+        stamp = time.strftime("%Y-%m-%d", time.gmtime((d / "accuracy.json").stat().st_mtime))
+        acc["provenance"] = {"date": stamp, "commit": commit or "?", "study": study,
+                             "command": "snakemake -j2 rve_table_convergence"}
+        Path(a.write_accuracy).write_text(json.dumps(acc, indent=1) + "\n")
+        print(f"accuracy -> {a.write_accuracy}")
     if a.docs:
         dst = Path("docs/img/rve_table_convergence.png")
         dst.parent.mkdir(parents=True, exist_ok=True)

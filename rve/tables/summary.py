@@ -78,6 +78,13 @@ def summarize(ds: xr.Dataset) -> str:
                 f"{m} {_rng(ds[name].sel(mode=m).values)}" for m in ds["mode"].values))
     if "network_fit_residual" in ds:
         lines.append(f"  network fit residual (rms log): max {_rng(ds['network_fit_residual'].values).split(' .. ')[-1]}")
+    stated = [(v, ds[v].attrs) for v in ds.data_vars if "estimated_relative_error" in ds[v].attrs]
+    if stated:
+        lines.append("  estimated relative error (convergence study: mesh + penalty):")
+        for v, a in stated:
+            lines.append(f"    {v}: {100 * a['estimated_relative_error']:.3g} % (mesh "
+                         f"{100 * a.get('estimated_relative_error_mesh', float('nan')):.3g} %, penalty "
+                         f"{100 * a.get('estimated_relative_error_penalty', float('nan')):.3g} %)")
     if "equilibrium_residual" in ds and np.isfinite(ds["equilibrium_residual"].values).any():
         r = ds["equilibrium_residual"].values
         lines.append(f"  equilibrium residual [N]: max {np.nanmax(r):.3g} over {int(np.isfinite(r).sum())} table entries")

@@ -177,6 +177,7 @@ rule rve_gather:
     """All probe records of a run -> the lookup table (netCDF, CSV, text summary)."""
     input:
         records=lambda w: rve_layout.run_record_paths(config["rve"]["runs"][w.run], w.run),
+        accuracy=lambda w: config["rve"]["runs"][w.run].get("accuracy") or [],
     output:
         **rve_layout.table_outputs("{run}"),
     log:

@@ -1,0 +1,100 @@
+"""The stated accuracy of a lookup table, from its convergence study (issue 14;
+docs/table_accuracy.md).
+
+The convergence study (``rve.studies.table_convergence``, target ``rve_table_convergence``)
+takes hours, so the default job cannot run it; it writes ``accuracy.json`` (the default
+run's error against the finest mesh and against the stiffest penalty, per table quantity).
+That file, copied into the repository next to the run's config
+(``configs/rve/plain_weave_accuracy.json``) and named by the run spec's ``accuracy`` key,
+is the table's stated accuracy: the gather job writes it into the table's attributes.
+
+Contract
+--------
+``read_accuracy(path) -> dict``: the study's ``accuracy.json`` (``default``, ``mesh`` and
+``penalty`` with ``estimated_relative_error`` per quantity); a missing or malformed file is
+a ``ValueError`` naming the file and the key.
+
+``annotate_accuracy(ds, accuracy, mesh_elements, contact_penalty, source) -> list[str]``:
+when the table's run is the study's default (the same elements per fibril and the same
+penalty P*, N/mm²), writes on every quantity ``v`` the study assessed (``QUANTITIES`` of
+the study) the attributes
+
+* ``estimated_relative_error_mesh``: max relative difference to the finest mesh,
+* ``estimated_relative_error_penalty``: max relative difference to the stiffest penalty,
+* ``estimated_relative_error``: their sum (the bound a user should read),
+
+and the global attributes ``accuracy_source`` (the study: references, date, commit) and a
+line of ``comment``. Returns the annotated variable names. A table of another mesh or
+penalty is not annotated (returns ``[]``, logs why): the study says nothing about it.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+from typing import Union
+
+import xarray as xr
+
+__all__ = ["read_accuracy", "annotate_accuracy"]
+
+log = logging.getLogger("rve.tables.accuracy")
+
+PathLike = Union[str, os.PathLike]
+
+
+def read_accuracy(path: PathLike) -> dict:
+    """The convergence study's accuracy file (see the module docstring)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            acc = json.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"accuracy: file {path} not found (write it with "
+                         "`python benchmarks/table_convergence.py --write-accuracy {path}`)") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"accuracy: {path} is not JSON ({exc})") from None
+    for key in ("default", "mesh", "penalty"):
+        if key not in acc:
+            raise ValueError(f"accuracy: {path} has no key {key!r} (a convergence study's accuracy.json has "
+                             "'default', 'mesh' and 'penalty')")
+    for key in ("mesh_elements", "contact_penalty"):
+        if key not in acc["default"]:
+            raise ValueError(f"accuracy: {path}: default.{key} missing")
+    return acc
+
+
+def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contact_penalty: float,
+                      source: str = "") -> list:
+    """Write the study's errors into ``ds``'s attributes (module docstring)."""
+    d = accuracy["default"]
+    if int(d["mesh_elements"]) != int(mesh_elements) or abs(float(d["contact_penalty"]) - float(contact_penalty)) > \
+            1e-9 * max(1.0, abs(float(contact_penalty))):
+        log.warning("accuracy %s is of %s elements and P* = %s N/mm^2, this table's run has %s and %s: not annotated",
+                    source, d["mesh_elements"], d["contact_penalty"], mesh_elements, contact_penalty)
+        return []
+    mesh = accuracy["mesh"].get("estimated_relative_error", {})
+    pen = accuracy["penalty"].get("estimated_relative_error", {})
+    done = []
+    for name in sorted(set(mesh) | set(pen)):
+        if name not in ds:
+            continue
+        em, ep = mesh.get(name), pen.get(name)
+        if em is None and ep is None:
+            continue
+        a = ds[name].attrs
+        if em is not None:
+            a["estimated_relative_error_mesh"] = float(em)
+        if ep is not None:
+            a["estimated_relative_error_penalty"] = float(ep)
+        a["estimated_relative_error"] = float((em or 0.0) + (ep or 0.0))
+        done.append(name)
+    refs = (f"finest mesh {accuracy['mesh'].get('reference')} elements per fibril, "
+            f"stiffest penalty P* = {accuracy['penalty'].get('reference')} N/mm^2")
+    prov = accuracy.get("provenance", {})
+    ds.attrs["accuracy_source"] = (f"{source}: table convergence study (rve_table_convergence) of this run's "
+                                   f"configuration; references: {refs}"
+                                   + (f"; run {prov.get('date', '?')} at commit {prov.get('commit', '?')}" if prov else ""))
+    line = ("estimated_relative_error on " + ", ".join(done) + " = max relative difference over strains and labels "
+            "to the finest mesh (…_mesh) plus to the stiffest penalty (…_penalty)")
+    ds.attrs["comment"] = (ds.attrs.get("comment", "") + "\n" + line).strip()
+    return done
