@@ -61,16 +61,19 @@ class ThermalOperators:
         self._M_lu = None
         self._memo = {}
 
-    def _memoised(self, what, key_arrays, t, compute):
+    def _memoised(self, what, key_arrays, t, compute, refs=()):
         """The last value of ``what`` if it was computed at equal arrays and time (times equal
         to 1e-12 relative: the integrator's accepted time t0 + k h0 and the stage time t0 + h
-        of the same step may differ in the last bit)."""
+        of the same step may differ in the last bit) and with the same objects ``refs``
+        (compared by identity: the contact map, replaced by every rebuild)."""
         hit = self._memo.get(what)
-        if hit is not None and abs(hit[1] - t) <= 1e-12 * max(1.0, abs(t)) and all(
-                a is b or np.array_equal(a, b) for a, b in zip(hit[0], key_arrays)):
+        refs = tuple(refs)
+        if hit is not None and abs(hit[1] - t) <= 1e-12 * max(1.0, abs(t)) and len(hit[3]) == len(refs) \
+                and all(a is b for a, b in zip(hit[3], refs)) \
+                and all(a is b or np.array_equal(a, b) for a, b in zip(hit[0], key_arrays)):
             return hit[2]
         val = compute()
-        self._memo[what] = (tuple(np.array(a, copy=True) for a in key_arrays), float(t), val)
+        self._memo[what] = (tuple(np.array(a, copy=True) for a in key_arrays), float(t), val, refs)
         return val
 
     def active_pairs(self, x):
@@ -81,7 +84,7 @@ class ThermalOperators:
             if term.map is None or term.map.n_pairs == 0:
                 return np.zeros(0, np.int64)
             return term.active_pairs(x)
-        return self._memoised("active", (x,), 0.0, compute)
+        return self._memoised("active", (x,), 0.0, compute, (self.system.term.map,))
 
     def contact_triplets(self, x):
         """COO triplets (rows, cols, values) of the contact heat-transfer matrix h_C a [[T]]
@@ -101,7 +104,7 @@ class ThermalOperators:
             loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)  # (Pa, 2nn)
             m = loc.shape[1]
             return np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel(), Ju.ravel()
-        return self._memoised("contact", (x,), 0.0, compute)
+        return self._memoised("contact", (x,), 0.0, compute, (self.system.term.map,))
 
     def contact(self, x):
         """Contact heat-transfer matrix (n_nodes, n_nodes) at x (the map's active pairs)."""
