@@ -392,9 +392,10 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         "balance_errors": {k_: errs[k_] for k_ in ("charge", "electrical", "mechanical", "thermal", "total")},
         "energies_mJ": {k_: errs[k_] for k_ in ("work_lorentz_mJ", "work_circuit_mJ", "joule_heat_mJ",
                                                 "damping_mJ", "delta_mechanical_energy_mJ")},
+        "contact_active_pairs_max": int(max(bal["contact_active_pairs"])),
         "thermal_post_solves": post.solves if post is not None else 0,
-        "thermal_post_refinements": post.refinements if post is not None else 0,
-        "thermal_post_fallbacks": post.fallbacks if post is not None else 0,
+        "thermal_post_refinements": getattr(post, "refinements", 0),
+        "thermal_post_fallbacks": getattr(post, "fallbacks", 0),
         "geometry": problem.info,
         "wall_time_s": wall,
     }
