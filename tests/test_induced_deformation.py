@@ -262,3 +262,66 @@ def test_post_temperature_equals_monolithic_with_contact(monkeypatch):
     assert np.abs(Tp - Tm).max() <= 1e-6 * np.abs(Tm).max()
     assert tw.dev <= 1e-13, tw.dev
     assert np.abs(Tp - tw.T_fresh).max() <= 1e-13 * np.abs(Tp).max()
+
+
+def _dense_stage_solve(ops, tab, T0, stages, t0, h, T_fixed=0.0):
+    """Independent reference: the SDIRK stage equations of M T' + (K + K_c) T = Q on the
+    free nodes, dense, with K_c from scalar_jump and Q from BeamModel.joule_power."""
+    from rve.physics.contact_forms import scalar_jump
+
+    term, b = ops.system.term, ops.base
+    conn = b.mesh.conn
+    M, K = ops.M.toarray(), ops.K.toarray()
+    fr, fx = ops.free, ops.fixed
+    Fs = []
+    for i, (x, w) in enumerate(stages):
+        act = term.active_pairs(x)
+        Kc = np.zeros_like(M)
+        if act.size:
+            z = np.zeros((act.size, 2))
+            Ju = scalar_jump(term.geometry(x, act), 1, z, z, term.weight[act], ops.h_C, term.kappa[act],
+                             term.g_eps, True)[1]
+            loc = np.concatenate([conn[term.map.e_plus[act]], conn[term.map.e_minus[act]]], axis=1)
+            for p_ in range(act.size):
+                Kc[np.ix_(loc[p_], loc[p_])] += Ju[p_]
+        ha = h * tab.A[i, i]
+        Q = b.joule_power(x, w, t0 + tab.c[i] * h)
+        rhs = M @ T0 + ha * Q - sum(h * tab.A[i, j] * Fs[j] for j in range(i))
+        A = M + ha * (K + Kc)
+        T = np.full(ops.n, T_fixed)
+        T[fr] = np.linalg.solve(A[np.ix_(fr, fr)], rhs[fr] - A[np.ix_(fr, fx)] @ T[fx])
+        Fs.append((K + Kc) @ T - Q)
+    return T
+
+
+@pytest.mark.parametrize("h_C", [0.1, 1.0e4])
+def test_post_step_refinement_and_fallback(h_C):
+    """One post-solve step with active contact pairs at two stage states: the kept factor +
+    iterative refinement (h_C = 0.1, the scene's value) and its direct fallback (h_C = 1e4,
+    a contact far stiffer than the capacity: the refinement does not contract) against the
+    former path and a dense solve of the stage equations, to round-off."""
+    from rve.scenes.induced_balances import ThermalOperators, ThermalPostSolver
+    from rve.solvers.dirk import sdirk
+
+    p, x, w = _pressed_state()
+    b = p.model
+    x1 = x.copy()
+    b.nodal(x1)[:, 2] *= 0.98
+    ops = ThermalOperators(p.system, h_C, p.fixed_T_nodes)
+    assert ops.active_pairs(x1).size and ops.active_pairs(x).size
+    T0 = np.random.default_rng(1).uniform(0.0, 5.0, ops.n)
+    T0[ops.fixed] = 0.0
+    tab, h = sdirk(2), 0.005
+    stages = [(x1, w), (x, w)]
+    new = ThermalPostSolver(ops, tab)
+    T = new.step(T0, stages, 0.1, h)
+    Tf = ThermalPostSolver(ops, tab, reuse=False).step(T0, stages, 0.1, h)
+    Td = _dense_stage_solve(ops, tab, T0, stages, 0.1, h)
+    assert np.abs(T - Td).max() <= 1e-12 * np.abs(Td).max()
+    assert np.abs(T - Tf).max() <= 1e-12 * np.abs(Td).max()
+    assert np.abs(Td - ThermalPostSolver(ThermalOperators(p.system, 0.0, p.fixed_T_nodes), tab).step(
+        T0, stages, 0.1, h)).max() > 1e-9 * np.abs(Td).max()   # the contact term matters here
+    if h_C < 1:
+        assert new.refinements >= 2 and new.fallbacks == 0
+    else:
+        assert new.fallbacks == 2

@@ -183,8 +183,8 @@ def heat_transfer_block(geo, order: int, weight, coef, kappa, g_eps: float = 0.0
     kap = np.asarray(kappa, float)
     kap = kap[:, None] if kap.ndim == 1 else kap
     a, _ = hertz_width(np.where(geo.active, geo.g, 0.0), kap, g_eps)
-    Np, _ = lagrange_at(order, geo.s_plus)
-    Nm, _ = lagrange_at(order, geo.s_minus)
+    N, _ = lagrange_at(order, np.stack([geo.s_plus, geo.s_minus]))  # one call: (2, P, G, nn)
+    Np, Nm = N[0], N[1]
     k = np.where(geo.active, w * coef, 0.0)
     phi = np.concatenate([Np, -Nm], axis=-1)  # (P, G, 2nn)
     return np.einsum("pgA,pgB->pAB", (k * a)[..., None] * phi, phi)
