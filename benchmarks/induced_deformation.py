@@ -23,6 +23,9 @@ path ``post-original``: ``rve/scenes/induced_balances.py`` of the git revision R
 ``git show``) in place of the current one, for the before/after of the T post-solve.
 
     python benchmarks/induced_deformation.py --ab [B2:0.1:20,B3:0.5:100] [--pairs 2] [--original REV]
+
+``--contact-check [B3:0.5:100]``: whether the contact heat-transfer matrix must follow every
+stage (``contact_check``).
 """
 import argparse
 import json
@@ -70,6 +73,67 @@ def _solve_path(cfg, name, t_end, steps, original=None, **kw):
         return solve(cfg, t_end=t_end, steps=steps, record=False, mode="post", **kw)
     finally:
         scene.ThermalOperators, scene.ThermalPostSolver = keep
+
+
+def contact_check(a, ov):
+    """Does the contact heat-transfer matrix have to follow every stage? One post run of the
+    case with two extra T chains on the same stage states, by dense solves of the stage
+    equations: K_c per stage (the exact stage equations) and K_c frozen at the step's end
+    state for both stages. Prints max |T_post - T_chain| / max T over the run and at t_end."""
+    import rve.scenes.induced_deformation as scene
+    from rve.scenes.induced_balances import ThermalPostSolver
+
+    def dense_step(ops, tab, T0, stages, t0, h, x_ref=None):
+        M, K = ops.M.toarray(), ops.K.toarray()
+        fr, fx = ops.free, ops.fixed
+        Fs, T = [], None
+        for i, (x, w) in enumerate(stages):
+            ha = h * tab.A[i, i]
+            Kc = ops.contact(x if x_ref is None else x_ref).toarray()
+            Q = ops.joule_now(x, w, t0 + tab.c[i] * h)
+            rhs = M @ T0 + ha * Q - sum(h * tab.A[i, j] * Fs[j] for j in range(i))
+            A = M + ha * (K + Kc)
+            T = np.zeros(ops.n)
+            T[fx] = T0[fx]
+            T[fr] = np.linalg.solve(A[np.ix_(fr, fr)], rhs[fr] - A[np.ix_(fr, fx)] @ T[fx])
+            Fs.append((K + Kc) @ T - Q)
+        return T
+
+    class Chains(ThermalPostSolver):
+        last = None
+
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            self.T_exact = self.T_frozen = None
+            self.dev = {"exact": 0.0, "frozen": 0.0}
+            Chains.last = self
+
+        def step(self, T0, stages, t0, h):
+            T = super().step(T0, stages, t0, h)
+            self.T_exact = dense_step(self.ops, self.tab, T0 if self.T_exact is None else self.T_exact,
+                                      stages, t0, h)
+            self.T_frozen = dense_step(self.ops, self.tab, T0 if self.T_frozen is None else self.T_frozen,
+                                       stages, t0, h, stages[-1][0])
+            m = max(np.abs(T).max(), 1e-300)
+            for k, v in (("exact", self.T_exact), ("frozen", self.T_frozen)):
+                self.dev[k] = max(self.dev[k], float(np.abs(T - v).max() / m))
+            return T
+
+    o, t_end, steps = a.contact_check.split(":")
+    cfg = load_config(a.config, ov + [f"field.orientation={o}"])
+    keep = scene.ThermalPostSolver
+    scene.ThermalPostSolver = Chains
+    try:
+        r = solve(cfg, t_end=float(t_end), steps=int(steps), record=False, mode="post")
+    finally:
+        scene.ThermalPostSolver = keep
+    c, T = Chains.last, r.state["T"]
+    s = r.summary
+    print(f"[{o} {t_end} ms, {steps} steps] max active pairs {s['contact_active_pairs_max']}, refinement solves "
+          f"{s['thermal_post_refinements']}, fallbacks {s['thermal_post_fallbacks']}")
+    for k, v in (("K_c per stage (dense)", c.T_exact), ("K_c frozen at the step end", c.T_frozen)):
+        key = "exact" if v is c.T_exact else "frozen"
+        print(f"  post vs {k}: max over the run {c.dev[key]:.2e}, at t_end {np.abs(T - v).max() / T.max():.2e}")
 
 
 def ab(a, ov):
@@ -143,13 +207,18 @@ def main():
     ap.add_argument("--pairs", type=int, default=2, help="--ab: interleaved rounds (>= 2)")
     ap.add_argument("--no-memory", action="store_true", help="--ab: skip the tracemalloc runs")
     ap.add_argument("--original", default=None, help="--ab: also the T post-solve of this git revision")
+    ap.add_argument("--contact-check", nargs="?", const="B3:0.5:100", default=None,
+                    help="only: post vs dense chains with K_c per stage and frozen per step (case o:t:steps)")
     a = ap.parse_args()
     ov = ["output.vtk=false", "output.png=false"] + list(a.set)
     if a.reduced:
         ov += ["geometry.n_warp=2", "geometry.n_weft=2", "geometry.span=5 mm", "geometry.natural_length=6.25 mm",
                "mesh.elements=10"]
-    if a.ab:
-        ab(a, ov)
+    if a.ab or a.contact_check:
+        if a.ab:
+            ab(a, ov)
+        if a.contact_check:
+            contact_check(a, ov)
         return
     for o in a.orientations.split(","):
         cfg = load_config(a.config, ov + [f"field.orientation={o}"])
