@@ -8,11 +8,17 @@ Contract
   ``M`` (capacity, W... mJ/K), ``K`` (conduction, W/K) on the nodes, ``contact(x)`` the
   contact heat-transfer matrix ``h_C a [[T]]`` of the map's active pairs at x (exactly the
   monolithic contact term's T block: ``rve.physics.contact_forms.scalar_jump``), ``joule(x,
-  w, t)`` the nodal Joule heat (W), ``fixed`` the T = 0 end nodes.
-* ``ThermalPostSolver(ops, tableau)``: ``step(T0, stages, t0, h) -> T1``: one SDIRK step of
-  the heat equation ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` with the stage states
-  ``[(x_i, w_i)]`` of the mechanical/electrical step: one sparse solve per stage (T does
-  not feed back: S = alpha_mu = 0), the same stage equations as the monolithic solve.
+  w, t)`` the nodal Joule heat (W), ``fixed`` the T = 0 end nodes; ``active_pairs``,
+  ``contact_triplets``, ``contact_apply`` and ``joule`` memoised for the last state (and
+  contact map).
+* ``ThermalPostSolver(ops, tableau, T_fixed=0, reuse=True)``: ``step(T0, stages, t0, h) -> T1``:
+  one SDIRK step of the heat equation ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` with the
+  stage states ``[(x_i, w_i)]`` of the mechanical/electrical step (T does not feed back:
+  S = alpha_mu = 0), the same stage equations as the monolithic solve: (M + h a_ii K)_ff
+  factorised once per h a_ii, the contact part by iterative refinement on that factor
+  (direct fallback); ``reuse=False`` the former path (a fresh solve per stage). Counters
+  ``solves``, ``refinements``, ``fallbacks``, ``wall``.
+* ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone.
 * ``StateBalances(system, ops, circuits)``: ``__call__(x, w, t, T)`` -> dict of the charge
   (currents in/out/leak, A), electrical (circuit power, Joule, contact Joule, Lorentz power,
   W), mechanical (kinetic, strain, contact energy, mJ; damping power, W) and thermal (heat
