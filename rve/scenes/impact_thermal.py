@@ -80,11 +80,18 @@ class ImpactThermal(ThermalOperators):
         r, c, v = super().contact_triplets(xf)
         if not self.sink:
             return r, c, v
-        S = self.sink_matrix(xf).tocoo()
-        if S.nnz == 0:
-            return r, c, v
-        return (np.concatenate([r, S.row.astype(np.int64)]), np.concatenate([c, S.col.astype(np.int64)]),
-                np.concatenate([v, S.data]))
+
+        def compute():
+            S = self.sink_matrix(xf).tocoo()
+            if S.nnz == 0:
+                return r, c, v
+            return (np.concatenate([r, S.row.astype(np.int64)]), np.concatenate([c, S.col.astype(np.int64)]),
+                    np.concatenate([v, S.data]))
+        # memoised for the last (fabric state, sphere centres): the post-solve asks once per
+        # refinement iteration (rve.scenes.induced_balances.ThermalPostSolver)
+        centres = np.zeros(0) if self.centres is None else self.centres
+        return self._memoised("contact_sink", (xf, centres), 0.0, compute,
+                              (self.system.term.map, self.impact.sphere.centre))
 
     def joule(self, x, w, t):
         xf = self._split(x)

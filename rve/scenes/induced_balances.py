@@ -8,11 +8,17 @@ Contract
   ``M`` (capacity, W... mJ/K), ``K`` (conduction, W/K) on the nodes, ``contact(x)`` the
   contact heat-transfer matrix ``h_C a [[T]]`` of the map's active pairs at x (exactly the
   monolithic contact term's T block: ``rve.physics.contact_forms.scalar_jump``), ``joule(x,
-  w, t)`` the nodal Joule heat (W), ``fixed`` the T = 0 end nodes.
-* ``ThermalPostSolver(ops, tableau)``: ``step(T0, stages, t0, h) -> T1``: one SDIRK step of
-  the heat equation ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` with the stage states
-  ``[(x_i, w_i)]`` of the mechanical/electrical step: one sparse solve per stage (T does
-  not feed back: S = alpha_mu = 0), the same stage equations as the monolithic solve.
+  w, t)`` the nodal Joule heat (W), ``fixed`` the T = 0 end nodes; ``active_pairs``,
+  ``contact_triplets``, ``contact_apply`` and ``joule`` memoised for the last state (and
+  contact map).
+* ``ThermalPostSolver(ops, tableau, T_fixed=0, reuse=True)``: ``step(T0, stages, t0, h) -> T1``:
+  one SDIRK step of the heat equation ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` with the
+  stage states ``[(x_i, w_i)]`` of the mechanical/electrical step (T does not feed back:
+  S = alpha_mu = 0), the same stage equations as the monolithic solve: (M + h a_ii K)_ff
+  factorised once per h a_ii, the contact part by iterative refinement on that factor
+  (direct fallback); ``reuse=False`` the former path (a fresh solve per stage). Counters
+  ``solves``, ``refinements``, ``fallbacks``, ``wall``.
+* ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone.
 * ``StateBalances(system, ops, circuits)``: ``__call__(x, w, t, T)`` -> dict of the charge
   (currents in/out/leak, A), electrical (circuit power, Joule, contact Joule, Lorentz power,
   W), mechanical (kinetic, strain, contact energy, mJ; damping power, W) and thermal (heat
@@ -26,12 +32,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..kernels import use_numba
 from ..model.assembler import ElementState
-from ..physics.contact_forms import scalar_jump
+from ..physics.contact_forms import hertz_width, lagrange_at, scalar_jump
 from ..physics.thermal_forms import capacity_matrix, conduction
 from ..model.terms.elasticity import beam_strain_energy
 
-__all__ = ["ThermalOperators", "ThermalPostSolver", "StateBalances", "balance_errors"]
+__all__ = ["ThermalOperators", "ThermalPostSolver", "StateBalances", "balance_errors", "heat_transfer_block"]
 
 
 class ThermalOperators:
@@ -60,43 +67,62 @@ class ThermalOperators:
         self._M_lu = None
         self._memo = {}
 
-    def _memoised(self, what, key_arrays, t, compute):
-        """The last value of ``what`` if it was computed at equal arrays and time."""
+    def _memoised(self, what, key_arrays, t, compute, refs=()):
+        """The last value of ``what`` if it was computed at equal arrays and time (times equal
+        to 1e-12 relative: the integrator's accepted time t0 + k h0 and the stage time t0 + h
+        of the same step may differ in the last bit) and with the same objects ``refs``
+        (compared by identity: the contact map, replaced by every rebuild)."""
         hit = self._memo.get(what)
-        if hit is not None and hit[1] == t and all(a is b or np.array_equal(a, b)
-                                                     for a, b in zip(hit[0], key_arrays)):
+        refs = tuple(refs)
+        if hit is not None and abs(hit[1] - t) <= 1e-12 * max(1.0, abs(t)) and len(hit[3]) == len(refs) \
+                and all(a is b for a, b in zip(hit[3], refs)) \
+                and all(a is b or np.array_equal(a, b) for a, b in zip(hit[0], key_arrays)):
             return hit[2]
         val = compute()
-        self._memo[what] = (tuple(np.array(a, copy=True) for a in key_arrays), t, val)
+        self._memo[what] = (tuple(np.array(a, copy=True) for a in key_arrays), float(t), val, refs)
         return val
+
+    def active_pairs(self, x):
+        """The contact map's active pairs at x (memoised for the last state; empty without
+        a map)."""
+        def compute():
+            term = self.system.term
+            if term.map is None or term.map.n_pairs == 0:
+                return np.zeros(0, np.int64)
+            return term.active_pairs(x)
+        return self._memoised("active", (x,), 0.0, compute, (self.system.term.map,))
 
     def contact_triplets(self, x):
         """COO triplets (rows, cols, values) of the contact heat-transfer matrix h_C a [[T]]
         of the map's active pairs at x (exactly the monolithic contact term's T block:
-        ``rve.physics.contact_forms.scalar_jump``); empty arrays without active pairs."""
+        ``rve.physics.contact_forms.scalar_jump``'s ``Ju``, by ``heat_transfer_block``);
+        empty arrays without active pairs. Memoised for the last state."""
         def compute():
             term = self.system.term
             e = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
-            if self.h_C <= 0 or term.map is None or term.map.n_pairs == 0:
-                return e
-            act = term.active_pairs(x)
-            if act.size == 0:
+            act = self.active_pairs(x) if self.h_C > 0 else ()
+            if len(act) == 0:
                 return e
             geo = term.geometry(x, act)
             conn, cmap = self.base.mesh.conn, term.map
-            nn = conn.shape[1]
-            z = np.zeros((act.size, nn))
-            _, Ju, _ = scalar_jump(geo, self.base.mesh.order, z, z, term.weight[act], self.h_C, term.kappa[act],
-                                   term.g_eps, True)
+            Ju = heat_transfer_block(geo, self.base.mesh.order, term.weight[act], self.h_C, term.kappa[act],
+                                     term.g_eps)
             loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)  # (Pa, 2nn)
             m = loc.shape[1]
             return np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel(), Ju.ravel()
-        return self._memoised("contact", (x,), 0.0, compute)
+        return self._memoised("contact", (x,), 0.0, compute, (self.system.term.map,))
 
     def contact(self, x):
         """Contact heat-transfer matrix (n_nodes, n_nodes) at x (the map's active pairs)."""
         r, c, v = self.contact_triplets(x)
         return sp.csr_matrix((v, (r, c)), shape=(self.n, self.n))
+
+    def contact_apply(self, x, T):
+        """K_c(x) T (n_nodes,) from the triplets (no matrix is built)."""
+        r, c, v = self.contact_triplets(x)
+        if v.size == 0:
+            return np.zeros(self.n)
+        return np.bincount(r, weights=v * np.asarray(T, float)[c], minlength=self.n)
 
     def contact_blocks(self, x):
         """(free x free CSC, free x fixed CSR) blocks of the contact matrix, or None without
@@ -114,13 +140,31 @@ class ThermalOperators:
         Kfc = sp.csr_matrix((v[fc], (ri[fc], fix_pos[c[fc]])), shape=(nf, self.fixed.size))
         return Kff, Kfc
 
+    def joule_now(self, x, w, t):
+        """Nodal Joule heat (W) at the state, not memoised: the compiled fused kernel the
+        monolithic solve takes its Joule rows from (``rve.kernels.electric.coupled_forms``,
+        no Lorentz force, no tangents) when ``rve.kernels.use_numba()``, else
+        ``BeamModel.joule_power`` (the numpy reference; the two agree to rounding)."""
+        base = self.base
+        if not use_numba():
+            return base.joule_power(x, w, t)
+        from ..kernels.electric import coupled_forms as compiled
+
+        em = base.assembler.term("electromagnetic")
+        a = em.active
+        st = ElementState(base.basis, base.layout, x, w, t)
+        S = em.seebeck if a["seebeck"] else 0.0
+        R, _ = compiled(base.ops, st.U, st.Uv if a["back_emf"] else None, st.T if S else None, st.V,
+                        base.field(t), base.material.electrical_conductivity, S, a["back_emf"], False, True, False)
+        return np.bincount(base.mesh.conn.ravel(), weights=-R["T"].ravel(), minlength=self.n)
+
     def joule(self, x, w, t):
         """Nodal Joule heat (W) at the state (memoised for the last state)."""
-        return self._memoised("joule", (x, w), float(t), lambda: self.base.joule_power(x, w, t))
+        return self._memoised("joule", (x, w), float(t), lambda: self.joule_now(x, w, t))
 
     def residual(self, T, x, w, t):
         """F_T = (K + K_c(x)) T - Q (no capacity term)."""
-        return self.K @ T + self.contact(x) @ T - self.joule(x, w, t)
+        return self.K @ T + self.contact_apply(x, T) - self.joule(x, w, t)
 
     def rate(self, T, x, w, t):
         """dT/dt at the free nodes from the heat equation (0 at the fixed ends) and the heat
@@ -135,33 +179,126 @@ class ThermalOperators:
         return Tdot, q_out
 
 
+def heat_transfer_block(geo, order: int, weight, coef, kappa, g_eps: float = 0.0):
+    """``Ju`` (P, 2nn, 2nn) of ``rve.physics.contact_forms.scalar_jump`` alone: the Jacobian
+    of ``int [[dT]] coef a(g) [[T]]`` with respect to the nodal T of the two elements (the
+    term is linear in T, so this is the whole contact heat-transfer matrix). The same
+    expressions as ``scalar_jump`` without its residual and its dX tangents."""
+    P, G = geo.g.shape
+    w = np.broadcast_to(np.asarray(weight, float).reshape(P, -1), (P, G))
+    kap = np.asarray(kappa, float)
+    kap = kap[:, None] if kap.ndim == 1 else kap
+    a, _ = hertz_width(np.where(geo.active, geo.g, 0.0), kap, g_eps)
+    N, _ = lagrange_at(order, np.stack([geo.s_plus, geo.s_minus]))  # one call: (2, P, G, nn)
+    Np, Nm = N[0], N[1]
+    k = np.where(geo.active, w * coef, 0.0)
+    phi = np.concatenate([Np, -Nm], axis=-1)  # (P, G, 2nn)
+    return np.einsum("pgA,pgB->pAB", (k * a)[..., None] * phi, phi)
+
+
 class ThermalPostSolver:
     """One SDIRK step of the heat equation from the mechanical/electrical stage states.
 
-    The stage matrix on the free nodes is ``(M + h a_ii K)_ff`` plus ``h a_ii`` times the
-    contact block of the active pairs; without active pairs its factorisation is kept per
-    ``h a_ii`` (one per step size), with them one sparse solve per stage."""
+    Stage i on the free nodes: ``(M + h a_ii (K + K_c(x_i)))_ff T_i = rhs_i`` with
+    ``rhs_i = M T0 + h a_ii Q(x_i) - h sum_{j<i} a_ij F_j`` (less the fixed ends' columns).
+    ``reuse=True`` (default): ``(M + h a_ii K)_ff`` is factorised once per ``h a_ii`` (one
+    per step size, kept across steps and contact patterns); without active contact pairs
+    the stage is that one solve; with active pairs the contact part ``h a_ii K_c(x_i)``
+    (a small, positive semi-definite perturbation: ~3e-5 of the capacity) is taken by
+    iterative refinement on the kept factor, ``T <- T + LU^-1 (rhs - A T)`` with the exact
+    stage matrix A in the residual, until the correction is <= ``refine_tol`` times |T|
+    (3-5 solves); if a correction does not shrink by half the stage falls back to a direct
+    sparse solve of A (``fallbacks``). Joule heat and the contact matrix come from
+    ``ThermalOperators`` (memoised per state: the last stage's values serve the balances of
+    the accepted state). ``reuse=False``: the former path, a fresh ``spsolve`` of A at every
+    stage with active pairs, Joule by ``BeamModel.joule_power`` and the contact matrix by
+    ``scalar_jump`` at every stage (the reference of tests/test_induced_deformation.py)."""
 
-    def __init__(self, ops: ThermalOperators, tableau, T_fixed: float = 0.0):
+    def __init__(self, ops: ThermalOperators, tableau, T_fixed: float = 0.0, reuse: bool = True,
+                 refine_tol: float = 1e-14, max_refine: int = 12):
         self.ops, self.tab = ops, tableau
         self.T_fixed = float(T_fixed)
+        self.reuse = bool(reuse)
+        self.refine_tol, self.max_refine = float(refine_tol), int(max_refine)
         self.solves = 0
+        self.refinements = 0
+        self.fallbacks = 0
         self.wall = 0.0
         self._lu = {}
 
-    def _base_lu(self, haii):
-        lu = self._lu.get(haii)
-        if lu is None:
+    def _base(self, haii):
+        """(LU of (M + h a_ii K)_ff, (M + h a_ii K)_fc, M + h a_ii K), kept per h a_ii."""
+        hit = self._lu.get(haii)
+        if hit is None:
             if len(self._lu) > 8:
                 self._lu.clear()
             op = self.ops
-            lu = self._lu[haii] = spla.splu((op.M_ff + haii * op.K_ff).tocsc())
-        return lu
+            hit = self._lu[haii] = (spla.splu((op.M_ff + haii * op.K_ff).tocsc()),
+                                    (op.M_fc + haii * op.K_fc).tocsr(), (op.M + haii * op.K).tocsr())
+        return hit
 
     def step(self, T0, stages, t0: float, h: float):
         import time
 
         w0 = time.perf_counter()
+        T = self._step_reuse(T0, stages, t0, h) if self.reuse else self._step_fresh(T0, stages, t0, h)
+        self.wall += time.perf_counter() - w0
+        return T
+
+    def _step_reuse(self, T0, stages, t0, h):
+        op, tab = self.ops, self.tab
+        fr, fx = op.free, op.fixed
+        rhs0 = op.M @ T0
+        T_fix = np.full(fx.size, self.T_fixed)
+        Fs = []
+        T = np.array(T0, float, copy=True)
+        last = len(stages) - 1
+        for i, (x, w) in enumerate(stages):
+            ti = t0 + tab.c[i] * h
+            haii = h * tab.A[i, i]
+            Q = op.joule(x, w, ti)
+            rhs = rhs0 + haii * Q
+            for j in range(i):
+                rhs = rhs - h * tab.A[i, j] * Fs[j]
+            lu, A_fc, A = self._base(haii)
+            T = np.empty(op.n)
+            T[fx] = T_fix
+            T[fr] = lu.solve(rhs[fr] - A_fc @ T_fix)
+            self.solves += 1
+            if op.contact_triplets(x)[2].size:  # active pairs (or, impact, the projectile sink)
+                T = self._refine(T, rhs, lu, A, haii, x)
+            if i < last:  # F of the last stage is not needed
+                Fs.append(op.K @ T + op.contact_apply(x, T) - Q)
+        return T
+
+    def _refine(self, T, rhs, lu, A, haii, x):
+        """Iterative refinement of the stage solve with the contact part (class docstring)."""
+        op, fr = self.ops, self.ops.free
+        prev = np.inf
+        for _ in range(self.max_refine):
+            r = rhs - A @ T - haii * op.contact_apply(x, T)
+            d = lu.solve(r[fr])
+            self.solves += 1
+            self.refinements += 1
+            T[fr] += d
+            nd = float(np.abs(d).max())
+            if nd <= self.refine_tol * max(float(np.abs(T).max()), 1e-300):
+                return T
+            if nd > 0.5 * prev:
+                break
+            prev = nd
+        # not contracting (a contact much stiffer than the capacity): a direct solve of A
+        self.fallbacks += 1
+        blocks = op.contact_blocks(x)
+        Kff, Kfc = blocks
+        T_fix = T[op.fixed]
+        rhs_f = rhs[fr] - (op.M_fc + haii * (op.K_fc + Kfc)) @ T_fix
+        T[fr] = spla.spsolve((op.M_ff + haii * (op.K_ff + Kff)).tocsc(), rhs_f)
+        self.solves += 1
+        return T
+
+    def _step_fresh(self, T0, stages, t0, h):
+        """The former path (class docstring): nothing memoised or kept but the base factor."""
         op, tab = self.ops, self.tab
         fr, fx = op.free, op.fixed
         MT0 = op.M @ T0
@@ -170,24 +307,56 @@ class ThermalPostSolver:
         for i, (x, w) in enumerate(stages):
             ti = t0 + tab.c[i] * h
             haii = h * tab.A[i, i]
-            Q = op.joule(x, w, ti)
+            Q = op.base.joule_power(*self._fabric(x, w), ti)
             rhs = MT0 + haii * Q
             for j in range(i):
                 rhs = rhs - h * tab.A[i, j] * Fs[j]
-            blocks = op.contact_blocks(x)
+            Kc = self._contact_fresh(x)
             rhs_f = rhs[fr] - (op.M_fc + haii * op.K_fc) @ T_fix
             T = np.empty(op.n)
             T[fx] = T_fix
-            if blocks is None:
-                T[fr] = self._base_lu(haii).solve(rhs_f)
+            if Kc.nnz == 0:
+                T[fr] = self._base(haii)[0].solve(rhs_f)
             else:
-                Kff, Kfc = blocks
+                Kff, Kfc = Kc[fr][:, fr].tocsc(), Kc[fr][:, fx].tocsr()
                 rhs_f = rhs_f - haii * (Kfc @ T_fix)
                 T[fr] = spla.spsolve((op.M_ff + haii * (op.K_ff + Kff)).tocsc(), rhs_f)
             self.solves += 1
-            Fs.append(op.residual(T, x, w, ti))
-        self.wall += time.perf_counter() - w0
+            Fs.append(op.K @ T + Kc @ T - Q)
         return T
+
+    def _fabric(self, x, w):
+        """The fabric part of (x, w) (the impact scene's operators take full states)."""
+        split = getattr(self.ops, "_split", None)
+        if split is None:
+            return x, w
+        xf = split(x)
+        w = np.asarray(w, float)
+        return xf, (w[: xf.size] if w.size != xf.size else w)
+
+    def _contact_fresh(self, x):
+        """The contact heat-transfer matrix at x by ``scalar_jump`` (no memo, no shortcut)."""
+        op = self.ops
+        term = op.system.term
+        n = op.n
+        extra = None
+        if hasattr(op, "sink_matrix"):  # the impact scene's projectile sink (centres from x)
+            x = op._split(x)
+            extra = op.sink_matrix(x)
+        K = sp.csr_matrix((n, n))
+        if op.h_C > 0 and term.map is not None and term.map.n_pairs > 0:
+            act = term.active_pairs(x)
+            if act.size:
+                geo = term.geometry(x, act)
+                conn, cmap = op.base.mesh.conn, term.map
+                z = np.zeros((act.size, conn.shape[1]))
+                _, Ju, _ = scalar_jump(geo, op.base.mesh.order, z, z, term.weight[act], op.h_C, term.kappa[act],
+                                       term.g_eps, True)
+                loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)
+                m = loc.shape[1]
+                K = sp.csr_matrix((Ju.ravel(), (np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel())),
+                                  shape=(n, n))
+        return K if extra is None else (K + extra).tocsr()
 
 
 class StateBalances:

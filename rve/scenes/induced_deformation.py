@@ -214,9 +214,11 @@ def _initial_w(problem, system, x0, t0, nopts):
 
 def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | None = None,
           steps: int | None = None, progress: bool = False, integrator_options: dict | None = None,
-          measure_memory: bool = False) -> SceneResult:
+          measure_memory: bool = False, post_reuse: bool = True) -> SceneResult:
     """Run the scene in memory (module docstring). ``t_end``/``steps`` override the config
-    (short horizons for tests and the convergence study). Raises ``SceneFailure``."""
+    (short horizons for tests and the convergence study); ``post_reuse`` False: the T
+    post-solve's former path (``ThermalPostSolver(reuse=False)``, the reference of the
+    tests and benchmarks). Raises ``SceneFailure``."""
     wall0 = time.perf_counter()
     if measure_memory:
         tracemalloc.start()
@@ -236,7 +238,7 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     scale = base.row_scales(h0, x, np.zeros(base.n))
     rec = _StageRecorder(sysm, tab.c)
     thermal = ThermalOperators(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes)
-    post = ThermalPostSolver(thermal, tab, cfg.end_temperature) if mode == "post" else None
+    post = ThermalPostSolver(thermal, tab, cfg.end_temperature, reuse=post_reuse) if mode == "post" else None
     balances = StateBalances(sysm, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
     w, init = _initial_w(problem, RowScaledSystem(sysm, scale), x, 0.0, nopts)
     T = np.full(mesh.n_nodes, cfg.end_temperature) if mode == "post" else None
@@ -279,7 +281,7 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         rec.last.clear()
         tb = time.perf_counter()
         b = balances(x_, w_, t, T_of(w_), F_end)
-        b["contact_active_pairs"] = float(sysm.term.active_pairs(x_).size) if sysm.term.map is not None else 0.0
+        b["contact_active_pairs"] = float(thermal.active_pairs(x_).size)  # memoised by the post-solve / balances
         for k_, v in b.items():
             bal[k_].append(v)
         bal_t.append(t)
@@ -390,7 +392,10 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         "balance_errors": {k_: errs[k_] for k_ in ("charge", "electrical", "mechanical", "thermal", "total")},
         "energies_mJ": {k_: errs[k_] for k_ in ("work_lorentz_mJ", "work_circuit_mJ", "joule_heat_mJ",
                                                 "damping_mJ", "delta_mechanical_energy_mJ")},
+        "contact_active_pairs_max": int(max(bal["contact_active_pairs"])),
         "thermal_post_solves": post.solves if post is not None else 0,
+        "thermal_post_refinements": getattr(post, "refinements", 0),
+        "thermal_post_fallbacks": getattr(post, "fallbacks", 0),
         "geometry": problem.info,
         "wall_time_s": wall,
     }
