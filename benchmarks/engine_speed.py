@@ -11,6 +11,9 @@ own matrices, and whole runs (relaxation, strain step) as whole processes per ba
         # impact_scene impact_scene_reduced induced_B3): superlu_colamd (StageFactorisation's
         # route for pardiso/auto before round 4), superlu_symm (the 'superlu' backend),
         # superlu_pruned (the impact scene's), pardiso_unsym[_fresh|_nomatch] (mtype 11)
+    python benchmarks/engine_speed.py --scene-ab impact [--start 60 --steps 20 --rounds 2] [--reduced]
+    python benchmarks/engine_speed.py --scene-ab induced [--steps 100 --rounds 3]
+        # interleaved whole-scene A/B of the stage-matrix backend (main_scene_ab)
 
 Whole runs (``--relax N``: the shipped 80-fibril plain weave, configs/scenes/
 plain_weave_relax.yaml with ``mesh.elements = N``; at N = 12 its coarse stage is the run
@@ -307,6 +310,122 @@ def main_unsym(d: Path, names, variants, repeats: int, rounds: int, json_path=No
         Path(json_path).write_text(json.dumps(results, indent=1))
 
 
+# ----------------------------------------------------------------------------- scene A/B (round 4)
+def _state_diff(a: dict, b: dict) -> dict:
+    """max |a - b| / max |a| of the final states' arrays (x, w, T)."""
+    out = {}
+    for k in ("x", "w", "T"):
+        if k in a and k in b:
+            va, vb = np.asarray(a[k], float), np.asarray(b[k], float)
+            out[k] = float(np.abs(va - vb).max() / max(np.abs(va).max(), 1e-300))
+    return out
+
+
+def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, reduced: bool, json_path=None) -> None:
+    """Interleaved whole-scene runs in this process, one per backend and round (the backend
+    through ``integrator_options={'linear_backend': ...}``): CPU and wall time medians, the
+    ratio to the first backend, factorisations, Newton iterations per stage, balance errors,
+    and the final states' max differences to the first backend's.
+
+    ``impact``: configs/scenes/impact.yaml (full size unless ``reduced``); the relaxed state of
+    engine_matrices.py (``impact_scene[_reduced]_relaxed.npz``, relaxed here if absent), then
+    ``start`` steps of 0.5 us once (pardiso_unsym) to a checkpoint, from which every timed run
+    resumes for ``steps`` more (the segment in sphere + fabric contact); the last two stage
+    matrices of the preparation are saved as ``impact_deep[_reduced]_<k>``.
+    ``induced``: configs/scenes/induced_deformation.yaml B3 full size, ``steps`` steps of 5 us
+    from t = 0 (contact from about 0.3 ms)."""
+    import shutil
+    import tempfile
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from rve.config.loader import load_config
+
+    d = ROOT / "results/engine"
+    ov = ["output.vtk=false", "output.png=false"]
+    runs = {b: [] for b in backends}
+    tmp = Path(tempfile.mkdtemp(prefix="rve_ab_"))
+    if scene == "impact":
+        from engine_matrices import _hook_stage_matrices, _save
+
+        from rve.scenes import impact
+
+        if reduced:
+            ov += ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=16",
+                   "projectile.radius=4.5 mm"]
+        tag = "impact_scene_reduced" if reduced else "impact_scene"
+        cfg = load_config(ROOT / "configs/scenes/impact.yaml", ov + [f"time.checkpoint_every={start}"])
+        state = d / f"{tag}_relaxed.npz"
+        if state.exists():
+            x0 = np.load(state)["x"]
+        else:
+            x0, _ = impact.relax(cfg)
+            d.mkdir(parents=True, exist_ok=True)
+            np.savez(state, x=x0)
+        total = start + steps
+        t_end = 5e-4 * total
+        ck = tmp / "start.npz"
+        seen, undo = _hook_stage_matrices(2)
+        t0 = time.perf_counter()
+        try:
+            impact.solve(cfg, x_start=x0, record=False, t_end=t_end, steps=total, checkpoint=ck,
+                         stop_after_steps=start, integrator_options={"linear_backend": "pardiso_unsym"})
+        except Exception as exc:  # SceneFailure: stopped after `start` steps (the checkpoint is written)
+            print(f"  preparation: {exc} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        finally:
+            undo()
+        deep = "impact_deep_reduced" if reduced else "impact_deep"
+        for k, (seq, A) in enumerate(seen["last"]):
+            _save(d, f"{deep}_{k}", A, {"source": f"impact scene {'reduced' if reduced else 'full size'}, the "
+                                                  f"{seq}-th of {seen['count']} stage factorisations of the first "
+                                                  f"{start} steps of 0.5 us (row-scaled, restricted)",
+                                        "border": int(__import__("rve.scenes.impact_solver", fromlist=["x"]
+                                                                 ).PrunedSuperLU.border),
+                                        "note": f"factorisation {seq}/{seen['count']}"})
+
+        def one(backend):
+            c = tmp / f"run_{backend}.npz"
+            shutil.copy(ck, c)
+            return impact.solve(cfg, x_start=x0, record=False, t_end=t_end, steps=total, checkpoint=c,
+                                integrator_options={"linear_backend": backend})
+    else:
+        from rve.scenes.induced_deformation import solve as induced_solve
+
+        cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml", ov + ["field.orientation=B3"])
+
+        def one(backend):
+            return induced_solve(cfg, t_end=5e-3 * steps, steps=steps, record=False,
+                                 integrator_options={"linear_backend": backend})
+    for _ in range(max(1, rounds)):
+        for b in backends:
+            c0, w0 = time.process_time(), time.perf_counter()
+            r = one(b)
+            runs[b].append((r, time.process_time() - c0, time.perf_counter() - w0))
+            print(f"  {scene} {b}: CPU {runs[b][-1][1]:.1f} s wall {runs[b][-1][2]:.1f} s "
+                  f"(load {os.getloadavg()[0]:.1f})", flush=True)
+    ref = runs[backends[0]][-1][0]
+    rec = {}
+    cpu0 = float(np.median([c for _, c, _ in runs[backends[0]]]))
+    for b in backends:
+        r = runs[b][-1][0]
+        s = r.summary
+        cpu = float(np.median([c for _, c, _ in runs[b]]))
+        wall = float(np.median([w for _, _, w in runs[b]]))
+        diff = _state_diff(ref.state, r.state)
+        rec[b] = {"cpu_s": cpu, "wall_s": wall, "cpu_ratio": cpu0 / cpu, "runs": len(runs[b]),
+                  "factorizations": s.get("factorizations"), "newton_per_stage": s.get("newton_iterations_per_stage"),
+                  "steps_accepted": s.get("steps_accepted"), "steps_rejected": s.get("steps_rejected"),
+                  "balance_errors": s.get("balance_errors"), "state_diff_to_first": diff}
+        print(f"[{scene}] {b:<16} CPU {cpu:7.1f} s (ratio {cpu0 / cpu:4.2f})  wall {wall:7.1f} s  "
+              f"steps {s.get('steps_accepted')}/{s.get('steps_rejected')} rejected  factorisations "
+              f"{s.get('factorizations')}  Newton/stage {s.get('newton_iterations_per_stage'):.2f}  "
+              f"max|diff|/max to {backends[0]}: " + " ".join(f"{k} {v:.1e}" for k, v in diff.items()), flush=True)
+        print(f"[{scene}] {b:<16} balance errors "
+              + json.dumps({k: float(f"{v:.4g}") for k, v in s.get("balance_errors", {}).items()}), flush=True)
+    shutil.rmtree(tmp, ignore_errors=True)
+    if json_path:
+        Path(json_path).write_text(json.dumps(rec, indent=1, default=float))
+
+
 # ----------------------------------------------------------------------------- whole runs
 RUN_BACKENDS = ("superlu", "pardiso", "pardiso_nonzero", "pardiso_keep", "pardiso_stored", "pardiso_grow",
                 "pardiso_nosub", "pardiso_amd")
@@ -545,7 +664,19 @@ def main(argv=None) -> None:
                          "impact_scene induced_B3): SuperLU paths vs PARDISO mtype 11")
     ap.add_argument("--unsym-variants", nargs="*", default=list(UNSYM_VARIANTS), choices=UNSYM_VARIANTS)
     ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds of the --unsym variants")
+    ap.add_argument("--scene-ab", choices=("impact", "induced"), default=None,
+                    help="interleaved whole-scene runs per backend (--scene-backends) in this process")
+    ap.add_argument("--scene-backends", nargs="*", default=None,
+                    help="default: impact superlu_pruned pardiso_unsym; induced superlu pardiso")
+    ap.add_argument("--steps", type=int, default=20, help="--scene-ab: timed steps")
+    ap.add_argument("--start", type=int, default=60, help="--scene-ab impact: steps before the timed segment")
+    ap.add_argument("--reduced", action="store_true", help="--scene-ab impact: the config header's small version")
     a = ap.parse_args(argv)
+    if a.scene_ab:
+        be = a.scene_backends or (["superlu_pruned", "pardiso_unsym"] if a.scene_ab == "impact"
+                                  else ["superlu", "pardiso"])
+        main_scene_ab(a.scene_ab, be, a.rounds, a.steps, a.start, a.reduced, a.json)
+        return
     if a.unsym:
         main_unsym(Path(a.dir), a.only, a.unsym_variants, a.repeats, a.rounds, a.json)
         return
