@@ -132,6 +132,7 @@ class StageFactorisation:
             if companion is not None:
                 try:
                     self._backend = companion().factorize(J)
+                    self._owner = backend  # the companion lives (is released) with its owner
                     self.kind = "pardiso_unsym"
                     return
                 except RuntimeError:  # PardisoError, SingularFactorError (non-finite entry)
