@@ -321,6 +321,46 @@ def _state_diff(a: dict, b: dict) -> dict:
     return out
 
 
+class _Timers:
+    """Calls and wall time of the factorisation backends' phases (wrapped methods), reset per run."""
+
+    def __init__(self):
+        from rve.scenes.impact_solver import PrunedSuperLU
+        from rve.solvers import linear, pardiso
+
+        self.t, self.n = {}, {}
+        targets = [(pardiso.PardisoFactorization, "analyse", "pardiso_analyse"),
+                   (pardiso.PardisoFactorization, "factorize", "pardiso_factorize"),
+                   (pardiso.PardisoFactorization, "solve", "pardiso_solve"),
+                   (PrunedSuperLU, "_factorize", "superlu_pruned_factorize"),
+                   (PrunedSuperLU, "solve", "superlu_pruned_solve"),
+                   (linear.SuperLUBackend, "_factorize", "superlu_factorize"),
+                   (linear.SuperLUBackend, "solve", "superlu_solve")]
+        for owner, attr, key in targets:
+            self._wrap(owner, attr, key)
+
+    def _wrap(self, owner, attr, key):
+        fn = owner.__dict__[attr]
+        timers = self
+
+        def timed(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return fn(*a, **k)
+            finally:
+                timers.t[key] = timers.t.get(key, 0.0) + time.perf_counter() - t0
+                timers.n[key] = timers.n.get(key, 0) + 1
+
+        setattr(owner, attr, timed)
+
+    def reset(self):
+        self.t, self.n = {}, {}
+
+    def summary(self) -> str:
+        # pardiso_factorize includes the analyses it triggers; printed as is
+        return ", ".join(f"{k} {self.n[k]}x {self.t[k]:.1f} s" for k in sorted(self.t))
+
+
 def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, reduced: bool, json_path=None) -> None:
     """Interleaved whole-scene runs in this process, one per backend and round (the backend
     through ``integrator_options={'linear_backend': ...}``): CPU and wall time medians, the
@@ -395,13 +435,17 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
         def one(backend):
             return induced_solve(cfg, t_end=5e-3 * steps, steps=steps, record=False,
                                  integrator_options={"linear_backend": backend})
+    timers = _Timers()
+    phases = {}
     for _ in range(max(1, rounds)):
         for b in backends:
+            timers.reset()
             c0, w0 = time.process_time(), time.perf_counter()
             r = one(b)
             runs[b].append((r, time.process_time() - c0, time.perf_counter() - w0))
+            phases[b] = timers.summary()
             print(f"  {scene} {b}: CPU {runs[b][-1][1]:.1f} s wall {runs[b][-1][2]:.1f} s "
-                  f"(load {os.getloadavg()[0]:.1f})", flush=True)
+                  f"(load {os.getloadavg()[0]:.1f}); {phases[b]}", flush=True)
     ref = runs[backends[0]][-1][0]
     rec = {}
     cpu0 = float(np.median([c for _, c, _ in runs[backends[0]]]))
@@ -414,7 +458,7 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
         rec[b] = {"cpu_s": cpu, "wall_s": wall, "cpu_ratio": cpu0 / cpu, "runs": len(runs[b]),
                   "factorizations": s.get("factorizations"), "newton_per_stage": s.get("newton_iterations_per_stage"),
                   "steps_accepted": s.get("steps_accepted"), "steps_rejected": s.get("steps_rejected"),
-                  "balance_errors": s.get("balance_errors"), "state_diff_to_first": diff}
+                  "balance_errors": s.get("balance_errors"), "state_diff_to_first": diff, "phases": phases.get(b)}
         print(f"[{scene}] {b:<16} CPU {cpu:7.1f} s (ratio {cpu0 / cpu:4.2f})  wall {wall:7.1f} s  "
               f"steps {s.get('steps_accepted')}/{s.get('steps_rejected')} rejected  factorisations "
               f"{s.get('factorizations')}  Newton/stage {s.get('newton_iterations_per_stage'):.2f}  "

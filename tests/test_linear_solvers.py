@@ -170,7 +170,7 @@ def test_environment_override(monkeypatch):
 
 
 def test_bad_backend_name_is_a_clear_error(monkeypatch):
-    allowed = r"allowed: auto, banded, pardiso, superlu"
+    allowed = r"allowed: auto, banded, pardiso, pardiso_unsym, superlu"
     with pytest.raises(ValueError, match=r"unknown linear-solver backend 'mumps'.*" + allowed):
         resolve_backend("mumps")
     monkeypatch.setenv(linear.BACKEND_ENV, "pardisso")
@@ -279,9 +279,10 @@ def test_shifted_keeps_the_stored_pattern():
 
 def test_stage_factorisation_sends_unsymmetric_matrices_past_pardiso():
     """A kept stage factorisation (modified Newton) with the PARDISO backend must still
-    solve an unsymmetric stage matrix exactly: PARDISO is a symmetric LDL^T of the upper
-    triangle, so the unsymmetric coupled matrices go to SuperLU (regression: the induced-
-    deformation scene's Newton converged only linearly)."""
+    solve an unsymmetric stage matrix exactly: the symmetric PARDISO is an LDL^T of the
+    upper triangle, so the unsymmetric coupled matrices go past it, to its mtype-11 LU
+    companion since round 4 (SuperLU before; regression: the induced-deformation scene's
+    Newton converged only linearly)."""
     from rve.solvers import pardiso
     from rve.solvers.newton import StageFactorisation
 
@@ -296,5 +297,6 @@ def test_stage_factorisation_sends_unsymmetric_matrices_past_pardiso():
     assert not linear.is_symmetric(A)
     b = rng.standard_normal(n)
     f = StageFactorisation(A, linear.get_backend("pardiso"))
+    assert f.kind == "pardiso_unsym"
     x = f.solve(b)
     assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)

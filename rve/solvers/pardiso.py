@@ -253,7 +253,7 @@ class PardisoFactorization:
     reuses_analysis = True
 
     def __init__(self, threads: Optional[int] = 1, matching: bool = True, drop_zeros: bool = True,
-                 refinement: Optional[int] = None, check: bool = False, ordering: int = 2,
+                 refinement: int = 0, check: bool = False, ordering: int = 2,
                  reuse_subpattern: bool = True, grow_limit: float = 1.25, analyse_stored: bool = False,
                  symmetric: bool = True):
         lib = _load()
@@ -276,8 +276,6 @@ class PardisoFactorization:
         ip = self.iparm
         ip[0] = 1                        # iparm(1): no solver defaults, all set here
         ip[1] = int(ordering)            # iparm(2): 2 = METIS nested dissection, 0 = minimum degree
-        if refinement is None:           # MKL's choices: -2 auto (0), 11 two steps (its unsymmetric example)
-            refinement = 0 if self.symmetric else 2
         ip[7] = int(refinement)          # iparm(8): max iterative refinement steps (0: auto, 2 if perturbed)
         ip[9] = 8 if self.symmetric else 13  # iparm(10): pivot perturbation 1e-8 (-2) / 1e-13 (11)
         ip[10] = 1 if matching else 0    # iparm(11): scaling
