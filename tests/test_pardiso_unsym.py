@@ -283,16 +283,59 @@ def test_real_impact_stage_matrix(impact_stage_matrices):
 
 @needs_mkl
 def test_reduced_impact_run_with_pardiso_unsym_equals_superlu(impact_stage_matrices):
-    """The whole reduced impact run: PARDISO mtype 11 gives the SuperLU run's states to
+    """The whole reduced impact run (backend ``auto_pruned``): PARDISO mtype 11 gives the SuperLU run's states to
     round-off (the residual tolerance decides convergence; both converge to it)."""
     from rve.scenes import impact
 
     cfg, x, info, ref, _ = impact_stage_matrices
     res = impact.solve(cfg, x_start=x, relax_info=info, record=False, t_end=5e-4 * 8, steps=8,
-                       integrator_options={"linear_backend": "pardiso_unsym"})
+                       integrator_options={"linear_backend": "auto_pruned"})
     for k in ("x", "w", "T"):
         a, b = np.asarray(ref.state[k]), np.asarray(res.state[k])
         assert np.abs(a - b).max() <= 1e-8 * max(np.abs(a).max(), 1e-300), k
     assert res.summary["steps_accepted"] == ref.summary["steps_accepted"]
     for k, v in ref.summary["balance_errors"].items():
         assert abs(res.summary["balance_errors"][k] - v) <= 1e-6 * max(abs(v), 1e-12) + 1e-12, k
+
+
+# ----------------------------------------------------------------------------- the impact scene's backend
+@pytest.mark.parametrize("mkl", [True, False])
+def test_auto_pruned_is_pardiso_with_mkl_else_superlu_pruned(mkl, monkeypatch):
+    from rve.scenes.impact_solver import NAME_AUTO, PardisoOrPruned, PrunedSuperLU, register
+
+    if mkl and not pardiso.available():
+        pytest.skip(f"PARDISO unavailable: {pardiso.unavailable_reason()}")
+    if not mkl:
+        monkeypatch.setattr(pardiso, "available", lambda: False)
+    monkeypatch.setattr(PrunedSuperLU, "border", 5)  # the last 5 unknowns by a Schur complement
+    A = _stage_like(300, 12)
+    b = np.random.default_rng(12).standard_normal(300)
+    ref = np.linalg.solve(A.toarray(), b)
+    be = PardisoOrPruned()
+    f = StageFactorisation(A, be)
+    assert be.kind == ("pardiso_unsym" if mkl else "superlu_pruned")
+    x = f.solve(b)
+    assert _backward(A, x, b) <= 1e-12
+    assert np.abs(x - ref).max() <= 1e-10 * np.abs(ref).max()
+    with pytest.raises(ValueError, match="inertia"):
+        be.negative_pivots
+    register(5)
+    assert NAME_AUTO in linear.BACKENDS
+
+
+@needs_mkl
+def test_auto_pruned_falls_back_to_superlu_pruned_when_pardiso_fails(monkeypatch):
+    from rve.scenes.impact_solver import PardisoOrPruned, PrunedSuperLU
+
+    monkeypatch.setattr(PrunedSuperLU, "border", 0)
+    A = _stage_like(200, 13)
+    b = np.random.default_rng(13).standard_normal(200)
+    be = PardisoOrPruned()
+
+    def fail(self, *a, **k):
+        raise pardiso.PardisoError(-4, 22)
+
+    monkeypatch.setattr(pardiso.PardisoFactorization, "factorize", fail)
+    x = StageFactorisation(A, be).solve(b)
+    assert be.kind == "superlu_pruned" and be.fallbacks == 1
+    assert _backward(A, x, b) <= 1e-12
