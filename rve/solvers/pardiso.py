@@ -1,6 +1,8 @@
 """PARDISO (Intel MKL) as a factorisation backend: supernodal LDLᵀ of real symmetric
-indefinite matrices (``mtype = -2``) with the fill-reducing analysis reused per sparsity
-pattern (issue 10; measurements in docs/engine.md, "Supernodal backend (measured)").
+indefinite matrices (``mtype = -2``) and, with ``symmetric=False``, LU of real unsymmetric
+ones (``mtype = 11``), the fill-reducing analysis reused per sparsity pattern (issue 10;
+measurements in docs/engine.md, "Supernodal backend (measured)" and "Unsymmetric stage
+matrices (round 4)").
 
 Contract
 --------
@@ -58,6 +60,24 @@ backend (registry name ``"pardiso"``) with the interface of the linear-solver la
   analysis, iparm(15); permanent + factorisation, iparm(16) + iparm(17)).
 * counters ``analyses``, ``factorizations``, ``solves``.
 * ``release()``: phase -1 (all MKL memory of this instance); also in ``__del__``.
+
+Unsymmetric mode (``symmetric=False``, registry name ``"pardiso_unsym"``; the companion
+``unsymmetric()`` of a symmetric instance, to which ``rve.solvers.newton.StageFactorisation``
+sends the unsymmetric stage matrices of the dynamic scenes): ``mtype = 11`` on the *full*
+pattern, handed to PARDISO as the CSR of A itself (a CSC input's entries are mapped to
+their true (row, column) once per pattern, so the gather of the values per factorisation
+is the only per-call work, as in the symmetric mode; no transposed solve), the diagonal
+added to the pattern as in the symmetric mode. MKL's settings for real unsymmetric
+matrices: nonsymmetric weighted matching and scaling (iparm(13) = iparm(11) = 1, with
+``matching``), pivot perturbation 1e-13 (iparm(10) = 13), no Bunch–Kaufman
+(iparm(21) = 0); ``refinement=0`` again (iparm(8) = 0: two refinement steps when pivots
+were perturbed: measured on the full-size impact stage matrix two forced steps tripled the
+solve, 28 → 90 ms, and left the backward error at 2e-16). Analysis reuse, the sub-pattern /
+union rules, ``analyse_stored``, ``drop_zeros`` and the stored-structure fast path are
+those of the symmetric mode, on the full pattern. There is no inertia: ``negative_pivots``
+/ ``positive_pivots`` and ``factorize(A, inertia=True)`` raise ``ValueError``
+(``provides_inertia`` is False; ``stats()['negative_pivots']`` is None), and
+``rve.solvers.linear.factor_inertia`` leaves such a backend to SuperLU.
 
 Pivoting (MKL's recommendation for symmetric indefinite matrices): Bunch–Kaufman 1×1 and
 2×2 pivots within the supernodes (iparm(21) = 1) with pivot perturbation (iparm(10) = 8);
