@@ -281,7 +281,7 @@ BACKENDS: Dict[str, Callable[..., LinearBackend]] = {"superlu": SuperLUBackend, 
 #: the backend used when neither a ``backend=`` argument nor ``RVE_LINEAR_BACKEND`` names one
 DEFAULT_BACKEND = "auto"
 
-#: environment variable overriding the default backend (superlu | pardiso | auto)
+#: environment variable overriding the default backend (superlu | pardiso | pardiso_unsym | auto)
 BACKEND_ENV = "RVE_LINEAR_BACKEND"
 
 
