@@ -23,6 +23,12 @@ Matrices (docs/engine.md, "Supernodal backend (measured)"):
   elements per fibril, fields mech + T + V (T and V of the RVE material, the contact
   conducting heat and current), ends pinned and held at T = V = 0, h = 5e-4 ms,
   a = 1 − √2/2, at the designed state with contact; ``impact_stage_mech``: mechanics only.
+* ``impact_scene``, ``impact_scene_reduced``, ``induced_B3`` (only with ``--only``): stage
+  matrices the scenes' kept factorisations (``StageFactorisation``) really receive, caught
+  from short runs of configs/scenes/impact.yaml (full size: relaxation + 20 steps, into
+  sphere contact; reduced: the config header's small version, 30 steps) and
+  configs/scenes/induced_deformation.yaml (B3 full size, 70 steps to 0.35 ms: fabric contact)
+  (docs/engine.md "Unsymmetric stage matrices (round 4)").
 """
 from __future__ import annotations
 
@@ -179,6 +185,86 @@ def impact_matrix(out: Path, fields=("mech", "T", "V"), n_yarns: int = 32, eleme
                          "note": f"h a = {haii:.3g} ms, fields {'+'.join(fields)}"})
 
 
+def _hook_stage_matrices(keep: int):
+    """Record the matrices ``StageFactorisation`` receives (the restricted, row-scaled stage
+    matrices of the DIRK Newton): the last ``keep`` of them, with their sequence numbers."""
+    from rve.solvers import newton
+
+    seen = {"count": 0, "last": []}
+    orig = newton.StageFactorisation.__init__
+
+    def init(self, J, backend):
+        seen["count"] += 1
+        seen["last"] = (seen["last"] + [(seen["count"], sp.csc_matrix(J, copy=True))])[-keep:]
+        orig(self, J, backend)
+
+    newton.StageFactorisation.__init__ = init
+    return seen, lambda: setattr(newton.StageFactorisation, "__init__", orig)
+
+
+def impact_scene_matrices(out: Path, steps: int = 20, keep: int = 2, reduced: bool = False) -> None:
+    """Stage matrices of the impact scene itself (configs/scenes/impact.yaml, full size
+    unless ``reduced``: the config header's small version): relax, then ``steps`` steps of
+    0.5 µs (contact from about step 14), the last ``keep`` matrices factorised saved as
+    ``impact_scene[_reduced]_<k>``; the relaxed state is kept in ``out`` for the A/B runs."""
+    from rve.config.loader import load_config
+    from rve.scenes import impact
+    from rve.scenes.impact_solver import PrunedSuperLU
+
+    ov = ["output.vtk=false", "output.png=false"]
+    if reduced:
+        ov += ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=16",
+               "projectile.radius=4.5 mm"]
+    tag = "impact_scene_reduced" if reduced else "impact_scene"
+    cfg = load_config(ROOT / "configs/scenes/impact.yaml", ov)
+    t0 = time.perf_counter()
+    state = out / f"{tag}_relaxed.npz"
+    if state.exists():
+        x = np.load(state)["x"]
+        rinfo = None
+    else:
+        x, rinfo = impact.relax(cfg)
+        out.mkdir(parents=True, exist_ok=True)
+        np.savez(state, x=x)
+    print(f"  relaxed in {time.perf_counter() - t0:.1f} s", flush=True)
+    seen, undo = _hook_stage_matrices(keep)
+    try:
+        res = impact.solve(cfg, x_start=x, relax_info=rinfo, record=False, t_end=5e-4 * steps, steps=steps)
+    finally:
+        undo()
+    s = res.summary
+    for k, (seq, A) in enumerate(seen["last"]):
+        _save(out, f"{tag}_{k}", A, {"source": f"impact scene {'reduced' if reduced else 'full size'}, the "
+                                               f"{seq}-th of {seen['count']} stage factorisations of {steps} steps "
+                                               "of 0.5 us from the relaxed state (row-scaled, restricted)",
+                                     "border": int(PrunedSuperLU.border), "steps": steps,
+                                     "sphere_pairs_active_max": s.get("sphere_pairs_active_max"),
+                                     "contact_pairs_max": s.get("contact_pairs_max"),
+                                     "note": f"factorisation {seq}/{seen['count']}, border {PrunedSuperLU.border}"})
+
+
+def induced_scene_matrices(out: Path, t_end: float = 0.35, steps: int = 70, keep: int = 2,
+                           orientation: str = "B3") -> None:
+    """Stage matrices of the induced-deformation scene (configs/scenes/induced_deformation.yaml,
+    full size) in its contact phase: ``steps`` steps to ``t_end`` ms (B3: contact from about
+    0.3 ms), the last ``keep`` factorised saved as ``induced_<orientation>_<k>``."""
+    from rve.config.loader import load_config
+    from rve.scenes.induced_deformation import solve
+
+    cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml",
+                      ["output.vtk=false", "output.png=false", f"field.orientation={orientation}"])
+    seen, undo = _hook_stage_matrices(keep)
+    try:
+        res = solve(cfg, t_end=t_end, steps=steps, record=False)
+    finally:
+        undo()
+    for k, (seq, A) in enumerate(seen["last"]):
+        _save(out, f"induced_{orientation}_{k}", A,
+              {"source": f"induced_deformation.yaml {orientation}, the {seq}-th of {seen['count']} stage "
+                         f"factorisations of {steps} steps to {t_end} ms", "t_end_ms": t_end, "steps": steps,
+               "note": f"factorisation {seq}/{seen['count']}"})
+
+
 BUILDERS = {
     "min12": lambda out: minimiser_matrices(12, out, pd=True, with_K=True),
     "driven12": lambda out: strain_matrices(12, out, "driven"),
@@ -186,6 +272,9 @@ BUILDERS = {
     "damped30": lambda out: strain_matrices(30, out, "damped"),
     "impact_stage": lambda out: impact_matrix(out),
     "impact_stage_mech": lambda out: impact_matrix(out, fields=("mech",), name="impact_stage_mech"),
+    "impact_scene": lambda out: impact_scene_matrices(out),
+    "impact_scene_reduced": lambda out: impact_scene_matrices(out, steps=30, reduced=True),
+    "induced_B3": lambda out: induced_scene_matrices(out),
 }
 
 
@@ -195,7 +284,7 @@ def main(argv=None) -> None:
     ap.add_argument("--out", default=str(ROOT / "results/engine"))
     a = ap.parse_args(argv)
     out = Path(a.out)
-    for name in a.only or list(BUILDERS):
+    for name in a.only or [b for b in BUILDERS if not b.endswith(("_scene", "_reduced", "_B3"))]:
         t0 = time.perf_counter()
         BUILDERS[name](out)
         print(f"  [{name} built in {time.perf_counter() - t0:.1f} s]", flush=True)

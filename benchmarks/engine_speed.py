@@ -6,6 +6,14 @@ own matrices, and whole runs (relaxation, strain step) as whole processes per ba
     python benchmarks/engine_speed.py --relax 12 [--runs 3] [--backends superlu pardiso ...]
     python benchmarks/engine_speed.py --relax 30 --runs 1
     python benchmarks/engine_speed.py --strain-step [--state FILE] [--runs 3]
+    python benchmarks/engine_speed.py --unsym [--only impact_scene_1 ...] [--rounds 2]
+        # the dynamic scenes' unsymmetric stage matrices (engine_matrices.py --only
+        # impact_scene impact_scene_reduced induced_B3): superlu_colamd (StageFactorisation's
+        # route for pardiso/auto before round 4), superlu_symm (the 'superlu' backend),
+        # superlu_pruned (the impact scene's), pardiso_unsym[_fresh|_nomatch] (mtype 11)
+    python benchmarks/engine_speed.py --scene-ab impact [--start 60 --steps 20 --rounds 2] [--reduced]
+    python benchmarks/engine_speed.py --scene-ab induced [--steps 100 --rounds 3]
+        # interleaved whole-scene A/B of the stage-matrix backend (main_scene_ab)
 
 Whole runs (``--relax N``: the shipped 80-fibril plain weave, configs/scenes/
 plain_weave_relax.yaml with ``mesh.elements = N``; at N = 12 its coarse stage is the run
@@ -139,12 +147,12 @@ def worker(path: str, variant: str, repeats: int) -> dict:
     return rec
 
 
-def run_variant(path: Path, variant: str, repeats: int) -> dict:
+def run_variant(path: Path, variant: str, repeats: int, worker: str = "--worker") -> dict:
     env = dict(os.environ)
     for k in ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
         env.setdefault(k, "1")
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    cmd = [sys.executable, __file__, "--worker", str(path), variant, str(repeats)]
+    cmd = [sys.executable, __file__, worker, str(path), variant, str(repeats)]
     p = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if p.returncode != 0:
         return {"variant": variant, "error": (p.stderr.strip().splitlines() or ["?"])[-1]}
@@ -173,6 +181,299 @@ def table(results: dict) -> str:
                  "SuperLU L+U, PARDISO L; RSS: peak MiB of the worker, +RSS over the loaded matrix; "
                  "neg: negative pivots; pert: perturbed pivots")
     return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- unsymmetric stage matrices
+#: variants of ``--unsym`` (docs/engine.md "Unsymmetric stage matrices (round 4)")
+UNSYM_VARIANTS = ("superlu_colamd", "superlu_symm", "superlu_pruned", "pardiso_unsym_fresh", "pardiso_unsym",
+                  "pardiso_unsym_nomatch")
+UNSYM_ORDER = ("impact_scene_1", "impact_scene_reduced_1", "induced_B3_1")
+
+
+def worker_unsym(path: str, variant: str, repeats: int) -> dict:
+    """One variant on one saved (unsymmetric) stage matrix: medians of ``repeats``
+    factorisations and solves of a random b, fill, peak RSS, residual against a dense-free
+    check |A x - b| / |b|."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    A = sp.load_npz(path).tocsc()
+    A.sum_duplicates()
+    meta_path = Path(path).with_suffix(".json")
+    meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+    n = A.shape[0]
+    b = np.random.default_rng(0).standard_normal(n)
+    rss0 = _rss_mib()
+    rec = {"variant": variant, "n": n, "nnz": int(A.nnz)}
+    if variant.startswith("superlu"):
+        from rve.solvers.linear import SUPERLU_FALLBACK_PERMC, SUPERLU_SYMMETRIC
+
+        if variant == "superlu_colamd":   # StageFactorisation's route for 'pardiso'/'auto' before round 4
+            fac = lambda: spla.splu(A, permc_spec=SUPERLU_FALLBACK_PERMC)  # noqa: E731
+        elif variant == "superlu_symm":   # the 'superlu' backend (induced scene's default)
+            fac = lambda: spla.splu(A, **SUPERLU_SYMMETRIC)  # noqa: E731
+        else:                             # the impact scene's backend, projectile border by Schur complement
+            from rve.scenes.impact_solver import PrunedSuperLU
+
+            PrunedSuperLU.border = int(meta.get("border", 0))
+            be = PrunedSuperLU(symmetric=False)
+            fac = lambda: be.factorize(A)  # noqa: E731
+        tf, lu = _median_time(fac, repeats)
+        ts, x = _median_time(lambda: lu.solve(b), max(repeats, 5))
+        L = lu.lu if variant == "superlu_pruned" else lu
+        rec.update(factor_s=tf, solve_s=ts, factor_nnz=int(L.L.nnz + L.U.nnz))
+    else:
+        from rve.solvers import pardiso
+
+        if not pardiso.available():
+            return {"variant": variant, "skipped": pardiso.unavailable_reason()}
+        f = pardiso.PardisoFactorization(symmetric=False, matching=variant != "pardiso_unsym_nomatch")
+        t0 = time.perf_counter()
+        f.analyse(A)
+        rec["analyse_s"] = time.perf_counter() - t0
+        if variant == "pardiso_unsym_fresh":
+            def run():
+                f.analyse(A)
+                return f.factorize(A)
+        else:
+            f.factorize(A)  # warm-up (first phase 22 after the analysis)
+            run = lambda: f.factorize(A)  # noqa: E731
+        tf, _ = _median_time(run, repeats)
+        ts, x = _median_time(lambda: f.solve(b), max(repeats, 5))
+        rec.update(factor_s=tf, solve_s=ts, factor_nnz=f.factor_nnz, perturbed=f.perturbed_pivots,
+                   refinement=f.refinement_steps, analyses=f.analyses, stored_fast=f.stored_fast,
+                   pardiso_mem_mib=f.memory_kb["factorization"] / 1024.0,
+                   pardiso_analysis_mib=f.memory_kb["analysis_peak"] / 1024.0)
+        f.release()
+    rec["residual"] = float(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
+    rec["rss_mib"] = _rss_mib()
+    rec["rss_growth_mib"] = rec["rss_mib"] - rss0
+    return rec
+
+
+def unsym_table(results: dict, ref_variant: str) -> str:
+    head = (f"{'matrix':<24} {'n':>6} {'nnz':>8} {'variant':<22} {'analyse':>8} {'factor':>8} {'ratio':>6} "
+            f"{'solve':>8} {'ratio':>6} {'fill':>9} {'RSS':>6} {'+RSS':>6} {'resid':>8} {'pert':>4}")
+    lines = [head, "-" * len(head)]
+    for name, recs in results.items():
+        ref = next((r for r in recs if r.get("variant") == ref_variant.get(name) and "factor_s" in r), None)
+        for r in recs:
+            if "factor_s" not in r:
+                lines.append(f"{name:<24} {'':>6} {'':>8} {r['variant']:<22} {r.get('skipped') or r.get('error')}")
+                continue
+            rf = ref["factor_s"] / r["factor_s"] if ref else float("nan")
+            rs = ref["solve_s"] / r["solve_s"] if ref else float("nan")
+            an = f"{r['analyse_s']:.3f}" if "analyse_s" in r else "-"
+            lines.append(
+                f"{name:<24} {r['n']:>6} {r['nnz']:>8} {r['variant']:<22} {an:>8} {r['factor_s']:>8.3f} {rf:>5.1f}x "
+                f"{r['solve_s'] * 1e3:>6.1f}ms {rs:>5.1f}x {r['factor_nnz']:>9} {r['rss_mib']:>6.0f} "
+                f"{r['rss_growth_mib']:>6.0f} {r['residual']:>8.1e} {r.get('perturbed', '-'):>4}")
+    lines.append("analyse / factor in s: median over the rounds of the medians of the repeats; ratio = the scene's "
+                 "current path (* in the variant column) / this; fill: SuperLU L+U, PARDISO L+U (iparm 18); RSS: peak "
+                 "MiB of the worker process, +RSS over the loaded matrix; pert: perturbed pivots")
+    return "\n".join(lines)
+
+
+def main_unsym(d: Path, names, variants, repeats: int, rounds: int, json_path=None) -> None:
+    """Every variant on every matrix in fresh worker processes, ``rounds`` interleaved rounds
+    (variant order the same each round), per-round medians of ``repeats``; the median over
+    the rounds is printed."""
+    names = names or [n for n in UNSYM_ORDER if (d / f"{n}.npz").exists()]
+    ref = {n: ("superlu_pruned" if n.startswith("impact") else "superlu_symm") for n in names}
+    results = {}
+    for name in names:
+        per = {v: [] for v in variants}
+        for _ in range(max(1, rounds)):
+            for v in variants:
+                per[v].append(run_variant(d / f"{name}.npz", v, max(repeats, 5), worker="--worker-unsym"))
+                r = per[v][-1]
+                print(f"  {name} {v}: {r.get('factor_s', r.get('error', r.get('skipped')))}", file=sys.stderr,
+                      flush=True)
+        recs = []
+        for v in variants:
+            ok = [r for r in per[v] if "factor_s" in r]
+            if not ok:
+                recs.append(per[v][-1])
+                continue
+            r = dict(ok[-1])
+            for k in ("factor_s", "solve_s", "analyse_s", "rss_mib", "rss_growth_mib"):
+                if k in r:
+                    r[k] = float(np.median([o[k] for o in ok]))
+            r["rounds"] = len(ok)
+            if v == ref[name]:
+                r["variant"] = v + " *"
+            recs.append(r)
+        results[name] = recs
+    ref_names = {n: ref[n] + " *" for n in names}
+    print(unsym_table(results, ref_names))
+    if json_path:
+        Path(json_path).write_text(json.dumps(results, indent=1))
+
+
+# ----------------------------------------------------------------------------- scene A/B (round 4)
+def _state_diff(a: dict, b: dict) -> dict:
+    """max |a - b| / max |a| of the final states' arrays (x, w, T)."""
+    out = {}
+    for k in ("x", "w", "T"):
+        if k in a and k in b:
+            va, vb = np.asarray(a[k], float), np.asarray(b[k], float)
+            out[k] = float(np.abs(va - vb).max() / max(np.abs(va).max(), 1e-300))
+    return out
+
+
+class _Timers:
+    """Calls and wall time of the factorisation backends' phases (wrapped methods), reset per run."""
+
+    def __init__(self):
+        from rve.scenes.impact_solver import PrunedSuperLU
+        from rve.solvers import linear, pardiso
+
+        self.t, self.n = {}, {}
+        targets = [(pardiso.PardisoFactorization, "analyse", "pardiso_analyse"),
+                   (pardiso.PardisoFactorization, "factorize", "pardiso_factorize"),
+                   (pardiso.PardisoFactorization, "solve", "pardiso_solve"),
+                   (PrunedSuperLU, "_factorize", "superlu_pruned_factorize"),
+                   (PrunedSuperLU, "solve", "superlu_pruned_solve"),
+                   (linear.SuperLUBackend, "_factorize", "superlu_factorize"),
+                   (linear.SuperLUBackend, "solve", "superlu_solve")]
+        for owner, attr, key in targets:
+            self._wrap(owner, attr, key)
+
+    def _wrap(self, owner, attr, key):
+        fn = owner.__dict__[attr]
+        timers = self
+
+        def timed(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return fn(*a, **k)
+            finally:
+                timers.t[key] = timers.t.get(key, 0.0) + time.perf_counter() - t0
+                timers.n[key] = timers.n.get(key, 0) + 1
+
+        setattr(owner, attr, timed)
+
+    def reset(self):
+        self.t, self.n = {}, {}
+
+    def summary(self) -> str:
+        # pardiso_factorize includes the analyses it triggers; printed as is
+        return ", ".join(f"{k} {self.n[k]}x {self.t[k]:.1f} s" for k in sorted(self.t))
+
+
+def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, reduced: bool, json_path=None) -> None:
+    """Interleaved whole-scene runs in this process, one per backend and round (the backend
+    through ``integrator_options={'linear_backend': ...}``): CPU and wall time medians, the
+    ratio to the first backend, factorisations, Newton iterations per stage, balance errors,
+    and the final states' max differences to the first backend's.
+
+    ``impact``: configs/scenes/impact.yaml (full size unless ``reduced``); the relaxed state of
+    engine_matrices.py (``impact_scene[_reduced]_relaxed.npz``, relaxed here if absent), then
+    ``start`` steps of 0.5 us once (pardiso_unsym) to a checkpoint, from which every timed run
+    resumes for ``steps`` more (the segment in sphere + fabric contact); the last two stage
+    matrices of the preparation are saved as ``impact_deep[_reduced]_<k>``.
+    ``induced``: configs/scenes/induced_deformation.yaml B3 full size, ``steps`` steps of 5 us
+    from t = 0 (contact from about 0.3 ms)."""
+    import shutil
+    import tempfile
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from rve.config.loader import load_config
+
+    from rve.solvers import linear, pardiso as _pardiso
+
+    # a benchmark-only variant: mtype 11 analysing the stored pattern (candidate contact pairs
+    # included), so that later nonzero patterns of the same contact map lie in it
+    linear.register_backend("pardiso_unsym_stored", lambda symmetric=True: _pardiso.PardisoFactorization(
+        symmetric=False, analyse_stored=True))
+    d = ROOT / "results/engine"
+    ov = ["output.vtk=false", "output.png=false"]
+    runs = {b: [] for b in backends}
+    tmp = Path(tempfile.mkdtemp(prefix="rve_ab_"))
+    if scene == "impact":
+        from engine_matrices import _hook_stage_matrices, _save
+
+        from rve.scenes import impact
+
+        if reduced:
+            ov += ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=16",
+                   "projectile.radius=4.5 mm"]
+        tag = "impact_scene_reduced" if reduced else "impact_scene"
+        cfg = load_config(ROOT / "configs/scenes/impact.yaml", ov + [f"time.checkpoint_every={start}"])
+        state = d / f"{tag}_relaxed.npz"
+        if state.exists():
+            x0 = np.load(state)["x"]
+        else:
+            x0, _ = impact.relax(cfg)
+            d.mkdir(parents=True, exist_ok=True)
+            np.savez(state, x=x0)
+        total = start + steps
+        t_end = 5e-4 * total
+        ck = tmp / "start.npz"
+        seen, undo = _hook_stage_matrices(2)
+        t0 = time.perf_counter()
+        try:
+            impact.solve(cfg, x_start=x0, record=False, t_end=t_end, steps=total, checkpoint=ck,
+                         stop_after_steps=start, integrator_options={"linear_backend": "pardiso_unsym"})
+        except Exception as exc:  # SceneFailure: stopped after `start` steps (the checkpoint is written)
+            print(f"  preparation: {exc} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        finally:
+            undo()
+        deep = "impact_deep_reduced" if reduced else "impact_deep"
+        for k, (seq, A) in enumerate(seen["last"]):
+            _save(d, f"{deep}_{k}", A, {"source": f"impact scene {'reduced' if reduced else 'full size'}, the "
+                                                  f"{seq}-th of {seen['count']} stage factorisations of the first "
+                                                  f"{start} steps of 0.5 us (row-scaled, restricted)",
+                                        "border": int(__import__("rve.scenes.impact_solver", fromlist=["x"]
+                                                                 ).PrunedSuperLU.border),
+                                        "note": f"factorisation {seq}/{seen['count']}"})
+
+        def one(backend):
+            c = tmp / f"run_{backend}.npz"
+            shutil.copy(ck, c)
+            return impact.solve(cfg, x_start=x0, record=False, t_end=t_end, steps=total, checkpoint=c,
+                                integrator_options={"linear_backend": backend})
+    else:
+        from rve.scenes.induced_deformation import solve as induced_solve
+
+        cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml", ov + ["field.orientation=B3"])
+
+        def one(backend):
+            return induced_solve(cfg, t_end=5e-3 * steps, steps=steps, record=False,
+                                 integrator_options={"linear_backend": backend})
+    timers = _Timers()
+    phases = {}
+    for _ in range(max(1, rounds)):
+        for b in backends:
+            timers.reset()
+            c0, w0 = time.process_time(), time.perf_counter()
+            r = one(b)
+            runs[b].append((r, time.process_time() - c0, time.perf_counter() - w0))
+            phases[b] = timers.summary()
+            print(f"  {scene} {b}: CPU {runs[b][-1][1]:.1f} s wall {runs[b][-1][2]:.1f} s "
+                  f"(load {os.getloadavg()[0]:.1f}); {phases[b]}", flush=True)
+    ref = runs[backends[0]][-1][0]
+    rec = {}
+    cpu0 = float(np.median([c for _, c, _ in runs[backends[0]]]))
+    for b in backends:
+        r = runs[b][-1][0]
+        s = r.summary
+        cpu = float(np.median([c for _, c, _ in runs[b]]))
+        wall = float(np.median([w for _, _, w in runs[b]]))
+        diff = _state_diff(ref.state, r.state)
+        rec[b] = {"cpu_s": cpu, "wall_s": wall, "cpu_ratio": cpu0 / cpu, "runs": len(runs[b]),
+                  "factorizations": s.get("factorizations"), "newton_per_stage": s.get("newton_iterations_per_stage"),
+                  "steps_accepted": s.get("steps_accepted"), "steps_rejected": s.get("steps_rejected"),
+                  "balance_errors": s.get("balance_errors"), "state_diff_to_first": diff, "phases": phases.get(b)}
+        print(f"[{scene}] {b:<16} CPU {cpu:7.1f} s (ratio {cpu0 / cpu:4.2f})  wall {wall:7.1f} s  "
+              f"steps {s.get('steps_accepted')}/{s.get('steps_rejected')} rejected  factorisations "
+              f"{s.get('factorizations')}  Newton/stage {s.get('newton_iterations_per_stage'):.2f}  "
+              f"max|diff|/max to {backends[0]}: " + " ".join(f"{k} {v:.1e}" for k, v in diff.items()), flush=True)
+        print(f"[{scene}] {b:<16} balance errors "
+              + json.dumps({k: float(f"{v:.4g}") for k, v in s.get("balance_errors", {}).items()}), flush=True)
+    shutil.rmtree(tmp, ignore_errors=True)
+    if json_path:
+        Path(json_path).write_text(json.dumps(rec, indent=1, default=float))
 
 
 # ----------------------------------------------------------------------------- whole runs
@@ -389,6 +690,9 @@ def main(argv=None) -> None:
     if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--worker":
         print(json.dumps(worker(sys.argv[2], sys.argv[3], int(sys.argv[4]))))
         return
+    if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--worker-unsym":
+        print(json.dumps(worker_unsym(sys.argv[2], sys.argv[3], int(sys.argv[4]))))
+        return
     if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--run-worker":
         print(json.dumps(run_worker(sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5]), default=float))
         return
@@ -405,7 +709,27 @@ def main(argv=None) -> None:
                     help="relaxed state of configs/rve/plain_weave.yaml for --strain-step")
     ap.add_argument("--runs", type=int, default=3, help="interleaved runs per backend (whole runs)")
     ap.add_argument("--backends", nargs="*", default=["superlu", "pardiso"], choices=RUN_BACKENDS)
+    ap.add_argument("--unsym", action="store_true",
+                    help="the unsymmetric stage matrices of the dynamic scenes (engine_matrices.py --only "
+                         "impact_scene induced_B3): SuperLU paths vs PARDISO mtype 11")
+    ap.add_argument("--unsym-variants", nargs="*", default=list(UNSYM_VARIANTS), choices=UNSYM_VARIANTS)
+    ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds of the --unsym variants")
+    ap.add_argument("--scene-ab", choices=("impact", "induced"), default=None,
+                    help="interleaved whole-scene runs per backend (--scene-backends) in this process")
+    ap.add_argument("--scene-backends", nargs="*", default=None,
+                    help="default: impact superlu_pruned pardiso_unsym; induced superlu pardiso")
+    ap.add_argument("--steps", type=int, default=20, help="--scene-ab: timed steps")
+    ap.add_argument("--start", type=int, default=60, help="--scene-ab impact: steps before the timed segment")
+    ap.add_argument("--reduced", action="store_true", help="--scene-ab impact: the config header's small version")
     a = ap.parse_args(argv)
+    if a.scene_ab:
+        be = a.scene_backends or (["superlu_pruned", "pardiso_unsym"] if a.scene_ab == "impact"
+                                  else ["superlu", "pardiso"])
+        main_scene_ab(a.scene_ab, be, a.rounds, a.steps, a.start, a.reduced, a.json)
+        return
+    if a.unsym:
+        main_unsym(Path(a.dir), a.only, a.unsym_variants, a.repeats, a.rounds, a.json)
+        return
     if a.relax is not None or a.strain_step:
         kind, arg = ("relax", str(a.relax)) if a.relax is not None else ("strain", a.state)
         main_whole(kind, arg, a.runs, a.backends, a.json)

@@ -2,6 +2,8 @@
 banded path agrees with SuperLU, the fallback rescues a breakdown, the backend seam, the
 backend choice (auto / RVE_LINEAR_BACKEND / backend=, clear errors). Runs without
 pypardiso (the PARDISO cases are skipped; the choice then falls back to SuperLU)."""
+import re
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -170,7 +172,9 @@ def test_environment_override(monkeypatch):
 
 
 def test_bad_backend_name_is_a_clear_error(monkeypatch):
-    allowed = r"allowed: auto, banded, pardiso, superlu"
+    # every registered name (scenes register their own: the impact's superlu_pruned, auto_pruned)
+    assert {"banded", "pardiso", "pardiso_unsym", "superlu"} <= set(linear.BACKENDS)
+    allowed = re.escape("allowed: " + ", ".join(["auto", *sorted(linear.BACKENDS)]))
     with pytest.raises(ValueError, match=r"unknown linear-solver backend 'mumps'.*" + allowed):
         resolve_backend("mumps")
     monkeypatch.setenv(linear.BACKEND_ENV, "pardisso")
@@ -279,9 +283,10 @@ def test_shifted_keeps_the_stored_pattern():
 
 def test_stage_factorisation_sends_unsymmetric_matrices_past_pardiso():
     """A kept stage factorisation (modified Newton) with the PARDISO backend must still
-    solve an unsymmetric stage matrix exactly: PARDISO is a symmetric LDL^T of the upper
-    triangle, so the unsymmetric coupled matrices go to SuperLU (regression: the induced-
-    deformation scene's Newton converged only linearly)."""
+    solve an unsymmetric stage matrix exactly: the symmetric PARDISO is an LDL^T of the
+    upper triangle, so the unsymmetric coupled matrices go past it, to its mtype-11 LU
+    companion since round 4 (SuperLU before; regression: the induced-deformation scene's
+    Newton converged only linearly)."""
     from rve.solvers import pardiso
     from rve.solvers.newton import StageFactorisation
 
@@ -296,5 +301,6 @@ def test_stage_factorisation_sends_unsymmetric_matrices_past_pardiso():
     assert not linear.is_symmetric(A)
     b = rng.standard_normal(n)
     f = StageFactorisation(A, linear.get_backend("pardiso"))
+    assert f.kind == "pardiso_unsym"
     x = f.solve(b)
     assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)

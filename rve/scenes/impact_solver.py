@@ -17,8 +17,18 @@ free dofs): 6.5 s with COLAMD on the stored pattern (what the unsymmetric path o
 Newton solver does today) vs 0.06 s. Full size (51.4k fabric dofs, t = 0.025 ms, row-scaled
 as the integrator solves it): threshold 0.1: 10.3 s, fill 23.8M (off-diagonal pivots);
 0.01: 0.49 s, fill 3.6M; 0.0: 0.74 s, fill 3.6M.
+
+``PardisoOrPruned`` (registry name ``"auto_pruned"``, added by ``register()`` too): PARDISO's
+LU of the unsymmetric stage matrix (``rve.solvers.pardiso.PardisoFactorization(symmetric=False)``:
+mtype 11, explicit zeros dropped, nonsymmetric matching and scaling, the analysis reused
+while the nonzero pattern lies in the analysed one, no Schur border: METIS orders the
+projectile's dofs well) where MKL is available, ``PrunedSuperLU`` where it is not and for
+a matrix PARDISO fails on (``kind`` says which factorised the last matrix). Measured on the
+full-size stage matrices (docs/engine.md "Unsymmetric stage matrices (round 4)").
 """
 from __future__ import annotations
+
+import logging
 
 import numpy as np
 import scipy.linalg
@@ -27,9 +37,12 @@ import scipy.sparse.linalg as spla
 
 from ..solvers.linear import BACKENDS, SingularFactorError, SuperLUBackend, register_backend
 
-__all__ = ["PrunedSuperLU", "register", "NAME"]
+__all__ = ["PrunedSuperLU", "PardisoOrPruned", "register", "NAME", "NAME_AUTO"]
+
+log = logging.getLogger("rve.scenes.impact_solver")
 
 NAME = "superlu_pruned"
+NAME_AUTO = "auto_pruned"
 
 
 def _splu(J):
@@ -93,10 +106,62 @@ class PrunedSuperLU(SuperLUBackend):
         raise ValueError("superlu_pruned gives no inertia")
 
 
+class PardisoOrPruned:
+    """PARDISO mtype 11 where MKL is available, else (and for a matrix PARDISO fails on)
+    ``PrunedSuperLU`` (module docstring). No inertia."""
+
+    name = NAME_AUTO
+    provides_inertia = False
+    symmetric = False
+
+    def __init__(self, symmetric: bool = False):
+        from ..solvers import pardiso
+
+        self._pardiso = pardiso.PardisoFactorization(symmetric=False) if pardiso.available() else None
+        self._pruned = None
+        self._active = None
+        self.kind = None
+        self.fallbacks = 0
+
+    def factorize(self, A, inertia: bool = False) -> "PardisoOrPruned":
+        if inertia:
+            raise ValueError(f"{NAME_AUTO} gives no inertia")
+        self._active = None
+        if self._pardiso is not None:
+            try:
+                self._pardiso.factorize(A)
+                self._active, self.kind = self._pardiso, "pardiso_unsym"
+                return self
+            except RuntimeError as exc:  # PardisoError, SingularFactorError
+                self.fallbacks += 1
+                log.info("PARDISO mtype 11 failed (%s): superlu_pruned", exc)
+        if self._pruned is None:
+            self._pruned = PrunedSuperLU(symmetric=False)
+        self._pruned.factorize(A)
+        self._active, self.kind = self._pruned, NAME
+        return self
+
+    def solve(self, b) -> np.ndarray:
+        if self._active is None:
+            raise RuntimeError("solve before factorize")
+        return self._active.solve(b)
+
+    @property
+    def negative_pivots(self) -> int:
+        raise ValueError(f"{NAME_AUTO} gives no inertia")
+
+    def release(self) -> None:
+        if self._pardiso is not None:
+            self._pardiso.release()
+
+
 def register(border: int = 0) -> str:
-    """Make the backend available by name (idempotent) with ``border`` trailing unknowns
-    eliminated by the Schur complement; returns the name."""
+    """Make the backends available by name (idempotent: ``superlu_pruned`` with ``border``
+    trailing unknowns eliminated by the Schur complement, and ``auto_pruned``); returns
+    the name of the first."""
     if NAME not in BACKENDS:
         register_backend(NAME, PrunedSuperLU)
+    if NAME_AUTO not in BACKENDS:
+        register_backend(NAME_AUTO, PardisoOrPruned)
     PrunedSuperLU.border = int(border)
     return NAME

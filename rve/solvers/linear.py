@@ -31,7 +31,8 @@ Contract
   minimiser's inertia check (docs/relaxation.md); ``(None, -1)`` for a zero or non-finite
   pivot. With PARDISO a factorisation that perturbed a pivot (its count of that pivot's
   sign is then not SuperLU's) or failed is redone by SuperLU, so the count always equals
-  SuperLU's on the same matrix.
+  SuperLU's on the same matrix; a backend without inertia (``pardiso_unsym``) leaves it to
+  SuperLU.
 * ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (the minimiser's and
   the pseudo-transient solver's regularised tangent). ``keep_pattern=False`` is scipy's
   sum (explicit zeros dropped: today's arithmetic); ``True`` keeps ``J``'s stored pattern
@@ -48,8 +49,14 @@ analysis.
   matching) reused while the nonzero pattern lies in the analysed one (a new analysis on
   the union when small). The energy minimiser hands it the contact map's stored pattern
   and analyses that (``analyse_stored``; ``rve.solvers.minimize.run_backend``): measured
-  the best of four choices, docs/engine.md "Backend choice". Symmetric matrices only (it
-  reads one triangle).
+  the best of four choices, docs/engine.md "Backend choice". ``symmetric=True`` reads one
+  triangle (symmetric matrices only); ``symmetric=False`` is PARDISO's LU of a real
+  unsymmetric matrix (mtype 11: full pattern, nonsymmetric matching and scaling, pivot
+  perturbation 1e-13, the same analysis reuse; no inertia). ``"auto"`` with
+  ``symmetric=False`` stays ``"superlu"``; ``rve.solvers.newton.StageFactorisation`` routes
+  an unsymmetric stage matrix handed to a symmetric ``"pardiso"`` instance to its mtype-11
+  companion (docs/engine.md "Unsymmetric stage matrices (round 4)").
+* ``"pardiso_unsym"`` (``PardisoUnsymBackend``): mtype 11 whatever ``symmetric`` says.
 * ``"superlu"`` (``SuperLUBackend``): scipy's SuperLU. ``symmetric=True``: minimum degree
   on A^T + A with diagonal pivots only (``SUPERLU_SYMMETRIC``), so the diagonal of U is
   the D of A = L D L^T (up to rounding) and gives the inertia; ``symmetric=False``:
@@ -71,7 +78,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["sparse_solve", "factorize", "factor_inertia", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
-           "PardisoBackend", "BACKENDS", "DEFAULT_BACKEND", "BACKEND_ENV", "resolve_backend", "register_backend",
+           "PardisoBackend", "PardisoUnsymBackend", "BACKENDS", "DEFAULT_BACKEND", "BACKEND_ENV", "resolve_backend", "register_backend",
            "get_backend", "release_shared", "SingularFactorError", "NotBandedError", "SUPERLU_SYMMETRIC",
            "SUPERLU_FALLBACK_PERMC", "BANDED_MAX_BANDWIDTH", "band_of", "is_symmetric"]
 
@@ -244,26 +251,37 @@ class BandedBackend(LinearBackend):
 
 def PardisoBackend(symmetric: bool = True, **options):
     """The ``"pardiso"`` backend: a fresh ``rve.solvers.pardiso.PardisoFactorization``
-    (one MKL thread, weighted matching, explicit zeros dropped; ``options`` go to it).
-    Symmetric matrices only; ``RuntimeError`` with the reason when MKL is unavailable."""
+    (one MKL thread, weighted matching, explicit zeros dropped; ``options`` go to it):
+    LDLᵀ of a symmetric matrix (mtype -2) or, ``symmetric=False``, LU of an unsymmetric one
+    (mtype 11, no inertia). A symmetric instance's ``unsymmetric()`` is its mtype-11
+    companion (``StageFactorisation`` sends the unsymmetric stage matrices there).
+    ``RuntimeError`` with the reason when MKL is unavailable."""
     from . import pardiso
 
-    if not symmetric:
-        raise ValueError("the pardiso backend factorises symmetric matrices only (mtype -2); "
-                         "use backend='superlu' with symmetric=False")
     if not pardiso.available():
         raise RuntimeError(f"linear-solver backend 'pardiso' is not available: {pardiso.unavailable_reason()}")
-    return pardiso.PardisoFactorization(**options)
+    return pardiso.PardisoFactorization(symmetric=symmetric, **options)
+
+
+def PardisoUnsymBackend(symmetric: bool = False, **options):
+    """The ``"pardiso_unsym"`` backend: PARDISO's LU (mtype 11) whatever ``symmetric`` says
+    (an explicit choice for matrices known to be unsymmetric: the dynamic scenes' stage
+    matrices). ``RuntimeError`` with the reason when MKL is unavailable."""
+    from . import pardiso
+
+    if not pardiso.available():
+        raise RuntimeError(f"linear-solver backend 'pardiso_unsym' is not available: {pardiso.unavailable_reason()}")
+    return pardiso.PardisoFactorization(symmetric=False, **options)
 
 
 #: backend classes by name
 BACKENDS: Dict[str, Callable[..., LinearBackend]] = {"superlu": SuperLUBackend, "banded": BandedBackend,
-                                                     "pardiso": PardisoBackend}
+                                                     "pardiso": PardisoBackend, "pardiso_unsym": PardisoUnsymBackend}
 
 #: the backend used when neither a ``backend=`` argument nor ``RVE_LINEAR_BACKEND`` names one
 DEFAULT_BACKEND = "auto"
 
-#: environment variable overriding the default backend (superlu | pardiso | auto)
+#: environment variable overriding the default backend (superlu | pardiso | pardiso_unsym | auto)
 BACKEND_ENV = "RVE_LINEAR_BACKEND"
 
 
@@ -473,7 +491,7 @@ def factor_inertia(A, backend: BackendSpec = None):
     is redone by SuperLU (whose count is then returned). Returns ``(factorisation,
     n_negative)``; ``(None, -1)`` when a pivot is zero or not finite."""
     solver = _instance(backend, symmetric=True)
-    if getattr(solver, "name", "") != "superlu":
+    if getattr(solver, "name", "") != "superlu" and getattr(solver, "provides_inertia", True):
         try:
             lu = solver.factorize(A, inertia=False)
             if getattr(lu, "perturbed_pivots", 0) == 0:

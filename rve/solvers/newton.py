@@ -103,7 +103,11 @@ class StageFactorisation:
     solve, which would make reuse pointless); others use ``backend`` (a
     ``rve.solvers.linear.get_backend`` instance, kept by the caller so that a backend that
     analyses a sparsity pattern reuses its analysis), with SuperLU's COLAMD + partial
-    pivoting as the fallback when the backend meets a zero pivot. Raises ``RuntimeError``
+    pivoting as the fallback when the backend meets a zero pivot. An unsymmetric matrix
+    (``rve.solvers.linear.is_symmetric``) handed to a symmetric ``"pardiso"`` instance
+    (LDLᵀ of one triangle) goes to the instance's mtype-11 companion
+    (``PardisoFactorization.unsymmetric()``: LU, its analysis reused across stages; kind
+    ``"pardiso_unsym"``), to SuperLU COLAMD if that fails. Raises ``RuntimeError``
     when even the fallback fails."""
 
     def __init__(self, J, backend):
@@ -120,9 +124,19 @@ class StageFactorisation:
             if info == 0:
                 self.kind, self._band = "banded", (lo, up, lu, piv)
                 return
-        if getattr(backend, "name", "") == "pardiso" and not is_symmetric(J):
-            # PARDISO runs as a symmetric LDL^T (upper triangle only): an unsymmetric stage
-            # matrix (Lorentz / back-EMF couplings) goes to SuperLU
+        if getattr(backend, "name", "") == "pardiso" and getattr(backend, "symmetric", True) and not is_symmetric(J):
+            # a symmetric PARDISO instance is an LDL^T of the upper triangle: an unsymmetric
+            # stage matrix (Lorentz / back-EMF couplings) goes to its mtype-11 companion (LU,
+            # kept by the instance, so its analysis is reused), SuperLU if that fails
+            companion = getattr(backend, "unsymmetric", None)
+            if companion is not None:
+                try:
+                    self._backend = companion().factorize(J)
+                    self._owner = backend  # the companion lives (is released) with its owner
+                    self.kind = "pardiso_unsym"
+                    return
+                except RuntimeError:  # PardisoError, SingularFactorError (non-finite entry)
+                    pass
             self._backend = get_backend("superlu", symmetric=False).factorize(J)
             self.kind = "superlu-colamd"
             return

@@ -1,6 +1,8 @@
 """PARDISO (Intel MKL) as a factorisation backend: supernodal LDLᵀ of real symmetric
-indefinite matrices (``mtype = -2``) with the fill-reducing analysis reused per sparsity
-pattern (issue 10; measurements in docs/engine.md, "Supernodal backend (measured)").
+indefinite matrices (``mtype = -2``) and, with ``symmetric=False``, LU of real unsymmetric
+ones (``mtype = 11``), the fill-reducing analysis reused per sparsity pattern (issue 10;
+measurements in docs/engine.md, "Supernodal backend (measured)" and "Unsymmetric stage
+matrices (round 4)").
 
 Contract
 --------
@@ -58,6 +60,24 @@ backend (registry name ``"pardiso"``) with the interface of the linear-solver la
   analysis, iparm(15); permanent + factorisation, iparm(16) + iparm(17)).
 * counters ``analyses``, ``factorizations``, ``solves``.
 * ``release()``: phase -1 (all MKL memory of this instance); also in ``__del__``.
+
+Unsymmetric mode (``symmetric=False``, registry name ``"pardiso_unsym"``; the companion
+``unsymmetric()`` of a symmetric instance, to which ``rve.solvers.newton.StageFactorisation``
+sends the unsymmetric stage matrices of the dynamic scenes): ``mtype = 11`` on the *full*
+pattern, handed to PARDISO as the CSR of A itself (a CSC input's entries are mapped to
+their true (row, column) once per pattern, so the gather of the values per factorisation
+is the only per-call work, as in the symmetric mode; no transposed solve), the diagonal
+added to the pattern as in the symmetric mode. MKL's settings for real unsymmetric
+matrices: nonsymmetric weighted matching and scaling (iparm(13) = iparm(11) = 1, with
+``matching``), pivot perturbation 1e-13 (iparm(10) = 13), no Bunch–Kaufman
+(iparm(21) = 0); ``refinement=0`` again (iparm(8) = 0: two refinement steps when pivots
+were perturbed: measured on the full-size impact stage matrix two forced steps tripled the
+solve, 28 → 90 ms, and left the backward error at 2e-16). Analysis reuse, the sub-pattern /
+union rules, ``analyse_stored``, ``drop_zeros`` and the stored-structure fast path are
+those of the symmetric mode, on the full pattern. There is no inertia: ``negative_pivots``
+/ ``positive_pivots`` and ``factorize(A, inertia=True)`` raise ``ValueError``
+(``provides_inertia`` is False; ``stats()['negative_pivots']`` is None), and
+``rve.solvers.linear.factor_inertia`` leaves such a backend to SuperLU.
 
 Pivoting (MKL's recommendation for symmetric indefinite matrices): Bunch–Kaufman 1×1 and
 2×2 pivots within the supernodes (iparm(21) = 1) with pivot perturbation (iparm(10) = 8);
@@ -232,34 +252,56 @@ def _upper_entries(A):
     return rows[keep] * n + cols[keep], keep
 
 
+def _full_entries(A):
+    """``(keys, positions)`` of all entries of the canonical square CSR or CSC matrix ``A``
+    in its true orientation: keys ``row * n + col`` (sorted for CSR, column-major for CSC)
+    and their positions in ``A.data``."""
+    n = A.shape[0]
+    major = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
+    minor = A.indices.astype(np.int64)
+    keys = major * n + minor if A.format == "csr" else minor * n + major
+    return keys, np.arange(keys.size, dtype=np.int64)
+
+
 class PardisoFactorization:
-    """MKL PARDISO LDLᵀ of a real symmetric (indefinite) sparse matrix (module docstring)."""
+    """MKL PARDISO of a real sparse matrix: LDLᵀ of a symmetric indefinite one
+    (``symmetric=True``, mtype -2) or LU of an unsymmetric one (``symmetric=False``,
+    mtype 11); module docstring."""
 
     name = "pardiso"
     provides_inertia = True
     reuses_analysis = True
 
     def __init__(self, threads: Optional[int] = 1, matching: bool = True, drop_zeros: bool = True,
-                 refinement: int = 0, check: bool = False, ordering: int = 2, reuse_subpattern: bool = True,
-                 grow_limit: float = 1.25, analyse_stored: bool = False):
+                 refinement: int = 0, check: bool = False, ordering: int = 2,
+                 reuse_subpattern: bool = True, grow_limit: float = 1.25, analyse_stored: bool = False,
+                 symmetric: bool = True):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"PARDISO is not available: {_REASON}")
         self._lib, self._fn = lib
         self.threads = None if threads is None else int(threads)
-        self.symmetric = True
-        self.mtype = -2
+        self.symmetric = bool(symmetric)
+        self.mtype = -2 if self.symmetric else 11
+        self.provides_inertia = self.symmetric
+        if not self.symmetric:
+            self.name = "pardiso_unsym"
+        self._entries = _upper_entries if self.symmetric else _full_entries
+        self._options = dict(threads=threads, matching=matching, drop_zeros=drop_zeros, refinement=refinement,
+                             check=check, ordering=ordering, reuse_subpattern=reuse_subpattern,
+                             grow_limit=grow_limit, analyse_stored=analyse_stored)
+        self._unsym = None               # the mtype-11 companion (``unsymmetric()``)
         self.pt = np.zeros(64, dtype=np.int64)  # PARDISO's internal handle (opaque pointers)
         self.iparm = np.zeros(64, dtype=np.int32)
         ip = self.iparm
         ip[0] = 1                        # iparm(1): no solver defaults, all set here
         ip[1] = int(ordering)            # iparm(2): 2 = METIS nested dissection, 0 = minimum degree
         ip[7] = int(refinement)          # iparm(8): max iterative refinement steps (0: auto, 2 if perturbed)
-        ip[9] = 8                        # iparm(10): pivot perturbation 1e-8
+        ip[9] = 8 if self.symmetric else 13  # iparm(10): pivot perturbation 1e-8 (-2) / 1e-13 (11)
         ip[10] = 1 if matching else 0    # iparm(11): scaling
-        ip[12] = 1 if matching else 0    # iparm(13): symmetric weighted matching
+        ip[12] = 1 if matching else 0    # iparm(13): (symmetric / nonsymmetric) weighted matching
         ip[17] = -1                      # iparm(18): report factor nonzeros
-        ip[20] = 1                       # iparm(21): Bunch-Kaufman 1x1 and 2x2 pivoting
+        ip[20] = 1 if self.symmetric else 0  # iparm(21): Bunch-Kaufman 1x1 and 2x2 pivoting (symmetric only)
         ip[23] = 0                       # iparm(24): classic factorisation (one thread)
         ip[26] = 1 if check else 0       # iparm(27): matrix checker
         ip[34] = 1                       # iparm(35): zero-based indices
@@ -345,7 +387,7 @@ class PardisoFactorization:
         """``src`` of ``A`` on the analysed pattern, or None when an entry of ``A`` is not in it."""
         ak = self._keys
         pos = np.searchsorted(ak, keys)
-        if pos.size and (pos[-1] >= ak.size or not np.array_equal(ak[pos], keys)):
+        if pos.size and (pos.max() >= ak.size or not np.array_equal(ak[pos], keys)):
             return None
         src = np.full(ak.size, -1, dtype=np.int64)
         src[pos] = keep
@@ -361,7 +403,7 @@ class PardisoFactorization:
             return
         if old is not None and old[3] is None and S.format == old[0] and _same_structure(S, old[1], old[2]):
             return  # this structure was found not to lie in the analysed pattern
-        keys, keep = _upper_entries(S)
+        keys, keep = self._entries(S)
         src = self._map(S, keys, keep)
         self._stored_fast = (S.format, S.indptr, S.indices, src, src is not None and bool(np.any(src < 0)))
 
@@ -373,7 +415,7 @@ class PardisoFactorization:
         if self._alive:
             self.release()
         n = self.n = int(A.shape[0])
-        keys, keep = _upper_entries(A)
+        keys, keep = self._entries(A)
         diag = np.arange(n, dtype=np.int64) * (n + 1)
         self.inserted_diagonal = int(n - np.count_nonzero(np.isin(diag, keys, assume_unique=True)))
         parts = [keys, diag] + ([] if _extra_keys is None else [_extra_keys])
@@ -401,6 +443,8 @@ class PardisoFactorization:
         ``rve.solvers.linear.SingularFactorError`` when a pivot was perturbed (a
         near-singular matrix; the factorisation stays usable). A non-finite entry raises
         ``SingularFactorError`` too."""
+        if inertia and not self.symmetric:
+            raise ValueError("pardiso_unsym (mtype 11, LU) gives no inertia")
         fast = self._stored_fast
         if (fast is not None and fast[3] is not None and self._alive and sp.issparse(A) and A.format == fast[0]
                 and A.shape == (self.n, self.n) and _same_structure(A, fast[1], fast[2])):
@@ -429,7 +473,7 @@ class PardisoFactorization:
         if not (self._alive and self._same_pattern(A)):
             src = None
             if self._alive and self.reuse_subpattern and A.shape[0] == self.n:
-                keys, keep = _upper_entries(A)
+                keys, keep = self._entries(A)
                 ak = self._keys
                 pos = np.minimum(np.searchsorted(ak, keys), ak.size - 1)
                 n_new = int(np.count_nonzero(ak[pos] != keys))
@@ -441,7 +485,7 @@ class PardisoFactorization:
                 elif self.analyse_stored and self._stored is not None and self._stored.nnz > A.nnz:
                     # analyse the stored pattern (explicit zeros included: e.g. the contact
                     # map's candidate pairs) so that later nonzero patterns lie in it
-                    self.analyse(A, _extra_keys=_upper_entries(self._stored)[0])
+                    self.analyse(A, _extra_keys=self._entries(self._stored)[0])
                     src = True
                 else:
                     grow = ak.size + n_new <= self.grow_limit * (keys.size + self.n)
@@ -449,7 +493,7 @@ class PardisoFactorization:
                     src = True
             if src is None:
                 stored = self._stored if self.analyse_stored and self._stored.nnz > A.nnz else None
-                self.analyse(A, _extra_keys=None if stored is None else _upper_entries(stored)[0])
+                self.analyse(A, _extra_keys=None if stored is None else self._entries(stored)[0])
         self._a = self._values(A)
         self._factored = False
         self._call(22)
@@ -475,18 +519,23 @@ class PardisoFactorization:
         self.refinement_steps = int(self.iparm[6])
         return np.ascontiguousarray(x)
 
-    @property
-    def negative_pivots(self) -> int:
-        """iparm(23): negative eigenvalues of the last factorised matrix."""
+    def _no_inertia(self) -> None:
+        if not self.symmetric:
+            raise ValueError("pardiso_unsym (mtype 11, LU of an unsymmetric matrix) gives no inertia")
         if not self._factored:
             raise RuntimeError("no factorisation")
+
+    @property
+    def negative_pivots(self) -> int:
+        """iparm(23): negative eigenvalues of the last factorised matrix (symmetric mode;
+        ``ValueError`` for mtype 11, whose pivots say nothing about eigenvalues)."""
+        self._no_inertia()
         return int(self.iparm[22])
 
     @property
     def positive_pivots(self) -> int:
-        """iparm(22): positive eigenvalues of the last factorised matrix."""
-        if not self._factored:
-            raise RuntimeError("no factorisation")
+        """iparm(22): positive eigenvalues of the last factorised matrix (symmetric mode)."""
+        self._no_inertia()
         return int(self.iparm[21])
 
     @property
@@ -507,11 +556,24 @@ class PardisoFactorization:
     def stats(self) -> dict:
         return {"analyses": self.analyses, "factorizations": self.factorizations, "solves": self.solves,
                 "subpattern_reuses": self.subpattern_reuses, "stored_fast": self.stored_fast,
-                "negative_pivots": int(self.iparm[22]), "perturbed_pivots": self.perturbed_pivots,
+                "negative_pivots": int(self.iparm[22]) if self.symmetric else None, "perturbed_pivots": self.perturbed_pivots,
                 "refinement_steps": self.refinement_steps, "factor_nnz": self.factor_nnz, **self.memory_kb}
 
+    def unsymmetric(self) -> "PardisoFactorization":
+        """The mtype-11 companion of a symmetric instance (created on the first call with
+        the same options, then kept: its analysis is reused across the calls); ``self``
+        when this instance is already unsymmetric. ``release`` frees it too."""
+        if not self.symmetric:
+            return self
+        if self._unsym is None:
+            self._unsym = PardisoFactorization(symmetric=False, **self._options)
+        return self._unsym
+
     def release(self) -> None:
-        """Phase -1: free all of this instance's MKL memory."""
+        """Phase -1: free all of this instance's MKL memory (and its companion's)."""
+        comp = getattr(self, "_unsym", None)
+        if comp is not None:
+            comp.release()
         if self._alive:
             self._alive = False
             self._factored = False
