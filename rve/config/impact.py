@@ -162,9 +162,10 @@ class ImpactNewton(Section):
     jacobian_reuse: Literal[False, True, "auto"] = Field("auto", description="factorisation reuse (modified "
                                                                              "Newton)")
     reuse_contraction: Dimensionless = Field(0.5, gt=0, lt=1, description="refactorise above this contraction")
-    linear_backend: Literal["superlu_pruned", "superlu", "auto"] = Field(
-        "superlu_pruned", description="stage-matrix factorisation: superlu_pruned (SuperLU on the nonzero pattern, "
-                                      "rve.scenes.impact_solver), or a backend of rve.solvers.linear")
+    linear_backend: Literal["superlu_pruned", "superlu", "auto", "auto_pruned"] = Field(
+        "auto_pruned", description="stage-matrix factorisation: auto_pruned (PARDISO unsymmetric, mtype 11, where MKL "
+                                   "is available, else superlu_pruned), superlu_pruned (SuperLU on the nonzero pattern, "
+                                   "rve.scenes.impact_solver), or a backend of rve.solvers.linear")
 
 
 class ImpactOutput(Section):
