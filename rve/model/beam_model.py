@@ -217,6 +217,25 @@ class BeamModel:
         Q = joule_source(self.ops, self._emf(x, w, t), self.material.electrical_conductivity)
         return np.bincount(self.mesh.conn.ravel(), weights=Q.ravel(), minlength=self.mesh.n_nodes)
 
+    def joule_power_fused(self, x, w, t=None) -> np.ndarray:
+        """``joule_power`` by the compiled fused kernel the monolithic solve takes its Joule
+        rows from (``rve.kernels.electric.coupled_forms``: no Lorentz force, no tangents) when
+        ``rve.kernels.use_numba()``, else the numpy reference ``joule_power`` (the two agree to
+        rounding). Needs the electromagnetic term."""
+        from ..kernels import use_numba
+
+        if not use_numba():
+            return self.joule_power(x, w, t)
+        from ..kernels.electric import coupled_forms as compiled
+
+        em = self.assembler.term("electromagnetic")
+        a = em.active
+        st = ElementState(self.basis, self.layout, x, w, t)
+        S = em.seebeck if a["seebeck"] else 0.0
+        R, _ = compiled(self.ops, st.U, st.Uv if a["back_emf"] else None, st.T if S else None, st.V,
+                        self.field(t), self.material.electrical_conductivity, S, a["back_emf"], False, True, False)
+        return np.bincount(self.mesh.conn.ravel(), weights=-R["T"].ravel(), minlength=self.mesh.n_nodes)
+
     def row_scales(self, t_ref: float, x, w) -> np.ndarray:
         """Positive row scales (Jacobi scaling of the nominal stage matrix
         ``M + t_ref Fw + t_ref^2 Fx`` at the state (x, w)): the scaled stage residual of row i

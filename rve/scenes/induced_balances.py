@@ -32,7 +32,6 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..kernels import use_numba
 from ..model.assembler import ElementState
 from ..physics.contact_forms import hertz_width, lagrange_at, scalar_jump
 from ..physics.thermal_forms import capacity_matrix, conduction
@@ -142,21 +141,10 @@ class ThermalOperators:
 
     def joule_now(self, x, w, t):
         """Nodal Joule heat (W) at the state, not memoised: the compiled fused kernel the
-        monolithic solve takes its Joule rows from (``rve.kernels.electric.coupled_forms``,
-        no Lorentz force, no tangents) when ``rve.kernels.use_numba()``, else
-        ``BeamModel.joule_power`` (the numpy reference; the two agree to rounding)."""
-        base = self.base
-        if not use_numba():
-            return base.joule_power(x, w, t)
-        from ..kernels.electric import coupled_forms as compiled
-
-        em = base.assembler.term("electromagnetic")
-        a = em.active
-        st = ElementState(base.basis, base.layout, x, w, t)
-        S = em.seebeck if a["seebeck"] else 0.0
-        R, _ = compiled(base.ops, st.U, st.Uv if a["back_emf"] else None, st.T if S else None, st.V,
-                        base.field(t), base.material.electrical_conductivity, S, a["back_emf"], False, True, False)
-        return np.bincount(base.mesh.conn.ravel(), weights=-R["T"].ravel(), minlength=self.n)
+        monolithic solve takes its Joule rows from (``BeamModel.joule_power_fused``: compiled
+        when ``rve.kernels.use_numba()``, else ``BeamModel.joule_power``, the numpy reference;
+        the two agree to rounding)."""
+        return self.base.joule_power_fused(x, w, t)
 
     def joule(self, x, w, t):
         """Nodal Joule heat (W) at the state (memoised for the last state)."""
