@@ -85,12 +85,15 @@ def clamped_ends(fab: Fabric, mesh, layout: DofLayout | None = None, twist_gauge
 
 
 def contact_params(contact, rebuild_every: int, conduction: bool = True) -> ContactParams:
-    """``ContactParams`` of a contact section (``rve.config.fabric.FabricContact``), the
-    map rebuilt every ``rebuild_every`` steps. ``conduction=False`` zeroes the contact
-    heat transfer and conductance (the mechanics-only strain steps)."""
+    """``ContactParams`` of a contact section (``rve.config.fabric.FabricContact``, or a
+    dynamic scene's contact section: ``recompute_closest`` and ``onset`` take the
+    ``ContactParams`` defaults where the section has none), the map rebuilt every
+    ``rebuild_every`` steps. ``conduction=False`` zeroes the contact heat transfer and
+    conductance (the mechanics-only strain steps)."""
     return ContactParams(penalty=contact.penalty, heat_transfer=contact.heat_transfer if conduction else 0.0,
                          conductance=contact.conductance if conduction else 0.0, n_gp=contact.n_gp,
-                         margin=contact.margin, g_eps=contact.g_eps, recompute_closest=contact.recompute_closest,
+                         margin=contact.margin, g_eps=contact.g_eps,
+                         recompute_closest=getattr(contact, "recompute_closest", True),
                          rebuild_every=rebuild_every, onset=float(getattr(contact, "onset", 0.0)))
 
 

@@ -39,7 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from ..fem.assembly import DofLayout
-from ..model import BeamMaterial, BeamModel, CircuitBC, ContactParams, ContactSystem, Couplings, DirichletBC
+from ..fabrics.setup import contact_params
+from ..model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
 from ..model import RowScaledSystem
 from ..model.projectile import ImpactSystem, projectile_mesh
 from ..model.terms.projectile_contact import SphereContactTerm
@@ -142,8 +143,7 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
     base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, fields=fields, bcs=bcs, couplings=couplings,
                      circuits=circuit_in + circuit_leak)
     k = cfg.contact
-    params = ContactParams(penalty=k.penalty, heat_transfer=k.heat_transfer, conductance=k.conductance,
-                           n_gp=k.n_gp, margin=k.margin, g_eps=k.g_eps, rebuild_every=k.rebuild_every)
+    params = contact_params(k, k.rebuild_every)
     xf = np.zeros(base.n)
     base.nodal(xf)[:, :9] = weave.x0
     fabric = ContactSystem(base, params, xf)

@@ -47,7 +47,8 @@ import numpy as np
 
 from .dynamic_wire import field_ramp  # the one C2 switch-on of B
 from ..fem.assembly import DofLayout
-from ..model import BeamMaterial, BeamModel, CircuitBC, ContactParams, ContactSystem, Couplings, DirichletBC
+from ..fabrics.setup import contact_params
+from ..model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
 from ..model import RowScaledSystem
 from ..solvers.dirk import IntegrationFailure, integrate, sdirk
 from .induced_balances import StateBalances, ThermalOperators, ThermalPostSolver, balance_errors
@@ -130,8 +131,7 @@ def setup(cfg, mode: str | None = None) -> InducedProblem:
     base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, fields=fields, bcs=bcs, couplings=couplings,
                      circuits=circuit_in + circuit_leak, field_ramp=field_ramp(cfg.field.ramp_time))
     k = cfg.contact
-    params = ContactParams(penalty=k.penalty, heat_transfer=k.heat_transfer, conductance=k.conductance,
-                           n_gp=k.n_gp, margin=k.margin, g_eps=k.g_eps, rebuild_every=k.rebuild_every)
+    params = contact_params(k, k.rebuild_every)
     x0 = np.zeros(base.n)
     base.nodal(x0)[:, :9] = weave.x0
     system = ContactSystem(base, params, x0)
