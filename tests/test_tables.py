@@ -777,7 +777,9 @@ def test_cf_checker_reports_no_errors(ci_table_file, swept_table, tmp_path):
     import shutil
     import subprocess
 
-    exe = shutil.which("cfchecks")
+    from cf_checker import cfchecks_command
+
+    exe, env = cfchecks_command(tmp_path)
     if exe is None:
         pytest.skip("the CF checker (pip cfchecker; needs Debian libudunits2-0 / udunits-bin) is not installed")
     import netCDF4
@@ -792,7 +794,7 @@ def test_cf_checker_reports_no_errors(ci_table_file, swept_table, tmp_path):
             f.Conventions = "CF-1.8"
         run = subprocess.run([exe, "-v", "1.8", "-s", str(cft / "standard_name_table.xml"),
                               "-a", str(cft / "area_type_table.xml"), "-r", str(cft / "region_names.xml"),
-                              str(path)], capture_output=True, text=True, timeout=300)
+                              str(path)], capture_output=True, text=True, timeout=300, env=env)
         assert "ERRORS detected: 0" in run.stdout, run.stdout[-3000:] + run.stderr[-2000:]
         assert "WARNINGS given: 0" in run.stdout, run.stdout[-3000:]
         assert run.returncode == 0
