@@ -103,3 +103,46 @@ def test_bad_accuracy_file_names_file_and_key(tmp_path):
     bad.write_text("{")
     with pytest.raises(ValueError, match="not JSON"):
         read_accuracy(bad)
+
+
+def test_stated_error_and_per_mode_errors_are_written(tmp_path):
+    """A study file with the reference's own error and per-mode maxima: the mesh part is the
+    stated error (difference + reference error), and each mode gets its own bound."""
+    import xarray as xr
+
+    acc = _accuracy(12, 50.0)
+    acc["mesh"].update({"stated_relative_error": {"reaction_force": 0.02}, "reference_error": {"reaction_force": 0.007},
+                        "by_mode": {"reaction_force": {"uniaxial": {"max": 0.005, "median": 0.001},
+                                                       "shear": {"max": 0.013, "median": 0.004}}}})
+    acc["penalty"]["by_mode"] = {"reaction_force": {"uniaxial": {"max": 0.001, "median": 0.0}}}
+    ds = xr.Dataset({"reaction_force": ("strain", [1.0, 2.0])})
+    assert annotate_accuracy(ds, acc, 12, 50.0) == ["reaction_force"]
+    a = ds["reaction_force"].attrs
+    assert a["estimated_relative_error_mesh"] == pytest.approx(0.02)
+    assert a["estimated_relative_error"] == pytest.approx(0.021)
+    assert a["estimated_relative_error_uniaxial"] == pytest.approx(0.005 + 0.007 + 0.001)
+    assert a["estimated_relative_error_shear"] == pytest.approx(0.013 + 0.007)
+    assert "own estimated error" in ds.attrs["comment"]
+
+
+def test_shipped_accuracy_file_is_of_the_default_run():
+    """configs/rve/plain_weave_accuracy.json states the accuracy of the run that names it:
+    the same elements per fibril and penalty as the default config resolves to, references
+    finer/stiffer than the default, and an error for every table quantity."""
+    pipe = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())["rve"]
+    for name in pipe["default_runs"]:
+        spec = pipe["runs"][name]
+        if not spec.get("accuracy"):
+            continue
+        cfg = load_run_config(spec)
+        acc = read_accuracy(ROOT / spec["accuracy"])
+        assert int(acc["default"]["mesh_elements"]) == cfg.mesh.elements
+        assert float(acc["default"]["contact_penalty"]) == pytest.approx(cfg.contact.penalty)
+        assert acc["mesh"]["reference"] > cfg.mesh.elements
+        assert acc["penalty"]["reference"] > cfg.contact.penalty
+        from rve.studies.table_convergence import QUANTITIES
+
+        for part in ("mesh", "penalty"):
+            errs = acc[part]["estimated_relative_error"]
+            assert set(errs) == set(QUANTITIES), (part, set(errs))
+            assert all(e is not None and e >= 0 for e in errs.values())

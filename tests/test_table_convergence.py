@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from rve.studies.table_convergence import (NEGLIGIBLE, combo_wall_times, observed_rates, relative_errors,
-                                           summarize_errors, table_convergence_job)
+from rve.studies.table_convergence import (NEGLIGIBLE, combo_costs, combo_wall_times, observed_rates,
+                                           reference_error, relative_errors, summarize_by_mode, summarize_errors,
+                                           table_convergence_job)
 
 
 def _series(order=2.0, Ns=(6.0, 12.0, 24.0, 48.0), c=0.3):
@@ -56,6 +57,38 @@ def test_observed_rate_recovers_the_order_against_an_exact_reference():
     assert rates1["probe_resistance"] == pytest.approx(1.0, abs=0.02)
 
 
+def test_reference_error_is_the_reference_runs_own_error_for_a_first_order_series():
+    # q(N) = exact (1 + c (s+1) / N): Richardson with order 1 from (24, 48) gives the error of
+    # the 48-element run against the exact value, which the study itself cannot see
+    ds, vals, exact = _series(order=1.0)
+    summ = summarize_errors(relative_errors(ds, 48.0, "mesh_elements"), "mesh_elements")
+    est = reference_error(summ, 48.0)
+    ref = vals[-1, 0]
+    true = np.max(np.abs(ref - exact) / np.abs(ref).max())
+    assert est["probe_resistance"] == pytest.approx(true, rel=1e-10)
+    # a second-order series: the order-1 estimate is conservative (larger than the truth)
+    ds2, vals2, exact2 = _series(order=2.0)
+    s2 = summarize_errors(relative_errors(ds2, 48.0, "mesh_elements"), "mesh_elements")
+    true2 = np.max(np.abs(vals2[-1, 0] - exact2) / np.abs(vals2[-1, 0]).max())
+    assert reference_error(s2, 48.0)["probe_resistance"] > true2
+
+
+def test_errors_by_mode_give_max_and_median_per_mode():
+    rows = [{"quantity": "q", "mode": m, "mesh_elements": 12.0, "relative_error": e}
+            for m, e in (("uniaxial", 0.1), ("uniaxial", 0.3), ("uniaxial", 0.2), ("shear", 0.5), ("shear", np.nan))]
+    by = summarize_by_mode(rows, "mesh_elements")
+    assert by["q"]["uniaxial"][12.0] == {"max": 0.3, "median": 0.2}
+    assert by["q"]["shear"][12.0] == {"max": 0.5, "median": 0.5}
+
+
+def test_costs_sum_cpu_and_take_the_largest_rss(tmp_path):
+    for k, (s, cpu, rss) in enumerate(((1.5, 1.0, 300.0), (2.5, 2.25, 500.0))):
+        p = tmp_path / "run" / "mesh_elements-6" / "strain" / f"u{k}.tsv"
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(f"s\th:m:s\tmax_rss\tmean_load\tcpu_time\n{s}\t0:00:01\t{rss}\t90\t{cpu}\n")
+    assert combo_costs(tmp_path, "run") == {"mesh_elements-6": {"wall_s": 4.0, "cpu_s": 3.25, "max_rss_mb": 500.0}}
+
+
 def test_wall_times_sum_the_jobs_of_each_combination(tmp_path):
     for combo, secs in (("mesh_elements-6", (1.5, 2.5)), ("mesh_elements-12", (4.0, 6.0))):
         for k, s in enumerate(secs):
@@ -76,6 +109,12 @@ def test_job_writes_report_plot_and_accuracy(tmp_path):
     assert acc["mesh"]["reference"] == 48.0 and acc["penalty"]["reference"] == 150.0
     assert 0 < acc["mesh"]["estimated_relative_error"]["probe_resistance"] < 0.01
     assert json.loads(outs["json"].read_text())["mesh"]["meets_targets"]["probe_resistance"] is True
+    m = acc["mesh"]
+    # the stated error adds the reference's own (Richardson) error to the difference
+    assert m["stated_relative_error"]["probe_resistance"] == pytest.approx(
+        m["estimated_relative_error"]["probe_resistance"] + m["reference_error"]["probe_resistance"])
+    assert set(m["by_mode"]["probe_resistance"]) == {"uniaxial"}
+    assert set(m["runs"]) == {"6", "12", "24", "48"}
     assert "| probe resistance |" in outs["md"].read_text()
     assert outs["png"].stat().st_size > 10_000
     assert len(outs["csv"].read_text().splitlines()) > 30

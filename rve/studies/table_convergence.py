@@ -51,8 +51,8 @@ from ..io.atomic import atomic_path, atomic_write_text
 from ..io.provenance import logging_to
 from .convergence import fit_order
 
-__all__ = ["QUANTITIES", "TARGETS", "NEGLIGIBLE", "relative_errors", "summarize_errors", "observed_rates",
-           "combo_wall_times", "convergence_report", "table_convergence_job"]
+__all__ = ["QUANTITIES", "TARGETS", "NEGLIGIBLE", "REFERENCE_ORDER", "relative_errors", "summarize_errors",
+           "summarize_by_mode", "observed_rates", "reference_error", "combo_costs", "combo_wall_times", "convergence_report", "table_convergence_job"]
 
 log = logging.getLogger("rve.studies.table_convergence")
 
@@ -72,6 +72,8 @@ TARGETS = {"reaction_force": 0.02, "membrane_force": 0.02, "probe_resistance": 0
            "contact_resistance": 0.01, "temperature_rise_max": 0.02}
 #: labels smaller than this fraction of the quantity's largest reference value are not assessed
 NEGLIGIBLE = 0.05
+#: the convergence order assumed to estimate the finest mesh's own error (``reference_error``)
+REFERENCE_ORDER = 1.0
 
 _LEAD = ("mode", "strain")
 
@@ -132,8 +134,11 @@ def observed_rates(summary: Mapping, h_of=lambda v: 1.0 / v) -> dict:
     return out
 
 
-def combo_wall_times(bench_root: PathLike, run: str) -> dict:
-    """{combo: summed wall seconds of its jobs} from the Snakemake benchmark files."""
+def combo_costs(bench_root: PathLike, run: str) -> dict:
+    """{combo: {"wall_s", "cpu_s", "max_rss_mb"}}: the summed wall and CPU seconds of a
+    combination's jobs and the largest resident set of any of them, from the Snakemake
+    benchmark files (CPU is the fair work figure on a shared machine: wall times of jobs that
+    ran under other jobs' load are inflated, their CPU time is not)."""
     root = Path(bench_root) / run
     out: dict = {}
     if not root.exists():
@@ -141,8 +146,54 @@ def combo_wall_times(bench_root: PathLike, run: str) -> dict:
     for p in sorted(root.glob("*/**/*.tsv")):
         combo = p.relative_to(root).parts[0]
         rows = list(csv.DictReader(io.StringIO(p.read_text()), delimiter="\t"))
-        if rows:
-            out[combo] = out.get(combo, 0.0) + float(rows[-1]["s"])
+        if not rows:
+            continue
+        last = rows[-1]
+        c = out.setdefault(combo, {"wall_s": 0.0, "cpu_s": 0.0, "max_rss_mb": 0.0})
+        c["wall_s"] += float(last["s"])
+        c["cpu_s"] += _float(last.get("cpu_time"))
+        c["max_rss_mb"] = max(c["max_rss_mb"], _float(last.get("max_rss")))
+    return out
+
+
+def _float(v) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):   # "-" where psutil could not read the figure
+        return 0.0
+
+
+def combo_wall_times(bench_root: PathLike, run: str) -> dict:
+    """{combo: summed wall seconds of its jobs} from the Snakemake benchmark files."""
+    return {k: v["wall_s"] for k, v in combo_costs(bench_root, run).items()}
+
+
+def summarize_by_mode(rows: Sequence[Mapping], dim: str) -> dict:
+    """{quantity: {mode: {run value: {"max": .., "median": ..}}}} over labels and strains."""
+    acc: dict = {}
+    for r in rows:
+        if np.isfinite(r["relative_error"]):
+            acc.setdefault(r["quantity"], {}).setdefault(r["mode"], {}).setdefault(r[dim], []).append(
+                r["relative_error"])
+    return {q: {m: {v: {"max": float(np.max(e)), "median": float(np.median(e))} for v, e in sorted(runs.items())}
+                for m, runs in modes.items()} for q, modes in acc.items()}
+
+
+def reference_error(summary: Mapping, reference: float, order: float = REFERENCE_ORDER) -> dict:
+    """{quantity: estimated error of the reference run itself}: the difference of the next
+    finer-than-all-others run N_2 to the reference N_1 times the Richardson factor
+    r / (1 - r), r = (N_2 / N_1)^order, i.e. what is left of a power-law error of that
+    order at N_1 (``order`` = 1, the observed order of the median force and resistance
+    errors, is the conservative choice: a higher order gives a smaller factor)."""
+    out = {}
+    for q, errs in summary.items():
+        coarser = [v for v in errs if v < reference]
+        if not coarser:
+            out[q] = None
+            continue
+        n2 = max(coarser)
+        r = (n2 / reference) ** order
+        out[q] = float(errs[n2] * r / (1.0 - r))
     return out
 
 
@@ -154,7 +205,7 @@ def _combo_value(combo: str, dim: str) -> Optional[float]:
     return None
 
 
-def _md_table(summary, rates, times, dim, reference, default, unit) -> list[str]:
+def _md_table(summary, rates, times, dim, reference, default, unit, cpu=None, rss=None) -> list[str]:
     vals = sorted({v for e in summary.values() for v in e} | {reference})
     head = f"| quantity | " + " | ".join(f"{dim} = {v:g}{unit}" for v in vals) + " | observed rate |"
     lines = [head, "|" + "---|" * (len(vals) + 2)]
@@ -167,6 +218,12 @@ def _md_table(summary, rates, times, dim, reference, default, unit) -> list[str]
                      f"| {QUANTITIES[q]} | " + " | ".join(cells) + " | none |")
     lines.append("| wall time (sum of jobs) | " + " | ".join(
         f"{times[v]:.0f} s" if v in times else "n/a" for v in vals) + " | |")
+    if cpu:
+        lines.append("| CPU time (sum of jobs) | " + " | ".join(
+            f"{cpu[v]:.0f} s" if cpu.get(v) else "n/a" for v in vals) + " | |")
+    if rss:
+        lines.append("| peak RSS (largest job) | " + " | ".join(
+            f"{rss[v]:.0f} MB" if rss.get(v) else "n/a" for v in vals) + " | |")
     return lines
 
 
@@ -180,7 +237,28 @@ def convergence_report(mesh, penalty, default: Mapping) -> str:
             continue
         out += [f"## {title}", ""]
         out += _md_table(st["summary"], st["rates"], st["times"], st["dim"], st["reference"],
-                         default.get(st["dim"]), unit)
+                         default.get(st["dim"]), unit, st.get("cpu"), st.get("rss"))
+        dv = default.get(st["dim"])
+        if st.get("by_mode"):
+            runs = sorted({v for q in st["by_mode"].values() for m in q.values() for v in m})
+            out += ["", f"Per mode, max / median over labels and strains ({st['dim']} = "
+                    + ", ".join(f"{v:g}" for v in runs) + "):", "",
+                    "| quantity | mode | " + " | ".join(f"{v:g}" for v in runs) + " |",
+                    "|" + "---|" * (len(runs) + 2)]
+            for q, modes in st["by_mode"].items():
+                for m, e in modes.items():
+                    out.append(f"| {QUANTITIES[q]} | {m} | " + " | ".join(
+                        (f"{100 * e[v]['max']:.3g} / {100 * e[v]['median']:.3g} %" if v in e else "n/a")
+                        for v in runs) + " |")
+        if st.get("reference_error"):
+            out += ["", f"Estimated error of the reference run itself (Richardson, order {REFERENCE_ORDER:g}, "
+                    "from the next-finest run) and the stated error of the default run (difference to the "
+                    "reference + the reference's own error):", ""]
+            for q, er in st["reference_error"].items():
+                e = st["summary"][q].get(dv)
+                if er is not None and e is not None:
+                    out.append(f"* {QUANTITIES[q]}: reference {100 * er:.3g} %, default {100 * e:.3g} % "
+                               f"-> stated {100 * (e + er):.3g} %")
         if st.get("overlap"):
             out += ["", "max overlap / R after relaxation: " + ", ".join(
                 f"{st['dim']} = {k:g}: {v:.3g}" for k, v in sorted(st["overlap"].items()))]
@@ -201,8 +279,10 @@ def _plot(path, mesh, penalty, default):
         for k, (q, errs) in enumerate(st["summary"].items()):
             vals = sorted(errs)
             if dim == "mesh_elements":
-                x = [st["times"].get(v, np.nan) for v in vals]
-                ax.set_xlabel("work: summed job wall time of the run [s]")
+                cpu = st.get("cpu") or {}
+                x = [cpu.get(v) or st["times"].get(v, np.nan) for v in vals]
+                ax.set_xlabel("work: summed job CPU time of the run [s]" if cpu else
+                              "work: summed job wall time of the run [s]")
             else:
                 x = vals
                 ax.set_xscale("log")
@@ -254,12 +334,16 @@ def _study(ds, dim, bench_root, run, states_root):
     summary = summarize_errors(rows, dim)
     h_of = (lambda v: 1.0 / v)
     rates = observed_rates(summary, h_of)
-    times = {}
-    for combo, t in combo_wall_times(bench_root, run).items():
+    times, cpu, rss = {}, {}, {}
+    for combo, c in combo_costs(bench_root, run).items():
         v = _combo_value(combo, dim)
         if v is not None:
-            times[v] = t
-    st = {"dim": dim, "reference": reference, "summary": summary, "rates": rates, "times": times}
+            times[v], cpu[v], rss[v] = c["wall_s"], c["cpu_s"], c["max_rss_mb"]
+    st = {"dim": dim, "reference": reference, "summary": summary, "rates": rates, "times": times, "cpu": cpu,
+          "rss": rss, "by_mode": summarize_by_mode(rows, dim),
+          # the finest mesh's own error (Richardson, order REFERENCE_ORDER); the penalty's limit
+          # P* -> inf is not extrapolated (rate 0.2-0.4: docs/table_accuracy.md)
+          "reference_error": reference_error(summary, reference) if dim == "mesh_elements" else {}}
     if dim == "contact_penalty":
         st["overlap"] = _overlaps(states_root, run, dim)
     return st, rows
@@ -292,9 +376,20 @@ def table_convergence_job(mesh_table, penalty_table, runs: Mapping[str, str], ou
                 continue
             dv = default.get(st["dim"])
             errs = {q: e.get(dv) for q, e in st["summary"].items()}
+            ref_err = st.get("reference_error") or {}
+            stated = {q: (None if e is None else e + (ref_err.get(q) or 0.0)) for q, e in errs.items()}
+            cpu = st.get("cpu") or {}
             acc[name] = {"reference": st["reference"], "estimated_relative_error": errs,
+                         "reference_error": ref_err, "stated_relative_error": stated,
+                         "by_mode": {q: {m: e.get(dv) for m, e in modes.items()} for q, modes in st["by_mode"].items()},
                          "observed_rate": st["rates"],
-                         "meets_targets": {q: (e is not None and e <= TARGETS.get(q, np.inf)) for q, e in errs.items()},
+                         "runs": {f"{v:g}": {"max_relative_error": {q: st["summary"][q].get(v) for q in st["summary"]},
+                                            "wall_s": st["times"].get(v), "cpu_s": cpu.get(v),
+                                            "max_rss_mb": (st.get("rss") or {}).get(v)}
+                                  for v in sorted({v for e in st["summary"].values() for v in e} | {st["reference"]})},
+                         "meets_targets": {q: (e is not None and e <= TARGETS.get(q, np.inf)) for q, e in stated.items()},
+                         "cpu_time_ratio_default_to_reference": (cpu[dv] / cpu[st["reference"]]
+                                                                 if cpu.get(dv) and cpu.get(st["reference"]) else None),
                          "wall_time_ratio_default_to_reference": (st["times"].get(dv, np.nan)
                                                                   / st["times"].get(st["reference"], np.nan)
                                                                   if st["times"].get(st["reference"]) else None)}

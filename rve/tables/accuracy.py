@@ -19,9 +19,13 @@ when the table's run is the study's default (the same elements per fibril and th
 penalty P*, N/mm²), writes on every quantity ``v`` the study assessed (``QUANTITIES`` of
 the study) the attributes
 
-* ``estimated_relative_error_mesh``: max relative difference to the finest mesh,
+* ``estimated_relative_error_mesh``: the study's ``stated_relative_error`` of the mesh (max
+  relative difference to the finest mesh plus the finest mesh's own estimated error) where
+  the file has it, else the plain difference ``estimated_relative_error``,
 * ``estimated_relative_error_penalty``: max relative difference to the stiffest penalty,
 * ``estimated_relative_error``: their sum (the bound a user should read),
+* ``estimated_relative_error_<mode>``: the same sum from the per-mode maxima (``by_mode``),
+  where the file has them (the shear mode's errors are larger than the uniaxial ones),
 
 and the global attributes ``accuracy_source`` (the study: references, date, commit) and a
 line of ``comment``. Returns the annotated variable names. A table of another mesh or
@@ -72,8 +76,10 @@ def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contac
         log.warning("accuracy %s is of %s elements and P* = %s N/mm^2, this table's run has %s and %s: not annotated",
                     source, d["mesh_elements"], d["contact_penalty"], mesh_elements, contact_penalty)
         return []
-    mesh = accuracy["mesh"].get("estimated_relative_error", {})
+    mesh = accuracy["mesh"].get("stated_relative_error") or accuracy["mesh"].get("estimated_relative_error", {})
     pen = accuracy["penalty"].get("estimated_relative_error", {})
+    ref_err = accuracy["mesh"].get("reference_error") or {}
+    by_m, by_p = accuracy["mesh"].get("by_mode") or {}, accuracy["penalty"].get("by_mode") or {}
     done = []
     for name in sorted(set(mesh) | set(pen)):
         if name not in ds:
@@ -87,6 +93,13 @@ def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contac
         if ep is not None:
             a["estimated_relative_error_penalty"] = float(ep)
         a["estimated_relative_error"] = float((em or 0.0) + (ep or 0.0))
+        for mode in sorted(set(by_m.get(name) or {}) | set(by_p.get(name) or {})):
+            bm = ((by_m.get(name) or {}).get(mode) or {}).get("max")
+            bp = ((by_p.get(name) or {}).get(mode) or {}).get("max")
+            if bm is None and bp is None:
+                continue
+            a[f"estimated_relative_error_{mode}"] = float((bm or 0.0) + (ref_err.get(name) or 0.0) * (bm is not None)
+                                                          + (bp or 0.0))
         done.append(name)
     refs = (f"finest mesh {accuracy['mesh'].get('reference')} elements per fibril, "
             f"stiffest penalty P* = {accuracy['penalty'].get('reference')} N/mm^2")
@@ -95,6 +108,7 @@ def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contac
                                    f"configuration; references: {refs}"
                                    + (f"; run {prov.get('date', '?')} at commit {prov.get('commit', '?')}" if prov else ""))
     line = ("estimated_relative_error on " + ", ".join(done) + " = max relative difference over strains and labels "
-            "to the finest mesh (…_mesh) plus to the stiffest penalty (…_penalty)")
+            "to the finest mesh" + (" plus that mesh's own estimated error" if ref_err else "")
+            + " (…_mesh) plus to the stiffest penalty (…_penalty)")
     ds.attrs["comment"] = (ds.attrs.get("comment", "") + "\n" + line).strip()
     return done
