@@ -687,9 +687,16 @@ def test_v1_table_still_opens_with_macro_quantities():
     assert np.isnan(float(ds["areal_density"]))  # version 1 did not record the fibril mass
 
 
+#: table variables fitted to the probe resistances (rve.homogenisation.network.fit_network)
+NETWORK_FIT = ("yarn_resistance", "contact_resistance", "network_fit_residual", "yarn_resistance_warp",
+               "yarn_resistance_weft")
+
+
 def test_gather_reproduces_the_v1_table_bit_for_bit(tmp_path):
     """The stored records of the v1 fixture's CI run, gathered by today's code: every
-    version-1 variable is identical (the new quantities are additions)."""
+    version-1 variable is identical (the new quantities are additions); the network-fit
+    parameters to their fit's own tolerance (where an iterative fit stops depends on
+    the library build)."""
     import yaml
 
     from rve.tables.jobs import gather_job
@@ -702,7 +709,15 @@ def test_gather_reproduces_the_v1_table_bit_for_bit(tmp_path):
     new, old = open_table(out), xr.open_dataset(DATA / "table_v1_ci.nc").load()
     assert new.attrs["rve_table_format"] == "rve-lookup-table/2"
     for name in old.data_vars:
-        np.testing.assert_array_equal(new[name].values, old[name].values, err_msg=name)
+        if name in NETWORK_FIT:
+            # an iterative least-squares fit (scipy least_squares, xtol = 1e-15 on log R, |log R|
+            # < 10): where it stops depends on the scipy/LAPACK build, so it reproduces to its
+            # own tolerance, 1e-15 x (1 + |log R|) < 1e-13 relative (9e-15 seen between
+            # machines; the measured quantities are plain arithmetic and stay bit for bit); the residual (rms of log R, ~1e-7) moves by the same absolute amount
+            tol = dict(rtol=0, atol=1e-13) if name == "network_fit_residual" else dict(rtol=1e-13, atol=0)
+            np.testing.assert_allclose(new[name].values, old[name].values, err_msg=name, **tol)
+        else:
+            np.testing.assert_array_equal(new[name].values, old[name].values, err_msg=name)
     for name in old.coords:
         assert list(new[name].values) == list(old[name].values), name
     assert float(new["areal_density"]) > 0
