@@ -82,8 +82,10 @@ def main(argv=None) -> int:
                 print(f"  {v:>8s} {r.get('cpu_s') or float('nan'):8.0f} {r.get('wall_s') or float('nan'):8.0f} "
                       f"{r.get('max_rss_mb') or float('nan'):12.0f}")
         r = st.get("cpu_time_ratio_default_to_reference")
-        if r:
-            print(f"  CPU time default / reference: {r:.3f} (wall times depend on the machine's load)")
+        w = st.get("wall_time_ratio_default_to_reference")
+        if r or w:
+            print(f"  time default / reference: CPU {r or float('nan'):.3f}, wall (summed jobs) {w or float('nan'):.3f}"
+                  " (wall times depend on the machine's load)")
     if a.write_accuracy:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
         stamp = time.strftime("%Y-%m-%d", time.gmtime((d / "accuracy.json").stat().st_mtime))
