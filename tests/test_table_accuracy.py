@@ -114,6 +114,7 @@ def test_stated_error_and_per_mode_errors_are_written(tmp_path):
     acc["mesh"].update({"stated_relative_error": {"reaction_force": 0.02}, "reference_error": {"reaction_force": 0.007},
                         "by_mode": {"reaction_force": {"uniaxial": {"max": 0.005, "median": 0.001},
                                                        "shear": {"max": 0.013, "median": 0.004}}}})
+    acc["mesh"]["reference_error_by_mode"] = {"reaction_force": {"shear": 0.004}}   # uniaxial: the overall 0.007
     acc["penalty"]["by_mode"] = {"reaction_force": {"uniaxial": {"max": 0.001, "median": 0.0}}}
     ds = xr.Dataset({"reaction_force": ("strain", [1.0, 2.0])})
     assert annotate_accuracy(ds, acc, 12, 50.0) == ["reaction_force"]
@@ -121,7 +122,7 @@ def test_stated_error_and_per_mode_errors_are_written(tmp_path):
     assert a["estimated_relative_error_mesh"] == pytest.approx(0.02)
     assert a["estimated_relative_error"] == pytest.approx(0.021)
     assert a["estimated_relative_error_uniaxial"] == pytest.approx(0.005 + 0.007 + 0.001)
-    assert a["estimated_relative_error_shear"] == pytest.approx(0.013 + 0.007)
+    assert a["estimated_relative_error_shear"] == pytest.approx(0.013 + 0.004)
     assert "own estimated error" in ds.attrs["comment"]
 
 

@@ -115,6 +115,8 @@ def test_job_writes_report_plot_and_accuracy(tmp_path):
         m["estimated_relative_error"]["probe_resistance"] + m["reference_error"]["probe_resistance"])
     assert set(m["by_mode"]["probe_resistance"]) == {"uniaxial"}
     assert set(m["runs"]) == {"6", "12", "24", "48"}
+    assert m["reference_error_by_mode"]["probe_resistance"]["uniaxial"] == pytest.approx(
+        m["reference_error"]["probe_resistance"])   # one mode: the same figure
     assert "| probe resistance |" in outs["md"].read_text()
     assert outs["png"].stat().st_size > 10_000
     assert len(outs["csv"].read_text().splitlines()) > 30

@@ -344,6 +344,10 @@ def _study(ds, dim, bench_root, run, states_root):
           # the finest mesh's own error (Richardson, order REFERENCE_ORDER); the penalty's limit
           # P* -> inf is not extrapolated (rate 0.2-0.4: docs/table_accuracy.md)
           "reference_error": reference_error(summary, reference) if dim == "mesh_elements" else {}}
+    if dim == "mesh_elements":
+        st["reference_error_by_mode"] = {
+            q: {m: reference_error({q: {v: e["max"] for v, e in runs_.items()}}, reference)[q]
+                for m, runs_ in modes.items()} for q, modes in st["by_mode"].items()}
     if dim == "contact_penalty":
         st["overlap"] = _overlaps(states_root, run, dim)
     return st, rows
@@ -381,6 +385,7 @@ def table_convergence_job(mesh_table, penalty_table, runs: Mapping[str, str], ou
             cpu = st.get("cpu") or {}
             acc[name] = {"reference": st["reference"], "estimated_relative_error": errs,
                          "reference_error": ref_err, "stated_relative_error": stated,
+                         "reference_error_by_mode": st.get("reference_error_by_mode") or {},
                          "by_mode": {q: {m: e.get(dv) for m, e in modes.items()} for q, modes in st["by_mode"].items()},
                          "observed_rate": st["rates"],
                          "runs": {f"{v:g}": {"max_relative_error": {q: st["summary"][q].get(v) for q in st["summary"]},

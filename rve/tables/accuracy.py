@@ -24,8 +24,8 @@ the study) the attributes
   the file has it, else the plain difference ``estimated_relative_error``,
 * ``estimated_relative_error_penalty``: max relative difference to the stiffest penalty,
 * ``estimated_relative_error``: their sum (the bound a user should read),
-* ``estimated_relative_error_<mode>``: the same sum from the per-mode maxima (``by_mode``),
-  where the file has them (the shear mode's errors are larger than the uniaxial ones),
+* ``estimated_relative_error_<mode>``: the same sum from the per-mode maxima (``by_mode``,
+  ``reference_error_by_mode``), where the file has them (the shear mode's errors are larger than the uniaxial ones),
 
 and the global attributes ``accuracy_source`` (the study: references, date, commit) and a
 line of ``comment``. Returns the annotated variable names. A table of another mesh or
@@ -80,6 +80,7 @@ def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contac
     pen = accuracy["penalty"].get("estimated_relative_error", {})
     ref_err = accuracy["mesh"].get("reference_error") or {}
     by_m, by_p = accuracy["mesh"].get("by_mode") or {}, accuracy["penalty"].get("by_mode") or {}
+    ref_m = accuracy["mesh"].get("reference_error_by_mode") or {}
     done = []
     for name in sorted(set(mesh) | set(pen)):
         if name not in ds:
@@ -98,8 +99,8 @@ def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contac
             bp = ((by_p.get(name) or {}).get(mode) or {}).get("max")
             if bm is None and bp is None:
                 continue
-            a[f"estimated_relative_error_{mode}"] = float((bm or 0.0) + (ref_err.get(name) or 0.0) * (bm is not None)
-                                                          + (bp or 0.0))
+            rm = (ref_m.get(name) or {}).get(mode, ref_err.get(name)) if bm is not None else None
+            a[f"estimated_relative_error_{mode}"] = float((bm or 0.0) + (rm or 0.0) + (bp or 0.0))
         done.append(name)
     refs = (f"finest mesh {accuracy['mesh'].get('reference')} elements per fibril, "
             f"stiffest penalty P* = {accuracy['penalty'].get('reference')} N/mm^2")
