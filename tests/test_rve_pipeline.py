@@ -427,3 +427,23 @@ def test_driver_fields_of_the_new_modes():
     np.testing.assert_allclose(end_targets(X, "trellis", 0.05) + t_step * w[:, :3], end_targets(X, "trellis", 0.1),
                                rtol=0, atol=1e-14)
     np.testing.assert_allclose(end_targets(X, "uniaxial_y", 0.1)[:, 1], X[:, 1] * 1.1, rtol=1e-15)
+
+
+def test_config_digest_follows_the_resolved_scene_config(tmp_path):
+    """rve_fabric's `config_digest` param: editing the scene config a run spec names changes
+    it (so Snakemake reruns the chain), a comment or a reformatting does not, and each
+    combination of a sweep has its own."""
+    from rve.homogenisation.layout import config_digest
+
+    src = Path(__file__).parents[1] / "configs" / "rve" / "plain_weave.yaml"
+    scene = tmp_path / "weave.yaml"
+    scene.write_text(src.read_text())
+    spec = {"scene_config": str(scene), "overrides": []}
+    d0 = config_digest(spec, "base")
+    assert len(d0) == 16
+    scene.write_text("# a comment\n" + src.read_text().replace("elements: 30 ", "elements:   30 "))
+    assert config_digest(dict(spec), "base") == d0
+    scene.write_text(src.read_text().replace("elements: 30 ", "elements: 24 "))
+    assert config_digest(dict(spec), "base") != d0
+    sweep = {**spec, "sweep": {"mesh.elements": [12, 18]}}
+    assert config_digest(sweep, "mesh_elements-12") != config_digest(sweep, "mesh_elements-18")

@@ -38,6 +38,9 @@ run (``run_record_paths``) and the default targets of ``snakemake -j2``
 """
 from __future__ import annotations
 
+import functools
+import hashlib
+import json
 import os
 from typing import Mapping, Optional, Sequence, Union
 
@@ -47,7 +50,7 @@ __all__ = [
     "RVE_DIR", "LOG_DIR", "BENCHMARK_DIR", "STAGES", "state_name", "state_names", "state_path", "record_path",
     "previous_state", "run_record_paths", "table_outputs", "export_outputs", "report_prefix", "report_outputs", "job_name",
     "log_path", "benchmark_path", "default_targets", "tubes_path", "picture_outputs", "picture_targets",
-    "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default",
+    "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default", "config_digest",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -161,6 +164,25 @@ def mode_state_names(spec: Mapping, combo: str, mode: str) -> list[str]:
     """The relaxed state and every step of ``mode`` of one combination, in order."""
     steps = load_run_config(spec, combo).strain.steps
     return ["relaxed"] + [state_name(mode, i) for i in range(1, steps + 1)]
+
+
+@functools.lru_cache(maxsize=None)
+def _config_digest(spec_json: str, combo: str, source_text: str) -> str:
+    cfg = load_run_config(json.loads(spec_json), combo)
+    return hashlib.sha256(cfg.model_dump_json().encode()).hexdigest()[:16]
+
+
+def config_digest(spec: Mapping, combo: str) -> str:
+    """A digest of the resolved, validated scene config of one combination (16 hex digits).
+
+    The first rule of a chain (``rve_fabric``) takes it as a param, so editing the scene
+    config a run spec names (``scene_config``, e.g. ``mesh.elements`` in
+    configs/rve/plain_weave.yaml) reruns that run's chain: Snakemake compares params, and a
+    spec that only names the file would not change. Formatting and comments of the file do
+    not change the digest; any resolved value does."""
+    path = spec.get("scene_config")
+    text = open(path, encoding="utf-8").read() if path and os.path.exists(path) else ""
+    return _config_digest(json.dumps(spec, sort_keys=True, default=str), combo, text)   # cached per file content
 
 
 def convergence_outputs(study: str, root: PathLike = RVE_DIR) -> dict:

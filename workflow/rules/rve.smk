@@ -33,6 +33,8 @@ rule rve_fabric:
         rve_layout.benchmark_path("{run}", "fabric", "{combo}")
     params:
         spec=lambda w: config["rve"]["runs"][w.run],
+        # the resolved scene config: editing the file a spec names reruns the chain
+        config_digest=lambda w: rve_layout.config_digest(config["rve"]["runs"][w.run], w.combo),
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
