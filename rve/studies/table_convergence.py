@@ -283,6 +283,7 @@ def _plot(path, mesh, penalty, default):
                 x = [cpu.get(v) or st["times"].get(v, np.nan) for v in vals]
                 ax.set_xlabel("work: summed job CPU time of the run [s]" if cpu else
                               "work: summed job wall time of the run [s]")
+                ax.set_xscale("log")
             else:
                 x = vals
                 ax.set_xscale("log")
