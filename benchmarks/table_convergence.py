@@ -75,6 +75,13 @@ def main(argv=None) -> int:
                      if ref_err.get(q) is not None else "")
             print(f"  {q:22s} error {100 * e:8.3f} %{extra}  target {100 * tgt:4.1f} %  "
                   f"{'met' if st['meets_targets'][q] else 'NOT met':7s}  rate {rate:.2f}")
+        by_mode, ref_m = st.get("by_mode") or {}, st.get("reference_error_by_mode") or {}
+        for q, modes in by_mode.items():
+            for m, e in modes.items():
+                if e:
+                    own = (ref_m.get(q) or {}).get(m)
+                    print(f"  {q:22s} {m:9s} max {100 * e['max']:8.3f} %  median {100 * e['median']:7.3f} %"
+                          + (f"  stated (+ reference's own) {100 * (e['max'] + own):8.3f} %" if own is not None else ""))
         runs = st.get("runs") or {}
         if runs:
             print(f"  {'run':>8s} {'CPU s':>8s} {'wall s':>8s} {'peak RSS MB':>12s}")
