@@ -98,7 +98,7 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
         try:
             from rve.solvers.linear import factor_inertia
         except ImportError:
-            from rve.contact.relax import factor_inertia
+            from rve.solvers.linear import factor_inertia
         from rve.homogenisation.checkpoint import load_state
 
         cfg = load_config(str(Path.cwd() / STRAIN_CONFIG), ["mesh.elements=12"])  # the 12-element step measured since round 3

@@ -58,19 +58,19 @@ def _save(out: Path, name: str, A, meta: dict) -> None:
 
 
 def _neg(A) -> int:
-    from rve.contact.relax import factor_inertia
+    from rve.solvers.linear import factor_inertia
 
     return factor_inertia(A)[1]
 
 
 def minimiser_matrices(elements: int, out: Path, pd: bool = True, with_K: bool = False) -> None:
     from rve.config.loader import load_config
-    from rve.scenes.fabric_relax import build
+    from rve.scenes.fabric_relax import setup
     from rve.solvers.static import StaticProblem
 
     t0 = time.perf_counter()
     cfg = load_config(ROOT / "configs/scenes/plain_weave_relax.yaml", [f"mesh.elements={elements}"])
-    fab, system, x0 = build(cfg)
+    fab, system, x0 = setup(cfg)
     system.rebuild(x0)
     prob = StaticProblem(system, x0, np.zeros(system.n), 0.0)
     r, J = prob(prob.u0())

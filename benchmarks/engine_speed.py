@@ -39,7 +39,9 @@ the analysed one while it lies in it, a new analysis on the stored pattern when 
 ``analyse_stored``), ``pardiso_grow`` (the analysed
 pattern is always the union of the patterns met: ``grow_limit = inf``), ``pardiso_nosub``
 (a new analysis for every new nonzero pattern: ``reuse_subpattern = False``),
-``pardiso_amd`` (minimum-degree ordering, no weighted matching: a cheaper analysis).
+``pardiso_amd`` (minimum-degree ordering, no weighted matching: a cheaper analysis),
+``pardiso_cnr`` / ``pardiso_t2`` (the default in CNR mode for up to two threads, iparm(34)
+= 2, on one / two PARDISO threads).
 
 For every saved matrix and every variant, in a fresh subprocess (so ``ru_maxrss`` is the
 peak of that variant alone): median wall time of one numeric factorisation and of one
@@ -58,6 +60,9 @@ pivots and refinement steps. Variants:
   explicit zeros of inactive contact pairs dropped in every factorisation, the copy
   included in the time; only for the matrices holding explicit zeros).
 * ``pardiso_nomatch_drop``: both (no matching/scaling, zeros dropped).
+* ``pardiso_drop_cnr`` / ``pardiso_drop_t2``: as ``pardiso_dropzeros`` in MKL's conditional
+  numerical reproducibility mode for up to two threads (iparm(34) = 2), on one / two
+  threads (the two give bitwise the same factor; docs/engine.md "Two threads").
   The other PARDISO variants run with ``drop_zeros=False`` (the stored pattern).
 
 The machine (2 cores) is usually shared: compare ratios within one run, not across runs.
@@ -79,7 +84,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ("superlu", "pardiso_fresh", "pardiso_reuse", "pardiso_nomatch", "pardiso_dropzeros",
-            "pardiso_nomatch_drop")
+            "pardiso_nomatch_drop", "pardiso_drop_cnr", "pardiso_drop_t2")
 DEFAULT_ORDER = ("min12_first", "min12_first_keep", "min12_K", "min12_pd", "driven12", "min30_first",
                  "min30_first_keep", "min30_pd", "damped30", "impact_stage_mech", "impact_stage")
 
@@ -120,11 +125,13 @@ def worker(path: str, variant: str, repeats: int) -> dict:
         if not pardiso.available():
             return {"variant": variant, "skipped": pardiso.unavailable_reason()}
         M = A
-        drop = variant in ("pardiso_dropzeros", "pardiso_nomatch_drop")
+        drop = variant in ("pardiso_dropzeros", "pardiso_nomatch_drop", "pardiso_drop_cnr", "pardiso_drop_t2")
         if drop:
             rec["nnz"] = int(np.count_nonzero(A.data))
+        # CNR mode for up to 2 threads (iparm(34) = 2), on one or two threads
+        extra = {"cnr": 2, "threads": 2 if variant.endswith("_t2") else 1} if "_drop_" in variant else {}
         # the backend drops the zeros itself (its factorisation time includes that copy)
-        f = pardiso.PardisoFactorization(matching="nomatch" not in variant, drop_zeros=drop)
+        f = pardiso.PardisoFactorization(matching="nomatch" not in variant, drop_zeros=drop, **extra)
         t0 = time.perf_counter()
         f.analyse(M)
         rec["analyse_s"] = time.perf_counter() - t0
@@ -478,12 +485,15 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
 
 # ----------------------------------------------------------------------------- whole runs
 RUN_BACKENDS = ("superlu", "pardiso", "pardiso_nonzero", "pardiso_keep", "pardiso_stored", "pardiso_grow",
-                "pardiso_nosub", "pardiso_amd")
+                "pardiso_nosub", "pardiso_amd", "pardiso_cnr", "pardiso_t2")
 #: PARDISO variants of the whole runs: rve.solvers.minimize.PARDISO_OPTIONS
 RUN_VARIANT_OPTIONS = {"pardiso_stored": {"drop_zeros": True, "analyse_stored": True},
                        "pardiso": {"drop_zeros": True, "analyse_stored": True},
                        "pardiso_grow": {"grow_limit": float("inf")}, "pardiso_nosub": {"reuse_subpattern": False},
-                       "pardiso_amd": {"ordering": 0, "matching": False}}
+                       "pardiso_amd": {"ordering": 0, "matching": False},
+                       # CNR mode (iparm(34) = 2): bitwise the same result on 1 or 2 threads
+                       "pardiso_cnr": {"drop_zeros": True, "analyse_stored": True, "cnr": 2},
+                       "pardiso_t2": {"drop_zeros": True, "analyse_stored": True, "cnr": 2, "threads": 2}}
 RELAX_CONFIG = ROOT / "configs/scenes/plain_weave_relax.yaml"
 STRAIN_CONFIG = ROOT / "configs/rve/plain_weave.yaml"
 
@@ -533,7 +543,8 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
     from rve.solvers import minimize
 
     # the variants are set explicitly (independent of the defaults of rve.solvers.minimize)
-    minimize.KEEP_STORED_PATTERN = backend in ("pardiso", "pardiso_keep", "pardiso_stored")
+    minimize.KEEP_STORED_PATTERN = backend in ("pardiso", "pardiso_keep", "pardiso_stored", "pardiso_cnr",
+                                               "pardiso_t2")
     minimize.PARDISO_OPTIONS.clear()
     minimize.PARDISO_OPTIONS.update(RUN_VARIANT_OPTIONS.get(backend, {}))
     split = _instrument()

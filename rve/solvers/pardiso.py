@@ -275,7 +275,7 @@ class PardisoFactorization:
     def __init__(self, threads: Optional[int] = 1, matching: bool = True, drop_zeros: bool = True,
                  refinement: int = 0, check: bool = False, ordering: int = 2,
                  reuse_subpattern: bool = True, grow_limit: float = 1.25, analyse_stored: bool = False,
-                 symmetric: bool = True):
+                 symmetric: bool = True, cnr: int = 0):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"PARDISO is not available: {_REASON}")
@@ -289,7 +289,7 @@ class PardisoFactorization:
         self._entries = _upper_entries if self.symmetric else _full_entries
         self._options = dict(threads=threads, matching=matching, drop_zeros=drop_zeros, refinement=refinement,
                              check=check, ordering=ordering, reuse_subpattern=reuse_subpattern,
-                             grow_limit=grow_limit, analyse_stored=analyse_stored)
+                             grow_limit=grow_limit, analyse_stored=analyse_stored, cnr=cnr)
         self._unsym = None               # the mtype-11 companion (``unsymmetric()``)
         self.pt = np.zeros(64, dtype=np.int64)  # PARDISO's internal handle (opaque pointers)
         self.iparm = np.zeros(64, dtype=np.int32)
@@ -304,6 +304,7 @@ class PardisoFactorization:
         ip[20] = 1 if self.symmetric else 0  # iparm(21): Bunch-Kaufman 1x1 and 2x2 pivoting (symmetric only)
         ip[23] = 0                       # iparm(24): classic factorisation (one thread)
         ip[26] = 1 if check else 0       # iparm(27): matrix checker
+        ip[33] = int(cnr)                # iparm(34): CNR mode for up to this many threads (0: off)
         ip[34] = 1                       # iparm(35): zero-based indices
         self.matching = bool(matching)
         self.drop_zeros = bool(drop_zeros)
