@@ -307,3 +307,58 @@ def test_analyse_stored_pattern():
             assert f.negative_pivots == int(np.count_nonzero(np.linalg.eigvalsh(M.toarray()) < 0))
         assert f.analyses == analyses, stored
         f.release()
+
+
+def _grid_laplacian_indefinite(m=24, shift=0.5):
+    """A 3D 7-point Laplacian on an m^3 grid minus shift: symmetric indefinite, large
+    enough (13,824 dofs) that PARDISO factorises supernodes in parallel."""
+    one = sp.diags([-np.ones(m - 1), 2.0 * np.ones(m), -np.ones(m - 1)], [-1, 0, 1])
+    eye = sp.eye(m)
+    L = (sp.kron(sp.kron(one, eye), eye) + sp.kron(sp.kron(eye, one), eye) + sp.kron(sp.kron(eye, eye), one))
+    return (L - shift * sp.eye(m ** 3)).tocsc()
+
+
+def test_cnr_mode_gives_the_same_bits_on_one_and_two_threads():
+    A = _grid_laplacian_indefinite()
+    b = np.random.default_rng(3).standard_normal(A.shape[0])
+    xs, negs = [], []
+    for threads in (1, 2, 2, 1):
+        f = pardiso.PardisoFactorization(threads=threads, cnr=2)
+        f.factorize(A)
+        xs.append(f.solve(b))
+        negs.append(f.negative_pivots)
+        f.release()
+    for x in xs[1:]:
+        assert np.array_equal(x, xs[0])
+    assert _rel_res(A, xs[0], b) < 1e-10
+    # the inertia of L - 0.5 I: eigenvalues of the 1D operators 2 - 2 cos(k pi / (m + 1))
+    m = 24
+    lam1 = 2.0 - 2.0 * np.cos(np.arange(1, m + 1) * np.pi / (m + 1))
+    lam = lam1[:, None, None] + lam1[None, :, None] + lam1[None, None, :]
+    assert len(set(negs)) == 1 and negs[0] == int(np.count_nonzero(lam < 0.5))
+
+
+def test_minimiser_backend_threads_from_context_and_environment(monkeypatch):
+    from rve.solvers import linear, minimize
+
+    monkeypatch.delenv(linear.THREADS_ENV, raising=False)
+    monkeypatch.setenv("RVE_LINEAR_BACKEND", "pardiso")
+    solver, owned = minimize.run_backend()
+    assert owned and solver.threads == min(linear.DEFAULT_THREADS, __import__("os").cpu_count())
+    assert solver.iparm[33] == minimize.CNR_THREADS
+    solver.release()
+    monkeypatch.setenv(linear.THREADS_ENV, "1")
+    solver, _ = minimize.run_backend()
+    assert solver.threads == 1 and solver.iparm[33] == 2
+    solver.release()
+    with linear.linear_threads(2):
+        solver, _ = minimize.run_backend()
+        assert solver.threads == 2
+        solver.release()
+    assert linear.solver_threads() == 1
+    monkeypatch.setenv(linear.THREADS_ENV, "two")
+    with pytest.raises(ValueError, match="RVE_PARDISO_THREADS"):
+        linear.solver_threads()
+    with pytest.raises(ValueError, match="positive integer"):
+        with linear.linear_threads(0):
+            pass

@@ -132,14 +132,20 @@ def _check_state(st, mesh, path):
 
 
 def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLike], spec: Mapping,
-              combo: str = BASE_COMBO):
+              combo: str = BASE_COMBO, threads: Optional[int] = None):
     """Relax the initial state (damped dynamics + static Newton); write step 0 (clamp
-    reactions and the contact map included)."""
+    reactions and the contact map included). ``threads``: of the minimiser's PARDISO
+    factorisations (None: ``rve.solvers.linear.solver_threads()``; 1 and 2 give the same
+    bits)."""
     from .checkpoint import State, load_state
     from ..fabrics.setup import clamp_reactions
+    from ..solvers.linear import linear_threads
     from .strain import relax_fabric
 
-    with logging_to(log_path):
+    with logging_to(log_path), linear_threads(threads):
+        from ..solvers.linear import solver_threads
+
+        log.info("relax job: the minimiser's PARDISO factorisations on %d thread(s)", solver_threads())
         cfg = load_run_config(spec, combo)
         fab, mesh = _fabric_mesh(cfg)
         st0 = load_state(in_state, quarantine=True)

@@ -69,6 +69,8 @@ analysis.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 from typing import Callable, Dict, Optional, Union
 
@@ -77,7 +79,7 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["sparse_solve", "factorize", "factor_inertia", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
+__all__ = ["solver_threads", "linear_threads", "THREADS_ENV", "sparse_solve", "factorize", "factor_inertia", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
            "PardisoBackend", "PardisoUnsymBackend", "BACKENDS", "DEFAULT_BACKEND", "BACKEND_ENV", "resolve_backend", "register_backend",
            "get_backend", "release_shared", "SingularFactorError", "NotBandedError", "SUPERLU_SYMMETRIC",
            "SUPERLU_FALLBACK_PERMC", "BANDED_MAX_BANDWIDTH", "band_of", "is_symmetric"]
@@ -283,6 +285,52 @@ DEFAULT_BACKEND = "auto"
 
 #: environment variable overriding the default backend (superlu | pardiso | pardiso_unsym | auto)
 BACKEND_ENV = "RVE_LINEAR_BACKEND"
+
+
+#: environment variable: PARDISO threads of the energy minimiser's factorisations (a
+#: positive integer; default ``DEFAULT_THREADS`` capped at the cores there are)
+THREADS_ENV = "RVE_PARDISO_THREADS"
+#: threads when neither ``linear_threads`` nor ``RVE_PARDISO_THREADS`` says: the two cores
+#: the minimiser's results are reproducible on (MKL's CNR mode for up to 2 threads,
+#: ``rve.solvers.minimize.CNR_THREADS``: 1 and 2 threads give the same bits)
+DEFAULT_THREADS = 2
+_THREADS = contextvars.ContextVar("rve_linear_threads", default=None)
+
+
+def solver_threads() -> int:
+    """Threads of the minimiser's PARDISO factorisations: ``linear_threads(n)`` in effect,
+    else ``$RVE_PARDISO_THREADS``, else ``min(DEFAULT_THREADS, cores)``. A bad value of the
+    variable raises ``ValueError`` naming it."""
+    n = _THREADS.get()
+    if n is not None:
+        return n
+    env = os.environ.get(THREADS_ENV, "").strip()
+    if env:
+        try:
+            n = int(env)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise ValueError(f"environment variable {THREADS_ENV}={env!r}: expected a positive integer (threads)")
+        return n
+    return max(1, min(DEFAULT_THREADS, os.cpu_count() or 1))
+
+
+@contextlib.contextmanager
+def linear_threads(n: Optional[int]):
+    """Within the block, the minimiser's factorisations use ``n`` threads (None: unchanged);
+    a context variable, so jobs run side by side in threads of one process do not mix."""
+    if n is None:
+        yield
+        return
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"threads = {n}: expected a positive integer")
+    token = _THREADS.set(n)
+    try:
+        yield
+    finally:
+        _THREADS.reset(token)
 
 
 def register_backend(name: str, cls: Callable[..., LinearBackend]) -> None:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .linear import factor_inertia, get_backend, resolve_backend, shifted, sparse_solve
+from .linear import factor_inertia, get_backend, resolve_backend, shifted, solver_threads, sparse_solve
 from .newton import NewtonResult, convergence_rates
 from .static import StaticProblem
 
@@ -56,6 +56,13 @@ KEEP_STORED_PATTERN = True
 #: benchmarks/engine_speed.py measures variants through it)
 PARDISO_OPTIONS: dict = {"drop_zeros": True, "analyse_stored": True}
 
+#: MKL's conditional numerical reproducibility for up to this many threads (iparm(34)):
+#: the minimiser's factorisations give the same bits on 1 and 2 threads, so a Snakemake job
+#: scaled down from 2 threads to 1 (``-j1``) computes the same table (docs/engine.md "Two
+#: threads"). More threads than this (``RVE_PARDISO_THREADS`` > 2) set CNR for that many:
+#: reproducible run to run, but other rounding than on 1-2 threads.
+CNR_THREADS = 2
+
 
 def run_backend(backend=None, keep_pattern: bool = None):
     """``(instance, owned)``: the linear-solver backend one solver run keeps for all its
@@ -69,7 +76,9 @@ def run_backend(backend=None, keep_pattern: bool = None):
     if name == "pardiso":
         from .pardiso import PardisoFactorization
 
-        return PardisoFactorization(**{"drop_zeros": not keep, **PARDISO_OPTIONS}), True
+        threads = solver_threads()
+        opts = {"drop_zeros": not keep, "threads": threads, "cnr": max(CNR_THREADS, threads), **PARDISO_OPTIONS}
+        return PardisoFactorization(**opts), True
     return get_backend(name, symmetric=True), True
 
 
