@@ -10,6 +10,10 @@ Contract
   allowed ones; ``"pardiso"`` named explicitly where it is unavailable raises
   ``RuntimeError`` with the reason. ``RVE_LINEAR_BACKEND=superlu`` forces the pure-scipy
   fallback everywhere (docs/engine.md, "Backend choice").
+* Threads of the energy minimiser's PARDISO factorisations: ``solver_threads() -> int``
+  (``linear_threads(n)`` in effect, else ``$RVE_PARDISO_THREADS``, else
+  ``min(DEFAULT_THREADS, cores)``), in MKL's reproducible mode (``rve.solvers.minimize.
+  CNR_THREADS``: 1 and 2 threads give the same bits; docs/engine.md "Two threads").
 * ``sparse_solve(J, r, backend=None) -> du``: one direct solve ``J du = r`` (Newton, the
   static and pseudo-transient solvers, the capped Newton): LAPACK's banded LU when ``J``
   is narrowly banded (single fibrils); else the chosen backend — PARDISO (only when ``J``
