@@ -8,8 +8,8 @@
 import os
 
 # One BLAS/OpenMP thread per job. Every rule but rve_relax declares `threads: 1` and `-j2`
-# runs two jobs side by side: OpenBLAS's default (a thread per core in each job) would oversubscribe the
-# cores and tie a job's floating-point results to the thread count. With one thread a
+# runs two jobs side by side: OpenBLAS's default (a thread per core in each job) would
+# oversubscribe the cores and tie a job's floating-point results to the thread count. With one thread a
 # job's output depends on its input file only, so a killed and resumed run writes the same
 # bits as an uninterrupted one (tests/test_rve_pipeline.py). Spawned jobs inherit this
 # environment; values the user set are kept. rve_relax (alone on the machine: everything

@@ -97,8 +97,8 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
             from rve.homogenisation.strain import build_fabric as fabric_and_mesh  # today's main
         try:
             from rve.solvers.linear import factor_inertia
-        except ImportError:
-            from rve.solvers.linear import factor_inertia
+        except ImportError:  # the pre-redesign baseline tree
+            from rve.contact.relax import factor_inertia
         from rve.homogenisation.checkpoint import load_state
 
         cfg = load_config(str(Path.cwd() / STRAIN_CONFIG), ["mesh.elements=12"])  # the 12-element step measured since round 3

@@ -6,6 +6,9 @@ own matrices, and whole runs (relaxation, strain step) as whole processes per ba
     python benchmarks/engine_speed.py --relax 12 [--runs 3] [--backends superlu pardiso ...]
     python benchmarks/engine_speed.py --relax 30 --runs 1
     python benchmarks/engine_speed.py --strain-step [--state FILE] [--runs 3]
+    python benchmarks/engine_speed.py --threads-check [--only min30_first_keep ...]
+        # PARDISO on 1 and 2 threads, CNR off / on (iparm(34) = 2): factorisation medians and
+        # max |x - x_ref| of repeated solves (bitwise reproducibility; docs/engine.md "Two threads")
     python benchmarks/engine_speed.py --unsym [--only impact_scene_1 ...] [--rounds 2]
         # the dynamic scenes' unsymmetric stage matrices (engine_matrices.py --only
         # impact_scene impact_scene_reduced induced_B3): superlu_colamd (StageFactorisation's
@@ -40,8 +43,10 @@ the analysed one while it lies in it, a new analysis on the stored pattern when 
 pattern is always the union of the patterns met: ``grow_limit = inf``), ``pardiso_nosub``
 (a new analysis for every new nonzero pattern: ``reuse_subpattern = False``),
 ``pardiso_amd`` (minimum-degree ordering, no weighted matching: a cheaper analysis),
-``pardiso_cnr`` / ``pardiso_t2`` (the default in CNR mode for up to two threads, iparm(34)
-= 2, on one / two PARDISO threads).
+``pardiso_t2`` (the default, CNR mode for up to two threads, iparm(34) = 2, on two PARDISO
+threads instead of one), ``pardiso_nocnr`` (the default with CNR off: the arithmetic before
+round 7). Whole runs get ``RVE_PARDISO_THREADS=1`` unless it is set, so only ``pardiso_t2``
+uses two threads.
 
 For every saved matrix and every variant, in a fresh subprocess (so ``ru_maxrss`` is the
 peak of that variant alone): median wall time of one numeric factorisation and of one
@@ -152,6 +157,31 @@ def worker(path: str, variant: str, repeats: int) -> dict:
     rec["rss_mib"] = _rss_mib()
     rec["rss_growth_mib"] = rec["rss_mib"] - rss0
     return rec
+
+
+def threads_check(path: Path, repeats: int) -> None:
+    """Factorise and solve one matrix on 1 and 2 PARDISO threads, CNR off and on, each
+    twice with a fresh instance; print the median factorisation time and the largest
+    difference of every solution to the first one of its CNR mode."""
+    import scipy.sparse as sp
+
+    from rve.solvers import pardiso
+
+    A = sp.load_npz(path).tocsc()
+    b = np.random.default_rng(0).standard_normal(A.shape[0])
+    print(f"{path.stem}: n = {A.shape[0]}, nnz = {A.nnz}")
+    for cnr in (0, 2):
+        ref = None
+        for threads in (1, 2, 2, 1):
+            f = pardiso.PardisoFactorization(threads=threads, cnr=cnr)
+            f.factorize(A)
+            tf, _ = _median_time(lambda: f.factorize(A), repeats)
+            x = f.solve(b)
+            f.release()
+            ref = x if ref is None else ref
+            d = float(np.abs(x - ref).max())
+            print(f"  cnr={cnr} threads={threads}: factorisation {tf:.3f} s, max|x - x(first, 1 thread)| = "
+                  f"{'0 (bitwise)' if d == 0.0 else f'{d:.2e}'}", flush=True)
 
 
 def run_variant(path: Path, variant: str, repeats: int, worker: str = "--worker") -> dict:
@@ -485,15 +515,15 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
 
 # ----------------------------------------------------------------------------- whole runs
 RUN_BACKENDS = ("superlu", "pardiso", "pardiso_nonzero", "pardiso_keep", "pardiso_stored", "pardiso_grow",
-                "pardiso_nosub", "pardiso_amd", "pardiso_cnr", "pardiso_t2")
+                "pardiso_nosub", "pardiso_amd", "pardiso_nocnr", "pardiso_t2")
 #: PARDISO variants of the whole runs: rve.solvers.minimize.PARDISO_OPTIONS
 RUN_VARIANT_OPTIONS = {"pardiso_stored": {"drop_zeros": True, "analyse_stored": True},
                        "pardiso": {"drop_zeros": True, "analyse_stored": True},
                        "pardiso_grow": {"grow_limit": float("inf")}, "pardiso_nosub": {"reuse_subpattern": False},
                        "pardiso_amd": {"ordering": 0, "matching": False},
-                       # CNR mode (iparm(34) = 2): bitwise the same result on 1 or 2 threads
-                       "pardiso_cnr": {"drop_zeros": True, "analyse_stored": True, "cnr": 2},
-                       "pardiso_t2": {"drop_zeros": True, "analyse_stored": True, "cnr": 2, "threads": 2}}
+                       # the minimiser's default is CNR mode for up to 2 threads (iparm(34) = 2)
+                       "pardiso_nocnr": {"drop_zeros": True, "analyse_stored": True, "cnr": 0},
+                       "pardiso_t2": {"drop_zeros": True, "analyse_stored": True, "threads": 2}}
 RELAX_CONFIG = ROOT / "configs/scenes/plain_weave_relax.yaml"
 STRAIN_CONFIG = ROOT / "configs/rve/plain_weave.yaml"
 
@@ -543,7 +573,7 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
     from rve.solvers import minimize
 
     # the variants are set explicitly (independent of the defaults of rve.solvers.minimize)
-    minimize.KEEP_STORED_PATTERN = backend in ("pardiso", "pardiso_keep", "pardiso_stored", "pardiso_cnr",
+    minimize.KEEP_STORED_PATTERN = backend in ("pardiso", "pardiso_keep", "pardiso_stored", "pardiso_nocnr",
                                                "pardiso_t2")
     minimize.PARDISO_OPTIONS.clear()
     minimize.PARDISO_OPTIONS.update(RUN_VARIANT_OPTIONS.get(backend, {}))
@@ -610,7 +640,7 @@ def _count(info, key) -> int:
 
 def run_whole(kind: str, arg: str, backend: str, out_npz: Path) -> dict:
     env = dict(os.environ)
-    for k in ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+    for k in ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "RVE_PARDISO_THREADS"):
         env.setdefault(k, "1")
     env["RVE_LINEAR_BACKEND"] = "superlu" if backend == "superlu" else "pardiso"
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
@@ -720,6 +750,8 @@ def main(argv=None) -> None:
                     help="relaxed state of configs/rve/plain_weave.yaml for --strain-step")
     ap.add_argument("--runs", type=int, default=3, help="interleaved runs per backend (whole runs)")
     ap.add_argument("--backends", nargs="*", default=["superlu", "pardiso"], choices=RUN_BACKENDS)
+    ap.add_argument("--threads-check", action="store_true",
+                    help="1 vs 2 PARDISO threads, CNR off/on, on the --only matrices (default min30_first_keep)")
     ap.add_argument("--unsym", action="store_true",
                     help="the unsymmetric stage matrices of the dynamic scenes (engine_matrices.py --only "
                          "impact_scene induced_B3): SuperLU paths vs PARDISO mtype 11")
@@ -737,6 +769,10 @@ def main(argv=None) -> None:
         be = a.scene_backends or (["superlu_pruned", "pardiso_unsym"] if a.scene_ab == "impact"
                                   else ["superlu", "pardiso"])
         main_scene_ab(a.scene_ab, be, a.rounds, a.steps, a.start, a.reduced, a.json)
+        return
+    if a.threads_check:
+        for name in a.only or ["min30_first_keep"]:
+            threads_check(Path(a.dir) / f"{name}.npz", a.repeats)
         return
     if a.unsym:
         main_unsym(Path(a.dir), a.only, a.unsym_variants, a.repeats, a.rounds, a.json)

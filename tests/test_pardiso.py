@@ -1,6 +1,8 @@
 """The PARDISO backend (rve/solvers/pardiso.py): accuracy against SuperLU / dense solves,
 inertia against eigvalsh, analysis reuse per sparsity pattern. Skipped without pypardiso
 (e.g. on aarch64, where MKL has no wheel)."""
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -344,7 +346,7 @@ def test_minimiser_backend_threads_from_context_and_environment(monkeypatch):
     monkeypatch.delenv(linear.THREADS_ENV, raising=False)
     monkeypatch.setenv("RVE_LINEAR_BACKEND", "pardiso")
     solver, owned = minimize.run_backend()
-    assert owned and solver.threads == min(linear.DEFAULT_THREADS, __import__("os").cpu_count())
+    assert owned and solver.threads == min(linear.DEFAULT_THREADS, os.cpu_count())
     assert solver.iparm[33] == minimize.CNR_THREADS
     solver.release()
     monkeypatch.setenv(linear.THREADS_ENV, "1")

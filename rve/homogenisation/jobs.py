@@ -139,12 +139,10 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
     bits)."""
     from .checkpoint import State, load_state
     from ..fabrics.setup import clamp_reactions
-    from ..solvers.linear import linear_threads
+    from ..solvers.linear import linear_threads, solver_threads
     from .strain import relax_fabric
 
     with logging_to(log_path), linear_threads(threads):
-        from ..solvers.linear import solver_threads
-
         log.info("relax job: the minimiser's PARDISO factorisations on %d thread(s)", solver_threads())
         cfg = load_run_config(spec, combo)
         fab, mesh = _fabric_mesh(cfg)

@@ -83,7 +83,8 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["solver_threads", "linear_threads", "THREADS_ENV", "sparse_solve", "factorize", "factor_inertia", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
+__all__ = ["sparse_solve", "factorize", "factor_inertia", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
+           "solver_threads", "linear_threads", "THREADS_ENV", "DEFAULT_THREADS",
            "PardisoBackend", "PardisoUnsymBackend", "BACKENDS", "DEFAULT_BACKEND", "BACKEND_ENV", "resolve_backend", "register_backend",
            "get_backend", "release_shared", "SingularFactorError", "NotBandedError", "SUPERLU_SYMMETRIC",
            "SUPERLU_FALLBACK_PERMC", "BANDED_MAX_BANDWIDTH", "band_of", "is_symmetric"]
