@@ -262,6 +262,11 @@ def test_minimiser_with_pardiso_equals_superlu_on_a_small_weave(tmp_path, monkey
     assert np.abs(x_pd - x_lu).max() <= 1e-10 * np.abs(x_lu).max()
     assert abs(s_pd["energy_mJ"] - s_lu["energy_mJ"]) <= 1e-10 * abs(s_lu["energy_mJ"])
     assert s_pd["negative_pivots"] == s_lu["negative_pivots"] == 0
+    # the sigma ladder is the same on both (the Cholesky test's verdicts are the inertia's)
+    lu_stages = [h for h in s_lu["history"] if h.get("method") == "minimize_energy"]
+    assert [h["indefinite"] for h in stages] == [h["indefinite"] for h in lu_stages]
+    assert [h["factorizations"] for h in stages] == [h["factorizations"] for h in lu_stages]
+    assert sum(h["indefinite"] for h in stages) > 0
 
 
 def test_inertia_of_weave_tangents_equals_superlu(tmp_path):
@@ -364,3 +369,108 @@ def test_minimiser_backend_threads_from_context_and_environment(monkeypatch):
     with pytest.raises(ValueError, match="positive integer"):
         with linear.linear_threads(0):
             pass
+
+
+# ----------------------------------------------------------------------------- Cholesky
+def test_cholesky_verdict_equals_the_dense_inertia_over_a_shift_sweep(tmp_path):
+    """The minimiser's definiteness test: PARDISO's Cholesky companion (mtype 2) of K + sigma M
+    of the small weave, one kept instance over shifts through the indefinite range, succeeds
+    exactly where eigvalsh finds no negative eigenvalue, and then solves as accurately as
+    the LDL^T; ``factor_positive_definite`` with SuperLU gives the same verdicts."""
+    from rve.fabrics.relaxation import relaxation_system
+    from rve.solvers.linear import factor_positive_definite, shifted
+    from rve.solvers.static import StaticProblem
+
+    cfg = _small_weave(tmp_path)
+    fab, system, x0 = relaxation_system(cfg)[:3]
+    prob = StaticProblem(system, x0, np.zeros(system.n), 0.0)
+    _, J = prob(prob.u0())
+    M = prob.fd.matrix(system.mass())
+    scale = np.abs(J.diagonal()).max() / np.abs(M.diagonal()).max()
+    b = np.random.default_rng(5).standard_normal(J.shape[0])
+    inst = pardiso.PardisoFactorization()
+    verdicts = []
+    for sigma in [0.0] + list(scale * np.logspace(-9, 0, 10)):
+        A = shifted(J, M, sigma)
+        definite = bool(np.linalg.eigvalsh(A.toarray()).min() > 0)
+        f = factor_positive_definite(A, backend=inst)
+        assert (f is not None) == definite, sigma
+        assert (factor_positive_definite(A, backend="superlu") is not None) == definite, sigma
+        if definite:
+            assert f.name == "pardiso_spd" and f.negative_pivots == 0
+            assert _rel_res(A, f.solve(b), b) < 1e-12
+        verdicts.append(definite)
+    assert not verdicts[0] and verdicts[-1]
+    chol = inst.cholesky()
+    assert chol.indefinite == verdicts.count(False) and chol.factorizations == len(verdicts)
+    assert chol.analyses < len(verdicts) and inst.factorizations == 0  # the LDL^T was not needed
+    inst.release()
+
+
+def test_cholesky_raises_on_an_indefinite_matrix_and_stays_usable():
+    from rve.solvers.linear import NotPositiveDefiniteError
+
+    A, S = with_inertia(n_neg=3, seed=4), spd(n=300, density=0.02, seed=4)
+    b = np.random.default_rng(4).standard_normal(300)
+    f = pardiso.PardisoFactorization(positive_definite=True)
+    assert f.mtype == 2 and f.iparm[20] == 0 and f.iparm[12] == 0  # no Bunch-Kaufman, no matching
+    with pytest.raises(NotPositiveDefiniteError):
+        f.factorize(A)
+    with pytest.raises(RuntimeError, match="before factorize"):
+        f.solve(b)
+    f.factorize(S)
+    assert _rel_res(S, f.solve(b), b) < 1e-12 and f.negative_pivots == 0 and f.positive_pivots == 300
+    assert f.indefinite == 1 and f.factorizations == 2
+    with pytest.raises(ValueError, match="symmetric"):
+        pardiso.PardisoFactorization(positive_definite=True, symmetric=False)
+    with pytest.raises(ValueError, match="Cholesky"):
+        pardiso.PardisoFactorization(symmetric=False).cholesky()
+    f.release()
+
+
+def test_cholesky_cnr_gives_the_same_bits_on_one_and_two_threads():
+    A = _grid_laplacian_indefinite(shift=-0.5)  # L + 0.5 I: positive definite
+    b = np.random.default_rng(6).standard_normal(A.shape[0])
+    xs = []
+    for threads in (1, 2, 2, 1):
+        f = pardiso.PardisoFactorization(threads=threads, cnr=2, positive_definite=True)
+        xs.append(f.factorize(A).solve(b))
+        f.release()
+    for x in xs[1:]:
+        assert np.array_equal(x, xs[0])
+    assert _rel_res(A, xs[0], b) < 1e-12
+
+
+def test_stored_fast_path_with_entries_outside_the_analysis():
+    """A stored structure with entries the analysis has not seen (candidate pairs of a
+    rebuilt contact map) takes the fast path while those hold explicit zeros — the same
+    bits as a fresh instance — and leaves it for a new analysis when one becomes nonzero."""
+    A = with_inertia(n_neg=0, seed=11)
+    A = (A + sp.eye(A.shape[0]) * 0.0).tocsr()
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    extra = (rows != A.indices) & ((rows * 7 + A.indices * 7) % 5 == 1)  # symmetric choice
+    Z = A.copy()
+    Z.data[extra] = 0.0
+    Z0 = Z.copy()
+    Z0.eliminate_zeros()
+    b = np.random.default_rng(11).standard_normal(A.shape[0])
+    f = pardiso.PardisoFactorization(analyse_stored=False, grow_limit=1.0)
+    f.factorize(Z0)  # the analysis knows only the nonzeros
+    assert f.analyses == 1
+    x_general = f.factorize(Z).solve(b)  # the stored structure: mapped after this call
+    fast0 = f.stored_fast
+    for k in range(3):
+        Zk = Z.copy()
+        Zk.data = Z.data * (1.0 + 0.1 * k)
+        x = f.factorize(Zk).solve(b)
+        ref = pardiso.PardisoFactorization(analyse_stored=False)
+        ref.factorize(Z0)
+        Z0k = Z0.copy()
+        Z0k.data = Z0.data * (1.0 + 0.1 * k)
+        assert np.array_equal(x, ref.factorize(Z0k).solve(b))
+        ref.release()
+    assert f.stored_fast == fast0 + 3 and f.analyses == 1
+    assert np.array_equal(x_general, f.factorize(Z).solve(b))
+    f.factorize(A)  # the outside entries now nonzero: a new analysis, the right answer
+    assert f.analyses == 2 and _rel_res(A, f.solve(b), b) < 1e-12
+    f.release()

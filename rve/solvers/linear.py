@@ -37,6 +37,13 @@ Contract
   sign is then not SuperLU's) or failed is redone by SuperLU, so the count always equals
   SuperLU's on the same matrix; a backend without inertia (``pardiso_unsym``) leaves it to
   SuperLU.
+* ``factor_positive_definite(A, backend=None) -> factorisation or None``: the energy
+  minimiser's definiteness test of ``K + sigma M``: a factorisation to solve with when
+  ``A`` is positive definite, None when it is not. With PARDISO the instance's Cholesky
+  companion (mtype 2, ``PardisoFactorization.cholesky``), which stops at the first pivot
+  <= 0 (a tenth of a factorisation or less on the minimiser's indefinite matrices:
+  docs/engine.md "Cholesky as the definiteness test"); otherwise ``factor_inertia`` and
+  its count (SuperLU: today's arithmetic).
 * ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (the minimiser's and
   the pseudo-transient solver's regularised tangent). ``keep_pattern=False`` is scipy's
   sum (explicit zeros dropped: today's arithmetic); ``True`` keeps ``J``'s stored pattern
@@ -83,10 +90,10 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["sparse_solve", "factorize", "factor_inertia", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
+__all__ = ["sparse_solve", "factorize", "factor_inertia", "factor_positive_definite", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
            "solver_threads", "linear_threads", "THREADS_ENV", "DEFAULT_THREADS",
            "PardisoBackend", "PardisoUnsymBackend", "BACKENDS", "DEFAULT_BACKEND", "BACKEND_ENV", "resolve_backend", "register_backend",
-           "get_backend", "release_shared", "SingularFactorError", "NotBandedError", "SUPERLU_SYMMETRIC",
+           "get_backend", "release_shared", "SingularFactorError", "NotPositiveDefiniteError", "NotBandedError", "SUPERLU_SYMMETRIC",
            "SUPERLU_FALLBACK_PERMC", "BANDED_MAX_BANDWIDTH", "band_of", "is_symmetric"]
 
 
@@ -112,6 +119,10 @@ BANDED_MAX_BANDWIDTH = 48
 
 class SingularFactorError(RuntimeError):
     """A factorisation met an exactly zero (or non-finite) pivot."""
+
+
+class NotPositiveDefiniteError(RuntimeError):
+    """A Cholesky factorisation met a pivot <= 0: the matrix is not positive definite."""
 
 
 class NotBandedError(ValueError):
@@ -558,3 +569,24 @@ def factor_inertia(A, backend: BackendSpec = None):
     except SingularFactorError:
         return None, -1
     return lu, lu.negative_pivots
+
+
+def factor_positive_definite(A, backend: BackendSpec = None):
+    """The factorisation of the symmetric ``A`` when it is positive definite, else None (the
+    energy minimiser's test of ``K + sigma M``). ``backend``: a name or an instance (kept).
+    A PARDISO instance tries its Cholesky companion (``cholesky()``), which stops at the
+    first pivot <= 0; any other PARDISO failure, and every other backend, go through
+    ``factor_inertia`` (positive definite = no negative and no zero pivot)."""
+    solver = _instance(backend, symmetric=True)
+    chol = getattr(solver, "cholesky", None)
+    if chol is not None and getattr(solver, "symmetric", False):
+        try:
+            return chol().factorize(A)
+        except NotPositiveDefiniteError:
+            return None
+        except SingularFactorError:  # a non-finite entry
+            return None
+        except RuntimeError:  # another PARDISO error: the inertia path decides
+            pass
+    lu, neg = factor_inertia(A, backend=solver)
+    return lu if neg == 0 else None

@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .linear import factor_inertia, get_backend, resolve_backend, shifted, solver_threads, sparse_solve
+from .linear import (factor_inertia, factor_positive_definite, get_backend, resolve_backend, shifted, solver_threads,
+                     sparse_solve)
 from .newton import NewtonResult, convergence_rates
 from .static import StaticProblem
 
@@ -85,6 +86,11 @@ def run_backend(backend=None, keep_pattern: bool = None):
 def _release(solver, owned: bool) -> None:
     if owned and hasattr(solver, "release"):
         solver.release()
+
+
+def _analyses(solver) -> int:
+    """Symbolic analyses of a run's backend so far (its companions' included)."""
+    return int(getattr(solver, "total_analyses", getattr(solver, "analyses", 0)))
 
 
 def _free_centroids(prob, layout) -> np.ndarray:
@@ -194,7 +200,9 @@ def active_pair_keys(system, x):
 class MinimizeResult(NewtonResult):
     """``NewtonResult`` of ``minimize_energy`` plus its per-iteration record:
     ``energies`` (N mm), ``sigmas`` (regularisation used by each accepted step),
-    ``steps`` (step fraction alpha), ``factorizations``, ``rejections``, ``rebuilds``,
+    ``steps`` (step fraction alpha), ``factorizations`` (all numeric factorisations, the
+    definiteness tests included), ``indefinite`` (tests that found K + sigma M not positive
+    definite: with PARDISO a Cholesky stopped at its first pivot <= 0), ``rejections``, ``rebuilds``,
     ``negative_pivots`` (inertia of the last unregularised tangent; 0: a local minimum),
     ``backend`` (the linear
     solver's name) and ``analyses`` (its symbolic analyses in this run; 0 for SuperLU,
@@ -204,6 +212,7 @@ class MinimizeResult(NewtonResult):
     sigmas: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     factorizations: int = 0
+    indefinite: int = 0
     rejections: int = 0
     rebuilds: int = 0
     negative_pivots: int = -1
@@ -262,7 +271,7 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
                      max_rejections=None, max_sigma_rel=1e16):
     t0 = time.perf_counter()
     keep = KEEP_STORED_PATTERN and solver.name == "pardiso"
-    analyses0 = int(getattr(solver, "analyses", 0))
+    analyses0 = _analyses(solver)
     w0 = np.zeros(system.n)
     lay = system.layout
     guard = 0.5 * float(system.params.margin)
@@ -290,6 +299,7 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
     sig_floor = 1e-8 * scale
     sigma = 1e-6 * scale if sigma0 is None else float(sigma0)
     sig_neg = 0.0
+    unregularised = None  # the last K (sigma = 0) found indefinite, its count still to take
     it = 0
     while True:
         if rn <= atol or rn <= rtol * r0:
@@ -312,14 +322,19 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
             out.reason = (f"no descent step: the regularisation sigma = {sigma:.3g} exceeds {max_sigma_rel:g} x the "
                           f"stiffest mode's (the trial steps shrank below the minimum step; |F| = {rn:.3e})")
             break
-        # factorise K + sigma M, raising sigma until it is positive definite
+        # factorise K + sigma M, raising sigma until it is positive definite (the test is a
+        # Cholesky where PARDISO is there: it stops at the first pivot <= 0, docs/engine.md)
         for _ in range(60):
-            lu, neg = factor_inertia(shifted(J, Mff, sigma, keep_pattern=keep), backend=solver)
+            A = shifted(J, Mff, sigma, keep_pattern=keep)
+            lu = factor_positive_definite(A, backend=solver)
             out.factorizations += 1
             if sigma == 0.0:
-                out.negative_pivots = neg
-            if neg == 0:
+                # inertia of the unregularised tangent: 0 when definite; otherwise counted
+                # (an LDL^T) only if it is still the last unregularised tangent at the end
+                out.negative_pivots, unregularised = (0, None) if lu is not None else (-1, A)
+            if lu is not None:
                 break
+            out.indefinite += 1
             sig_neg = max(sig_neg, sigma)
             sigma = max(4.0 * sigma, sig_floor)
         else:
@@ -403,9 +418,11 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
         log.info("%s it=%d |F|=%.3e Pi=%.12e dPi=%.2e ratio=%.2f step=%.3g sigma=%.3g pairs=%d rate=%s wall=%.1f",
                  label, it, rn, Pi, dPi, ratio, alpha, out.sigmas[-1], system.map.n_pairs,
                  f"{rates[-1]:.2f}" if rates else "-", time.perf_counter() - t0)
+    if unregularised is not None:
+        out.negative_pivots = factor_inertia(unregularised, backend=solver)[1]
     out.u = u
     out.iterations = it
     out.backend = solver.name
-    out.analyses = int(getattr(solver, "analyses", 0)) - analyses0
+    out.analyses = _analyses(solver) - analyses0
     xs, ws = prob.state(u)
     return xs, ws, out

@@ -225,7 +225,7 @@ def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:
         st = system.contact_state(x)
         rec = {"phase": "static", "stage": k + 1, "method": "minimize_energy", "onset_over_R": eps,
                "converged": bool(res.converged), "newton_iterations": int(res.iterations),
-               "factorizations": int(res.factorizations),
+               "factorizations": int(res.factorizations), "indefinite": int(res.indefinite),
                "rejections": int(res.rejections), "linear_backend": res.backend, "analyses": int(res.analyses),
                "map_rebuilds": int(res.rebuilds), "negative_pivots": int(res.negative_pivots),
                "residuals": [float(v) for v in res.residuals], "energies": [float(v) for v in res.energies],
@@ -237,8 +237,9 @@ def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:
         out.static_newton_iterations += res.iterations
         out.static_result = res
         out.static_converged = bool(res.converged)
-        log.info("onset stage %d (%gR): converged=%s its=%d factorizations=%d |F|=%.3e Pi=%.10g wall=%.1f s",
-                 k + 1, eps, res.converged, res.iterations, res.factorizations, res.residuals[-1],
+        log.info("onset stage %d (%gR): converged=%s its=%d factorizations=%d (indefinite %d) |F|=%.3e Pi=%.10g "
+                 "wall=%.1f s", k + 1, eps, res.converged, res.iterations, res.factorizations, res.indefinite,
+                 res.residuals[-1],
                  res.energies[-1], rec["wall_s"])
         if on_rebuild is not None:
             on_rebuild(k + 1, float(t0), x, np.zeros(system.n))
