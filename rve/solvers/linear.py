@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import copy
 import os
 from typing import Callable, Dict, Optional, Union
 
@@ -412,7 +413,9 @@ def shifted(J, M, sigma: float, keep_pattern: bool = False):
     if _same_buffer(M.indices, J.indices) and _same_buffer(M.indptr, J.indptr) and J.has_canonical_format:
         # M on J's very structure (both restricted through one plan: the contact system's mass
         # lives on the union pattern): entry by entry, the same sums as the slot path
-        return sp.csc_matrix((J.data + sigma * M.data, J.indices, J.indptr), shape=J.shape)
+        A = copy.copy(J)  # a shallow copy sharing J's checked index arrays (no re-validation)
+        A.data = J.data + sigma * M.data
+        return A
     c = _SLOT_CACHE
     if c and all(_same_arrays(c[k], X) for k, X in (("J", J), ("M", M))):
         slots = c["slots"]

@@ -466,6 +466,16 @@ class PardisoFactorization:
         if inertia and not self.symmetric:
             raise ValueError("pardiso_unsym (mtype 11, LU) gives no inertia")
         fast = self._stored_fast
+        if (self._alive and self.drop_zeros and self.reuse_subpattern and sp.issparse(A)
+                and A.format in ("csr", "csc") and A.shape == (self.n, self.n) and A.has_canonical_format
+                and not (fast is not None and fast[6] == self.analyses and A.format == fast[0]
+                         and _same_structure(A, fast[1], fast[2]))):
+            # a new stored structure (a rebuilt contact map): map it onto the analysis once;
+            # its nonzeros then either lie there (the fast path below) or they do not (a new
+            # analysis in the general path)
+            self._stored = A
+            self._remember_stored()
+            fast = self._stored_fast
         if (fast is not None and self._alive and sp.issparse(A) and A.format == fast[0]
                 and A.shape == (self.n, self.n) and fast[6] == self.analyses and _same_structure(A, fast[1], fast[2])
                 and not (fast[5].size and np.any(A.data[fast[5]]))):
