@@ -44,8 +44,10 @@ pattern is always the union of the patterns met: ``grow_limit = inf``), ``pardis
 (a new analysis for every new nonzero pattern: ``reuse_subpattern = False``),
 ``pardiso_amd`` (minimum-degree ordering, no weighted matching: a cheaper analysis),
 ``pardiso_t2`` (the default, CNR mode for up to two threads, iparm(34) = 2, on two PARDISO
-threads instead of one), ``pardiso_nocnr`` (the default with CNR off: the arithmetic before
-round 7). Whole runs get ``RVE_PARDISO_THREADS=1`` unless it is set, so only ``pardiso_t2``
+threads instead of one), ``pardiso_t2_ldlt`` (``pardiso_t2`` with the LDL^T inertia count as
+the minimiser's definiteness test instead of the Cholesky: ``rve.solvers.minimize.
+CHOLESKY_TEST = False``, round 7's test), ``pardiso_nocnr`` (the default with CNR off: the
+arithmetic before round 7). Whole runs get ``RVE_PARDISO_THREADS=1`` unless it is set, so only ``pardiso_t2``
 uses two threads.
 
 For every saved matrix and every variant, in a fresh subprocess (so ``ru_maxrss`` is the
@@ -68,6 +70,11 @@ pivots and refinement steps. Variants:
 * ``pardiso_drop_cnr`` / ``pardiso_drop_t2``: as ``pardiso_dropzeros`` in MKL's conditional
   numerical reproducibility mode for up to two threads (iparm(34) = 2), on one / two
   threads (the two give bitwise the same factor; docs/engine.md "Two threads").
+* ``pardiso_chol_t2``: the energy minimiser's definiteness test, PARDISO's Cholesky (mtype 2,
+  ``PardisoFactorization(positive_definite=True)``) as ``pardiso_drop_t2`` otherwise; on an
+  indefinite matrix the time until it stops at the first pivot <= 0 (``neg`` is then
+  printed as ``>0``, the residual as nan), on a definite one a whole factorisation and its
+  solve (docs/engine.md "Cholesky as the definiteness test").
   The other PARDISO variants run with ``drop_zeros=False`` (the stored pattern).
 
 The machine (2 cores) is usually shared: compare ratios within one run, not across runs.
@@ -89,7 +96,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ("superlu", "pardiso_fresh", "pardiso_reuse", "pardiso_nomatch", "pardiso_dropzeros",
-            "pardiso_nomatch_drop", "pardiso_drop_cnr", "pardiso_drop_t2")
+            "pardiso_nomatch_drop", "pardiso_drop_cnr", "pardiso_drop_t2", "pardiso_chol_t2")
 DEFAULT_ORDER = ("min12_first", "min12_first_keep", "min12_K", "min12_pd", "driven12", "min30_first",
                  "min30_first_keep", "min30_pd", "damped30", "impact_stage_mech", "impact_stage")
 
@@ -130,6 +137,8 @@ def worker(path: str, variant: str, repeats: int) -> dict:
         if not pardiso.available():
             return {"variant": variant, "skipped": pardiso.unavailable_reason()}
         M = A
+        if variant == "pardiso_chol_t2":
+            return _cholesky_record(A, b, rec, repeats, rss0)
         drop = variant in ("pardiso_dropzeros", "pardiso_nomatch_drop", "pardiso_drop_cnr", "pardiso_drop_t2")
         if drop:
             rec["nnz"] = int(np.count_nonzero(A.data))
@@ -154,6 +163,38 @@ def worker(path: str, variant: str, repeats: int) -> dict:
                    pardiso_mem_mib=f.memory_kb["factorization"] / 1024.0)
         f.release()
     rec["residual"] = float(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
+    rec["rss_mib"] = _rss_mib()
+    rec["rss_growth_mib"] = rec["rss_mib"] - rss0
+    return rec
+
+
+def _cholesky_record(A, b, rec: dict, repeats: int, rss0: float) -> dict:
+    """``pardiso_chol_t2``: the Cholesky companion on two threads (CNR), zeros dropped."""
+    from rve.solvers import pardiso
+    from rve.solvers.linear import NotPositiveDefiniteError
+
+    f = pardiso.PardisoFactorization(positive_definite=True, drop_zeros=True, cnr=2, threads=2)
+    t0 = time.perf_counter()
+    f.analyse(A)
+    rec["analyse_s"] = time.perf_counter() - t0
+    rec["nnz"] = int(np.count_nonzero(A.data))
+
+    def run():
+        try:
+            return f.factorize(A)
+        except NotPositiveDefiniteError:
+            return None
+
+    definite = run() is not None  # warm-up
+    tf, _ = _median_time(run, repeats)
+    if definite:
+        ts, x = _median_time(lambda: f.solve(b), max(repeats, 5))
+        rec["residual"] = float(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
+    else:
+        ts, rec["residual"] = float("nan"), float("nan")
+    rec.update(factor_s=tf, solve_s=ts, factor_nnz=f.factor_nnz if definite else -1,
+               negative_pivots=0 if definite else ">0", perturbed=0, refinement=0, analyses=f.analyses)
+    f.release()
     rec["rss_mib"] = _rss_mib()
     rec["rss_growth_mib"] = rec["rss_mib"] - rss0
     return rec
@@ -515,7 +556,7 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
 
 # ----------------------------------------------------------------------------- whole runs
 RUN_BACKENDS = ("superlu", "pardiso", "pardiso_nonzero", "pardiso_keep", "pardiso_stored", "pardiso_grow",
-                "pardiso_nosub", "pardiso_amd", "pardiso_nocnr", "pardiso_t2")
+                "pardiso_nosub", "pardiso_amd", "pardiso_nocnr", "pardiso_t2", "pardiso_t2_ldlt")
 #: PARDISO variants of the whole runs: rve.solvers.minimize.PARDISO_OPTIONS
 RUN_VARIANT_OPTIONS = {"pardiso_stored": {"drop_zeros": True, "analyse_stored": True},
                        "pardiso": {"drop_zeros": True, "analyse_stored": True},
@@ -523,7 +564,8 @@ RUN_VARIANT_OPTIONS = {"pardiso_stored": {"drop_zeros": True, "analyse_stored": 
                        "pardiso_amd": {"ordering": 0, "matching": False},
                        # the minimiser's default is CNR mode for up to 2 threads (iparm(34) = 2)
                        "pardiso_nocnr": {"drop_zeros": True, "analyse_stored": True, "cnr": 0},
-                       "pardiso_t2": {"drop_zeros": True, "analyse_stored": True, "threads": 2}}
+                       "pardiso_t2": {"drop_zeros": True, "analyse_stored": True, "threads": 2},
+                       "pardiso_t2_ldlt": {"drop_zeros": True, "analyse_stored": True, "threads": 2}}
 RELAX_CONFIG = ROOT / "configs/scenes/plain_weave_relax.yaml"
 STRAIN_CONFIG = ROOT / "configs/rve/plain_weave.yaml"
 
@@ -551,7 +593,7 @@ class _Split:
 
 def _instrument() -> _Split:
     from rve.model import contact_model
-    from rve.solvers import linear, minimize, newton, static
+    from rve.solvers import minimize, newton, static
 
     sp_ = _Split()
     cs = contact_model.ContactSystem
@@ -559,10 +601,14 @@ def _instrument() -> _Split:
     sp_.wrap(cs, "rebuild", "contact_rebuild")
     sp_.wrap(cs, "energy", "energy")
     for mod in (minimize, newton, static):
-        for name in ("factor_inertia", "sparse_solve"):
+        for name in ("factor_inertia", "factor_positive_definite", "sparse_solve"):
             if hasattr(mod, name):
                 sp_.wrap(mod, name, "factorisation")
-    sp_.wrap(linear, "factor_inertia", "factorisation")  # rve.fabrics.relaxation's stability check
+    from rve.fabrics import relaxation as fabric_relaxation
+
+    # the stability check (its own reference; wrapping linear's would count the LDL^T of
+    # factor_positive_definite twice)
+    sp_.wrap(fabric_relaxation, "factor_inertia", "factorisation")
     return sp_
 
 
@@ -574,7 +620,8 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
 
     # the variants are set explicitly (independent of the defaults of rve.solvers.minimize)
     minimize.KEEP_STORED_PATTERN = backend in ("pardiso", "pardiso_keep", "pardiso_stored", "pardiso_nocnr",
-                                               "pardiso_t2")
+                                               "pardiso_t2", "pardiso_t2_ldlt")
+    minimize.CHOLESKY_TEST = backend != "pardiso_t2_ldlt"  # the LDL^T inertia as the test (round 7)
     minimize.PARDISO_OPTIONS.clear()
     minimize.PARDISO_OPTIONS.update(RUN_VARIANT_OPTIONS.get(backend, {}))
     split = _instrument()

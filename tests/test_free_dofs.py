@@ -195,3 +195,25 @@ def test_combine_skips_a_zero_mask_and_equals_the_masked_sum():
     out = fd.combine([(P, 2.0, mask), (Q, 0.5, 1.0 - mask)])
     np.testing.assert_allclose(out.toarray(), _dense_combination(fd, [(P, 2.0, mask), (Q, 0.5, 1.0 - mask)]),
                                rtol=1e-15, atol=1e-15)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_csr_restriction_equals_the_csc_one(seed):
+    """``fmt="csr"`` (the minimiser's, for PARDISO): the same matrix as the CSC restriction
+    and the dense one, in canonical CSR (sorted indices, no duplicates), with its own plan."""
+    n = 40
+    P = _random_csr(n, seed)
+    rng = np.random.default_rng(90 + seed)
+    fd = FreeDofs(n, rng.choice(n, 7, replace=False))
+    mech = (rng.uniform(size=n) < 0.5).astype(float)
+    terms = [(P, 1.0, mech), (P, 0.4, 1.0 - mech)]
+    csr, csc = fd.combine(terms, fmt="csr"), fd.combine(terms)
+    assert csr.format == "csr" and csc.format == "csc" and len(fd._plans) == 2
+    assert csr.has_canonical_format
+    np.testing.assert_array_equal(csr.toarray(), csc.toarray())
+    np.testing.assert_allclose(csr.toarray(), _dense_combination(fd, terms), rtol=1e-14, atol=1e-14)
+    M = fd.matrix(P, fmt="csr")
+    assert M.format == "csr" and np.shares_memory(M.indices, csr.indices)  # one plan per structure and format
+    np.testing.assert_array_equal(M.toarray(), P.toarray()[np.ix_(fd.free, fd.free)])
+    with pytest.raises(ValueError, match="csr"):
+        fd.matrix(P, fmt="coo")

@@ -403,19 +403,23 @@ def factorize(A, symmetric: bool = True, inertia: bool = False, backend: Backend
 
 def shifted(J, M, sigma: float, keep_pattern: bool = False):
     """``J + sigma M`` as CSC. ``keep_pattern=False``: scipy's sum (explicit zeros dropped);
-    ``True``: on ``J``'s stored pattern when ``M``'s pattern lies in it (else scipy's sum)."""
+    ``True``: on ``J``'s stored pattern when ``M``'s pattern lies in it (else scipy's sum);
+    ``J`` and ``M`` of one structure (the same index arrays, CSR or CSC) keep that format."""
     if sigma == 0.0:
         return J
     if not keep_pattern:
         return (J + sigma * M).tocsc()
-    J = sp.csc_matrix(J)
-    M = sp.csc_matrix(M)
+    if not (sp.issparse(J) and sp.issparse(M) and J.format == M.format and J.format in ("csr", "csc")):
+        J = sp.csc_matrix(J)
+        M = sp.csc_matrix(M)
     if _same_buffer(M.indices, J.indices) and _same_buffer(M.indptr, J.indptr) and J.has_canonical_format:
         # M on J's very structure (both restricted through one plan: the contact system's mass
         # lives on the union pattern): entry by entry, the same sums as the slot path
         A = copy.copy(J)  # a shallow copy sharing J's checked index arrays (no re-validation)
         A.data = J.data + sigma * M.data
         return A
+    J = sp.csc_matrix(J)
+    M = sp.csc_matrix(M)
     c = _SLOT_CACHE
     if c and all(_same_arrays(c[k], X) for k, X in (("J", J), ("M", M))):
         slots = c["slots"]
@@ -574,14 +578,15 @@ def factor_inertia(A, backend: BackendSpec = None):
     return lu, lu.negative_pivots
 
 
-def factor_positive_definite(A, backend: BackendSpec = None):
+def factor_positive_definite(A, backend: BackendSpec = None, cholesky: bool = True):
     """The factorisation of the symmetric ``A`` when it is positive definite, else None (the
     energy minimiser's test of ``K + sigma M``). ``backend``: a name or an instance (kept).
     A PARDISO instance tries its Cholesky companion (``cholesky()``), which stops at the
-    first pivot <= 0; any other PARDISO failure, and every other backend, go through
-    ``factor_inertia`` (positive definite = no negative and no zero pivot)."""
+    first pivot <= 0; any other PARDISO failure, every other backend, and ``cholesky=False``
+    (the LDL^T test of round 7, for A/B benchmarks) go through ``factor_inertia`` (positive
+    definite = no negative and no zero pivot)."""
     solver = _instance(backend, symmetric=True)
-    chol = getattr(solver, "cholesky", None)
+    chol = getattr(solver, "cholesky", None) if cholesky else None
     if chol is not None and getattr(solver, "symmetric", False):
         try:
             return chol().factorize(A)

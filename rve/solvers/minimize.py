@@ -57,6 +57,12 @@ KEEP_STORED_PATTERN = True
 #: benchmarks/engine_speed.py measures variants through it)
 PARDISO_OPTIONS: dict = {"drop_zeros": True, "analyse_stored": True}
 
+#: the definiteness test of K + sigma M: PARDISO's Cholesky (True; it stops at the first pivot
+#: <= 0, a fraction of a factorisation on an indefinite matrix) or the LDL^T inertia count
+#: (False, round 7; benchmarks/engine_speed.py's ``pardiso_t2_ldlt``). Same verdicts, same
+#: sigma ladder (tests/test_pardiso.py); docs/engine.md "Cholesky as the definiteness test".
+CHOLESKY_TEST = True
+
 #: MKL's conditional numerical reproducibility for up to this many threads (iparm(34)):
 #: the minimiser's factorisations give the same bits on 1 and 2 threads, so a Snakemake job
 #: scaled down from 2 threads to 1 (``-j1``) computes the same table (docs/engine.md "Two
@@ -279,10 +285,13 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
     if cap > guard:
         raise ValueError(f"step_cap {cap} exceeds half the search margin {guard}")
 
+    # PARDISO reads CSR as well: the restriction is then a row filter (no transposition)
+    fmt = "csr" if keep else "csc"
+
     def setup(xc):
-        prob = StaticProblem(system, xc, w0, t)
+        prob = StaticProblem(system, xc, w0, t, fmt=fmt)
         cen = _free_centroids(prob, lay)
-        return prob, cen, prob.fd.matrix(system.mass())
+        return prob, cen, prob.fd.matrix(system.mass(), fmt=fmt)
 
     x = np.array(x, float, copy=True)
     if system.max_displacement_since_rebuild(x) > 0.0:
@@ -326,7 +335,7 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
         # Cholesky where PARDISO is there: it stops at the first pivot <= 0, docs/engine.md)
         for _ in range(60):
             A = shifted(J, Mff, sigma, keep_pattern=keep)
-            lu = factor_positive_definite(A, backend=solver)
+            lu = factor_positive_definite(A, backend=solver, cholesky=CHOLESKY_TEST)
             out.factorizations += 1
             if sigma == 0.0:
                 # inertia of the unregularised tangent: 0 when definite; otherwise counted

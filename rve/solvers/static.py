@@ -47,8 +47,9 @@ log = logging.getLogger("rve.static")
 class StaticProblem:
     """The static residual of a system at time ``t`` as a function of the free unknowns."""
 
-    def __init__(self, system, x, w, t: float):
+    def __init__(self, system, x, w, t: float, fmt: str = "csc"):
         self.system = system
+        self.fmt = fmt  # of the restricted Jacobian (``FreeDofs.matrix``)
         self.t = float(t)
         self.n = int(system.n)
         self.mech = mech_mask(system)
@@ -80,7 +81,7 @@ class StaticProblem:
         x, w = self.state(u)
         F, Fx, Fw = self.system.evaluate(x, w, self.t, jacobian=True)
         fd = self.fd
-        J = fd.combine([(Fx, 1.0, self._mechf), (Fw, 1.0, 1.0 - self._mechf)])
+        J = fd.combine([(Fx, 1.0, self._mechf), (Fw, 1.0, 1.0 - self._mechf)], fmt=self.fmt)
         return np.asarray(F, float)[self.free], J
 
     def admissible(self, u) -> bool:

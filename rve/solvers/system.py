@@ -155,17 +155,20 @@ class FreeDofs:
     def size(self) -> int:
         return int(self.free.size)
 
-    def matrix(self, A) -> sp.csc_matrix:
+    def matrix(self, A, fmt: str = "csc"):
+        """``A[free][:, free]`` as CSC (``fmt="csc"``, default: what SuperLU takes) or CSR
+        (``fmt="csr"``: a row filter of a CSR ``A``, no transposition; what the energy
+        minimiser hands PARDISO, which reads either)."""
         if isinstance(A, sp.csr_matrix) and A.has_canonical_format:
             # the cached plan of the structure: the same matrix as the COO pass below
-            gather, indices, indptr = self._plan(A)
-            return sp.csc_matrix((A.data[gather], indices, indptr), shape=(self.size, self.size))
+            gather, indices, indptr = self._plan(A, fmt)
+            return _FORMATS[fmt]((A.data[gather], indices, indptr), shape=(self.size, self.size))
         A = A.tocoo() if sp.issparse(A) else sp.coo_matrix(A)
         r = self.new_index[A.row]
         c = self.new_index[A.col]
         keep = (r >= 0) & (c >= 0)
         m = self.free.size
-        return sp.csc_matrix((A.data[keep], (r[keep], c[keep])), shape=(m, m))
+        return _FORMATS[fmt]((A.data[keep], (r[keep], c[keep])), shape=(m, m))
 
     def triplets(self, A, coef: float = 1.0, colmask: "np.ndarray | None" = None):
         """Restricted COO triplets ``(rows, cols, data)`` of ``coef * A @ diag(colmask)``."""
@@ -192,8 +195,9 @@ class FreeDofs:
         d = np.concatenate([p[2] for p in parts])
         return sp.csc_matrix((d, (r, c)), shape=(m, m))
 
-    def combine(self, terms) -> sp.csc_matrix:
-        """Restricted ``sum(coef * A @ diag(colmask))`` over ``terms = [(A, coef, colmask)]``.
+    def combine(self, terms, fmt: str = "csc"):
+        """Restricted ``sum(coef * A @ diag(colmask))`` over ``terms = [(A, coef, colmask)]``,
+        as CSC (default) or CSR (``fmt``, see ``matrix``).
 
         Fast path: when every non-empty ``A`` is CSR with one and the same sparsity
         structure (all the model's matrices come from one element pattern), the sum is
@@ -206,7 +210,7 @@ class FreeDofs:
         """
         mats = [(A, c, m) for A, c, m in terms if A is not None and A.nnz > 0]
         if not mats:
-            return sp.csc_matrix((self.size, self.size))
+            return _FORMATS[fmt]((self.size, self.size))
         live = [(A, c, m) for A, c, m in mats if m is None or np.any(m)]
         if live:
             mats = live
@@ -217,8 +221,9 @@ class FreeDofs:
             and (A.indptr is base.indptr or np.array_equal(A.indptr, base.indptr))
             for A, _, _ in mats)
         if not same:
-            return self.assemble([self.triplets(A, c, None if m is None else np.asarray(m) != 0) for A, c, m in mats])
-        gather, indices, indptr = self._plan(base)
+            out = self.assemble([self.triplets(A, c, None if m is None else np.asarray(m) != 0) for A, c, m in mats])
+            return out if fmt == "csc" else out.tocsr()
+        gather, indices, indptr = self._plan(base, fmt)
         if len(mats) == 1 and mats[0][1] == 1.0 and (mats[0][2] is None or np.all(mats[0][2] == 1.0)):
             data = base.data[gather]
         else:
@@ -229,7 +234,7 @@ class FreeDofs:
                 else:
                     data += c * (A.data * m[A.indices])
             data = data[gather]
-        return sp.csc_matrix((data, indices, indptr), shape=(self.size, self.size))
+        return _FORMATS[fmt]((data, indices, indptr), shape=(self.size, self.size))
 
     #: plans shared by the FreeDofs of one constraint set (a StaticProblem is rebuilt after
     #: every contact-map rebuild; the plan of an unchanged structure is kept): at most this
@@ -237,19 +242,21 @@ class FreeDofs:
     shared_plans = 4
     _SHARED: list = []
 
-    def _plan(self, A):
-        """``(gather, indices, indptr)``: the restricted CSC of CSR ``A`` is
-        ``(A.data[gather], indices, indptr)``. Cached per structure: the key is the
-        structure itself (identity of the index arrays, else their contents), never a
-        digest, so two structures with equal sizes cannot share a plan."""
+    def _plan(self, A, fmt: str = "csc"):
+        """``(gather, indices, indptr)``: the restricted CSC (or CSR, ``fmt``) of CSR ``A``
+        is ``(A.data[gather], indices, indptr)``. Cached per structure and format: the key
+        is the structure itself (identity of the index arrays, else their contents), never
+        a digest, so two structures with equal sizes cannot share a plan."""
+        if fmt not in _FORMATS:
+            raise ValueError(f"fmt = {fmt!r}: expected 'csc' or 'csr'")
         plans = self.__dict__.setdefault("_plans", {})
-        for ref_indptr, ref_indices, plan in plans.values():
-            if _same_structure(A, ref_indptr, ref_indices):
+        for ref_fmt, ref_indptr, ref_indices, plan in plans.values():
+            if ref_fmt == fmt and _same_structure(A, ref_indptr, ref_indices):
                 return plan
         shared = FreeDofs._SHARED
         for key, ref_indptr, ref_indices, plan in shared:
-            if key == self.key and _same_structure(A, ref_indptr, ref_indices):
-                plans[len(plans)] = (ref_indptr, ref_indices, plan)
+            if key == (self.key, fmt) and _same_structure(A, ref_indptr, ref_indices):
+                plans[len(plans)] = (fmt, ref_indptr, ref_indices, plan)
                 return plan
         # the restricted CSR (row filter, no sort) with the positions as values, then scipy's
         # O(nnz) CSR -> CSC transposition: the same plan as a COO -> CSC build, ~20 % cheaper
@@ -259,12 +266,15 @@ class FreeDofs:
         kept = np.concatenate(([0], np.cumsum(ok)))
         indptr = np.concatenate(([0], np.cumsum((kept[A.indptr[1:]] - kept[A.indptr[:-1]])[self.is_free])))
         m = self.size
-        tag = sp.csr_matrix((np.arange(keep.size, dtype=float), c[keep], indptr), shape=(m, m)).tocsc()
-        plan = (keep[tag.data.astype(np.int64)], tag.indices, tag.indptr)
+        if fmt == "csr":  # the row filter itself: a sequential gather
+            plan = (keep, c[keep].astype(np.int32), indptr.astype(np.int32))
+        else:
+            tag = sp.csr_matrix((np.arange(keep.size, dtype=float), c[keep], indptr), shape=(m, m)).tocsc()
+            plan = (keep[tag.data.astype(np.int64)], tag.indices, tag.indptr)
         if len(plans) > 8:
             plans.clear()
-        plans[len(plans)] = (A.indptr, A.indices, plan)
-        shared.append((self.key, A.indptr, A.indices, plan))
+        plans[len(plans)] = (fmt, A.indptr, A.indices, plan)
+        shared.append(((self.key, fmt), A.indptr, A.indices, plan))
         del shared[:-self.shared_plans]
         return plan
 
@@ -279,6 +289,9 @@ class FreeDofs:
                 cache.clear()
             cache[key] = fd
         return fd
+
+
+_FORMATS = {"csc": sp.csc_matrix, "csr": sp.csr_matrix}
 
 
 def _same_buffer(a, b) -> bool:
