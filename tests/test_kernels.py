@@ -251,6 +251,52 @@ def test_weave_numba_equals_numpy(monkeypatch, elements):
         assert abs(b[4] - a[4]) <= RTOL * abs(a[4])
 
 
+def test_weave_kernels_give_the_same_bits_on_one_and_two_threads():
+    """The compiled kernels split their elements / pairs over the job's threads
+    (rve.threads.run_chunked): F, Fx and the energy of the 80-fibril weave are bitwise the
+    same on 1 and 2 threads, and 2 threads really split (enough elements and pairs)."""
+    from pathlib import Path
+
+    from rve.config.loader import load_config
+    from rve.kernels import beam, contact
+    from rve.scenes.fabric_relax import setup
+    from rve.threads import linear_threads
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "configs/scenes/plain_weave_relax.yaml",
+                      ["mesh.elements=12"])
+    _, system, x = setup(cfg)
+    x = x + 0.01 * np.random.default_rng(4).standard_normal(x.size) * system.mech
+    w = np.zeros(system.n)
+    assert system.mesh.n_elements >= 2 * beam.MIN_CHUNK and system.map.n_pairs >= 2 * contact.MIN_CHUNK
+    out = {}
+    for threads in (1, 2):
+        with linear_threads(threads):
+            F, Fx, _ = system.evaluate(x, w, 0.0, True)
+            out[threads] = (F, Fx.data, system.energy(x), system.gaps(x))
+    for a, b in zip(out[1], out[2]):
+        assert np.array_equal(a, b)
+
+
+def test_run_chunked_covers_the_range_once_and_raises():
+    from rve.threads import linear_threads, run_chunked
+
+    for threads, n in ((1, 1000), (2, 1000), (2, 7), (3, 1001)):
+        hits = np.zeros(n, int)
+
+        def fn(a, b):
+            hits[a:b] += 1
+
+        with linear_threads(threads):
+            run_chunked(n, fn, min_chunk=2)
+        assert np.all(hits == 1)
+
+    def bad(a, b):
+        raise RuntimeError(f"chunk {a}:{b}")
+
+    with linear_threads(2), pytest.raises(RuntimeError, match="chunk"):
+        run_chunked(100, bad, min_chunk=10)
+
+
 # ---------------------------------------------------------------------------- union pattern
 def _brute_union(pattern, local, comps, b):
     n = pattern.n
@@ -290,6 +336,15 @@ def test_union_pattern_structure_and_slots(dense, monkeypatch):
     m = u.gdofs.shape[1]
     np.testing.assert_array_equal(rows_u[u.slots].reshape(-1, m, m), np.repeat(u.gdofs[:, :, None], m, axis=2))
     np.testing.assert_array_equal(u.indices[u.slots].reshape(-1, m, m), np.repeat(u.gdofs[:, None, :], m, axis=1))
+    # a second union on the same element pattern (its node-pair tables reused when dense)
+    local2 = np.concatenate([conn[rng.integers(0, len(conn), 30)], conn[rng.integers(0, len(conn), 30)]], axis=1)
+    u2 = UnionPattern(pat, local2, comps)
+    ref2 = _brute_union(pat, local2, comps, layout.block)
+    np.testing.assert_array_equal(u2.indptr, ref2.indptr)
+    np.testing.assert_array_equal(u2.indices, ref2.indices)
+    rows_u2 = np.repeat(np.arange(u2.n), np.diff(u2.indptr))
+    np.testing.assert_array_equal(rows_u2[u2.slots].reshape(-1, m, m), np.repeat(u2.gdofs[:, :, None], m, axis=2))
+    assert dense == ("_union_tables" in pat.__dict__)
 
 
 def test_rebuild_keeps_the_union_when_the_pairs_are_unchanged():

@@ -10,14 +10,20 @@ reference; formulas there) to rounding, in one pass over the quadrature points w
 3x3 algebra in registers: the per-call numpy overhead of the reference (~20 temporaries of
 (E, nq, naf, 3)) is what this removes. The tangent is built on its upper triangle and
 mirrored (it is symmetric exactly: the mirrored entry is the same products summed in the
-same order).
+same order). The elements are split over ``rve.threads.solver_threads()`` threads (the kernel
+releases the GIL; every element's output is its own, so any split gives the same bits).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-__all__ = ["neo_hookean_element_forces"]
+from ..threads import run_chunked
+
+__all__ = ["neo_hookean_element_forces", "MIN_CHUNK"]
+
+#: elements per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
+MIN_CHUNK = 256
 
 
 @njit(cache=True, fastmath=False, nogil=True)
@@ -123,6 +129,12 @@ def neo_hookean_element_forces(D, W, U, mu, lam, want_tangent: bool = True, want
     R = np.zeros((E, naf, 3))
     K = np.empty((E, naf * 3, naf * 3)) if want_tangent else np.zeros((0, 0, 0))
     dR = np.empty((E, nq, naf, 3)) if want_dmu else np.zeros((0, 0, 0, 0))
+    wt, wd = bool(want_tangent), bool(want_dmu)
+
+    def chunk(a, b):  # elements a..b (independent outputs: the same bits on any split)
+        _kernel(D[a:b], W[a:b], U[a:b], mu[a:b], lam[a:b], wt, wd, R[a:b], K[a:b] if wt else K,
+                dR[a:b] if wd else dR)
+
     with np.errstate(invalid="ignore", divide="ignore"):
-        _kernel(D, W, U, mu, lam, bool(want_tangent), bool(want_dmu), R, K, dR)
+        run_chunked(E, chunk, MIN_CHUNK)
     return (R, K.reshape(E, naf, 3, naf, 3) if want_tangent else None, dR if want_dmu else None)

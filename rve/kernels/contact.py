@@ -21,6 +21,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..threads import run_chunked
+
+#: pairs per thread below which a kernel runs on one thread (``rve.threads.run_chunked``)
+MIN_CHUNK = 512
+
 __all__ = ["chord_gaps", "penalty_forms"]
 
 _TINY = 1e-300
@@ -173,7 +178,9 @@ def chord_gaps(r, npl, nmi, s_plus, gap_radius, s_minus=None, recompute: bool = 
     """Overlaps g (P, G) of every point (module docstring)."""
     r, npl, nmi, sp, gr, sm = _prep(r, npl, nmi, s_plus, gap_radius, s_minus)
     out = np.empty(sp.shape)
-    _gaps(r, npl, nmi, sp, gr, sm, bool(recompute), out)
+    rc = bool(recompute)
+    run_chunked(sp.shape[0], lambda a, b: _gaps(r, npl[a:b], nmi[a:b], sp[a:b], gr[a:b], sm[a:b], rc, out[a:b]),
+                MIN_CHUNK)
     return out
 
 
@@ -184,12 +191,14 @@ def penalty_forms(r, npl, nmi, s_plus, gap_radius, s_minus, recompute: bool, wei
     w = np.ascontiguousarray(weight, dtype=np.float64)
     P = sp.shape[0]
     mark = np.zeros(P, np.bool_)
-    _select(r, npl, nmi, sp, gr, sm, bool(recompute), 0.0, mark)
+    rc, jac = bool(recompute), bool(jacobian)
+    run_chunked(P, lambda a, b: _select(r, npl[a:b], nmi[a:b], sp[a:b], gr[a:b], sm[a:b], rc, 0.0, mark[a:b]),
+                MIN_CHUNK)
     act = np.flatnonzero(mark)
     Pa = act.size
     R = np.zeros((Pa, 4, 3))
     K = np.zeros((Pa, 4, 3, 4, 3)) if jacobian else np.zeros((0, 4, 3, 4, 3))
     if Pa:
-        _forms(r, npl, nmi, sp, gr, sm, bool(recompute), w, act, float(penalty), float(onset),
-               bool(jacobian), R, K)
+        run_chunked(Pa, lambda a, b: _forms(r, npl, nmi, sp, gr, sm, rc, w, act[a:b], float(penalty), float(onset),
+                                            jac, R[a:b], K[a:b] if jac else K), MIN_CHUNK)
     return act, R, (K if jacobian else None)

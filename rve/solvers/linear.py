@@ -10,7 +10,8 @@ Contract
   allowed ones; ``"pardiso"`` named explicitly where it is unavailable raises
   ``RuntimeError`` with the reason. ``RVE_LINEAR_BACKEND=superlu`` forces the pure-scipy
   fallback everywhere (docs/engine.md, "Backend choice").
-* Threads of the energy minimiser's PARDISO factorisations: ``solver_threads() -> int``
+* Threads of the energy minimiser's PARDISO factorisations (defined in ``rve.threads``,
+  re-exported here; the compiled kernels use the same count): ``solver_threads() -> int``
   (``linear_threads(n)`` in effect, else ``$RVE_PARDISO_THREADS``, else
   ``min(DEFAULT_THREADS, cores)``), in MKL's reproducible mode (``rve.solvers.minimize.
   CNR_THREADS``: 1 and 2 threads give the same bits; docs/engine.md "Two threads").
@@ -80,8 +81,6 @@ analysis.
 """
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import copy
 import os
 from typing import Callable, Dict, Optional, Union
@@ -90,6 +89,8 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from ..threads import DEFAULT_THREADS, THREADS_ENV, linear_threads, solver_threads
 
 __all__ = ["sparse_solve", "factorize", "factor_inertia", "factor_positive_definite", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
            "solver_threads", "linear_threads", "THREADS_ENV", "DEFAULT_THREADS",
@@ -302,52 +303,6 @@ DEFAULT_BACKEND = "auto"
 
 #: environment variable overriding the default backend (superlu | pardiso | pardiso_unsym | auto)
 BACKEND_ENV = "RVE_LINEAR_BACKEND"
-
-
-#: environment variable: PARDISO threads of the energy minimiser's factorisations (a
-#: positive integer; default ``DEFAULT_THREADS`` capped at the cores there are)
-THREADS_ENV = "RVE_PARDISO_THREADS"
-#: threads when neither ``linear_threads`` nor ``RVE_PARDISO_THREADS`` says: the two cores
-#: the minimiser's results are reproducible on (MKL's CNR mode for up to 2 threads,
-#: ``rve.solvers.minimize.CNR_THREADS``: 1 and 2 threads give the same bits)
-DEFAULT_THREADS = 2
-_THREADS = contextvars.ContextVar("rve_linear_threads", default=None)
-
-
-def solver_threads() -> int:
-    """Threads of the minimiser's PARDISO factorisations: ``linear_threads(n)`` in effect,
-    else ``$RVE_PARDISO_THREADS``, else ``min(DEFAULT_THREADS, cores)``. A bad value of the
-    variable raises ``ValueError`` naming it."""
-    n = _THREADS.get()
-    if n is not None:
-        return n
-    env = os.environ.get(THREADS_ENV, "").strip()
-    if env:
-        try:
-            n = int(env)
-        except ValueError:
-            n = 0
-        if n < 1:
-            raise ValueError(f"environment variable {THREADS_ENV}={env!r}: expected a positive integer (threads)")
-        return n
-    return max(1, min(DEFAULT_THREADS, os.cpu_count() or 1))
-
-
-@contextlib.contextmanager
-def linear_threads(n: Optional[int]):
-    """Within the block, the minimiser's factorisations use ``n`` threads (None: unchanged);
-    a context variable, so jobs run side by side in threads of one process do not mix."""
-    if n is None:
-        yield
-        return
-    n = int(n)
-    if n < 1:
-        raise ValueError(f"threads = {n}: expected a positive integer")
-    token = _THREADS.set(n)
-    try:
-        yield
-    finally:
-        _THREADS.reset(token)
 
 
 def register_backend(name: str, cls: Callable[..., LinearBackend]) -> None:
