@@ -20,7 +20,11 @@ and the median wall time (ms, ``--repeat`` calls, numpy and numba alternating) o
   pair set unchanged (the union kept) or forced new; with ``--reference DIR`` also the
   ``UnionPattern`` and ``build_contact_map`` of another source tree (e.g. /work/baseline or
   a ``git archive`` of main), interleaved with this one;
-* the max relative differences (max |a - b| / max |b|) of F, Fx, Fw numba vs numpy.
+* the max relative differences (max |a - b| / max |b|) of F, Fx, Fw numba vs numpy, and
+  whether the two-thread kernels give the one-thread bits.
+
+Modes: ``numpy`` (the reference), ``numba`` (compiled, one thread), ``numba_t2`` (compiled,
+elements and pairs split over two threads: ``rve.threads.run_chunked``).
 
 Then the dynamic wire (configs/scenes/dynamic_wire.yaml, ``--wire-elements``; coupled T):
 the electromagnetic term (EMF + Lorentz + Joule kernel), the elasticity term (with thermal
@@ -44,11 +48,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-MODES = ("numpy", "numba")
+#: numpy: the reference; numba: compiled on one thread; numba_t2: compiled, the elements /
+#: pairs split over two threads (rve.threads.run_chunked, the relaxation job's setting)
+MODES = ("numpy", "numba", "numba_t2")
 
 
 def _set(mode):
-    os.environ["RVE_KERNELS"] = mode
+    os.environ["RVE_KERNELS"] = "numba" if mode.startswith("numba") else mode
+    if mode == "auto":
+        os.environ.pop("RVE_PARDISO_THREADS", None)
+    else:
+        os.environ["RVE_PARDISO_THREADS"] = "2" if mode.endswith("_t2") else "1"
 
 
 def interleaved(funcs: dict, repeat: int) -> dict:
@@ -67,6 +77,8 @@ def interleaved(funcs: dict, repeat: int) -> dict:
 def _row(name, d, unit="ms"):
     vals = "  ".join(f"{m} {d[m]:8.2f}" for m in d)
     ratio = f"  x{d['numpy'] / d['numba']:.2f}" if "numba" in d and "numpy" in d and d["numba"] > 0 else ""
+    if "numba_t2" in d and d["numba_t2"] > 0:
+        ratio += f"  (2 threads x{d['numba'] / d['numba_t2']:.2f})"
     print(f"  {name:34s} {vals} {unit}{ratio}", flush=True)
 
 
@@ -176,9 +188,10 @@ def weave(elements: int, repeat: int, reference=None, jit: dict | None = None) -
         _set(m)
         out[m] = system.evaluate(x, w, 0.0, True)
     _set("auto")
-    a, b = out["numpy"], out["numba"]
+    a, b, c = out["numpy"], out["numba"], out["numba_t2"]
     print(f"  max rel. difference numba vs numpy: F {_rel(b[0], a[0]):.1e}, Fx {_rel(b[1].data, a[1].data):.1e}, "
-          f"Fw {_rel(b[2].data, a[2].data):.1e}")
+          f"Fw {_rel(b[2].data, a[2].data):.1e}; 2 threads vs 1 bitwise equal: "
+          f"{np.array_equal(b[0], c[0]) and np.array_equal(b[1].data, c[1].data)}")
 
 
 def wire(elements: int, repeat: int, jit: dict | None = None) -> None:
