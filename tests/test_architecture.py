@@ -23,7 +23,7 @@ ALLOWED = {
     "physics": {"fem"},
     "contact": {"fem", "physics"},
     "model": {"fem", "physics", "contact", "kernels"},
-    "solvers": set(),
+    "solvers": {"threads"},
     "testing": {"fem"},
     "config": {"io"},
     "fabrics": {"io", "fem", "physics", "contact", "model", "solvers", "config"},
@@ -31,7 +31,8 @@ ALLOWED = {
     "homogenisation": {"io", "fem", "physics", "contact", "model", "solvers", "config", "fabrics"},
     "tables": {"io", "config", "fabrics", "homogenisation"},
     "studies": {"io", "config", "scenes", "analytic"},
-    "kernels": set(),
+    "kernels": {"threads"},
+    "threads": set(),
     "cli": None,  # the top: anything
 }
 

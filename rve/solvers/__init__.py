@@ -11,6 +11,6 @@ docs/relaxation.md), lowest first:
 
 Import the submodules (``from rve.solvers.dirk import integrate``); this package imports
 nothing itself, so ``import rve.solvers`` stays cheap. The solvers import neither
-``rve.contact`` nor ``rve.model``.
+``rve.contact`` nor ``rve.model`` (of the package only ``rve.threads``, the job's thread count).
 """
 __all__ = ["system", "linear", "newton", "static", "dirk", "minimize", "relaxation"]
