@@ -259,8 +259,8 @@ class UnionPattern:
         self._template = None
 
     #: the node-pair tables are kept on the element pattern (reused by every rebuild of the
-    #: union: their pages are touched once, not at every rebuild; measured 17 of 34 ms of a
-    #: union build at 30 el/fibril were first-touch page faults of the lookup table) while
+    #: union: their pages are touched once, not at every rebuild; a line profile at 30
+    #: el/fibril put half of a union build in the first-touch page faults of the lookup) while
     #: n_nodes^2 <= this (9 bytes per node pair: 55 MB at 30 el/fibril); beyond, fresh per build
     keep_tables_limit = 2 ** 23
 

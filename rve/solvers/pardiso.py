@@ -12,7 +12,7 @@ there is no MKL wheel). Nothing is loaded at import of this module: the library 
 on the first ``available()`` or the first ``PardisoFactorization()``.
 
 ``PardisoFactorization(threads=1, matching=True, drop_zeros=True, refinement=0,
-check=False)``, a stateful
+check=False, ..., positive_definite=False)``, a stateful
 backend (registry name ``"pardiso"``) with the interface of the linear-solver layer
 (``rve/solvers/linear.py``: analyse / factorize / solve / negative_pivots):
 
@@ -61,6 +61,14 @@ backend (registry name ``"pardiso"``) with the interface of the linear-solver la
   analysis, iparm(15); permanent + factorisation, iparm(16) + iparm(17)).
 * counters ``analyses``, ``factorizations``, ``solves``.
 * ``release()``: phase -1 (all MKL memory of this instance); also in ``__del__``.
+
+Cholesky mode (``positive_definite=True``, name ``"pardiso_spd"``; the ``cholesky()``
+companion of a symmetric instance, kept like ``unsymmetric()``): ``mtype = 2``, no pivoting,
+no matching; the same pattern policy, fast path and threads. ``factorize`` raises
+``rve.solvers.linear.NotPositiveDefiniteError`` at the first pivot <= 0 (counted in
+``indefinite``), which it meets long before the end of a whole factorisation on the energy
+minimiser's indefinite matrices: the minimiser's definiteness test
+(``rve.solvers.linear.factor_positive_definite``; ``negative_pivots`` is 0 after a success).
 
 Unsymmetric mode (``symmetric=False``, registry name ``"pardiso_unsym"``; the companion
 ``unsymmetric()`` of a symmetric instance, to which ``rve.solvers.newton.StageFactorisation``
@@ -229,7 +237,8 @@ def _sorted_unique(keys):
     """Sorted unique int64 keys (a sort and a mask: NumPy 2's hash-based ``np.unique`` was
     measured 10x slower on these ~10^5-10^6 keys). The keys come as a few sorted runs (the
     entries of a canonical matrix, the diagonal, the old pattern): timsort (``stable``) merges
-    them, 14x faster than quicksort on 10^6 keys in three runs."""
+    them in linear time where quicksort sorted them afresh (1.4 s of a 30-element
+    relaxation's profile, docs/engine.md "Round 8")."""
     k = np.sort(keys, kind="stable")
     if k.size:
         k = k[np.concatenate(([True], k[1:] != k[:-1]))]
@@ -536,8 +545,9 @@ class PardisoFactorization:
     def _phase22(self) -> None:
         """The numeric factorisation of the values in ``self._a``. Cholesky (mtype 2) stops
         at the first pivot that is not positive with error -4: raised as
-        ``NotPositiveDefiniteError`` (measured on the 12-element minimiser's first matrix,
-        739 negative eigenvalues: 0.7 ms against 8-11 ms for a whole factorisation)."""
+        ``NotPositiveDefiniteError`` (benchmarks/engine_speed.py ``pardiso_chol_t2``: on the
+        12-element minimiser's first matrix, 739 negative eigenvalues, 1 ms against 8 ms for
+        the LDL^T)."""
         self._factored = False
         self.factorizations += 1
         try:
