@@ -250,3 +250,24 @@ def test_capped_newton_reports_non_convergence():
     _, _, res = capped_newton(sys, np.zeros(6), 0.0, max_iter=3, step_cap=0.05)
     assert not res.converged and res.iterations == 3
     assert res.reason.startswith("no convergence in 3 iterations")
+
+
+def test_minimiser_freezes_the_old_objects_only_while_it_runs():
+    """``_long_lived_objects_frozen``: the garbage collector skips the objects alive before the
+    loop while it runs and is back as it was afterwards; a caller's own freeze is left alone."""
+    import gc
+
+    from rve.solvers import minimize
+
+    before = gc.get_freeze_count()
+    with minimize._long_lived_objects_frozen():
+        inside = gc.get_freeze_count()
+    assert before == 0 and inside > 1000 and gc.get_freeze_count() == 0
+    gc.freeze()
+    try:
+        frozen = gc.get_freeze_count()
+        with minimize._long_lived_objects_frozen():
+            assert gc.get_freeze_count() == frozen
+        assert gc.get_freeze_count() == frozen
+    finally:
+        gc.unfreeze()

@@ -474,3 +474,21 @@ def test_stored_fast_path_with_entries_outside_the_analysis():
     f.factorize(A)  # the outside entries now nonzero: a new analysis, the right answer
     assert f.analyses == 2 and _rel_res(A, f.solve(b), b) < 1e-12
     f.release()
+
+
+@pytest.mark.parametrize("n_neg", [0, 1, 37])
+def test_negative_eigenvalue_count_equals_eigvalsh_and_skips_the_ldlt_when_definite(n_neg):
+    """The relaxation's stability check (``negative_eigenvalue_count``): a Cholesky first, the
+    LDL^T count only where it fails; the number equals the dense eigenvalue count, with
+    PARDISO and with SuperLU."""
+    from rve.solvers.linear import negative_eigenvalue_count
+
+    A = spd(n=300, density=0.02, seed=7) if n_neg == 0 else with_inertia(n_neg=n_neg, seed=7)
+    expected = int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
+    assert expected == n_neg
+    inst = pardiso.PardisoFactorization(threads=2, cnr=2)
+    assert negative_eigenvalue_count(A, backend=inst) == expected
+    assert inst.cholesky().factorizations == 1
+    assert inst.factorizations == (0 if n_neg == 0 else 1)  # the LDL^T only for an indefinite matrix
+    assert negative_eigenvalue_count(A, backend="superlu") == expected
+    inst.release()
