@@ -7,3 +7,7 @@ command (``rve.cli``). Subpackages are imported on demand; nothing is re-exporte
 """
 __all__ = ["io", "fem", "physics", "contact", "model", "solvers", "fabrics", "config", "scenes",
            "homogenisation", "tables", "studies", "analytic", "cli"]
+
+from .process import install_fast_exit as _install_fast_exit
+
+_install_fast_exit()  # the exit-time freeze (rve/process.py: ~0.4 s of every process's finalisation)
