@@ -2,16 +2,16 @@
 
 Contract
 --------
-``install_fast_exit()`` (called once by ``rve/__init__.py``): at interpreter exit, after
-every other ``atexit`` handler (it is registered first, handlers run last-in first-out),
-the objects still alive are frozen out of the cyclic garbage collector (``gc.freeze``).
+``install_fast_exit()`` (called once by ``rve/__init__.py``): at interpreter exit (an
+``atexit`` handler; the others run as usual before or after it, since freezing stops no
+code) the objects still alive are frozen out of the cyclic garbage collector (``gc.freeze``).
 Python's finalisation then skips its full collections over them: with numba's type
 system, pint's registry and the model objects (~1.6e5 tracked objects) those passes took
 0.4-0.5 s at the end of every process, a tenth of a 12-element relaxation and of many
 short Snakemake jobs (docs/engine.md "Round 9"). What is not collected at exit is
 reference-cycle garbage, whose finalisers Python does not promise to run at exit anyway;
 files are closed and flushed by the code that writes them (``rve.io.atomic``), logging
-by its own ``atexit`` handler, which runs before this one. ``RVE_FAST_EXIT=0`` turns it off.
+by its own ``atexit`` handler. ``RVE_FAST_EXIT=0`` turns it off.
 """
 from __future__ import annotations
 
