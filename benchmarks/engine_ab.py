@@ -13,7 +13,8 @@ current interpreter, alternated (base, new, base, new, ...) so that both see the
 machine load. Per process: wall time (launch to exit), CPU time (user + system of that
 process alone, ``os.wait4``), peak RSS, and what the worker prints (energy, overlap,
 stability, iterations, factorisations). Printed: medians per side, the ratios base / new
-of wall and CPU time, and the relative energy difference and max |x_new - x_base| of the
+of wall and CPU time (of the medians, and the median and range of the run-by-run ratios of
+the alternated runs, which hold when the machine's speed drifts), and the relative energy difference and max |x_new - x_base| of the
 final states. ``--variant "NAME=K=V;K=V"`` adds a further side: this tree with the given
 environment (e.g. ``"superlu=RVE_LINEAR_BACKEND=superlu;RVE_KERNELS=numpy"``).
 
@@ -237,7 +238,9 @@ def main(argv=None):
         E0 = good(ref)[0]["energy_mJ"] if good(ref) else float("nan")
         x0 = xs.get((ref, 0))
         dx = float(np.abs(xs[name, 0] - x0).max()) if x0 is not None and (name, 0) in xs else float("nan")
-        print(f"{name:<10} wall {med(name, 'wall_s'):8.1f} s ({med(ref, 'wall_s') / med(name, 'wall_s'):.2f}x)  "
+        pairs = [a["wall_s"] / b["wall_s"] for a, b in zip(recs[ref], recs[name]) if "error" not in a and "error" not in b]
+        print(f"{name:<10} wall {med(name, 'wall_s'):8.1f} s ({med(ref, 'wall_s') / med(name, 'wall_s'):.2f}x; "
+              f"run by run {ref}/{name}: median {float(np.median(pairs)):.2f}x, {min(pairs):.2f}-{max(pairs):.2f})  "
               f"cpu {med(name, 'cpu_s'):8.1f} s ({med(ref, 'cpu_s') / med(name, 'cpu_s'):.2f}x)  "
               f"peak RSS {max(r['rss_mib'] for r in g):6.0f} MiB  E {g[0]['energy_mJ']:.12f} mJ "
               f"(dE/E {abs(g[0]['energy_mJ'] - E0) / abs(E0):.1e})  |dx| {dx:.1e}  "

@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..solvers.linear import negative_eigenvalue_count
-from ..solvers.minimize import run_backend
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .setup import clamp_reactions, contact_params, fabric_and_mesh, mechanics_system
 from .stack import stack_geometry
@@ -164,12 +163,7 @@ def relax(cfg, on_rebuild=None, problem=None) -> RelaxedFabric:
 
     prob = StaticProblem(system, res.x, np.zeros(system.n), res.t)
     _, J = prob(prob.u0())
-    solver, owned = run_backend()  # the minimiser's kind of instance (threads, CNR): a count, whatever the threads
-    try:
-        neg = negative_eigenvalue_count(J, backend=solver)
-    finally:
-        if owned and hasattr(solver, "release"):
-            solver.release()
+    neg = negative_eigenvalue_count(J)
     summary["negative_pivots"] = int(neg)
     summary["stable"] = bool(neg == 0)
     try:

@@ -539,17 +539,27 @@ def factor_inertia(A, backend: BackendSpec = None):
     return lu, lu.negative_pivots
 
 
+def _cholesky_verdict(A, solver):
+    """The Cholesky companion's verdict on ``A`` (``solver``: an instance): its factorisation
+    when ``A`` is positive definite, False when it is not (a pivot <= 0, a non-finite entry),
+    None when there is no verdict (no Cholesky companion, another PARDISO error)."""
+    chol = getattr(solver, "cholesky", None)
+    if chol is None or not getattr(solver, "symmetric", False):
+        return None
+    try:
+        return chol().factorize(A)
+    except (NotPositiveDefiniteError, SingularFactorError):
+        return False
+    except RuntimeError:  # another PARDISO error: the inertia path decides
+        return None
+
+
 def negative_eigenvalue_count(A, backend: BackendSpec = None) -> int:
     """Number of negative eigenvalues of the symmetric sparse ``A`` (module contract): 0
     when a PARDISO Cholesky of ``A`` succeeds, else ``factor_inertia(A, backend)[1]``."""
     solver = _instance(backend, symmetric=True)
-    chol = getattr(solver, "cholesky", None)
-    if chol is not None and getattr(solver, "symmetric", False):
-        try:
-            chol().factorize(A)
-            return 0
-        except RuntimeError:  # not positive definite, a non-finite entry, a PARDISO error
-            pass
+    if _cholesky_verdict(A, solver):
+        return 0
     return int(factor_inertia(A, backend=solver)[1])
 
 
@@ -561,15 +571,8 @@ def factor_positive_definite(A, backend: BackendSpec = None, cholesky: bool = Tr
     (the LDL^T test of round 7, for A/B benchmarks) go through ``factor_inertia`` (positive
     definite = no negative and no zero pivot)."""
     solver = _instance(backend, symmetric=True)
-    chol = getattr(solver, "cholesky", None) if cholesky else None
-    if chol is not None and getattr(solver, "symmetric", False):
-        try:
-            return chol().factorize(A)
-        except NotPositiveDefiniteError:
-            return None
-        except SingularFactorError:  # a non-finite entry
-            return None
-        except RuntimeError:  # another PARDISO error: the inertia path decides
-            pass
+    verdict = _cholesky_verdict(A, solver) if cholesky else None
+    if verdict is not None:
+        return verdict or None
     lu, neg = factor_inertia(A, backend=solver)
     return lu if neg == 0 else None
