@@ -311,9 +311,14 @@ def _brute_union(pattern, local, comps, b):
     return A
 
 
+@pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("dense", [True, False])
-def test_union_pattern_structure_and_slots(dense, monkeypatch):
+def test_union_pattern_structure_and_slots(dense, path, monkeypatch):
+    """The union structure against a brute-force COO construction, on the numpy reference and
+    on the compiled index kernels (rve.kernels.index)."""
     from rve.fem.assembly import DofLayout, ElementPattern, UnionPattern
+
+    monkeypatch.setenv("RVE_KERNELS", path)
 
     rng = np.random.default_rng(5)
     nodes = 40
@@ -363,3 +368,97 @@ def test_rebuild_keeps_the_union_when_the_pairs_are_unchanged():
     xn[sysm.mesh.fibril_nodes(2), 2] -= 1.0
     sysm.rebuild(xn.reshape(-1))
     assert ca.union is not u and ca.reused == 1
+
+
+# ---------------------------------------------------------------------------- index kernels
+@needs_numba
+def test_sorted_positions_is_the_clipped_searchsorted():
+    from rve.kernels.index import sorted_positions
+
+    rng = np.random.default_rng(11)
+    ref = np.unique(rng.integers(0, 10_000, 3_000))
+    for keys in (np.sort(rng.choice(ref, 500, replace=False)),                 # all inside
+                 np.unique(rng.integers(-50, 10_100, 800)),                     # outside, below and above
+                 np.zeros(0, np.int64), ref.copy()):
+        pos, ok = sorted_positions(ref, keys.astype(np.int64))
+        assert ok
+        np.testing.assert_array_equal(pos, np.minimum(np.searchsorted(ref, keys), ref.size - 1))
+    _, ok = sorted_positions(ref, np.array([5, 3], np.int64))  # not sorted: the caller falls back
+    assert not ok
+
+
+@needs_numba
+def test_upper_entries_kernel_equals_numpy(monkeypatch):
+    from rve.solvers.pardiso import _upper_entries
+
+    A = sp.random(300, 300, density=0.05, random_state=np.random.default_rng(12), format="csr")
+    A = (A + A.T + sp.eye(300)).tocsr()
+    A.sort_indices()
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        out[path] = _upper_entries(A)
+    for a, b in zip(out["numpy"], out["numba"]):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    keys, keep = out["numpy"]
+    rows = np.repeat(np.arange(300), np.diff(A.indptr))
+    assert np.all(A.indices[keep] >= rows[keep]) and keep.size == sp.triu(A).nnz
+
+
+@needs_numba
+def test_pair_data_gives_the_same_bits_as_bincount_and_add(monkeypatch):
+    """``UnionPattern.pair_data`` (one compiled scatter) against the numpy reference
+    (``np.bincount`` of the pair slots, then the element matrix added): the same sums in the
+    same order, bitwise; and a matrix off the base pattern takes the reference path."""
+    from rve.fem.assembly import DofLayout, ElementPattern, UnionPattern
+
+    rng = np.random.default_rng(13)
+    nodes = 40
+    conn = np.stack([np.arange(nodes - 1), np.arange(1, nodes)], axis=1)
+    conn = conn[np.arange(nodes - 1) % 10 != 9]
+    layout = DofLayout(nodes, ("mech",))
+    pat = ElementPattern(layout, conn)
+    local = np.concatenate([conn[rng.integers(0, len(conn), 60)], conn[rng.integers(0, len(conn), 60)]], axis=1)
+    u = UnionPattern(pat, local, np.arange(3))
+    act = np.sort(rng.choice(local.shape[0], 35, replace=False))
+    K = rng.standard_normal((act.size, u.slots.shape[1]))
+    A = pat.assemble_csr(rng.standard_normal((len(conn), 18, 18)))
+    ref = u.add(np.bincount(u.slots[act].ravel(), weights=K.ravel(), minlength=u.nnz), A)
+    monkeypatch.setenv("RVE_KERNELS", "numba")
+    assert np.array_equal(u.pair_data(act, K, A), ref)
+    monkeypatch.setenv("RVE_KERNELS", "numpy")
+    assert np.array_equal(u.pair_data(act, K, A), ref)
+    monkeypatch.setenv("RVE_KERNELS", "numba")
+    B = u.csr(rng.standard_normal(u.nnz))  # on the union, not the base pattern
+    ref_b = u.add(np.bincount(u.slots[act].ravel(), weights=K.ravel(), minlength=u.nnz), B)
+    assert np.array_equal(u.pair_data(act, K, B), ref_b)
+
+
+@needs_numba
+def test_index_kernels_keep_the_relaxation_bitwise(monkeypatch):
+    """The 12-element weave's union structure is the very same integers with the index
+    kernels as on the numpy reference, and its tangent agrees to the contact kernels' rounding."""
+    from pathlib import Path
+
+    from rve.config.loader import load_config
+    from rve.fem.assembly import UnionPattern
+    from rve.scenes.fabric_relax import setup
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "configs/scenes/plain_weave_relax.yaml",
+                      ["mesh.elements=12"])
+    _, system, x = setup(cfg)
+    x = x + 0.01 * np.random.default_rng(14).standard_normal(x.size) * system.mech
+    local, comps = system.assembler._local, system.assembler._comps
+    w = np.zeros(system.n)
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        u = UnionPattern(system.assembler.elements.pattern, local, comps)
+        system.assembler.union = u
+        system.assembler._fw_cache = None
+        out[path] = (u, system.evaluate(x, w, 0.0, True)[1])
+    (ua, Ja), (ub, Jb) = out["numpy"], out["numba"]
+    for name in ("indptr", "indices", "slots", "base_map", "gdofs"):
+        a, b = getattr(ua, name), getattr(ub, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), name
+    assert np.array_equal(Ja.indices, Jb.indices) and _rel(Jb.data, Ja.data) < RTOL  # the contact kernels' rounding

@@ -35,6 +35,18 @@ import scipy.sparse as sp
 __all__ = ["DofLayout", "ElementPattern", "UnionPattern"]
 
 _FIELD_SIZE = {"mech": 9, "T": 1, "V": 1}
+
+
+def _index_kernels():
+    """``rve.kernels.index`` when the compiled kernels are in use (``RVE_KERNELS``), else None:
+    the same integers as the numpy expressions beside every call (docs/kernels.md)."""
+    from ..kernels import use_numba
+
+    if not use_numba():
+        return None
+    from ..kernels import index
+
+    return index
 #: parts of the mechanical block: (offset within the block, size)
 _MECH_PARTS = {"r": (0, 3), "g1": (3, 3), "g2": (6, 3)}
 
@@ -219,16 +231,25 @@ class UnionPattern:
         total = int(indptr[-1])
         # column patterns of one pair-component row / one other row of every node
         nodeJ = keys % Nn
-        colc = np.where(isbase[:, None], nodeJ[:, None] * b + np.arange(b)[None, :],
-                        np.pad(nodeJ[:, None] * b + ci[None, :], ((0, 0), (0, b - nC)), constant_values=-1))
-        Qc = colc.ravel()[(np.arange(b)[None, :] < wc[:, None]).ravel()]
-        Qo = (nodeJ[isbase, None] * b + np.arange(b)[None, :]).ravel()
+        ix = _index_kernels()  # the compiled loops (rve.kernels.index), else the numpy reference
+        if ix is not None:
+            Qc, Qo = np.empty(int(cwc[-1]), np.int64), np.empty(int(cwo[-1]), np.int64)
+            ix.union_columns(nodeJ, isbase, b, ci, Qc, Qo)
+        else:
+            colc = np.where(isbase[:, None], nodeJ[:, None] * b + np.arange(b)[None, :],
+                            np.pad(nodeJ[:, None] * b + ci[None, :], ((0, 0), (0, b - nC)), constant_values=-1))
+            Qc = colc.ravel()[(np.arange(b)[None, :] < wc[:, None]).ravel()]
+            Qo = (nodeJ[isbase, None] * b + np.arange(b)[None, :]).ravel()
         startc = cwc[first[:-1]]
         starto = cwo[first[:-1]] + Qc.size
         src = np.where(isc[None, :], startc[:, None], starto[:, None]).ravel()
         Q = np.concatenate([Qc, Qo])
-        rep = np.repeat(src - indptr[:-1], rowlen)
-        self.indices = Q[np.arange(total, dtype=np.int64) + rep].astype(np.int32)
+        if ix is not None:
+            self.indices = np.empty(total, np.int32)
+            ix.row_gather(Q, src, rowlen, indptr, self.indices)
+        else:
+            rep = np.repeat(src - indptr[:-1], rowlen)
+            self.indices = Q[np.arange(total, dtype=np.int64) + rep].astype(np.int32)
         self.indptr = indptr.astype(np.int32) if total < 2**31 - 1 else indptr
         self.nnz = total
         # base entries -> union positions: per base node pair (I, J), entries (c, c')
@@ -249,10 +270,13 @@ class UnionPattern:
         # column of (J, c') within row (I, c): offset of block (I, J) + c' (pair-only block)
         # or + comps[c'] (base block); one broadcast sum into the (P, m, nC, m, nC) slots
         idx = np.int32 if total < 2**31 - 1 else np.int64
-        shift = np.stack([np.arange(nC), ci]).astype(idx)  # [isbase, c']
-        colpos = offc.astype(idx)[mp][..., None] + shift[isbase.astype(np.int8)[mp]]  # (P, m, m, nC)
         slots = np.empty((P, m, nC, m, nC), idx)
-        np.add(rowstart.astype(idx)[:, :, :, None, None], colpos[:, :, None, :, :], out=slots)
+        if ix is not None:
+            ix.union_slots(rowstart, offc, mp, isbase, ci, slots)
+        else:
+            shift = np.stack([np.arange(nC), ci]).astype(idx)  # [isbase, c']
+            colpos = offc.astype(idx)[mp][..., None] + shift[isbase.astype(np.int8)[mp]]  # (P, m, m, nC)
+            np.add(rowstart.astype(idx)[:, :, :, None, None], colpos[:, :, None, :, :], out=slots)
         self.slots = slots.reshape(P, m * nC * m * nC)
         self._matcache: dict = {}
         self._keys = None
@@ -306,7 +330,10 @@ class UnionPattern:
             if self._keys is None:
                 self._keys = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.indptr)) * self.n + self.indices
             uk = self._keys
-            mp = np.searchsorted(uk, k)
+            ix = _index_kernels()
+            mp, ok = ix.sorted_positions(uk, k) if ix is not None and uk.size else (None, False)
+            if not ok:
+                mp = np.searchsorted(uk, k)
             if np.any(uk[np.minimum(mp, self.nnz - 1)] != k):
                 raise ValueError("a matrix has entries outside the union pattern")
             if len(self._matcache) > 8:
@@ -325,6 +352,19 @@ class UnionPattern:
                 A.sum_duplicates()
             data[self.positions(A)] += A.data
         return data
+
+    def pair_data(self, act, K, A=None) -> np.ndarray:
+        """``add(np.bincount(slots[act].ravel(), weights=K.ravel(), minlength=nnz), A)``: the
+        pair elements ``act`` (indices) with their matrices ``K`` (len(act), (m nC)^2 entries
+        each) and then ``A`` on the union, in one compiled pass when ``A`` lies on the base
+        pattern (the same sums in the same order; rve.kernels.index.scatter_sum)."""
+        pat = self.pattern
+        ix = _index_kernels() if (np.asarray(act).dtype.kind in "iu" and isinstance(A, sp.csr_matrix)
+                                  and A.has_canonical_format and A.nnz == pat.nnz) else None
+        if ix is not None and (A.indptr is pat.indptr or (
+                np.array_equal(A.indptr, pat.indptr) and np.array_equal(A.indices, pat.indices))):
+            return ix.scatter_sum(self.nnz, self.slots, act, K, self.base_map, A.data)
+        return self.add(np.bincount(self.slots[act].ravel(), weights=np.asarray(K).ravel(), minlength=self.nnz), A)
 
     def data_of(self, A) -> np.ndarray:
         """A's entries laid out on the union structure (zeros elsewhere)."""

@@ -249,9 +249,7 @@ class ContactAssembler:
         if not jacobian:
             return F, None, None
         if act.size:
-            s = u.slots[act].ravel()
-            dx = np.bincount(s, weights=Kx.ravel(), minlength=u.nnz)
-            u.add(dx, ev.Fx)
+            dx = u.pair_data(act, Kx, ev.Fx)
         else:
             dx = u.data_of(ev.Fx)
         if ev.fw_constant and Kw is None:
@@ -265,6 +263,6 @@ class ContactAssembler:
         else:
             dw = u.data_of(ev.Fw)
             if Kw is not None and act.size:
-                dw += np.bincount(s, weights=Kw.ravel(), minlength=u.nnz)
+                dw += np.bincount(u.slots[act].ravel(), weights=Kw.ravel(), minlength=u.nnz)
             Fw = u.csr(dw)
         return F, u.csr(dx), Fw

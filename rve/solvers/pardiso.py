@@ -258,10 +258,36 @@ def _upper_entries(A):
     matrix ``A`` (CSC: of Aᵀ, the same pattern for a symmetric matrix): sorted keys
     ``row * n + col`` and their positions in ``A.data``."""
     n = A.shape[0]
+    ix = _index_kernels()
+    if ix is not None:
+        return ix.upper_entries(A.indptr, A.indices, n)
     rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
     cols = A.indices.astype(np.int64)
     keep = np.flatnonzero(cols >= rows)
     return rows[keep] * n + cols[keep], keep
+
+
+def _index_kernels():
+    """``rve.kernels.index`` when the compiled kernels are in use (``RVE_KERNELS``), else None
+    (the same integers as the numpy expressions beside every call)."""
+    from ..kernels import use_numba
+
+    if not use_numba():
+        return None
+    from ..kernels import index
+
+    return index
+
+
+def _clipped_positions(ak, keys):
+    """``np.minimum(np.searchsorted(ak, keys), ak.size - 1)`` for sorted ``ak`` (non-empty):
+    one merge pass when ``keys`` is sorted too and the compiled kernels are in use."""
+    ix = _index_kernels()
+    if ix is not None:
+        pos, ok = ix.sorted_positions(ak, keys)
+        if ok:
+            return pos
+    return np.minimum(np.searchsorted(ak, keys), ak.size - 1)
 
 
 def _full_entries(A):
@@ -407,8 +433,8 @@ class PardisoFactorization:
     def _map(self, A, keys, keep):
         """``src`` of ``A`` on the analysed pattern, or None when an entry of ``A`` is not in it."""
         ak = self._keys
-        pos = np.searchsorted(ak, keys)
-        if pos.size and (pos.max() >= ak.size or not np.array_equal(ak[pos], keys)):
+        pos = _clipped_positions(ak, keys)
+        if not np.array_equal(ak[pos], keys):
             return None
         src = np.full(ak.size, -1, dtype=np.int64)
         src[pos] = keep
@@ -429,7 +455,7 @@ class PardisoFactorization:
             return  # already mapped onto this analysis
         keys, keep = self._entries(S)
         ak = self._keys
-        pos = np.minimum(np.searchsorted(ak, keys), ak.size - 1)
+        pos = _clipped_positions(ak, keys)
         inside = ak[pos] == keys
         src = np.full(ak.size, -1, dtype=np.int64)
         src[pos[inside]] = keep[inside]
@@ -513,7 +539,7 @@ class PardisoFactorization:
             if self._alive and self.reuse_subpattern and A.shape[0] == self.n:
                 keys, keep = self._entries(A)
                 ak = self._keys
-                pos = np.minimum(np.searchsorted(ak, keys), ak.size - 1)
+                pos = _clipped_positions(ak, keys)
                 n_new = int(np.count_nonzero(ak[pos] != keys))
                 if n_new == 0:
                     src = np.full(ak.size, -1, dtype=np.int64)
