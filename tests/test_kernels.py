@@ -435,7 +435,7 @@ def test_pair_data_gives_the_same_bits_as_bincount_and_add(monkeypatch):
 
 
 @needs_numba
-def test_index_kernels_keep_the_relaxation_bitwise(monkeypatch):
+def test_index_kernels_build_the_same_union_on_the_weave(monkeypatch):
     """The 12-element weave's union structure is the very same integers with the index
     kernels as on the numpy reference, and its tangent agrees to the contact kernels' rounding."""
     from pathlib import Path

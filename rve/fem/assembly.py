@@ -32,21 +32,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..kernels import index_kernels as _index_kernels
+
 __all__ = ["DofLayout", "ElementPattern", "UnionPattern"]
 
 _FIELD_SIZE = {"mech": 9, "T": 1, "V": 1}
 
-
-def _index_kernels():
-    """``rve.kernels.index`` when the compiled kernels are in use (``RVE_KERNELS``), else None:
-    the same integers as the numpy expressions beside every call (docs/kernels.md)."""
-    from ..kernels import use_numba
-
-    if not use_numba():
-        return None
-    from ..kernels import index
-
-    return index
 #: parts of the mechanical block: (offset within the block, size)
 _MECH_PARTS = {"r": (0, 3), "g1": (3, 3), "g2": (6, 3)}
 
@@ -358,11 +349,9 @@ class UnionPattern:
         pair elements ``act`` (indices) with their matrices ``K`` (len(act), (m nC)^2 entries
         each) and then ``A`` on the union, in one compiled pass when ``A`` lies on the base
         pattern (the same sums in the same order; rve.kernels.index.scatter_sum)."""
-        pat = self.pattern
-        ix = _index_kernels() if (np.asarray(act).dtype.kind in "iu" and isinstance(A, sp.csr_matrix)
-                                  and A.has_canonical_format and A.nnz == pat.nnz) else None
-        if ix is not None and (A.indptr is pat.indptr or (
-                np.array_equal(A.indptr, pat.indptr) and np.array_equal(A.indices, pat.indices))):
+        ix = _index_kernels() if np.asarray(act).dtype.kind in "iu" and isinstance(A, sp.csr_matrix) \
+            and A.has_canonical_format else None
+        if ix is not None and self.positions(A) is self.base_map:
             return ix.scatter_sum(self.nnz, self.slots, act, K, self.base_map, A.data)
         return self.add(np.bincount(self.slots[act].ravel(), weights=np.asarray(K).ravel(), minlength=self.nnz), A)
 

@@ -14,6 +14,6 @@ numba's ``__pycache__`` next to the sources).
 """
 from __future__ import annotations
 
-from .select import kernels_mode, numba_available, use_numba
+from .select import index_kernels, kernels_mode, numba_available, use_numba
 
-__all__ = ["kernels_mode", "numba_available", "use_numba"]
+__all__ = ["index_kernels", "kernels_mode", "numba_available", "use_numba"]

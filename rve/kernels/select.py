@@ -4,7 +4,7 @@ from __future__ import annotations
 import importlib.util
 import os
 
-__all__ = ["kernels_mode", "numba_available", "use_numba"]
+__all__ = ["kernels_mode", "numba_available", "use_numba", "index_kernels"]
 
 _MODES = ("numpy", "numba", "auto")
 _AVAILABLE = None
@@ -36,3 +36,13 @@ def use_numba() -> bool:
             raise ImportError("RVE_KERNELS=numba but numba is not installed")
         return True
     return numba_available()
+
+
+def index_kernels():
+    """``rve.kernels.index`` when this call uses the compiled kernels, else None (the caller
+    takes the numpy expressions beside the call: the same integers and sums)."""
+    if not use_numba():
+        return None
+    from . import index
+
+    return index

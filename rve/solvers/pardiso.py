@@ -125,6 +125,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .linear import NotPositiveDefiniteError, SingularFactorError, _same_buffer
+from ..kernels import index_kernels as _index_kernels
 
 __all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
 
@@ -265,18 +266,6 @@ def _upper_entries(A):
     cols = A.indices.astype(np.int64)
     keep = np.flatnonzero(cols >= rows)
     return rows[keep] * n + cols[keep], keep
-
-
-def _index_kernels():
-    """``rve.kernels.index`` when the compiled kernels are in use (``RVE_KERNELS``), else None
-    (the same integers as the numpy expressions beside every call)."""
-    from ..kernels import use_numba
-
-    if not use_numba():
-        return None
-    from ..kernels import index
-
-    return index
 
 
 def _clipped_positions(ak, keys):
