@@ -118,10 +118,11 @@ def stage_matrix(system, x, w, t: float, haii: float):
 def strain_matrices(elements: int, out: Path, which: str) -> None:
     import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
     from rve.config.loader import load_config
-    from rve.homogenisation.strain import affine_velocity, build_fabric, clamped_ends, mech_system
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.strain import affine_velocity, clamped_ends, mech_system
 
     cfg = load_config(ROOT / "configs/rve/plain_weave.yaml", [f"mesh.elements={elements}"])
-    fab, mesh = build_fabric(cfg)
+    fab, mesh = fabric_and_mesh(cfg)
     x = np.zeros((mesh.n_nodes, 9))
     x[:] = fab.initial_state(mesh)
     s = cfg.strain
@@ -147,7 +148,7 @@ def impact_matrix(out: Path, fields=("mech", "T", "V"), n_yarns: int = 32, eleme
                   h: float = 5e-4, name: str = "impact_stage") -> None:
     import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
     from rve.config.loader import load_config
-    from rve.contact.system import ContactParams, ContactSystem
+    from rve.model.contact_model import ContactParams, ContactSystem
     from rve.fabrics import weave
     from rve.model import BeamMaterial, BeamModel, DirichletBC
     from rve.solvers.dirk import SDIRK2
