@@ -6,6 +6,9 @@ own matrices, and whole runs (relaxation, strain step) as whole processes per ba
     python benchmarks/engine_speed.py --relax 12 [--runs 3] [--backends superlu pardiso ...]
     python benchmarks/engine_speed.py --relax 30 --runs 1
     python benchmarks/engine_speed.py --strain-step [--state FILE] [--runs 3]
+    python benchmarks/engine_speed.py --wire [--runs 3] [--backends superlu pardiso]
+        [--baseline /work/baseline --baseline-python /work/baseline/.venv/bin/python]
+        # the dynamic-wire study (benchmarks/dynamic_wire_study_time.py) as fresh processes
     python benchmarks/engine_speed.py --threads-check [--only min30_first_keep ...]
         # PARDISO on 1 and 2 threads, CNR off / on (iparm(34) = 2): factorisation medians and
         # max |x - x_ref| of repeated solves (bitwise reproducibility; docs/engine.md "Two threads")
@@ -774,6 +777,56 @@ def main_whole(kind: str, arg: str, runs: int, backends, json_path=None, outdir=
         Path(json_path).write_text(json.dumps(recs, indent=1, default=float))
 
 
+def _wire_process(python: str, tree: Path, env: dict) -> dict:
+    """One fresh process of ``benchmarks/dynamic_wire_study_time.py`` (the default plan) in
+    ``tree`` with ``python``: study wall time as the script prints it, the process's wall time
+    and peak RSS (``os.wait4``: the parent process; the study's two worker processes are
+    not included), and its fitted-orders table (the lines after "fitted orders")."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([python, "benchmarks/dynamic_wire_study_time.py"], cwd=tree, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    out = proc.stdout.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"dynamic_wire_study_time.py failed in {tree}:\n{out[-2000:]}")
+    study = float(next(ln for ln in out.splitlines() if ln.startswith("study wall time")).split(":")[1].split()[0])
+    orders = out.split("fitted orders:", 1)[1].strip() if "fitted orders:" in out else ""
+    return {"study_s": study, "process_s": wall, "rss_mib": usage.ru_maxrss / 1024.0, "orders": orders}
+
+
+def main_wire(runs: int, backends, baseline: str | None, baseline_python: str | None) -> None:
+    """The dynamic-wire study (``--wire``): interleaved fresh processes, per side the median
+    study wall time, its ratio against the first side (today's main when ``--baseline`` is
+    given, else the first backend) and peak RSS; the orders tables must be equal across sides
+    (the wire is one fibril: its stage matrices take the kept banded LU whatever
+    ``RVE_LINEAR_BACKEND`` says, so the backends should not change a digit)."""
+    sides = []
+    if baseline:
+        sides.append(("today's main", baseline_python or sys.executable, Path(baseline), {}))
+    for b in backends:
+        sides.append((f"this tree, {b}", sys.executable, ROOT, {"RVE_LINEAR_BACKEND": b}))
+    recs = {name: [] for name, *_ in sides}
+    for k in range(runs):
+        for name, py, tree, extra in sides:
+            env = {**os.environ, **extra}
+            r = _wire_process(py, tree, env)
+            recs[name].append(r)
+            print(f"  run {k + 1} {name}: study {r['study_s']:.2f} s, process {r['process_s']:.2f} s, "
+                  f"peak RSS {r['rss_mib']:.0f} MiB", file=sys.stderr, flush=True)
+    ref = sides[0][0]
+    ref_t = float(np.median([r["study_s"] for r in recs[ref]]))
+    print(f"dynamic-wire study: medians of {runs} interleaved runs (ratio = {ref} / side)")
+    for name, *_ in sides:
+        t = float(np.median([r["study_s"] for r in recs[name]]))
+        pt = float(np.median([r["process_s"] for r in recs[name]]))
+        rss = max(r["rss_mib"] for r in recs[name])
+        same = all(r["orders"] == recs[ref][0]["orders"] for r in recs[name])
+        print(f"{name:24s} study {t:7.2f} s ({ref_t / t:.2f}x)  process {pt:7.2f} s  peak RSS {rss:5.0f} MiB  "
+              f"orders {'identical to ' + ref if same else 'DIFFERENT'}")
+    print("fitted orders (" + ref + "):\n" + recs[ref][0]["orders"])
+
+
 def main(argv=None) -> None:
     if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--worker":
         print(json.dumps(worker(sys.argv[2], sys.argv[3], int(sys.argv[4]))))
@@ -811,7 +864,14 @@ def main(argv=None) -> None:
     ap.add_argument("--steps", type=int, default=20, help="--scene-ab: timed steps")
     ap.add_argument("--start", type=int, default=60, help="--scene-ab impact: steps before the timed segment")
     ap.add_argument("--reduced", action="store_true", help="--scene-ab impact: the config header's small version")
+    ap.add_argument("--wire", action="store_true",
+                    help="the dynamic-wire study as whole processes (--runs, --backends, --baseline)")
+    ap.add_argument("--baseline", default=None, help="--wire: today's main tree to compare against")
+    ap.add_argument("--baseline-python", default=None, help="--wire: the baseline tree's interpreter")
     a = ap.parse_args(argv)
+    if a.wire:
+        main_wire(a.runs, a.backends, a.baseline, a.baseline_python)
+        return
     if a.scene_ab:
         be = a.scene_backends or (["superlu_pruned", "pardiso_unsym"] if a.scene_ab == "impact"
                                   else ["superlu", "pardiso"])
