@@ -143,3 +143,44 @@ def test_ci_study_through_snakemake(tmp_path):
     assert acc["mesh"]["wall_time_ratio_default_to_reference"] is not None
     text = (work / target).read_text()
     assert "wall time" in text and "P*" in text
+
+
+def _label_series(ref_values, run_values):
+    """A one-label reaction force (component x) and a constant big label (component y), two runs."""
+    strain = np.linspace(0, 0.2, len(ref_values))
+    f = np.zeros((2, 1, len(strain), 2))
+    f[0, 0, :, 0], f[1, 0, :, 0] = run_values, ref_values
+    f[:, 0, :, 1] = 10.0                         # constant: range 0
+    f[0, 0, -1, 1] = 10.1                        # the coarse run off by 0.1 at the last strain
+    ds = xr.Dataset({"reaction_force": (("mesh_elements", "mode", "strain", "component"), f)},
+                    coords={"mesh_elements": [6.0, 12.0], "mode": ["shear"], "strain": strain, "component": ["x", "y"]})
+    return ds
+
+
+def test_range_measure_of_a_label_crossing_zero():
+    """A label from +4 to -4 (crossing zero; max |q| = 4, range 8): a difference of 2 is
+    50 % on the magnitude measure and 25 % on the range measure."""
+    from rve.studies.table_convergence import RANGE_FLOOR
+
+    ref = np.array([4.0, 2.0, 0.0, -2.0, -4.0])
+    run = ref + np.array([0, 0, 0, 2.0, 0])
+    rows = relative_errors(_label_series(ref, run), 12.0, "mesh_elements")
+    x = [r for r in rows if r["label"] == "x"]
+    assert max(r["relative_error"] for r in x) == pytest.approx(2.0 / 4.0)
+    assert max(r["range_error"] for r in x) == pytest.approx(2.0 / 8.0)
+    # the constant label: range 0, so the floor RANGE_FLOOR x the quantity's scale (the
+    # reference's max |q| over every label: 10) divides
+    y = [r for r in rows if r["label"] == "y"]
+    assert max(r["range_error"] for r in y) == pytest.approx(0.1 / (RANGE_FLOOR * 10.0))
+    assert max(r["relative_error"] for r in y) == pytest.approx(0.1 / 10.0)
+    s = summarize_errors(rows, "mesh_elements", "range_error")
+    assert s["reaction_force"][6.0] == pytest.approx(max(0.25, 0.1 / (RANGE_FLOOR * 10.0)))
+
+
+def test_range_measure_equals_the_magnitude_measure_for_a_label_from_zero():
+    # a label growing from 0 to its maximum: range = max |q|, both measures agree
+    ref = np.array([0.0, 1.0, 2.0, 3.0, 5.0])
+    rows = relative_errors(_label_series(ref, ref * 1.1), 12.0, "mesh_elements")
+    for r in rows:
+        if r["label"] == "x":
+            assert r["range_error"] == pytest.approx(r["relative_error"], rel=1e-14)

@@ -82,6 +82,17 @@ class StrainPath(Section):
         "energy", description="static solve of a step: energy minimisation (rve.solvers.minimize.minimize_energy) "
                               "or the capped Newton of the dynamic relaxation path")
     static_atol: Dimensionless = Field(1e-9, gt=0, description="static solve tolerance on |F| (N)")
+    follow_branch: bool = Field(
+        False, description="one equilibrium path (rve.homogenisation.branch): test every step's energy balance and "
+                           "inertia, redo a step that jumped to another equilibrium in halves from the previous "
+                           "state")
+    branch_energy_rtol: Dimensionless = Field(
+        0.05, gt=0, le=1, description="jump test: energy mismatch allowed, fraction of the step's work "
+                                      "(|d| max |dPi/deps|)")
+    branch_max_halvings: Integer = Field(3, ge=0, le=8, description="jump test: recursion depth of the step halving "
+                                                                   "(floor: the step / 2^n)")
+    branch_state_tol: Length = Field("1e-4 mm", gt=0, description="naive and followed end states closer than this "
+                                                                   "(max centroid distance) are one equilibrium")
     static_rounds: Integer = Field(1, ge=1, description="static solves, each after a map rebuild ('newton')")
     static_max_iter: Integer = Field(
         1000, ge=1, description="iterations of the static solve (energy: the minimiser's cap; a step that "

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..io.atomic import atomic_write_json
 from ..io.provenance import logging_to
+from .branch import BRANCH_COUNTS
 from .sweeps import BASE_COMBO, combo_params, load_run_config
 
 __all__ = ["fabric_job", "relax_job", "strain_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
@@ -264,6 +265,9 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
                   "residual_N_recorded": recorded},
         "wall_s": time.perf_counter() - t0,
     }
+    branch = st.solver.get("branch")
+    if branch:   # the step's equilibrium-path test (rve.homogenisation.branch), for the table's attributes
+        rec["state"]["branch"] = {k: branch.get(k) for k in BRANCH_COUNTS + ("kept",)}
     return rec
 
 

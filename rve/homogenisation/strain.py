@@ -42,6 +42,12 @@ Then (Algorithm 7.1, 2b) the reaction forces: the clamp forces summed per box si
 components (``rve.fabrics.setup.clamp_reactions``: the residual at the pinned
 centroids, contact included).
 
+With ``strain.follow_branch`` the step goes through ``rve.homogenisation.branch.follow_branch``
+(one equilibrium path): the energy balance of the step (potential change against the clamps'
+work, ``pinned_energy``) and the minimiser's inertia verdict are tested, and a step that
+jumped to another equilibrium is redone from the previous state in halves; the record is
+``info["branch"]`` (docs/table_accuracy.md, "One equilibrium path").
+
 If the driven phase fails (step control exhausted), the remaining part of the field is
 applied kinematically (an affine move of every node) and the failure is recorded in
 the step's ``info``; the ends always land exactly on X + eps_n X1 e_i.
@@ -60,7 +66,7 @@ from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
-           "end_targets"]
+           "end_targets", "pinned_energy"]
 
 log = logging.getLogger("rve.homogenisation.strain")
 
@@ -282,17 +288,79 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
     sp_ = cfg.strain
     if not 1 <= step <= sp_.steps:
         raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
-    t_start = time.perf_counter()
     levels = strain_levels(cfg)
-    d_eps = float(levels[step] - levels[step - 1])
-    eps = float(levels[step])
+    eps_prev, eps = float(levels[step - 1]), float(levels[step])
+    if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
+        return _branch_step(cfg, fab, mesh, x_prev, origin, mode, step, eps_prev, eps)
+    return _algorithm_step(cfg, fab, mesh, x_prev, origin, mode, step, eps_prev, eps)
+
+
+def _branch_step(cfg, fab, mesh, x_prev, origin, mode, step, eps_prev, eps):
+    """``_algorithm_step`` through ``branch.follow_branch``: the potential of a state and its
+    load derivative, the clamp forces times the end velocity per unit strain
+    (``pinned_energy``); the inertia from the energy minimiser's definiteness verdict."""
+    from .branch import BranchSettings, StepSolution, follow_branch
+
+    t0 = time.perf_counter()
+    sp_ = cfg.strain
+    nn = mesh.n_nodes
+
+    def solve(start, e_from, e_to):
+        x2, sys2, inf = _algorithm_step(cfg, fab, mesh, start.x, origin, mode, step, e_from, e_to)
+        return StepSolution(x2, inf, sys2)
+
+    def energy(sol, e):
+        system = sol.extra if sol.extra is not None else mech_system(fab, mesh, cfg, sp_.relax_damping,
+                                                                     np.asarray(sol.x, float).reshape(-1))
+        return pinned_energy(fab, mesh, system, sol.x, origin, mode, e)
+
+    def inertia(sol):
+        k = (sol.info.get("static") or {}).get("negative_pivots")
+        return None if k is None or k < 0 else int(k)
+
+    def distance(xa, xb):   # centroid distance (mm)
+        return float(np.abs(np.asarray(xa).reshape(nn, 9)[:, :3] - np.asarray(xb).reshape(nn, 9)[:, :3]).max())
+
+    settings = BranchSettings(energy_rtol=float(sp_.branch_energy_rtol), max_halvings=int(sp_.branch_max_halvings),
+                              state_tol=float(sp_.branch_state_tol))
+    start = StepSolution(np.array(x_prev, float).reshape(nn, 9))
+    sol, binfo = follow_branch(solve, start, eps_prev, eps, energy, inertia=inertia, distance=distance,
+                               settings=settings)
+    info = dict(sol.info)
+    info.update({"strain": float(eps), "strain_increment": float(eps - eps_prev), "branch": binfo,
+                 "wall_s": time.perf_counter() - t0})
+    return sol.x, sol.extra, info
+
+
+def pinned_energy(fab, mesh, system, x, origin, mode: str, eps: float) -> tuple:
+    """``(Pi, dPi/deps)`` of an equilibrium of the pinned cell at strain ``eps``: the
+    potential ``system.energy(x)`` (N mm) and the work rate of the clamps, sum over the
+    pinned centroids of the clamp force (the residual there) times d(end target)/d eps (N mm
+    per unit strain): along a branch dPi/deps equals it, the free residual being zero."""
+    xf = np.asarray(x, float).reshape(-1)
+    ends, pinned, _ = clamped_ends(fab, mesh)
+    F, _, _ = system.evaluate(xf, np.zeros(system.n), 0.0, jacobian=False)
+    origin_ends = np.asarray(origin, float)[ends, :3]
+    h = 1e-6
+    rate = (end_targets(origin_ends, mode, eps + h) - end_targets(origin_ends, mode, eps - h)) / (2.0 * h)
+    work_rate = float(np.asarray(F)[np.asarray(pinned, dtype=np.int64)] @ rate.reshape(-1))
+    return float(system.energy(xf)), work_rate
+
+
+def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float):
+    """Algorithm 7.1 from ``x_prev`` at strain ``eps_prev`` to ``eps`` (module docstring;
+    ``step`` labels the record)."""
+    sp_ = cfg.strain
+    t_start = time.perf_counter()
+    d_eps = float(eps - eps_prev)
+    eps = float(eps)
     rate = d_eps / sp_.t_step
     nn = mesh.n_nodes
     origin = np.asarray(origin, float)
     x = np.array(x_prev, float).reshape(nn, 9)
     ends, _, _ = clamped_ends(fab, mesh)
     if mode == "trellis":  # F(theta) is not linear in theta: the secant field of the step
-        w_aff = secant_velocity(origin, trellis_gradient(float(levels[step - 1])), trellis_gradient(eps), sp_.t_step)
+        w_aff = secant_velocity(origin, trellis_gradient(float(eps_prev)), trellis_gradient(eps), sp_.t_step)
     else:
         w_aff = affine_velocity(origin, mode, rate)
     end_vel = w_aff[ends, :3]

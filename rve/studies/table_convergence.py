@@ -10,7 +10,11 @@ For every **table quantity** (``QUANTITIES``: clamp reaction forces, membrane fo
 resistances, Joule temperature rises, the network R_y and R_c) and every label of it (side
 and component, probe, ...), at every mode and strain, the difference of each run to the
 **reference run** (the finest mesh; the stiffest penalty) relative to the reference's
-magnitude ``scale`` = max over strains of |q_ref| at that label and mode. Labels whose
+magnitude ``scale`` = max over strains of |q_ref| at that label and mode (``relative_error``,
+the magnitude measure) and, beside it, relative to the reference's **range** over the strain
+path at that label and mode, max - min over strains, floored at ``RANGE_FLOOR`` x the
+quantity's overall scale (``range_error``, the range measure: a label that crosses zero or
+hardly moves is judged against how much it varies). Labels whose
 scale is below ``NEGLIGIBLE`` x the quantity's largest value (e.g. the z reactions of an
 in-plane cell, the shear reaction of a uniaxial stretch at strain 0) are left out: their
 relative error measures noise. Per run and quantity, ``error`` = the maximum over the kept
@@ -51,7 +55,7 @@ from ..io.atomic import atomic_path, atomic_write_text
 from ..io.provenance import logging_to
 from .convergence import fit_order
 
-__all__ = ["QUANTITIES", "TARGETS", "NEGLIGIBLE", "REFERENCE_ORDER", "relative_errors", "summarize_errors",
+__all__ = ["QUANTITIES", "TARGETS", "NEGLIGIBLE", "RANGE_FLOOR", "REFERENCE_ORDER", "range_scale", "relative_errors", "summarize_errors",
            "summarize_by_mode", "observed_rates", "reference_error", "combo_costs", "combo_wall_times", "convergence_report", "table_convergence_job"]
 
 log = logging.getLogger("rve.studies.table_convergence")
@@ -72,6 +76,8 @@ TARGETS = {"reaction_force": 0.02, "membrane_force": 0.02, "probe_resistance": 0
            "contact_resistance": 0.01, "temperature_rise_max": 0.02}
 #: labels smaller than this fraction of the quantity's largest reference value are not assessed
 NEGLIGIBLE = 0.05
+#: floor of the range measure's denominator, as a fraction of the quantity's overall scale
+RANGE_FLOOR = 0.05
 #: the convergence order assumed to estimate the finest mesh's own error (``reference_error``)
 REFERENCE_ORDER = 1.0
 
@@ -97,11 +103,13 @@ def relative_errors(ds, reference, dim: str) -> list[dict]:
         scale = np.nanmax(np.abs(rv), axis=1)                          # (mode, *labels)
         big = np.nanmax(scale) if np.isfinite(scale).any() else np.nan
         keep = scale >= NEGLIGIBLE * big
+        span = range_scale(rv, big)                                    # (mode, *labels)
         for val in ds[dim].values:
             if val == reference:
                 continue
             run = np.asarray(var.sel({dim: val}).transpose("mode", "strain", *labels).values, float)
             err = np.abs(run - rv) / np.expand_dims(np.where(keep, scale, np.nan), 1)
+            err_range = np.abs(run - rv) / np.expand_dims(np.where(keep, span, np.nan), 1)
             for idx in np.ndindex(err.shape):
                 m, s, lab = idx[0], idx[1], idx[2:]
                 if not keep[(m,) + lab]:
@@ -110,18 +118,31 @@ def relative_errors(ds, reference, dim: str) -> list[dict]:
                 rows.append({"quantity": name, "label": label, "mode": str(ds["mode"].values[m]),
                              "strain": float(ds["strain"].values[s]), dim: float(val),
                              "value": float(run[idx]), "reference": float(rv[idx]),
-                             "relative_error": float(err[idx])})
+                             "relative_error": float(err[idx]), "range_error": float(err_range[idx])})
     return rows
 
 
-def summarize_errors(rows: Sequence[Mapping], dim: str) -> dict:
-    """{quantity: {run value: max relative error over labels, modes, strains}}."""
+def range_scale(ref, big: float) -> np.ndarray:
+    """Denominator of the range measure, (mode, *labels) of a reference (mode, strain,
+    *labels): the reference's range over the strain path at that label and mode (max - min
+    over strains), floored at ``RANGE_FLOOR`` x ``big`` (the quantity's overall scale, max
+    |q_ref|) so that a label that hardly varies is not divided by ~0."""
+    ref = np.asarray(ref, float)
+    with np.errstate(invalid="ignore"):
+        span = np.nanmax(ref, axis=1) - np.nanmin(ref, axis=1)
+    return np.maximum(np.nan_to_num(span, nan=0.0), RANGE_FLOOR * big)
+
+
+def summarize_errors(rows: Sequence[Mapping], dim: str, measure: str = "relative_error") -> dict:
+    """{quantity: {run value: max error over labels, modes, strains}} of ``measure``
+    (``relative_error``: to the label's magnitude; ``range_error``: to its range)."""
     out: dict = {}
     for r in rows:
-        if not np.isfinite(r["relative_error"]):
+        e = r.get(measure, np.nan)
+        if not np.isfinite(e):
             continue
         q = out.setdefault(r["quantity"], {})
-        q[r[dim]] = max(q.get(r[dim], 0.0), r["relative_error"])
+        q[r[dim]] = max(q.get(r[dim], 0.0), e)
     return out
 
 
@@ -168,13 +189,13 @@ def combo_wall_times(bench_root: PathLike, run: str) -> dict:
     return {k: v["wall_s"] for k, v in combo_costs(bench_root, run).items()}
 
 
-def summarize_by_mode(rows: Sequence[Mapping], dim: str) -> dict:
+def summarize_by_mode(rows: Sequence[Mapping], dim: str, measure: str = "relative_error") -> dict:
     """{quantity: {mode: {run value: {"max": .., "median": ..}}}} over labels and strains."""
     acc: dict = {}
     for r in rows:
-        if np.isfinite(r["relative_error"]):
-            acc.setdefault(r["quantity"], {}).setdefault(r["mode"], {}).setdefault(r[dim], []).append(
-                r["relative_error"])
+        e = r.get(measure, np.nan)
+        if np.isfinite(e):
+            acc.setdefault(r["quantity"], {}).setdefault(r["mode"], {}).setdefault(r[dim], []).append(e)
     return {q: {m: {v: {"max": float(np.max(e)), "median": float(np.median(e))} for v, e in sorted(runs.items())}
                 for m, runs in modes.items()} for q, modes in acc.items()}
 
@@ -250,6 +271,19 @@ def convergence_report(mesh, penalty, default: Mapping) -> str:
                     out.append(f"| {QUANTITIES[q]} | {m} | " + " | ".join(
                         (f"{100 * e[v]['max']:.3g} / {100 * e[v]['median']:.3g} %" if v in e else "n/a")
                         for v in runs) + " |")
+        if st.get("summary_range"):
+            out += ["", "The same runs on the range measure (max over labels, modes and strains of |q - q_ref| / "
+                    f"max(range of q_ref over the strain path, {RANGE_FLOOR:g} x the quantity's scale)) beside "
+                    "the magnitude measure above:", "",
+                    "| quantity | " + " | ".join(f"{v:g}" for v in sorted({v for e in st['summary_range'].values()
+                                                                            for v in e})) + " |",
+                    "|" + "---|" * (1 + len({v for e in st['summary_range'].values() for v in e}))]
+            vals = sorted({v for e in st["summary_range"].values() for v in e})
+            for q, errs in st["summary_range"].items():
+                mag = st["summary"].get(q, {})
+                out.append(f"| {QUANTITIES[q]} | " + " | ".join(
+                    (f"{100 * errs[v]:.3g} % (magnitude {100 * mag[v]:.3g} %)" if v in errs and v in mag else "n/a")
+                    for v in vals) + " |")
         if st.get("reference_error"):
             out += ["", f"Estimated error of the reference run itself (Richardson, order {REFERENCE_ORDER:g}, "
                     "from the next-finest run) and the stated error of the default run (difference to the "
@@ -341,6 +375,7 @@ def _study(ds, dim, bench_root, run, states_root):
         if v is not None:
             times[v], cpu[v], rss[v] = c["wall_s"], c["cpu_s"], c["max_rss_mb"]
     st = {"dim": dim, "reference": reference, "summary": summary, "rates": rates, "times": times, "cpu": cpu,
+          "summary_range": summarize_errors(rows, dim, "range_error"),
           "rss": rss, "by_mode": summarize_by_mode(rows, dim),
           # the finest mesh's own error (Richardson, order REFERENCE_ORDER); the penalty's limit
           # P* -> inf is not extrapolated (rate 0.2-0.4: docs/table_accuracy.md)
@@ -364,7 +399,8 @@ def table_convergence_job(mesh_table, penalty_table, runs: Mapping[str, str], ou
     with logging_to(log_path):
         mesh, rows_m = _study(mesh_table, "mesh_elements", bench_root, runs.get("mesh", ""), states_root)
         pen, rows_p = _study(penalty_table, "contact_penalty", bench_root, runs.get("penalty", ""), states_root)
-        fields = ["study", "quantity", "label", "mode", "strain", "run_value", "value", "reference", "relative_error"]
+        fields = ["study", "quantity", "label", "mode", "strain", "run_value", "value", "reference", "relative_error",
+                  "range_error"]
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=fields)
         w.writeheader()
@@ -385,6 +421,7 @@ def table_convergence_job(mesh_table, penalty_table, runs: Mapping[str, str], ou
             stated = {q: (None if e is None else e + (ref_err.get(q) or 0.0)) for q, e in errs.items()}
             cpu = st.get("cpu") or {}
             acc[name] = {"reference": st["reference"], "estimated_relative_error": errs,
+                         "range_error": {q: e.get(dv) for q, e in (st.get("summary_range") or {}).items()},
                          "reference_error": ref_err, "stated_relative_error": stated,
                          "reference_error_by_mode": st.get("reference_error_by_mode") or {},
                          "by_mode": {q: {m: e.get(dv) for m, e in modes.items()} for q, modes in st["by_mode"].items()},

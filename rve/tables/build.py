@@ -383,4 +383,27 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
         internal_units="mm, ms, g, N, MPa, K, A, mC, V (ohm = V/A)",
     ))
     ds.attrs["Conventions"] = CF_VERSION
+    branch = _branch_attributes(records)
+    if branch:
+        ds.attrs.update(branch)
     return add_macro_quantities(ds)
+
+
+def _branch_attributes(records: Sequence[Mapping]) -> dict:
+    """``branch_jumps``, ``branch_limit_points``, ``branch_detections``, ``branch_false_alarms``:
+    JSON {mode: count summed over the mode's steps} of the records' equilibrium-path tests
+    (``state.branch``, rve.homogenisation.branch); empty when no record carries one."""
+    per: dict = {}
+    for rec in records:
+        b = (rec.get("state") or {}).get("branch")
+        if not b or not rec.get("mode"):
+            continue
+        m = per.setdefault(str(rec["mode"]), {})
+        for k in ("branch_jumps", "limit_points", "detections", "false_alarms"):
+            m[k] = m.get(k, 0) + int(b.get(k) or 0)
+    if not per:
+        return {}
+    name = {"branch_jumps": "branch_jumps", "limit_points": "branch_limit_points", "detections": "branch_detections",
+            "false_alarms": "branch_false_alarms"}
+    return {attr: json.dumps({mode: c[k] for mode, c in sorted(per.items())}, sort_keys=True)
+            for k, attr in name.items()}
