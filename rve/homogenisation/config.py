@@ -83,7 +83,7 @@ class StrainPath(Section):
                               "or the capped Newton of the dynamic relaxation path")
     static_atol: Dimensionless = Field(1e-9, gt=0, description="static solve tolerance on |F| (N)")
     follow_branch: bool = Field(
-        False, description="one equilibrium path (rve.homogenisation.branch): test every step's energy balance and "
+        True, description="one equilibrium path (rve.homogenisation.branch): test every step's energy balance and "
                            "inertia, redo a step that jumped to another equilibrium in halves from the previous "
                            "state")
     branch_energy_rtol: Dimensionless = Field(

@@ -51,6 +51,7 @@ __all__ = [
     "previous_state", "run_record_paths", "table_outputs", "export_outputs", "report_prefix", "report_outputs", "job_name",
     "log_path", "benchmark_path", "default_targets", "tubes_path", "picture_outputs", "picture_targets",
     "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default", "config_digest",
+    "work_precision_outputs", "work_precision_runs",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -197,6 +198,50 @@ def convergence_default(runs: Mapping, study: str) -> dict:
     cm = load_run_config({**runs[f"{study}_mesh"], "sweep": {}})
     cp = load_run_config({**runs[f"{study}_penalty"], "sweep": {}})
     return {"mesh_elements": float(cm.mesh.elements), "contact_penalty": float(cp.contact.penalty)}
+
+
+def work_precision_outputs(study: str, root: PathLike = RVE_DIR) -> dict:
+    """Files of the work-precision report of ``study`` (``rve.studies.work_precision``)."""
+    d = f"{root}/work_precision/{study}"
+    return {"md": f"{d}/work_precision.md", "csv": f"{d}/work_precision.csv", "png": f"{d}/work_precision.png",
+            "json": f"{d}/accuracy.json"}
+
+
+def _config_refusal(spec: Optional[Mapping], run: str) -> Optional[str]:
+    """None when every combination of run ``run`` validates, else why not (the first refusal)."""
+    if spec is None:
+        return f"run {run!r} is not in rve.runs"
+    try:
+        for c in combos(spec):
+            load_run_config(spec, c.id)
+    except Exception as exc:   # a ConfigError, a pydantic ValidationError, a unit error: the config refuses it
+        text = " ".join(str(exc).split())
+        return f"run {run}: {text[:300]}"
+    return None
+
+
+def work_precision_runs(rve_config: Mapping, study: str) -> dict:
+    """The runs of work-precision study ``study`` (``rve.work_precision.{study}`` of the
+    pipeline config: ``reference``, ``default``, ``levers: {lever: run}``): ``{"reference",
+    "default", "levers": {lever: run}, "skipped": {lever: why}}``. A lever whose run the
+    config refuses (an override key it does not know, e.g. a lever not built yet) is
+    skipped with the config's message; a refused reference or default is an error."""
+    studies = rve_config.get("work_precision") or {}
+    if study not in studies:
+        raise ValueError(f"work-precision study {study!r} is not in rve.work_precision (have {sorted(studies)})")
+    st, runs = studies[study], rve_config.get("runs") or {}
+    for role in ("reference", "default"):
+        why = _config_refusal(runs.get(st[role]), st[role]) if st.get(role) else None
+        if why:
+            raise ValueError(f"work-precision study {study}: its {role} run cannot run: {why}")
+    levers, skipped = {}, {}
+    for lever, run in (st.get("levers") or {}).items():
+        why = _config_refusal(runs.get(run), run)
+        if why:
+            skipped[lever] = why
+        else:
+            levers[lever] = run
+    return {"reference": st["reference"], "default": st.get("default"), "levers": levers, "skipped": skipped}
 
 
 def ensemble_report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:

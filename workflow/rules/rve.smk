@@ -322,3 +322,61 @@ rule rve_table_convergence:
     """`snakemake -j2 rve_table_convergence`: the default RVE's mesh and penalty study."""
     input:
         **rve_layout.convergence_outputs("table_convergence"),
+
+
+# --------------------------------------------------------------------------- work-precision study
+# A study {study} (config rve.work_precision.{study}) is a reference run, a default run and one
+# sweep run per lever (boundary, cell size, p, elements, contact points, enforcement). The report
+# compares every combination with the reference on the range measure, sets it against the
+# combination's summed job CPU time, draws the front and writes the default run's stated error
+# as an accuracy file (rve.studies.work_precision; docs/table_accuracy.md). A lever whose run the
+# config refuses (an override key it does not know) is skipped and listed in the report.
+#   snakemake -j2 rve_work_precision
+
+
+def _work_precision(w):
+    return rve_layout.work_precision_runs(config["rve"], w.study)
+
+
+rule rve_work_precision_report:
+    """Every lever's runs against one reference: errors, CPU time, front, the default's stated error."""
+    input:
+        reference=lambda w: rve_layout.table_outputs(_work_precision(w)["reference"])["table"],
+        default=lambda w: [rve_layout.table_outputs(r)["table"] for r in [_work_precision(w)["default"]] if r],
+        levers=lambda w: [rve_layout.table_outputs(r)["table"] for r in _work_precision(w)["levers"].values()],
+    output:
+        **rve_layout.work_precision_outputs("{study}"),
+    log:
+        f"{rve_layout.LOG_DIR}/work_precision/{{study}}.log",
+    benchmark:
+        f"{rve_layout.BENCHMARK_DIR}/work_precision/{{study}}.tsv"
+    wildcard_constraints:
+        study=r"[A-Za-z0-9_]+",
+    params:
+        runs=_work_precision,
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+    run:
+        from rve.studies.table_convergence import combo_costs
+        from rve.studies.work_precision import work_precision_job
+        from rve.homogenisation.sweeps import load_run_config
+        from rve.tables import open_table
+
+        wp = params.runs
+        default = wp["default"]
+        cfg = load_run_config(config["rve"]["runs"][default or wp["reference"]])
+        default_config = {"mesh_elements": float(cfg.mesh.elements), "contact_penalty": float(cfg.contact.penalty),
+                          "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp)}
+        runs = [wp["reference"]] + ([default] if default else []) + list(wp["levers"].values())
+        costs = {r: combo_costs(rve_layout.BENCHMARK_DIR, r) for r in runs}
+        work_precision_job(open_table(input.reference), (default, open_table(input.default[0])) if default else None,
+                           {lv: (r, open_table(rve_layout.table_outputs(r)["table"])) for lv, r in wp["levers"].items()},
+                           costs, wp["skipped"], dict(output), log[0],
+                           {"study": wildcards.study, "reference": wp["reference"]}, default_config)
+
+
+rule rve_work_precision:
+    """`snakemake -j2 rve_work_precision`: the work-precision study of the default table."""
+    input:
+        **rve_layout.work_precision_outputs("work_precision"),

@@ -1,0 +1,239 @@
+"""Work-precision study of the table's levers against one common fine reference
+(docs/table_accuracy.md, "Work-precision study").
+
+A study is ordinary pipeline runs (configs/pipeline.yaml, ``rve.work_precision.{study}``):
+a **reference** run (one combination, the finest settings), a **default** run (the
+configuration whose stated error the study produces) and one sweep run per **lever**
+(pinned vs periodic, cell size, p, elements per fibril, contact quadrature count, penalty
+vs augmented Lagrangian: each lever its run, each value its combination and chain of jobs).
+This module compares their tables (opened by the caller) and the Snakemake benchmark files
+of their jobs; a lever whose override key the config does not know is skipped by the caller
+(``rve.homogenisation.layout.work_precision_runs``) and listed with its reason.
+
+For every run (a combination of a lever run, the default run) and every table quantity
+(``rve.studies.table_convergence.QUANTITIES``) the error against the reference on the
+**range measure** (``range_error``: |q - q_ref| over the reference's range over the strain
+path at that label and mode, floored at ``RANGE_FLOOR`` x the quantity's scale) and, for
+comparison, on the magnitude measure (``relative_error``), max over labels, modes and
+strains (and per mode); the **work** = summed CPU seconds of the combination's jobs (wall
+seconds and the largest job's peak RSS beside it). The **Pareto front** is over (CPU time,
+worst target ratio = max over quantities of error / ``TARGETS``): the runs no other run
+beats in both.
+
+Contract
+--------
+* ``run_errors(run_ds, reference_ds)`` -> {"range": {q: e}, "magnitude": {q: e},
+  "range_by_mode": {q: {mode: e}}} (tables aligned on their common modes and strains);
+* ``pareto_front(points)`` -> indices of the non-dominated (cpu, error) points;
+* ``work_precision_job(reference, default, levers, costs, skipped, outputs, log_path,
+  names)`` writes ``md`` (the table), ``csv`` (every run and quantity), ``png`` (error vs
+  CPU time, one marker per lever, the front) and ``json`` (the default run's stated error:
+  an accuracy file ``rve.tables.accuracy`` reads, ``method: work_precision``).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
+from ..io.provenance import logging_to
+from .table_convergence import NEGLIGIBLE, QUANTITIES, RANGE_FLOOR, TARGETS, relative_errors, summarize_by_mode
+
+__all__ = ["run_errors", "pareto_front", "study_points", "work_precision_report", "work_precision_job"]
+
+log = logging.getLogger("rve.studies.work_precision")
+
+PathLike = Union[str, os.PathLike]
+
+_RUN, _REF = 0.0, 1.0   # the two values of the comparison's stacking dimension
+_DIM = "wp_run"
+
+
+def run_errors(run_ds, reference_ds) -> dict:
+    """Errors of one run's table against the reference's (module docstring), on the modes
+    and strains both have."""
+    import xarray as xr
+
+    names = [q for q in QUANTITIES if q in run_ds and q in reference_ds]
+    a, b = xr.align(run_ds[names].reset_coords(drop=True), reference_ds[names].reset_coords(drop=True),
+                    join="inner")
+    ds = xr.concat([a, b], dim=xr.DataArray([_RUN, _REF], dims=_DIM, name=_DIM))
+    rows = relative_errors(ds, _REF, _DIM)
+    out: dict = {"range": {}, "magnitude": {}, "range_by_mode": {}}
+    for r in rows:
+        for key, col in (("range", "range_error"), ("magnitude", "relative_error")):
+            e = r[col]
+            if np.isfinite(e):
+                out[key][r["quantity"]] = max(out[key].get(r["quantity"], 0.0), e)
+    for q, modes in summarize_by_mode(rows, _DIM, "range_error").items():
+        out["range_by_mode"][q] = {m: v[_RUN]["max"] for m, v in modes.items() if _RUN in v}
+    return out
+
+
+def worst_ratio(errors: Mapping[str, float]) -> float:
+    """max over quantities of error / target (<= 1: every target met)."""
+    vals = [e / TARGETS[q] for q, e in errors.items() if q in TARGETS and e is not None and np.isfinite(e)]
+    return float(max(vals)) if vals else float("nan")
+
+
+def pareto_front(points: Sequence[tuple]) -> list:
+    """Indices of the (cpu, error) points that no other point beats in both (ties kept),
+    in order of increasing cpu."""
+    idx = [i for i, (c, e) in enumerate(points) if np.isfinite(c) and np.isfinite(e)]
+    front = [i for i in idx if not any((points[j][0] <= points[i][0] and points[j][1] <= points[i][1])
+                                       and (points[j][0] < points[i][0] or points[j][1] < points[i][1]) for j in idx)]
+    return sorted(front, key=lambda i: points[i][0])
+
+
+def _combo_value(params: Mapping) -> str:
+    return ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in params.items()) or "base"
+
+
+def study_points(reference, default, levers: Mapping, costs: Mapping) -> list[dict]:
+    """Every run of the study against the reference: one dict per combination (``lever``,
+    ``run``, ``combo``, ``label``, ``errors``, ``cost``). ``levers``: {lever: (run name,
+    table)}; ``default``: (run name, table) or None; ``costs``: {run: {combo: cost dict}}
+    (``table_convergence.combo_costs``)."""
+    out = []
+    entries = ([("default", default)] if default is not None else []) + list(levers.items())
+    for lever, (run, ds) in entries:
+        swept = [d for d in ds.dims if d in ds.coords and d not in ("mode", "strain", "probe", "side", "component",
+                                                                      "terminal")]
+        combos = [{}]
+        for d in swept:
+            combos = [dict(c, **{d: v}) for c in combos for v in ds[d].values.tolist()]
+        for params in combos:
+            sel = ds.sel(params) if params else ds
+            errs = run_errors(sel, reference)
+            combo = "__".join(f"{k}-{format(v, '.12g') if isinstance(v, float) else v}" for k, v in params.items()) \
+                or "base"
+            out.append({"lever": lever, "run": run, "combo": combo, "label": _combo_value(params), "errors": errs,
+                        "cost": (costs.get(run) or {}).get(combo, {}),
+                        "worst_ratio": worst_ratio(errs["range"])})
+    return out
+
+
+def work_precision_report(points: Sequence[Mapping], skipped: Mapping[str, str], names: Mapping) -> str:
+    """Markdown: every run's error on the range measure (magnitude measure in brackets), its
+    CPU time, the front, and the skipped levers."""
+    qs = [q for q in QUANTITIES if any(q in p["errors"]["range"] for p in points)]
+    front = set(pareto_front([(p["cost"].get("cpu_s", np.nan) or np.nan, p["worst_ratio"]) for p in points]))
+    out = [f"# Work-precision study {names.get('study', '')} (rve.studies.work_precision)", "",
+           f"Reference: run {names.get('reference')}. Error = max over labels, modes and strains of |q - q_ref| / "
+           f"max(range of q_ref over the strain path, {RANGE_FLOOR:g} x the quantity's scale) (range measure; the "
+           f"magnitude measure, / max |q_ref| of the label, in brackets); labels below {NEGLIGIBLE:g} of the "
+           "quantity's scale left out. Work = summed CPU time of the run's jobs. Front: no other run is both "
+           "cheaper and more accurate (worst error / target over the quantities).", "",
+           "| lever | run | CPU s | wall s | peak RSS MB | " + " | ".join(QUANTITIES[q] for q in qs)
+           + " | worst / target | front |",
+           "|" + "---|" * (len(qs) + 7)]
+    for i, p in enumerate(points):
+        c = p["cost"]
+        cells = [f"{100 * p['errors']['range'][q]:.3g} % ({100 * p['errors']['magnitude'].get(q, np.nan):.3g} %)"
+                 if q in p["errors"]["range"] else "n/a" for q in qs]
+        out.append(f"| {p['lever']} | {p['label']} | {c.get('cpu_s', np.nan):.1f} | {c.get('wall_s', np.nan):.1f} | "
+                   f"{c.get('max_rss_mb', np.nan):.0f} | " + " | ".join(cells)
+                   + f" | {p['worst_ratio']:.3g} | {'yes' if i in front else ''} |")
+    out += ["", "Targets: " + ", ".join(f"{QUANTITIES[q]} {100 * t:g} %" for q, t in TARGETS.items())]
+    if skipped:
+        out += ["", "Levers skipped (their override key is not known to the config):", ""]
+        out += [f"* {lever}: {why}" for lever, why in skipped.items()]
+    return "\n".join(out) + "\n"
+
+
+def _plot(path, points):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6.4, 4.6))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    markers = "os^vD<>phX*"
+    levers = list(dict.fromkeys(p["lever"] for p in points))
+    pts = [(p["cost"].get("cpu_s", np.nan) or np.nan, p["worst_ratio"]) for p in points]
+    for k, lever in enumerate(levers):
+        sel = [(x, y, p["label"]) for (x, y), p in zip(pts, points) if p["lever"] == lever]
+        ax.plot([s[0] for s in sel], [max(s[1], 1e-6) for s in sel], ls="", marker=markers[k % len(markers)],
+                ms=7, label=lever)
+        for x, y, lab in sel:
+            ax.annotate(lab, (x, max(y, 1e-6)), textcoords="offset points", xytext=(4, 3), fontsize=6)
+    front = pareto_front(pts)
+    if front:
+        ax.plot([pts[i][0] for i in front], [max(pts[i][1], 1e-6) for i in front], "k--", lw=0.8, label="front")
+    ax.axhline(1.0, color="0.5", lw=0.6)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("work: summed job CPU time of the run [s]")
+    ax.set_ylabel("worst error / target over the quantities (range measure)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    ax.set_title("work-precision against the common reference", fontsize=10)
+    fig.tight_layout()
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=120)
+
+
+def _csv(points) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["lever", "run", "combo", "quantity", "range_error", "magnitude_error", "cpu_s", "wall_s",
+                "max_rss_mb"])
+    for p in points:
+        for q, e in p["errors"]["range"].items():
+            w.writerow([p["lever"], p["run"], p["combo"], q, e, p["errors"]["magnitude"].get(q),
+                        p["cost"].get("cpu_s"), p["cost"].get("wall_s"), p["cost"].get("max_rss_mb")])
+    return buf.getvalue()
+
+
+def accuracy_record(points, names: Mapping, default_config: Mapping, skipped: Mapping) -> dict:
+    """The accuracy file of the default run (``rve.tables.accuracy``, ``method:
+    work_precision``): its error against the reference on the range measure, per quantity
+    and per mode, and every run's figures."""
+    dp = next((p for p in points if p["lever"] == "default"), None)
+    stated = dict(dp["errors"]["range"]) if dp else {}
+    by_mode = {q: {m: {"max": e} for m, e in modes.items()} for q, modes in (dp["errors"]["range_by_mode"]
+                                                                              if dp else {}).items()}
+    ref = names.get("reference")
+    return {"method": "work_precision", "measure": "range", "range_floor": RANGE_FLOOR,
+            "negligible_fraction": NEGLIGIBLE, "targets": TARGETS, "default": dict(default_config),
+            "reference": ref, "study": names.get("study"),
+            "stated_relative_error": stated, "stated_relative_error_by_mode": by_mode,
+            "magnitude_relative_error": dict(dp["errors"]["magnitude"]) if dp else {},
+            "meets_targets": {q: bool(e <= TARGETS.get(q, np.inf)) for q, e in stated.items()},
+            # the layout of a convergence study's file (read_accuracy): the whole error in "mesh"
+            "mesh": {"reference": ref, "estimated_relative_error": stated, "stated_relative_error": stated,
+                     "by_mode": by_mode},
+            "penalty": {"reference": ref, "estimated_relative_error": {}},
+            "skipped_levers": dict(skipped),
+            "runs": [{"lever": p["lever"], "run": p["run"], "combo": p["combo"], "range_error": p["errors"]["range"],
+                      "magnitude_error": p["errors"]["magnitude"], "worst_ratio": p["worst_ratio"], **p["cost"]}
+                     for p in points]}
+
+
+def work_precision_job(reference, default, levers: Mapping, costs: Mapping, skipped: Mapping[str, str],
+                       outputs: Mapping[str, PathLike], log_path: Optional[PathLike], names: Mapping,
+                       default_config: Mapping) -> dict:
+    """The study's report (module docstring). ``reference``: the reference table;
+    ``default``: (run, table) or None; ``levers``: {lever: (run, table)}; ``costs``: {run:
+    {combo: cost}}; ``skipped``: {lever: why}; ``names``: study, reference (run names);
+    ``default_config``: the default run's mesh_elements, contact_penalty (and the other
+    lever values) for the accuracy file. Returns the accuracy record."""
+    with logging_to(log_path):
+        for lever, why in skipped.items():
+            log.warning("work-precision %s: lever %s skipped: %s", names.get("study"), lever, why)
+        points = study_points(reference, default, levers, costs)
+        text = work_precision_report(points, skipped, names)
+        atomic_write_text(outputs["md"], text)
+        atomic_write_text(outputs["csv"], _csv(points))
+        _plot(outputs["png"], points)
+        acc = accuracy_record(points, names, default_config, skipped)
+        atomic_write_json(outputs["json"], json.loads(json.dumps(acc, default=float)))
+        log.info("work-precision study:\n%s", text)
+    return acc
