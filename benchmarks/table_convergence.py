@@ -12,7 +12,15 @@ the study's accuracy.json (with the date and commit) to PATH, the file a run spe
 ``accuracy`` key names (configs/rve/plain_weave_accuracy.json for the default run): the
 gather job then writes it into the table's ``estimated_relative_error`` attributes.
 
+``--work-precision [STUDY]`` prints instead the work-precision study's report
+(``rve_work_precision_report``, docs/table_accuracy.md) and the acceptance figures: the
+default table's stated error per quantity (against the one reference, range measure)
+against the targets, and the default job's summed job wall time and peak memory from its
+Snakemake benchmark files (``--default-run``, default plain_weave); with ``--run`` it runs
+the study first, with ``--write-accuracy PATH`` it copies the study's accuracy file.
+
     python benchmarks/table_convergence.py --run                 # the default RVE (long: ~1-2 h)
+    python benchmarks/table_convergence.py --work-precision --ci --run   # the CI study (minutes)
     python benchmarks/table_convergence.py --run --ci            # the CI study (2 x 2 weave, minutes)
     python benchmarks/table_convergence.py [--study NAME] [--docs]
 
@@ -39,7 +47,13 @@ def main(argv=None) -> int:
     ap.add_argument("--results", default="results", help="results folder")
     ap.add_argument("--write-accuracy", default=None, metavar="PATH",
                     help="copy accuracy.json (+ date, commit) to PATH (the run spec's `accuracy` file)")
+    ap.add_argument("--work-precision", nargs="?", const="", default=None, metavar="STUDY",
+                    help="the work-precision study (default work_precision, with --ci ci_work_precision)")
+    ap.add_argument("--default-run", default=None, help="run whose job time and memory are printed "
+                                                         "(default plain_weave, with --ci ci)")
     a = ap.parse_args(argv)
+    if a.work_precision is not None:
+        return work_precision(a)
     study = a.study or ("ci_table_convergence" if a.ci else "table_convergence")
     d = Path(a.results) / "rve" / "convergence" / study
     target = str(d / "table_convergence.md")
@@ -106,6 +120,70 @@ def main(argv=None) -> int:
         shutil.copy2(d / "table_convergence.png", dst)
         print(f"plot -> {dst}")
     return 0
+
+
+def work_precision(a) -> int:
+    """The work-precision study's report and the acceptance figures (module docstring)."""
+    study = a.work_precision or ("ci_work_precision" if a.ci else "work_precision")
+    d = Path(a.results) / "rve" / "work_precision" / study
+    target = str(d / "work_precision.md")
+    if a.run:
+        cmd = ["nice", "-n", "15", sys.executable, "-m", "snakemake", "-j2"]
+        if a.ci:
+            cmd += ["--configfile", "configs/tests/pipeline_ci.yaml"]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd + ["--", target])
+        print(f"snakemake -j2 {target}: exit {proc.returncode}, {time.perf_counter() - t0:.0f} s wall")
+        if proc.returncode:
+            return proc.returncode
+    if not Path(target).exists():
+        print(f"{target} does not exist: run with --run (or snakemake -j2 rve_work_precision)")
+        return 1
+    print(Path(target).read_text())
+    acc = json.loads((d / "accuracy.json").read_text())
+    print(f"stated error of the default run ({acc['default']}) against the reference run {acc['reference']} "
+          f"({acc['measure']} measure, max over strains, labels and modes):")
+    for q, e in acc["stated_relative_error"].items():
+        tgt = acc["targets"].get(q)
+        mag = (acc.get("magnitude_relative_error") or {}).get(q)
+        print(f"  {q:22s} {100 * e:8.3f} %  target {100 * tgt:4.1f} %  {'met' if e <= tgt else 'NOT met':7s}"
+              + (f"  (magnitude measure {100 * mag:.3f} %)" if mag is not None else ""))
+    run = a.default_run or ("ci" if a.ci else "plain_weave")
+    print(_job_figures(Path(a.results) / "benchmarks" / "rve" / run, run))
+    if a.write_accuracy:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+        stamp = time.strftime("%Y-%m-%d", time.gmtime((d / "accuracy.json").stat().st_mtime))
+        acc["provenance"] = {"date": stamp, "commit": commit or "?", "study": study,
+                             "command": f"snakemake -j2 {target}"}
+        Path(a.write_accuracy).write_text(json.dumps(acc, indent=1) + "\n")
+        print(f"accuracy -> {a.write_accuracy}")
+    return 0
+
+
+def _job_figures(root: Path, run: str) -> str:
+    """The default job's summed job wall and CPU time and the largest peak RSS of its jobs."""
+    import csv
+
+    rows = []
+    for p in sorted(root.glob("**/*.tsv")):
+        got = list(csv.DictReader(p.open(), delimiter="\t"))
+        if got:
+            rows.append(got[-1])
+    if not rows:
+        return f"default job {run}: no benchmark files under {root} (run snakemake -j2 first)"
+
+    def num(v):
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return 0.0
+
+    wall = sum(num(r["s"]) for r in rows)
+    cpu = sum(num(r.get("cpu_time")) for r in rows)
+    rss = max(num(r.get("max_rss")) for r in rows)
+    return (f"default job {run}: {len(rows)} jobs, summed job wall {wall:.0f} s, CPU {cpu:.0f} s (with -j2 the job's "
+            f"wall is about half the CPU sum plus start-up; benchmarks/rve_pipeline_timing.py prints the stamps), "
+            f"peak RSS of one job {rss / 1024:.2f} GiB (target: 10 min wall, 4 GiB)")
 
 
 if __name__ == "__main__":

@@ -49,9 +49,22 @@ def test_pipeline_runs_reference_valid_rve_configs(capsys):
     from rve.homogenisation.sweeps import combo_ids, load_run_config
 
     for path in sorted(PIPELINE):
-        runs = yaml.safe_load((ROOT / path).read_text())["rve"]["runs"]
+        rve = yaml.safe_load((ROOT / path).read_text())["rve"]
+        runs = rve["runs"]
+        # a work-precision study may name runs of levers the config does not know yet: the
+        # study skips those (rve.homogenisation.layout.work_precision_runs); only an unknown key
+        # is such a reason
+        waiting = {r for st in (rve.get("work_precision") or {}).values()
+                   for r in [st["reference"], *st["levers"].values()]}
         for name, spec in runs.items():
             spec = dict(spec)
+            if name in waiting:
+                from rve.homogenisation.layout import _config_refusal
+
+                why = _config_refusal(spec if not spec.get("scene_config") else
+                                      {**spec, "scene_config": str(ROOT / spec["scene_config"])}, name)
+                assert why is None or "unknown key" in why, (path, name, why)
+                continue
             if spec.get("scene_config"):
                 spec["scene_config"] = str(ROOT / spec["scene_config"])
             for combo in combo_ids(spec):

@@ -10,6 +10,13 @@ is the table's stated accuracy: the gather job writes it into the table's attrib
 
 Contract
 --------
+A work-precision study's file (``method: work_precision``, ``rve.studies.work_precision``)
+has the same ``default``, ``mesh`` and ``penalty`` keys (so it reads the same way) and its
+own ``stated_relative_error`` (the default run against the study's one reference, range
+measure) and ``stated_relative_error_by_mode``: those become ``estimated_relative_error``
+and ``estimated_relative_error_<mode>``, without a mesh / penalty split; the default's
+``mesh_order`` and ``contact_n_gp`` are checked too where the table's config records them.
+
 ``read_accuracy(path) -> dict``: the study's ``accuracy.json`` (``default``, ``mesh`` and
 ``penalty`` with ``estimated_relative_error`` per quantity); a missing or malformed file is
 a ``ValueError`` naming the file and the key.
@@ -36,7 +43,7 @@ from __future__ import annotations
 import json
 import logging
 import os
-from typing import Union
+from typing import Optional, Union
 
 import xarray as xr
 
@@ -70,6 +77,8 @@ def read_accuracy(path: PathLike) -> dict:
 def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contact_penalty: float,
                       source: str = "") -> list:
     """Write the study's errors into ``ds``'s attributes (module docstring)."""
+    if accuracy.get("method") == "work_precision":
+        return _annotate_work_precision(ds, accuracy, mesh_elements, contact_penalty, source)
     d = accuracy["default"]
     if int(d["mesh_elements"]) != int(mesh_elements) or abs(float(d["contact_penalty"]) - float(contact_penalty)) > \
             1e-9 * max(1.0, abs(float(contact_penalty))):
@@ -111,5 +120,57 @@ def annotate_accuracy(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contac
     line = ("estimated_relative_error on " + ", ".join(done) + " = max relative difference over strains and labels "
             "to the finest mesh" + (" plus that mesh's own estimated error" if ref_err else "")
             + " (…_mesh) plus to the stiffest penalty (…_penalty)")
+    ds.attrs["comment"] = (ds.attrs.get("comment", "") + "\n" + line).strip()
+    return done
+
+
+def _same_default(accuracy: dict, ds: xr.Dataset, mesh_elements: int, contact_penalty: float) -> Optional[str]:
+    """None when the table's run is the study's default, else what differs."""
+    d = accuracy["default"]
+    if int(d["mesh_elements"]) != int(mesh_elements) or abs(float(d["contact_penalty"]) - float(contact_penalty)) > \
+            1e-9 * max(1.0, abs(float(contact_penalty))):
+        return (f"{d['mesh_elements']} elements and P* = {d['contact_penalty']} N/mm^2, this table's run has "
+                f"{mesh_elements} and {contact_penalty}")
+    try:
+        scene = json.loads(ds.attrs.get("config", "{}")).get("scene") or {}
+    except (TypeError, ValueError):
+        scene = {}
+    for key, path in (("mesh_order", ("mesh", "order")), ("contact_n_gp", ("contact", "n_gp"))):
+        have = (scene.get(path[0]) or {}).get(path[1])
+        if key in d and have is not None and int(have) != int(d[key]):
+            return f"{key} = {d[key]}, this table's run has {have}"
+    return None
+
+
+def _annotate_work_precision(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contact_penalty: float,
+                             source: str) -> list:
+    """A work-precision study's file (``method: work_precision``): ``stated_relative_error``
+    (the default run against the study's one reference, range measure) as
+    ``estimated_relative_error`` and ``stated_relative_error_by_mode`` as
+    ``estimated_relative_error_<mode>``; no mesh / penalty split (the reference differs in
+    every lever at once)."""
+    differs = _same_default(accuracy, ds, mesh_elements, contact_penalty)
+    if differs:
+        log.warning("accuracy %s is of %s: not annotated", source, differs)
+        return []
+    stated = accuracy.get("stated_relative_error") or {}
+    by_mode = accuracy.get("stated_relative_error_by_mode") or {}
+    done = []
+    for name in sorted(stated):
+        if name not in ds or stated[name] is None:
+            continue
+        a = ds[name].attrs
+        a["estimated_relative_error"] = float(stated[name])
+        for mode, e in sorted((by_mode.get(name) or {}).items()):
+            if (e or {}).get("max") is not None:
+                a[f"estimated_relative_error_{mode}"] = float(e["max"])
+        done.append(name)
+    prov = accuracy.get("provenance", {})
+    ds.attrs["accuracy_source"] = (f"{source}: work-precision study {accuracy.get('study', '?')} of this run's "
+                                   f"configuration; reference: run {accuracy.get('reference', '?')}"
+                                   + (f"; run {prov.get('date', '?')} at commit {prov.get('commit', '?')}" if prov else ""))
+    line = ("estimated_relative_error on " + ", ".join(done) + " = max over strains, labels and modes of the difference "
+            "to the study's reference relative to the reference's range over the strain path (floored at "
+            f"{accuracy.get('range_floor', '?')} of the quantity's scale)")
     ds.attrs["comment"] = (ds.attrs.get("comment", "") + "\n" + line).strip()
     return done
