@@ -99,3 +99,39 @@ def test_inertia_change_is_a_detection():
     assert not detect(1.0, 2.0, 1.2, 2.0, 0.1, s, inertia_a=0, inertia_b=None)["jump"]   # unknown: not judged
     v = detect(1.0, 2.0, 1.0, 2.0, 0.1, s)                                  # no energy change for 0.2 of work
     assert v["jump"] and v["why"] == ["energy"] and v["mismatch"] == pytest.approx(0.2)
+
+
+def test_pinned_work_rate_is_the_load_derivative_of_the_energy():
+    """``pinned_energy``'s dPi/deps (clamp forces times the end velocity per unit strain) is
+    the derivative of the potential when the ends move along the mode with the free dofs held:
+    central differences on the relaxed CI weave with its ends moved to a strain of 0.02, every
+    mode."""
+    from pathlib import Path
+
+    import yaml
+
+    from rve.fabrics.setup import clamped_ends, fabric_and_mesh
+    from rve.homogenisation.strain import end_targets, mech_system, pinned_energy, relax_fabric
+    from rve.homogenisation.sweeps import load_run_config
+
+    spec = yaml.safe_load((Path(__file__).parents[1] / "configs/tests/pipeline_ci.yaml").read_text())["rve"]["runs"]["ci"]
+    cfg = load_run_config(spec)
+    fab, mesh = fabric_and_mesh(cfg)
+    x, _, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    ends, _, _ = clamped_ends(fab, mesh)
+    system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, x.reshape(-1))
+    eps = 0.02    # the ends moved along the mode, the free dofs held: a loaded (non-equilibrium) state
+    for mode in ("uniaxial", "shear", "uniaxial_y", "trellis"):
+        xe = x.copy()
+        xe[ends, :3] = end_targets(x[ends, :3], mode, eps)
+        Pi, rate = pinned_energy(fab, mesh, system, xe, x, mode, eps)
+        assert Pi == pytest.approx(system.energy(xe.reshape(-1)))
+        h = 1e-6
+        vals = []
+        for s in (h, -h):
+            xs = x.copy()
+            xs[ends, :3] = end_targets(x[ends, :3], mode, eps + s)
+            vals.append(system.energy(xs.reshape(-1)))
+        fd = (vals[0] - vals[1]) / (2 * h)
+        assert abs(rate) > 0
+        assert rate == pytest.approx(fd, rel=1e-5), mode
