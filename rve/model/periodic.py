@@ -26,7 +26,9 @@ exact.
 ``DofLayout``: ``layout.dofs("r")`` are the master centroids), so the energy minimiser,
 the capped Newton and the relaxation driver run on it unchanged. Its constraints are the
 reduced dofs given at construction (e.g. one centroid against the rigid translation, the
-twist gauge, a potential reference); ``set_macro`` changes the jumps. ``tie_forces`` are
+twist gauge, a potential reference); ``set_macro`` changes the jumps; ``load`` is a
+constant vector added to the full residual
+(the uniform heat sink of the periodic Joule solve). ``tie_forces`` are
 the forces on the images, and ``macro_stress`` the first Piola-Kirchhoff membrane stress
 of the cell (N/mm):
 
@@ -155,8 +157,11 @@ class PeriodicSystem:
     (their values in ``values``: a velocity on mechanical dofs, the value on T/V dofs);
     ``F`` (2x2 in-plane or 3x3), ``grad_T`` (3,), ``E`` (3,): the macro jumps."""
 
-    def __init__(self, full, ties: PeriodicTies, constrained=(), values=0.0, F=None, grad_T=None, E=None):
+    def __init__(self, full, ties: PeriodicTies, constrained=(), values=0.0, F=None, grad_T=None, E=None,
+                 load=None):
         self.full = full
+        #: a constant vector added to the full residual (e.g. a uniform heat sink), or None
+        self.load = None if load is None else np.asarray(load, float)
         self.ties = ties
         flay = full.layout
         if flay.n_nodes != ties.n_nodes:
@@ -227,6 +232,8 @@ class PeriodicSystem:
 
     def evaluate(self, x, w, t, jacobian: bool = True):
         F, Fx, Fw = self.full.evaluate(self.expand(x), self.expand_rates(w), t, jacobian)
+        if self.load is not None:
+            F = F + self.load
         Fr = self._red.vector(F)
         if not jacobian:
             return Fr, None, None
@@ -269,7 +276,7 @@ class PeriodicSystem:
     def full_residual(self, x, w=None, t: float = 0.0) -> np.ndarray:
         w = np.zeros(self.n) if w is None else w
         F, _, _ = self.full.evaluate(self.expand(x), self.expand_rates(w), t, jacobian=False)
-        return F
+        return F if self.load is None else F + self.load
 
     def tie_forces(self, x, w=None, t: float = 0.0) -> np.ndarray:
         """(n_ties, 3): the residual at every image centroid, i.e. the force the periodic
