@@ -1,10 +1,12 @@
 """Contact between fibrils: the contact map (element pairs and quadrature-point table)."""
 from .search import (
     ContactMap,
+    ElementNeighbours,
     build_contact_map,
     candidate_pairs,
     candidate_pairs_bruteforce,
     closest_points,
+    element_neighbours,
     element_segments,
     gauss_fractions,
     segment_distance,
@@ -12,10 +14,12 @@ from .search import (
 
 __all__ = [
     "ContactMap",
+    "ElementNeighbours",
     "build_contact_map",
     "candidate_pairs",
     "candidate_pairs_bruteforce",
     "closest_points",
+    "element_neighbours",
     "element_segments",
     "gauss_fractions",
     "segment_distance",

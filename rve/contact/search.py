@@ -67,7 +67,9 @@ from scipy.spatial import cKDTree
 
 __all__ = [
     "ContactMap",
+    "ElementNeighbours",
     "build_contact_map",
+    "element_neighbours",
     "candidate_pairs",
     "candidate_pairs_bruteforce",
     "closest_points",
@@ -293,7 +295,10 @@ class ContactMap:
     * ``s_plus`` (P, n_gp): ``(k + 1/2) / n_gp`` on the + chord;
     * ``s_minus`` (P, n_gp): closest points on the - chord, **frozen** at the build state
       (see the module docstring; ``recompute_s_minus``/``refreshed`` give current ones);
-    * ``distance`` (P,): chord-chord distance at the build state.
+    * ``distance`` (P,): chord-chord distance at the build state;
+    * ``shift`` (P, 3) or None: a constant vector added to the positions of every node of
+      the - element of a pair (a pair with a periodic image of the - fibril); None means
+      zero for every pair (the positions are used as they are, bit for bit).
     """
 
     e_plus: np.ndarray
@@ -308,6 +313,7 @@ class ContactMap:
     cutoff: float
     n_gp: int
     exclude_neighbours: int | None = None
+    shift: np.ndarray | None = None
 
     @property
     def n_pairs(self) -> int:
@@ -316,9 +322,17 @@ class ContactMap:
     def __len__(self) -> int:
         return self.n_pairs
 
+    @property
+    def shifts(self) -> np.ndarray:
+        """(P, 3) shift of every pair's - side (zeros when ``shift`` is None)."""
+        return np.zeros((self.n_pairs, 3)) if self.shift is None else self.shift
+
     def _chords(self, x, nodes):
         r = np.asarray(x, float)[:, :3]
-        return r[nodes[:, 0]], r[nodes[:, 1]]
+        a, b = r[nodes[:, 0]], r[nodes[:, 1]]
+        if self.shift is not None and nodes is self.nodes_minus:
+            a, b = a + self.shift, b + self.shift
+        return a, b
 
     def plus_points(self, x) -> np.ndarray:
         """Contact points on the + chords, (P, n_gp, 3), for nodal state ``x``."""
@@ -348,6 +362,7 @@ class ContactMap:
             fibril_plus=self.fibril_plus, fibril_minus=self.fibril_minus,
             s_plus=self.s_plus, s_minus=self.recompute_s_minus(x), distance=d,
             cutoff=self.cutoff, n_gp=self.n_gp, exclude_neighbours=self.exclude_neighbours,
+            shift=self.shift,
         )
 
     def jump(self, x, s_minus=None) -> np.ndarray:
@@ -361,11 +376,23 @@ def build_contact_map(
     cutoff: float,
     n_gp: int = 4,
     exclude_neighbours: int | None = None,
+    images=None,
+    wrap=None,
 ) -> ContactMap:
     """Build the contact map of ``mesh`` at nodal state ``x_nodes_r`` ((n, 3) or (n, 9)).
 
     Candidate pairs are element chords within ``cutoff`` (``candidate_pairs``); the table
     has ``n_gp`` points per pair (module docstring for the conventions).
+
+    Periodic images: ``images`` (K, 3) translations T (zero rows are ignored) add the pairs
+    between an element and the copy of another element translated by T, as pairs with the
+    ``shift`` T on their - side (canonical form: ``e_plus <= e_minus``, the shift negated
+    when the roles swap; an element with its own image keeps the shift whose first nonzero
+    component is positive, so a symmetric set of images gives each contact once). They
+    follow the pairs of the cell itself (which are exactly those of ``images=None``).
+    ``wrap`` (as ``element_neighbours``) names the fibrils that continue into their own
+    image at ``T = m L_f``: such a pair is a same-fibril pair, dropped or kept by
+    ``exclude_neighbours`` with the index difference along the unwrapped fibril.
     """
     a, b = element_segments(x_nodes_r, mesh)
     efib = np.asarray(mesh.elem_fibril)
@@ -374,10 +401,19 @@ def build_contact_map(
         a, b, cutoff, efib, idx, exclude_neighbours=exclude_neighbours, return_distance=True
     )
     ep, em = pairs[:, 0], pairs[:, 1]
+    shift = None
+    if images is not None:
+        ie, im, ish, idist = _image_pairs(a, b, mesh, cutoff, images, wrap, exclude_neighbours)
+        if ie.size:
+            shift = np.concatenate([np.zeros((ep.size, 3)), ish])
+            ep, em, dist = np.concatenate([ep, ie]), np.concatenate([em, im]), np.concatenate([dist, idist])
     sp = np.broadcast_to(gauss_fractions(n_gp), (ep.size, int(n_gp))).copy()
     s = sp[..., None]
     pts = (1.0 - s) * a[ep][:, None, :] + s * b[ep][:, None, :]
-    sm = closest_points(pts, a[em][:, None, :], b[em][:, None, :])
+    am, bm = a[em], b[em]
+    if shift is not None:
+        am, bm = am + shift, bm + shift
+    sm = closest_points(pts, am[:, None, :], bm[:, None, :])
     conn = mesh.conn
     return ContactMap(
         e_plus=ep, e_minus=em,
@@ -386,4 +422,130 @@ def build_contact_map(
         fibril_plus=efib[ep], fibril_minus=efib[em],
         s_plus=sp, s_minus=sm, distance=dist,
         cutoff=float(cutoff), n_gp=int(n_gp), exclude_neighbours=exclude_neighbours,
+        shift=shift,
     )
+
+
+def _image_pairs(a, b, mesh, cutoff, images, wrap, exclude_neighbours):
+    """Pairs (e+, e-, shift, distance) between the cell's chords and their translated copies.
+
+    One ``candidate_pairs`` search over the cell's chords and, per image, the translated
+    chords near the cell (their midpoint within ``cutoff + L_max`` of its bounding box);
+    the copies carry fibril ids of their own, so only cell-to-copy pairs are kept."""
+    T = np.asarray(images, float).reshape(-1, 3)
+    T = T[np.any(T != 0.0, axis=1)]
+    E = a.shape[0]
+    none = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+    if T.shape[0] == 0 or E == 0:
+        return none
+    efib = np.asarray(mesh.elem_fibril)
+    nf = int(mesh.n_fibrils)
+    idx = np.arange(E) - np.asarray(mesh.elem_offsets)[efib]
+    L = np.linalg.norm(b - a, axis=1)
+    lo = np.minimum(a, b).min(axis=0) - (cutoff + L.max())
+    hi = np.maximum(a, b).max(axis=0) + (cutoff + L.max())
+    mid = 0.5 * (a + b)
+    segA, segB, fib, elem, img = [a], [b], [efib], [np.arange(E)], [np.full(E, -1)]
+    for k, t in enumerate(T):
+        near = np.flatnonzero(np.all((mid + t >= lo) & (mid + t <= hi), axis=1))
+        segA.append(a[near] + t)
+        segB.append(b[near] + t)
+        fib.append(efib[near] + nf * (k + 1))
+        elem.append(near)
+        img.append(np.full(near.size, k))
+    fib, elem, img = np.concatenate(fib), np.concatenate(elem), np.concatenate(img)
+    pairs, dist = candidate_pairs(np.concatenate(segA), np.concatenate(segB), cutoff, fib, None,
+                                  exclude_neighbours=None, return_distance=True)
+    i, j = pairs[:, 0], pairs[:, 1]
+    cross = (i < E) & (j >= E)  # i < j: the cell's chords come first
+    i, j, dist = i[cross], elem[j[cross]], dist[cross]
+    t = T[img[pairs[cross, 1]]]
+    keep = _image_exclusion(i, j, t, efib, idx, mesh, wrap, exclude_neighbours)
+    i, j, t, dist = i[keep], j[keep], t[keep], dist[keep]
+    swap = (i > j) | ((i == j) & ~_lex_positive(t))
+    ep, em = np.where(swap, j, i), np.where(swap, i, j)
+    t = np.where(swap[:, None], -t, t)
+    if ep.size == 0:
+        return none
+    scale = max(float(np.abs(T).max()), 1.0) * 1e-9
+    key = np.column_stack([ep, em, np.round(t / scale).astype(np.int64)])
+    _, first = np.unique(key, axis=0, return_index=True)  # sorted by (e+, e-, shift)
+    return ep[first], em[first], t[first], dist[first]
+
+
+def _lex_positive(t) -> np.ndarray:
+    """True where the first nonzero component of each row of ``t`` is positive."""
+    nz = t != 0.0
+    first = np.argmax(nz, axis=1)
+    return t[np.arange(t.shape[0]), first] > 0.0
+
+
+def _image_exclusion(i, j, t, efib, idx, mesh, wrap, exclude_neighbours):
+    """Keep mask of image pairs: a fibril paired with its own wrap continuation is a
+    same-fibril pair (index difference along the unwrapped fibril)."""
+    keep = np.ones(i.size, bool)
+    if wrap is None or i.size == 0:
+        return keep
+    period = _wrap_array(wrap, mesh.n_fibrils)
+    same = efib[i] == efib[j]
+    Lf = period[efib[i]]
+    has = same & np.all(np.isfinite(Lf), axis=1)
+    if not has.any():
+        return keep
+    LL = np.where(has, np.einsum("pi,pi->p", np.nan_to_num(Lf), np.nan_to_num(Lf)), 1.0)
+    m = np.where(has, np.round(np.einsum("pi,pi->p", t, np.nan_to_num(Lf)) / LL), 0.0)
+    along = has & np.all(np.abs(t - m[:, None] * np.nan_to_num(Lf)) <= 1e-9 * np.sqrt(LL)[:, None], axis=1)
+    if exclude_neighbours is None:
+        return keep & ~along
+    n_el = np.diff(np.asarray(mesh.elem_offsets))[efib[i]]
+    near = np.abs(idx[i] - (idx[j] + m * n_el)) <= int(exclude_neighbours)
+    return keep & ~(along & near)
+
+
+def _wrap_array(wrap, n_fibrils: int) -> np.ndarray:
+    """(n_fibrils, 3) period vectors, NaN rows for fibrils that do not wrap."""
+    out = np.full((int(n_fibrils), 3), np.nan)
+    if wrap is None:
+        return out
+    if isinstance(wrap, dict):
+        for f, v in wrap.items():
+            out[int(f)] = np.asarray(v, float)
+        return out
+    w = np.asarray(wrap, float).reshape(int(n_fibrils), 3)
+    return np.where(np.all(w == 0.0, axis=1)[:, None], np.nan, w)
+
+
+@dataclass(frozen=True)
+class ElementNeighbours:
+    """The elements before and after every element along its fibril.
+
+    ``next`` / ``prev`` (E,): global element index, -1 at a free fibril end;
+    ``next_shift`` / ``prev_shift`` (E, 3): the constant translation of the neighbour's
+    positions (zero, except across the wrap of a periodic fibril: the last element's next
+    is the first element translated by +L_f, the first's prev the last translated by -L_f)."""
+
+    next: np.ndarray
+    prev: np.ndarray
+    next_shift: np.ndarray
+    prev_shift: np.ndarray
+
+
+def element_neighbours(mesh, wrap=None) -> ElementNeighbours:
+    """``ElementNeighbours`` of ``mesh``; ``wrap`` is None, a dict ``{fibril: L_f}`` or an
+    (n_fibrils, 3) array of period vectors (zero or NaN rows: the fibril does not wrap)."""
+    E = int(mesh.n_elements)
+    off = np.asarray(mesh.elem_offsets)
+    first, last = off[:-1], off[1:] - 1
+    nxt = np.arange(1, E + 1, dtype=np.int64)
+    prv = np.arange(-1, E - 1, dtype=np.int64)
+    nxt[last] = -1
+    prv[first] = -1
+    nsh = np.zeros((E, 3))
+    psh = np.zeros((E, 3))
+    period = _wrap_array(wrap, mesh.n_fibrils)
+    wr = np.flatnonzero(np.all(np.isfinite(period), axis=1))
+    nxt[last[wr]] = first[wr]
+    prv[first[wr]] = last[wr]
+    nsh[last[wr]] = period[wr]
+    psh[first[wr]] = -period[wr]
+    return ElementNeighbours(nxt, prv, nsh, psh)

@@ -23,7 +23,7 @@ from ..config.fields import (
     Time, Voltage,
 )
 
-__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "RVEOutput", "Packing"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
 MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
@@ -116,10 +116,24 @@ class ProbeTerminal(Section):
 
 
 class ProbeSpec(Section):
-    """A probe: the test voltage on the first terminal ('+'), 0 V on the second ('-')."""
+    """A probe: the test voltage on the first terminal ('+'), 0 V on the second ('-'); or,
+    in a periodic cell, a macro field along ``field`` (the test voltage across one period)."""
 
     name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", description="probe name (table coordinate)")
-    terminals: list[ProbeTerminal] = Field(min_length=2, max_length=2, description="[+ terminal, - terminal]")
+    terminals: list[ProbeTerminal] = Field(
+        [], max_length=2, description="[+ terminal, - terminal] (pinned cell; empty for a field probe)")
+    field: Optional[Literal["x", "y"]] = Field(
+        None, description="periodic cell: direction of the macro field (the potential jumps by the test voltage "
+                          "across one period); null for a terminal probe")
+
+    @model_validator(mode="after")
+    def _terminals_or_field(self):
+        if self.field is None and len(self.terminals) != 2:
+            raise ValueError(f"probe {self.name}: terminals needs exactly 2 entries (+, -), got "
+                             f"{len(self.terminals)} (or give field: x | y in a periodic cell)")
+        if self.field is not None and self.terminals:
+            raise ValueError(f"probe {self.name}: a field probe ({self.field}) has no terminals")
+        return self
 
 
 class ProbeSolver(Section):
@@ -143,6 +157,11 @@ def thesis_probes() -> list[dict]:
         {"name": "probe3", "terminals": [{"yarn": "warp", "position": -1.0, "end": "x+"},
                                          {"yarn": "weft", "position": -1.0, "end": "y+"}]},
     ]
+
+
+def periodic_probes() -> list[dict]:
+    """The probes of a periodic cell: a macro field along the warp (x) and along the weft (y)."""
+    return [{"name": "field_x", "field": "x"}, {"name": "field_y", "field": "y"}]
 
 
 def default_probes() -> list[dict]:
@@ -196,6 +215,15 @@ class Packing(Section):
                                                  "each yarn, fraction of R (null: = perturbation)")
 
 
+class PeriodicCell(Section):
+    """The periodic cell (``boundary: periodic``; docs/rve_pipeline.md "Periodic cell"): the
+    smallest repeat of the weave pattern (plain 2 x 2 yarns, twill 2/1 3 x 3, twill 2/2 and
+    basket 4 x 4), ``repeat`` times in each direction; every fibril spans one period and
+    its end is tied to its start."""
+
+    repeat: Integer = Field(1, ge=1, le=8, description="pattern repeats per cell side (n x n)")
+
+
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 
@@ -214,10 +242,43 @@ class RVEConfig(SceneConfig):
     checks: FaultChecks = Field(default_factory=FaultChecks, description="fault checks (issue 15)")
     output: RVEOutput = Field(default_factory=RVEOutput)
     packing: Packing = Field(default_factory=Packing)
+    boundary: Literal["pinned", "periodic"] = Field(
+        "pinned", description="pinned: the thesis's cell, every fibril end pinned (Algorithm 7.1); periodic: the "
+                              "smallest repeat with periodic ties (section cell)")
+    cell: PeriodicCell = Field(default_factory=PeriodicCell, description="the periodic cell (boundary: periodic)")
 
     @model_validator(mode="after")
     def _unique_probe_names(self):
         names = [p.name for p in self.probes]
         if len(set(names)) != len(names):
             raise ValueError(f"probe names must be unique, got {names}")
+        return self
+
+    @model_validator(mode="after")
+    def _periodic_cell(self):
+        """A periodic cell takes its yarn counts from the pattern and ``cell.repeat`` and has
+        field probes; an explicit contradicting key is an error naming it."""
+        field_probes = [p.name for p in self.probes if p.field is not None]
+        if self.boundary == "pinned":
+            if field_probes:
+                raise ValueError(f"probes {field_probes}: field probes need boundary: periodic")
+            return self
+        if self.fabric.kind == "knit":
+            raise ValueError("boundary: periodic is defined for the weaves (fabric.kind plain, twill_2_1, "
+                             "twill_2_2, basket_2_2), not the knit")
+        from ..fabrics.weave import WEAVE_PATTERNS
+
+        m, n = WEAVE_PATTERNS[self.fabric.kind].shape
+        want = {"n_warp": m * self.cell.repeat, "n_weft": n * self.cell.repeat}
+        for key, value in want.items():
+            if key in self.fabric.model_fields_set and getattr(self.fabric, key) != value:
+                raise ValueError(f"fabric.{key} = {getattr(self.fabric, key)}: a periodic {self.fabric.kind} cell "
+                                 f"with cell.repeat = {self.cell.repeat} has {value} (leave it out)")
+            object.__setattr__(self.fabric, key, value)
+        if "probes" not in self.model_fields_set:
+            object.__setattr__(self, "probes", [ProbeSpec(**p) for p in periodic_probes()])
+        elif len(field_probes) != len(self.probes):
+            raise ValueError("boundary: periodic takes field probes only (probes: [{name: ..., field: x | y}])")
+        if self.relaxation.coarse_elements:
+            raise ValueError("relaxation.coarse_elements: mesh sequencing is not available in a periodic cell")
         return self

@@ -197,9 +197,14 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
 
 def recomputed_residual(cfg, fab, mesh, x) -> float:
     """|F(x, 0)| on the free dofs (N) of a stored state, from scratch: the strain path's
-    mechanics system (``strain.mech_system``, contact map built at ``x``)."""
+    mechanics system (``strain.mech_system``, contact map built at ``x``; a periodic cell's
+    reduced system at the macro gradient the state carries)."""
     from .strain import free_residual, mech_system
 
+    if cfg.boundary == "periodic":
+        from .periodic import periodic_free_residual
+
+        return periodic_free_residual(cfg, fab, mesh, x)
     xf = np.asarray(x, float).reshape(-1)
     return free_residual(mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf), xf)
 

@@ -357,6 +357,8 @@ def network_probes(cfg, fab) -> dict:
         index.update({(d, round(y.position, 9)): k for k, y in enumerate(ys)})
     out = {}
     for p in cfg.probes:
+        if getattr(p, "field", None) is not None:  # a periodic cell's field probe: no yarn ends
+            return {}
         terms = []
         for t in p.terminals:
             key = (t.yarn, round(t.position, 9))

@@ -452,4 +452,6 @@ def pictures_mode_job(mode: str, state_files: Sequence[PathLike], tubes_files: S
 
 def _probe_text(cfg, name: str) -> str:
     p = next(p for p in cfg.probes if p.name == name)
+    if getattr(p, "field", None) is not None:
+        return f"macro field along {p.field}"
     return " to ".join(f"{t.yarn} {t.position:g} {t.end}" for t in p.terminals)

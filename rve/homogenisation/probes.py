@@ -79,6 +79,8 @@ class ProbeResult:
     newton_iterations: dict = field(default_factory=dict)
     wall_s: dict = field(default_factory=dict)
     connected: bool = True
+    #: further entries of the record (a periodic field probe's per-width figures)
+    extra: dict = field(default_factory=dict)
     V: Optional[np.ndarray] = field(default=None, repr=False)
     T: Optional[np.ndarray] = field(default=None, repr=False)
 
@@ -92,7 +94,8 @@ class ProbeResult:
         return {"voltage": self.voltage, "current": {"+": self.current_plus, "-": self.current_minus},
                 "temperature_max": self.temperature_max, "temperature_mean": self.temperature_mean,
                 "leak_current": self.leak, "conservation_error": self.conservation_error,
-                "resistance": self.resistance, "connected": self.connected, "newton_iterations": self.newton_iterations, "wall_s": self.wall_s}
+                "resistance": self.resistance, "connected": self.connected, "newton_iterations": self.newton_iterations,
+                "wall_s": self.wall_s, **self.extra}
 
 
 def conduction_material(cfg) -> BeamMaterial:
@@ -236,5 +239,10 @@ def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeRe
 
 
 def solve_probes(cfg, fab, mesh, xn, with_fields: bool = False) -> dict:
-    """All probes of ``cfg.probes`` on the frozen state ``xn``: {name: ProbeResult}."""
+    """All probes of ``cfg.probes`` on the frozen state ``xn``: {name: ProbeResult} (a periodic
+    cell's field probes: ``rve.homogenisation.periodic_probes``)."""
+    if getattr(cfg, "boundary", "pinned") == "periodic":
+        from .periodic_probes import solve_field_probe
+
+        return {p.name: solve_field_probe(cfg, fab, mesh, xn, p, with_fields) for p in cfg.probes}
     return {p.name: solve_probe(cfg, fab, mesh, xn, p, with_fields) for p in cfg.probes}

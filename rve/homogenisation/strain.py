@@ -174,6 +174,10 @@ def relax_fabric(cfg, fab, mesh, x0):
 
     Returns ``(x (n_nodes, 9), system, info)``; ``info["residual_N"]`` is |F| on the free
     dofs at the end (the equilibrium error)."""
+    if getattr(cfg, "boundary", "pinned") == "periodic":
+        from .periodic import periodic_relax
+
+        return periodic_relax(cfg, fab, mesh, x0)
     r, st = cfg.relaxation, cfg.settle
     t0 = time.perf_counter()
     x = np.asarray(x0, float).reshape(-1)
@@ -285,6 +289,10 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
     eps_step (module docstring). Returns ``(x (n_nodes, 9), system, info)``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
+    if getattr(cfg, "boundary", "pinned") == "periodic":
+        from .periodic import periodic_strain_step
+
+        return periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode, step)
     sp_ = cfg.strain
     if not 1 <= step <= sp_.steps:
         raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")

@@ -109,6 +109,13 @@ class ContactSystem:
         _timer(self.stats, "rebuild_s", t0)
         return self.term.map
 
+    def set_periodic(self, images=None, wrap=None, x=None) -> None:
+        """Periodic images of the contact search (``ContactTerm.set_periodic``); with ``x``
+        the map and the union structure are rebuilt at once."""
+        self.term.set_periodic(images, wrap)
+        if x is not None:
+            self.rebuild(x)
+
     # ------------------------------------------------------------------ contact terms
     def set_onset(self, fraction: float) -> None:
         """Onset width of the penalty law as a fraction of the smallest radius (0: linear)."""

@@ -36,7 +36,14 @@ from ...physics.contact_forms import (
     penalty_forces, penalty_law, scalar_jump,
 )
 
-__all__ = ["ContactParams", "ContactTerm"]
+__all__ = ["ContactParams", "ContactTerm", "GEOMETRIES", "ENFORCEMENTS", "CONDUCTANCE_LAWS"]
+
+#: contact geometry: the linear chords of the elements, or their Lagrange centroid curve
+GEOMETRIES = ("chord", "curve")
+#: how impenetrability is enforced: a penalty, or augmented Lagrangian multipliers on it
+ENFORCEMENTS = ("penalty", "augmented_lagrangian")
+#: contact conductance: the Hertz width law, or Holm's a-spot constriction from the force
+CONDUCTANCE_LAWS = ("width", "holm")
 
 
 @dataclass(frozen=True)
@@ -51,7 +58,18 @@ class ContactParams:
     ``g_eps`` the Hertz regularisation as a fraction of the smallest radius;
     ``recompute_closest`` recomputes s- at every evaluation (else frozen per rebuild);
     ``rebuild_every`` is advisory (drivers read it); ``onset`` the width of the C² onset
-    of the penalty law as a fraction of the smallest radius (0: the linear law P* g)."""
+    of the penalty law as a fraction of the smallest radius (0: the linear law P* g).
+
+    ``geometry``: ``"chord"`` (the linear centroid chords, one-sided points, the closest
+    point clamped to the - element) or ``"curve"`` (the elements' Lagrange centroid curve,
+    both sides' points, the closest point continued to the neighbour element;
+    docs/contact.md "Contact on the centroid curve"). ``enforcement``: ``"penalty"`` or
+    ``"augmented_lagrangian"`` (Uzawa multipliers driven by ``rve.solvers.augmented``
+    until the largest overlap is below ``al_tolerance`` x R, at most ``al_max_iter``
+    updates). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
+    line load) or ``"holm"`` (the a-spot constriction conductance of the line load with the
+    hardness ``hardness`` (MPa) and a-spot radius ``spot_radius`` (mm); the fibrils' bulk
+    conductivities ``holm_conductivity``/``holm_thermal_conductivity`` from the model)."""
 
     penalty: float
     youngs_modulus: Optional[float] = None
@@ -63,6 +81,13 @@ class ContactParams:
     recompute_closest: bool = True
     rebuild_every: int = 5
     onset: float = 0.0
+    geometry: str = "chord"
+    enforcement: str = "penalty"
+    al_tolerance: float = 1e-3
+    al_max_iter: int = 20
+    conductance_law: str = "width"
+    hardness: float = 0.0
+    spot_radius: float = 0.0
 
     def __post_init__(self):
         if not self.penalty > 0:
@@ -77,6 +102,19 @@ class ContactParams:
             raise ValueError(f"g_eps must be >= 0, got {self.g_eps}")
         if not self.onset >= 0:
             raise ValueError(f"onset must be >= 0, got {self.onset}")
+        if self.geometry not in GEOMETRIES:
+            raise ValueError(f"contact geometry must be one of {GEOMETRIES}, got {self.geometry!r}")
+        if self.enforcement not in ENFORCEMENTS:
+            raise ValueError(f"contact enforcement must be one of {ENFORCEMENTS}, got {self.enforcement!r}")
+        if not self.al_tolerance > 0:
+            raise ValueError(f"al_tolerance must be > 0, got {self.al_tolerance}")
+        if int(self.al_max_iter) < 1:
+            raise ValueError(f"al_max_iter must be >= 1, got {self.al_max_iter}")
+        if self.conductance_law not in CONDUCTANCE_LAWS:
+            raise ValueError(f"conductance_law must be one of {CONDUCTANCE_LAWS}, got {self.conductance_law!r}")
+        if self.conductance_law == "holm" and not (self.hardness > 0 and self.spot_radius > 0):
+            raise ValueError("conductance_law 'holm' needs hardness > 0 and spot_radius > 0, got "
+                             f"hardness={self.hardness}, spot_radius={self.spot_radius}")
 
 
 class ContactTerm:
@@ -97,12 +135,28 @@ class ContactTerm:
         #: steps that close gaps (``minimize_energy`` sets it while far from the solution)
         self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
         self.map: Optional[ContactMap] = None
+        #: periodic images searched at every rebuild (translations T, (K, 3)) and the
+        #: fibrils that wrap into their own image (``set_periodic``); None: a plain cell
+        self.images = None
+        self.wrap = None
+
+    def set_periodic(self, images=None, wrap=None) -> None:
+        """Periodic images for the next ``rebuild``: ``images`` (K, 3) lattice translations
+        (each pair with an image of the - element carries that shift), ``wrap`` the period
+        vector of every fibril that continues into its own image (``{fibril: L_f}`` or
+        (n_fibrils, 3), zero/NaN rows: no wrap). ``set_periodic()`` returns to a plain cell."""
+        self.images = None if images is None else np.asarray(images, float).reshape(-1, 3)
+        self.wrap = wrap
 
     def rebuild(self, x) -> np.ndarray:
         """Contact map at state ``x``; returns the pair connectivity (P, m)."""
         mesh = self.mesh
         xn = self.layout.as_nodal(np.asarray(x, float))
-        cmap = build_contact_map(xn[:, :3], mesh, self.cutoff, self.params.n_gp)
+        if self.images is None:
+            cmap = build_contact_map(xn[:, :3], mesh, self.cutoff, self.params.n_gp)
+        else:
+            cmap = build_contact_map(xn[:, :3], mesh, self.cutoff, self.params.n_gp, images=self.images,
+                                     wrap=self.wrap)
         self.map = cmap
         conn = mesh.conn
         nn = conn.shape[1]
@@ -130,9 +184,23 @@ class ContactTerm:
     def ends(self, x, sel=None):
         r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
         npl, nmi = self.map.nodes_plus, self.map.nodes_minus
+        sh = self.map.shift
         if sel is not None:
             npl, nmi = npl[sel], nmi[sel]
+            sh = None if sh is None else sh[sel]
+        if sh is not None:
+            return r[npl[:, 0]], r[npl[:, 1]], r[nmi[:, 0]] + sh, r[nmi[:, 1]] + sh
         return r[npl[:, 0]], r[npl[:, 1]], r[nmi[:, 0]], r[nmi[:, 1]]
+
+    def _shifted(self, r):
+        """Positions and - chord end nodes for the compiled kernels: with shifts, the - ends
+        index shifted copies appended to ``r``."""
+        cmap = self.map
+        if cmap.shift is None:
+            return r, cmap.nodes_minus
+        P = cmap.n_pairs
+        ext = (r[cmap.nodes_minus] + cmap.shift[:, None, :]).reshape(-1, 3)
+        return np.concatenate([r, ext]), r.shape[0] + np.arange(2 * P, dtype=cmap.nodes_minus.dtype).reshape(P, 2)
 
     def geometry(self, x, sel=None):
         cmap = self.map
@@ -149,8 +217,8 @@ class ContactTerm:
         if use_numba():
             from ...kernels.contact import chord_gaps as compiled
 
-            r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
-            return compiled(r, cmap.nodes_plus, cmap.nodes_minus, cmap.s_plus, self.gap_radius, sm,
+            r, nminus = self._shifted(self.layout.as_nodal(np.asarray(x, float))[:, :3])
+            return compiled(r, cmap.nodes_plus, nminus, cmap.s_plus, self.gap_radius, sm,
                             bool(self.params.recompute_closest))
         return chord_gaps(*self.ends(x), cmap.s_plus, self.gap_radius, sm)
 
@@ -222,9 +290,9 @@ class ContactTerm:
         from ...kernels.contact import penalty_forms as compiled
 
         cmap = self.map
-        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        r, nminus = self._shifted(self.layout.as_nodal(np.asarray(x, float))[:, :3])
         rec = bool(self.params.recompute_closest)
-        act, Rm, Km = compiled(r, cmap.nodes_plus, cmap.nodes_minus, cmap.s_plus, self.gap_radius,
+        act, Rm, Km = compiled(r, cmap.nodes_plus, nminus, cmap.s_plus, self.gap_radius,
                                None if rec else cmap.s_minus, rec, self.weight, float(self.params.penalty),
                                self.onset, jacobian)
         if act.size == 0:

@@ -1,0 +1,192 @@
+"""The periodic cell of the RVE pipeline (``boundary: periodic``; docs/rve_pipeline.md "Periodic cell").
+
+Contract
+--------
+The cell is the weave of the config (``RVEConfig`` sets its yarn counts to the pattern's
+repeat times ``cell.repeat``): every fibril spans one period, its last node is tied to its
+first (``rve.model.periodic``). The mechanics is the reduced system
+``PeriodicSystem(ContactSystem(BeamModel without boundary conditions))`` with
+
+* the rigid translation removed by holding the centroid of the first node of fibril 0,
+* the twist gauge g1_z at each fibril's first node (the pinned cell's gauge, docs/relaxation.md).
+
+Functions (each returns the **full**, unrolled state (n_nodes, 9), so checkpoints, probes,
+pictures and the clamp-force sums of ``rve.fabrics.setup.clamp_reactions`` read it as a
+pinned state):
+
+* :func:`macro_gradient` -- the in-plane F of a mode at a strain (uniaxial: diag(1 + e, 1);
+  uniaxial_y: diag(1, 1 + e); shear: F21 = e, the pinned cell's v = e X1 e2; trellis:
+  ``strain.trellis_gradient``);
+* :func:`periodic_relax` -- the relaxed cell at F = I (``rve.solvers.relaxation`` on the
+  reduced system, the config's relaxation settings);
+* :func:`periodic_strain_step` -- one step: F_{n-1} -> F_n, predictor the affine map
+  F_n F_{n-1}^-1 of the previous state about the held node, then the static minimisation
+  (``strain.static_minimize``);
+* :func:`cell_gradient` -- the F a stored full state carries (its tie jumps), and
+  :func:`periodic_free_residual` -- |F| on the free reduced dofs of a stored state;
+* :func:`gauge_dofs` -- the held reduced dofs above.
+
+The clamp-force sums of the full system at the full state are the tie forces per cell
+face: ``x+`` sums the residual at the images on the x face (the force the neighbour cell
+exerts through the ties), ``x-`` at their masters (minus that, at an equilibrium of the
+reduced dofs). So the table's ``membrane_force`` (the + side force over the edge
+length) is the column P e_j of the Hill-Mandel stress ``PeriodicSystem.macro_stress``.
+"""
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from ..fabrics.setup import contact_params
+from ..fem.assembly import DofLayout
+from ..model import BeamMaterial, BeamModel, ContactSystem
+from ..model.periodic import PeriodicSystem, fibril_end_ties
+
+__all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
+           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state"]
+
+log = logging.getLogger("rve.homogenisation.periodic")
+
+
+def cell_ties(fab, mesh):
+    """The ties of a periodic weave cell: each fibril's end is its start's image; the
+    periods are the box sides (2 hx, 2 hy)."""
+    hx, hy = float(fab.half_widths[0]), float(fab.half_widths[1])
+    return fibril_end_ties(mesh, [[2.0 * hx, 0.0, 0.0], [0.0, 2.0 * hy, 0.0]])
+
+
+def gauge_dofs(ties, mesh, fields=("mech",)) -> np.ndarray:
+    """Reduced dofs held in the mechanics: the centroid of fibril 0's first node (the rigid
+    translation), g1_z at every fibril's first node (the twist gauge)."""
+    first = np.searchsorted(ties.kept_nodes, mesh.node_offsets[:-1])
+    lay = DofLayout(ties.kept_nodes.size, fields)
+    return np.concatenate([lay.dofs("r", first[:1]), lay.dofs("g1", first, comp=2)])
+
+
+def periodic_system(cfg, fab, mesh, x_full, F, damping: float = 0.0, params=None) -> PeriodicSystem:
+    """The reduced mechanics system of the cell at macro gradient ``F`` (module docstring),
+    its contact map built at the full state ``x_full``."""
+    m = cfg.material
+    params = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False) \
+        if params is None else params
+    mat = BeamMaterial(m.youngs_modulus, m.poisson_ratio, m.density, damping=float(damping))
+    base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points)
+    full = ContactSystem(base, params, np.asarray(x_full, float).reshape(-1))
+    ties = cell_ties(fab, mesh)
+    return PeriodicSystem(full, ties, gauge_dofs(ties, mesh), 0.0, F=F)
+
+
+def macro_gradient(mode: str, eps: float) -> np.ndarray:
+    """In-plane macro gradient (3, 3), F33 = 1, of ``mode`` at strain ``eps``."""
+    from .strain import trellis_gradient
+
+    F = np.eye(3)
+    if mode == "uniaxial":
+        F[0, 0] += eps
+    elif mode == "uniaxial_y":
+        F[1, 1] += eps
+    elif mode == "shear":
+        F[1, 0] = eps
+    elif mode == "trellis":
+        F = trellis_gradient(eps)
+    else:
+        raise ValueError(f"mode must be uniaxial, uniaxial_y, shear or trellis, got {mode!r}")
+    return F
+
+
+def full_state(psys, x_red) -> np.ndarray:
+    """The full nodal state (n_nodes, 9) of reduced dofs ``x_red``."""
+    return psys.expand(x_red).reshape(psys.ties.n_nodes, -1)[:, :9].copy()
+
+
+def cell_gradient(fab, mesh, x_full) -> np.ndarray:
+    """The macro gradient (3, 3) a full state carries: its tie jumps r(end) - r(start) =
+    F dX, solved for F by least squares over the ties (exact for a periodic state)."""
+    ties = cell_ties(fab, mesh)
+    x = np.asarray(x_full, float).reshape(mesh.n_nodes, -1)
+    d = x[ties.image, :3] - x[ties.master, :3]
+    F, *_ = np.linalg.lstsq(ties.jump[:, :2], d, rcond=None)
+    out = np.eye(3)
+    out[:, :2] = F.T
+    return out
+
+
+def periodic_free_residual(cfg, fab, mesh, x_full, F=None) -> float:
+    """|F| on the free reduced dofs (N) of a full state (its own gradient unless given)."""
+    from .strain import free_residual
+
+    F = cell_gradient(fab, mesh, x_full) if F is None else F
+    psys = periodic_system(cfg, fab, mesh, x_full, F)
+    return free_residual(psys, psys.restrict(np.asarray(x_full, float).reshape(-1)))
+
+
+def periodic_relax(cfg, fab, mesh, x0):
+    """Relax the designed periodic cell at F = I (the relaxation settings of ``cfg``:
+    energy path with onset continuation, or damped dynamics). Returns ``(x (n_nodes, 9),
+    full system, info)``."""
+    from ..fabrics.relaxation import relax_settings
+    from ..solvers.relaxation import relax_to_equilibrium
+    from .strain import free_residual
+
+    t0 = time.perf_counter()
+    params = contact_params(cfg.contact, rebuild_every=cfg.relaxation.rebuild_every, conduction=False)
+    psys = periodic_system(cfg, fab, mesh, x0, np.eye(3), cfg.relaxation.damping, params)
+    xr = psys.restrict(np.asarray(x0, float).reshape(-1))
+    res = relax_to_equilibrium(psys, xr, np.zeros(psys.n), relax_settings(cfg))
+    st = psys.contact_state(res.x)
+    info = {"method": cfg.relaxation.method, "boundary": "periodic", "converged": bool(res.static_converged),
+            "residual_N": free_residual(psys, res.x), "wall_s": time.perf_counter() - t0, "dofs": int(psys.n),
+            "static_newton_iterations": int(res.static_newton_iterations),
+            "max_overlap_over_R": float(st["max_overlap_over_R"]), "active_pairs": int(st["active_pairs"]),
+            "macro_stress_N_per_mm": psys.macro_stress(res.x)[:2, :2].tolist()}
+    if not info["converged"]:
+        log.warning("periodic relaxation: not converged (|F| = %.3e N)", info["residual_N"])
+    return full_state(psys, res.x), psys.full, info
+
+
+def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
+    """The previous full state mapped by dF about ``centre``: r -> centre + dF (r - centre),
+    g_a -> dF g_a (the ties stay satisfied at the new F)."""
+    x = np.array(x_prev, float).reshape(-1, 9)
+    x[:, :3] = centre + (x[:, :3] - centre) @ dF.T
+    x[:, 3:6] = x[:, 3:6] @ dF.T
+    x[:, 6:9] = x[:, 6:9] @ dF.T
+    return x
+
+
+def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
+    """One strain step of the periodic cell from ``x_prev`` (full, n_nodes x 9) at strain
+    eps_{step-1} to eps_step (module docstring). ``origin`` (the relaxed state) is not
+    used: the cell's strain is its macro gradient, exact by construction. Returns
+    ``(x (n_nodes, 9), full system, info)``."""
+    from .strain import free_residual, static_minimize, strain_levels
+
+    del origin
+    sp_ = cfg.strain
+    if not 1 <= step <= sp_.steps:
+        raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
+    t0 = time.perf_counter()
+    levels = strain_levels(cfg)
+    F_prev, F_next = macro_gradient(mode, float(levels[step - 1])), macro_gradient(mode, float(levels[step]))
+    dF = F_next @ np.linalg.inv(F_prev)
+    x_prev = np.asarray(x_prev, float).reshape(mesh.n_nodes, 9)
+    held = int(mesh.node_offsets[0])
+    x_pred = _affine_predictor(x_prev, dF, x_prev[held, :3])
+    psys = periodic_system(cfg, fab, mesh, x_pred, F_next)
+    xr = psys.restrict(x_pred.reshape(-1))
+    # (the equilibrium-branch check of a step, rve.homogenisation.branch, compares this
+    # step's result with x_prev and retries with smaller F increments; it goes here)
+    xs, sinfo = static_minimize(psys, xr, sp_.static_atol, sp_.static_max_iter)
+    sinfo["wall_s"] = time.perf_counter() - t0
+    info = {"mode": mode, "step": int(step), "strain": float(levels[step]),
+            "strain_increment": float(levels[step] - levels[step - 1]), "boundary": "periodic",
+            "macro_gradient": F_next.tolist(), "static": sinfo, "converged": bool(sinfo["converged"]),
+            "residual_N": free_residual(psys, xs), "energy_mJ": float(psys.energy(xs)),
+            "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
+            "wall_s": time.perf_counter() - t0}
+    if not info["converged"]:
+        log.warning("%s step %d (periodic): static solve did not reach %.1e N (|F| = %.3e N)", mode, step,
+                    sp_.static_atol, info["residual_N"])
+    return full_state(psys, xs), psys.full, info

@@ -1,0 +1,186 @@
+"""The periodic cell (rve.model.periodic, rve.homogenisation.periodic*): closed forms.
+
+(a) straight parallel fibrils under uniaxial macro strain: the force per fibril is the
+    beam model's uniaxial Neo-Hookean force (nu = 0: N = E A (lambda - 1/lambda) / 2) and
+    the sheet resistance W / (sigma A n); (b) a rigid rotation F = Q leaves the cell
+    stress-free; (c) Hill-Mandel: dPi/dF = A P at an equilibrium of a woven cell with
+    contact; the exact reduced tangent (finite differences); (d) a 1 x 1 and a 2 x 2
+    periodic plain weave give the same per-width figures.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rve.fem.assembly import DofLayout
+from rve.fem.mesh import fibril_mesh, straight_fibril
+from rve.model import BeamMaterial, BeamModel
+from rve.model.periodic import PeriodicSystem, fibril_end_ties, polar_rotation
+from rve.solvers.static import static_solve
+from rve.testing import fd_jacobian, rel_err
+
+E_MOD, RADIUS, SIGMA = 1.26, 0.15, 10.0
+
+
+def _rotation(theta):
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _straight_cell(n=3, L=4.0, W=2.0, order=2, elements=5, cross=False):
+    """``n`` straight fibrils along x, spaced W/n across y (and, with ``cross``, ``n`` along
+    y one layer up, not touching): a periodic cell of L x W (or L x L)."""
+    Wc = L if cross else W
+    fibs = [straight_fibril([-L / 2, (k + 0.5) * Wc / n - Wc / 2, 0], [L / 2, (k + 0.5) * Wc / n - Wc / 2, 0],
+                            RADIUS) for k in range(n)]
+    if cross:
+        fibs += [straight_fibril([(k + 0.5) * L / n - L / 2, -Wc / 2, 1.0], [(k + 0.5) * L / n - L / 2, Wc / 2, 1.0],
+                                 RADIUS) for k in range(n)]
+    mesh = fibril_mesh(fibs, elements, order)
+    return mesh, fibril_end_ties(mesh, [[L, 0, 0], [0, Wc, 0]])
+
+
+def _per_fibril_gauge(ties, mesh):
+    """Every fibril's first centroid and g1_z held (no contact: each fibril translates alone)."""
+    lay = DofLayout(ties.kept_nodes.size, ("mech",))
+    first = np.searchsorted(ties.kept_nodes, mesh.node_offsets[:-1])
+    return np.concatenate([lay.dofs("r", first), lay.dofs("g1", first, comp=2)])
+
+
+def _solve(psys, x_red):
+    xs, _, res = static_solve(psys, x_red, np.zeros(psys.n), 0.0, {"atol": 1e-13, "rtol": 1e-15, "max_iter": 30})
+    assert res.converged, res.reason
+    return xs
+
+
+@pytest.mark.parametrize("eps", [0.1, -0.05])
+def test_straight_fibrils_uniaxial_force_is_the_beam_models_closed_form(eps):
+    mesh, ties = _straight_cell()
+    psys = PeriodicSystem(BeamModel(mesh, BeamMaterial(E_MOD, 0.0, 1e-3)), ties, _per_fibril_gauge(ties, mesh),
+                          F=np.diag([1.0 + eps, 1.0]))
+    xs = _solve(psys, psys.restrict(mesh.X0.reshape(-1)))
+    lam, A = 1.0 + eps, np.pi * RADIUS ** 2
+    # Neo-Hookean with nu = 0 (lambda_Lame = 0): P = mu (F - F^-T), lateral stretch 1, E = 2 mu
+    force = 0.5 * E_MOD * A * (lam - 1.0 / lam)
+    P = psys.macro_stress(xs)
+    per_fibril = psys.tie_forces(xs)[:, 0]
+    assert np.allclose(per_fibril, force, rtol=1e-8, atol=0)
+    assert P[0, 0] * 2.0 / 3 == pytest.approx(force, rel=1e-8)  # P11 = n N / W
+    assert np.abs(P[1:, :]).max() < 1e-12 * abs(force)
+
+
+def test_straight_fibrils_sheet_resistance_is_exact_and_the_joule_power_is_j_dot_e():
+    from rve.homogenisation.periodic_probes import field_solve
+
+    n, L, W = 3, 4.0, 2.0
+    mesh, ties = _straight_cell(n, L, W, order=1, elements=4)
+    mat = BeamMaterial(E_MOD, 0.0, 1e-3, electrical_conductivity=SIGMA, thermal_conductivity=1.0)
+    A, E = np.pi * RADIUS ** 2, 0.25
+    for stretch in (1.0, 1.2):  # the section 7.4 pull-back: the current does not change with the stretch
+        xn = mesh.X0.copy()
+        xn[:, 0] *= stretch
+        sol = field_solve(mesh, ties, xn, np.diag([stretch, 1.0, 1.0]), mat, None, np.array([E, 0.0, 0.0]))
+        j = -sol["tie_currents"].sum() / W  # A per mm of width, leaving through the + face
+        assert E / j == pytest.approx(W / (SIGMA * A * n), rel=1e-12)  # sheet resistance
+        # per unit width: a strip of length L has the resistance x width L / (sigma A n_w), n_w = n / W
+        assert (E / j) * L == pytest.approx(L / (SIGMA * A * (n / W)), rel=1e-12)
+        assert sol["joule_power"] / (L * W) == pytest.approx(j * E, rel=1e-12)  # Hill-Mandel of conduction
+        assert np.abs(sol["T"]).max() < 1e-12  # uniform Joule heat, uniform sink: no fluctuation
+
+
+def test_rigid_rotation_gives_zero_stress_and_rotates_every_director():
+    mesh, ties = _straight_cell(n=2, cross=True)
+    Q = _rotation(0.5)
+    assert np.allclose(polar_rotation(Q @ np.diag([1.3, 0.9, 1.0])), Q)
+    psys = PeriodicSystem(BeamModel(mesh, BeamMaterial(E_MOD, 0.0, 1e-3)), ties, _per_fibril_gauge(ties, mesh),
+                          F=Q[:2, :2])
+    X = mesh.X0.reshape(-1, 3) @ Q.T
+    x0 = X.reshape(mesh.n_nodes, 9)
+    # a perturbation of the free centroids (the held dofs keep the rotated values)
+    rng = np.random.default_rng(1)
+    x_red = psys.restrict(x0.reshape(-1))
+    free = np.setdiff1d(psys.layout.dofs("r"), psys.constraints(0.0)[0])
+    x_red[free] += 0.01 * rng.standard_normal(free.size)
+    xs = _solve(psys, x_red)
+    assert np.abs(psys.macro_stress(xs)).max() < 1e-11
+    assert np.abs(psys.expand(xs).reshape(mesh.n_nodes, 9) - x0).max() < 1e-10
+
+
+@pytest.fixture(scope="module")
+def woven_cell():
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.config import RVEConfig
+    from rve.homogenisation.strain import relax_fabric
+
+    cfg = RVEConfig(scene="rve", boundary="periodic", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 6},
+                    contact={"onset": 0.05}, strain={"total": 0.1, "steps": 2})
+    fab, mesh = fabric_and_mesh(cfg)
+    x, _, info = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    assert info["converged"]
+    return cfg, fab, mesh, x
+
+
+def test_reduced_tangent_is_exact(woven_cell):
+    from rve.homogenisation.periodic import macro_gradient, periodic_system
+
+    cfg, fab, mesh, x = woven_cell
+    F = macro_gradient("shear", 0.05) @ macro_gradient("uniaxial", 0.03)
+    psys = periodic_system(cfg, fab, mesh, x, F)
+    xr = psys.restrict(x.reshape(-1)) + 1e-3 * np.random.default_rng(2).standard_normal(psys.n)
+    psys.rebuild(xr)
+    assert len(psys.active_pairs(xr)) > 0
+    w = np.zeros(psys.n)
+    R, K, _ = psys.evaluate(xr, w, 0.0)
+    cols = np.arange(0, psys.n, 7)
+    fd = fd_jacobian(lambda u: psys.evaluate(u, w, 0.0, jacobian=False)[0], xr, cols, eps=1e-7)
+    assert rel_err(K.toarray()[:, cols], fd) < 1e-6
+    # the residual is the gradient of the energy: R_red = T^T R_full
+    g = fd_jacobian(lambda u: np.array([psys.energy(u)]), xr, cols, eps=1e-7)[0]
+    assert rel_err(R[cols], g) < 1e-6
+
+
+def test_hill_mandel_macro_work_equals_the_micro_energy_change(woven_cell):
+    from rve.homogenisation.periodic import macro_gradient, periodic_system
+    from rve.homogenisation.strain import static_minimize
+
+    cfg, fab, mesh, x = woven_cell
+    F0 = macro_gradient("uniaxial", 0.04)
+    dF = np.array([[0.3, 0.1, 0.0], [0.5, -0.2, 0.0], [0.0, 0.0, 0.0]])
+
+    def equilibrium(t):
+        psys = periodic_system(cfg, fab, mesh, x, F0 + t * dF)
+        xs, info = static_minimize(psys, psys.restrict(x.reshape(-1)), 1e-12, 200)
+        assert info["converged"]
+        return psys, xs
+
+    psys, xs = equilibrium(0.0)
+    macro = psys.ties.area * float(np.sum(psys.macro_stress(xs) * dF))
+    energies = {t: psys_t.energy(xs_t) for t in (-2e-4, -1e-4, 1e-4, 2e-4) for psys_t, xs_t in [equilibrium(t)]}
+    d1 = (energies[1e-4] - energies[-1e-4]) / 2e-4
+    d2 = (energies[2e-4] - energies[-2e-4]) / 4e-4
+    micro = (4.0 * d1 - d2) / 3.0  # Richardson: O(h^4)
+    assert abs(macro) > 1e-4
+    assert micro == pytest.approx(macro, rel=1e-8)
+
+
+def test_one_and_two_repeats_give_the_same_per_width_figures():
+    from rve.fabrics.setup import clamp_reactions, fabric_and_mesh
+    from rve.homogenisation.config import RVEConfig
+    from rve.homogenisation.probes import solve_probes
+    from rve.homogenisation.strain import relax_fabric, strain_step
+
+    out = {}
+    for repeat in (1, 2):
+        cfg = RVEConfig(scene="rve", boundary="periodic", cell={"repeat": repeat}, fabric={"kind": "plain", "rows": [1]},
+                        mesh={"elements": 6 * repeat}, strain={"total": 0.05, "steps": 1},
+                        probe_solver={"temperature": False})
+        fab, mesh = fabric_and_mesh(cfg)
+        x, _, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+        x, system, info = strain_step(cfg, fab, mesh, x, x, "uniaxial", 1)
+        assert info["converged"]
+        L = 2.0 * fab.half_widths[:2]
+        reac = clamp_reactions(fab, system, x)
+        probes = solve_probes(cfg, fab, mesh, x)
+        out[repeat] = np.array([reac["x+"][0] / L[1], reac["y+"][1] / L[0],
+                                probes["field_x"].resistance, probes["field_y"].resistance])
+    assert np.allclose(out[2], out[1], rtol=1e-6, atol=0)
