@@ -11,7 +11,8 @@ import pytest
 import xarray as xr
 
 from rve.studies.table_convergence import RANGE_FLOOR, combo_costs
-from rve.studies.work_precision import pareto_front, run_errors, work_precision_job
+from rve.studies.work_precision import (front_of, pareto_front, run_errors, study_points, target_misses,
+                                       work_precision_job)
 from rve.tables.accuracy import annotate_accuracy, read_accuracy
 
 STRAIN = np.linspace(0.0, 0.2, 5)
@@ -48,6 +49,23 @@ def test_errors_against_the_reference_are_the_closed_form_range_errors():
     assert RANGE_FLOOR * 11.0 < 1.0
 
 
+def test_quantities_of_different_cells_or_probes_are_not_compared():
+    """A per-cell force between cells of different size, and resistances of disjoint probe
+    sets, get no error; such a run is not on the front (it omits targeted quantities)."""
+    ref = _table().assign_coords(cell_length_x=4.0, cell_length_y=4.0)
+    other = _table(dR=0.001, dF=0.001).assign_coords(cell_length_x=8.0, cell_length_y=8.0, probe=["field_x"])
+    e = run_errors(other, ref)
+    assert e["range"] == {} and set(e["not_compared"]) >= {"reaction_force", "probe_resistance"}
+    same = run_errors(_table(dF=0.6).assign_coords(cell_length_x=4.0, cell_length_y=4.0), ref)
+    assert same["range"]["reaction_force"] == pytest.approx(0.6 / 8.0) and "reaction_force" not in same["not_compared"]
+    pts = study_points(ref, ("wp_default", _table(dR=0.05).assign_coords(cell_length_x=4.0, cell_length_y=4.0)),
+                       {"boundary": ("wp_boundary", other)}, {})
+    assert pts[1]["missing"] == ["reaction_force", "probe_resistance"] and not pts[1]["meets"]
+    assert front_of(pts) == []   # no cost: nothing on the front; the incomplete run never is
+    assert pts[0]["missing"] == [] and target_misses(pts[0]["errors"]) == {"probe_resistance": (pytest.approx(0.05),
+                                                                                               0.01)}
+
+
 def test_pareto_front():
     pts = [(10.0, 0.5), (20.0, 0.2), (15.0, 0.6), (40.0, 0.2), (5.0, 2.0), (np.nan, 0.01)]
     assert pareto_front(pts) == [4, 0, 1]
@@ -74,6 +92,7 @@ def test_report_on_synthetic_runs(tmp_path):
     acc = work_precision_job(ref, ("wp_default", default), {"elements": ("wp_elements", elements)}, costs, skipped,
                              out, None, {"study": "wp", "reference": "wp_ref"},
                              {"mesh_elements": 6.0, "contact_penalty": 50.0, "mesh_order": 1, "contact_n_gp": 4})
+    assert acc["front"] == ["elements: mesh_elements-4", "default: base", "elements: mesh_elements-12"]  # by CPU
     assert acc["stated_relative_error"]["probe_resistance"] == pytest.approx(0.02)
     assert acc["stated_relative_error"]["reaction_force"] == pytest.approx(0.01)
     runs = {(r["lever"], r["combo"]): r for r in acc["runs"]}
@@ -82,8 +101,11 @@ def test_report_on_synthetic_runs(tmp_path):
     text = out["md"].read_text()
     assert "boundary: run wp_boundary: boundary: unknown key" in text and "| elements | mesh_elements = 4 |" in text
     # front: 4 el (cheapest), the default (cheaper than 12 el); 12 el is the most accurate: all three
-    front_rows = [line for line in text.splitlines() if line.endswith("| yes |")]
-    assert len(front_rows) == 3
+    rows = [[c.strip() for c in line.split("|")[1:-1]] for line in text.splitlines() if line.startswith("| ")][1:]
+    assert sorted(r[1] for r in rows if r[-2] == "yes") == ["base", "mesh_elements = 12", "mesh_elements = 4"]
+    # meets: 12 el is within every target (R 0.5 % of the range, F 0.125 %), the default's R 2 % is not
+    assert {r[1]: r[-1] for r in rows} == {"base": "no", "mesh_elements = 4": "no", "mesh_elements = 12": "yes"}
+    assert "Probe resistance 2 % > 1 % (2 x)".lower() in text.lower()
     assert out["png"].stat().st_size > 0 and "range_error" in out["csv"].read_text()
     # the gather's reader takes the file; the annotation is the default's stated error
     read = read_accuracy(out["json"])
@@ -98,3 +120,12 @@ def test_report_on_synthetic_runs(tmp_path):
     other = _table()
     other.attrs["config"] = json.dumps({"scene": {"mesh": {"order": 2}, "contact": {"n_gp": 4}}})
     assert annotate_accuracy(other, read, 6, 50.0) == []
+    # a periodic study's file does not annotate a pinned table of the same mesh and penalty
+    periodic = json.loads(out["json"].read_text())
+    periodic["default"].update(boundary="periodic", cell_repeat=1)
+    pinned = _table()
+    pinned.attrs["config"] = json.dumps({"scene": {"mesh": {"order": 1}, "contact": {"n_gp": 4}}})
+    assert annotate_accuracy(pinned, periodic, 6, 50.0) == []
+    pinned.attrs["config"] = json.dumps({"scene": {"mesh": {"order": 1}, "contact": {"n_gp": 4}, "boundary": "periodic",
+                                                   "cell": {"repeat": 2}}})
+    assert annotate_accuracy(pinned, periodic, 6, 50.0) == []

@@ -46,7 +46,8 @@ from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
 from ..io.provenance import logging_to
 from .table_convergence import NEGLIGIBLE, QUANTITIES, RANGE_FLOOR, relative_errors, summarize_by_mode
 
-__all__ = ["TARGETS", "run_errors", "pareto_front", "study_points", "work_precision_report", "work_precision_job"]
+__all__ = ["TARGETS", "not_comparable", "run_errors", "worst_ratio", "missing_targets", "target_misses", "pareto_front",
+           "front_of", "study_points", "work_precision_report", "work_precision_job"]
 
 log = logging.getLogger("rve.studies.work_precision")
 
@@ -61,17 +62,43 @@ _RUN, _REF = 0.0, 1.0   # the two values of the comparison's stacking dimension
 _DIM = "wp_run"
 
 
+def not_comparable(run_ds, reference_ds) -> dict:
+    """{quantity: why} of the table quantities a run cannot be compared on with the
+    reference: a per-cell force between cells of different size (the pinned 4 x 4 cell and
+    a periodic 2 x 2 one, a repeated cell; ``membrane_force`` is the per-width form), probe
+    resistances and Joule rises of different probes (a pinned cell's terminal probes, a
+    periodic cell's field probes), and a quantity the reference does not have (or has only
+    as NaN: the network R_y, R_c of a periodic cell)."""
+    out = {}
+    size = [tuple(float(ds[c].values) if c in ds.coords else np.nan for c in ("cell_length_x", "cell_length_y"))
+            for ds in (run_ds, reference_ds)]
+    if "reaction_force" in reference_ds and not np.allclose(size[0], size[1], rtol=1e-9, equal_nan=True):
+        out["reaction_force"] = (f"a force per cell: cell {size[0][0]:g} x {size[0][1]:g} mm against the "
+                                 f"reference's {size[1][0]:g} x {size[1][1]:g} mm (membrane_force is per width)")
+    probes = [set(ds["probe"].values.tolist()) if "probe" in ds.coords else set() for ds in (run_ds, reference_ds)]
+    for q in ("probe_resistance", "temperature_rise_max"):
+        if q in reference_ds and q in run_ds and not probes[0] & probes[1]:
+            out[q] = f"no common probe (run {sorted(probes[0])}, reference {sorted(probes[1])})"
+    for q in TARGETS:
+        if q not in out and (q not in reference_ds or not np.isfinite(np.asarray(reference_ds[q].values, float)).any()):
+            out[q] = "not in the reference table"
+        elif q not in out and q not in run_ds:
+            out[q] = "not in the run's table"
+    return out
+
+
 def run_errors(run_ds, reference_ds) -> dict:
     """Errors of one run's table against the reference's (module docstring), on the modes
-    and strains both have."""
+    and strains both have; ``not_compared`` {quantity: why} (``not_comparable``)."""
     import xarray as xr
 
-    names = [q for q in QUANTITIES if q in run_ds and q in reference_ds]
+    skip = not_comparable(run_ds, reference_ds)
+    names = [q for q in QUANTITIES if q in run_ds and q in reference_ds and q not in skip]
     a, b = xr.align(run_ds[names].reset_coords(drop=True), reference_ds[names].reset_coords(drop=True),
                     join="inner")
     ds = xr.concat([a, b], dim=xr.DataArray([_RUN, _REF], dims=_DIM, name=_DIM))
     rows = relative_errors(ds, _REF, _DIM)
-    out: dict = {"range": {}, "magnitude": {}, "range_by_mode": {}}
+    out: dict = {"range": {}, "magnitude": {}, "range_by_mode": {}, "not_compared": skip}
     for r in rows:
         for key, col in (("range", "range_error"), ("magnitude", "relative_error")):
             e = r[col]
@@ -86,6 +113,19 @@ def worst_ratio(errors: Mapping[str, float]) -> float:
     """max over quantities of error / target (<= 1: every target met)."""
     vals = [e / TARGETS[q] for q, e in errors.items() if q in TARGETS and e is not None and np.isfinite(e)]
     return float(max(vals)) if vals else float("nan")
+
+
+def missing_targets(errors: Mapping) -> list:
+    """The targeted quantities the reference has but the run got no error for (not
+    comparable, or NaN in the run): a run with any is not a candidate for the default, its
+    worst ratio omits them."""
+    skip = errors.get("not_compared") or {}
+    return [q for q in TARGETS if q not in errors["range"] and skip.get(q) != "not in the reference table"]
+
+
+def target_misses(errors: Mapping) -> dict:
+    """{quantity: (error, target)} of the compared quantities above their target."""
+    return {q: (e, TARGETS[q]) for q, e in errors["range"].items() if q in TARGETS and e > TARGETS[q]}
 
 
 def pareto_front(points: Sequence[tuple]) -> list:
@@ -119,34 +159,64 @@ def study_points(reference, default, levers: Mapping, costs: Mapping) -> list[di
             errs = run_errors(sel, reference)
             combo = "__".join(f"{k}-{format(v, '.12g') if isinstance(v, float) else v}" for k, v in params.items()) \
                 or "base"
+            missing = missing_targets(errs)
+            ratio = worst_ratio(errs["range"])
             out.append({"lever": lever, "run": run, "combo": combo, "label": _combo_value(params), "errors": errs,
-                        "cost": (costs.get(run) or {}).get(combo, {}),
-                        "worst_ratio": worst_ratio(errs["range"])})
+                        "cost": (costs.get(run) or {}).get(combo, {}), "worst_ratio": ratio, "missing": missing,
+                        "meets": bool(not missing and np.isfinite(ratio) and ratio <= 1.0)})
     return out
+
+
+def front_of(points: Sequence[Mapping]) -> list:
+    """Indices (into ``points``) of the Pareto front over (CPU time, worst ratio) among the
+    runs compared on every targeted quantity the reference has."""
+    full = [i for i, p in enumerate(points) if not p["missing"]]
+    sub = pareto_front([(points[i]["cost"].get("cpu_s", np.nan) or np.nan, points[i]["worst_ratio"]) for i in full])
+    return [full[k] for k in sub]
 
 
 def work_precision_report(points: Sequence[Mapping], skipped: Mapping[str, str], names: Mapping) -> str:
     """Markdown: every run's error on the range measure (magnitude measure in brackets), its
-    CPU time, the front, and the skipped levers."""
+    CPU time, the front, the runs that meet every target, what the default misses, the
+    quantities not compared and the skipped levers."""
     qs = [q for q in QUANTITIES if any(q in p["errors"]["range"] for p in points)]
-    front = set(pareto_front([(p["cost"].get("cpu_s", np.nan) or np.nan, p["worst_ratio"]) for p in points]))
+    front = set(front_of(points))
     out = [f"# Work-precision study {names.get('study', '')} (rve.studies.work_precision)", "",
            f"Reference: run {names.get('reference')}. Error = max over labels, modes and strains of |q - q_ref| / "
            f"max(range of q_ref over the strain path, {RANGE_FLOOR:g} x the quantity's scale) (range measure; the "
            f"magnitude measure, / max |q_ref| of the label, in brackets); labels below {NEGLIGIBLE:g} of the "
-           "quantity's scale left out. Work = summed CPU time of the run's jobs. Front: no other run is both "
-           "cheaper and more accurate (worst error / target over the quantities).", "",
+           "quantity's scale left out. Work = summed CPU time of the run's jobs. Front: among the runs compared on "
+           "every targeted quantity the reference has, no other run is both cheaper and more accurate (worst error "
+           "/ target over the quantities). meets: every such quantity within its target.", "",
            "| lever | run | CPU s | wall s | peak RSS MB | " + " | ".join(QUANTITIES[q] for q in qs)
-           + " | worst / target | front |",
-           "|" + "---|" * (len(qs) + 7)]
+           + " | worst / target | front | meets |",
+           "|" + "---|" * (len(qs) + 8)]
     for i, p in enumerate(points):
         c = p["cost"]
         cells = [f"{100 * p['errors']['range'][q]:.3g} % ({100 * p['errors']['magnitude'].get(q, np.nan):.3g} %)"
                  if q in p["errors"]["range"] else "n/a" for q in qs]
+        meets = "yes" if p["meets"] else ("incomplete" if p["missing"] else "no")
         out.append(f"| {p['lever']} | {p['label']} | {c.get('cpu_s', np.nan):.1f} | {c.get('wall_s', np.nan):.1f} | "
                    f"{c.get('max_rss_mb', np.nan):.0f} | " + " | ".join(cells)
-                   + f" | {p['worst_ratio']:.3g} | {'yes' if i in front else ''} |")
+                   + f" | {p['worst_ratio']:.3g} | {'yes' if i in front else ''} | {meets} |")
     out += ["", "Targets: " + ", ".join(f"{QUANTITIES[q]} {100 * t:g} %" for q, t in TARGETS.items())]
+    met = [p for p in points if p["meets"]]
+    out += ["", "Runs meeting every target: " + (", ".join(f"{p['lever']} {p['label']} ({p['cost'].get('cpu_s', np.nan):.0f}"
+                                                           " CPU s)" for p in sorted(
+        met, key=lambda p: p["cost"].get("cpu_s", np.inf))) if met else "none")]
+    dp = next((p for p in points if p["lever"] == "default"), None)
+    if dp is not None:
+        miss = target_misses(dp["errors"])
+        out += ["", "The default run against the targets: " + (
+            "; ".join(f"{QUANTITIES[q]} {100 * e:.3g} % > {100 * t:g} % ({e / t:.3g} x)" for q, (e, t) in miss.items())
+            if miss else "every compared quantity within its target")
+            + ("; not compared: " + ", ".join(QUANTITIES[q] for q in dp["missing"]) if dp["missing"] else "")]
+    gone = {}
+    for p in points:
+        for q, why in (p["errors"].get("not_compared") or {}).items():
+            gone.setdefault(f"{QUANTITIES[q]}: {why}", []).append(f"{p['lever']} {p['label']}")
+    if gone:
+        out += ["", "Not compared:", ""] + [f"* {why} ({', '.join(runs)})" for why, runs in gone.items()]
     if skipped:
         out += ["", "Levers skipped (their override key is not known to the config):", ""]
         out += [f"* {lever}: {why}" for lever, why in skipped.items()]
@@ -164,12 +234,16 @@ def _plot(path, points):
     levers = list(dict.fromkeys(p["lever"] for p in points))
     pts = [(p["cost"].get("cpu_s", np.nan) or np.nan, p["worst_ratio"]) for p in points]
     for k, lever in enumerate(levers):
-        sel = [(x, y, p["label"]) for (x, y), p in zip(pts, points) if p["lever"] == lever]
-        ax.plot([s[0] for s in sel], [max(s[1], 1e-6) for s in sel], ls="", marker=markers[k % len(markers)],
-                ms=7, label=lever)
-        for x, y, lab in sel:
+        sel = [(x, y, p["label"], bool(p["missing"])) for (x, y), p in zip(pts, points) if p["lever"] == lever]
+        line, = ax.plot([s[0] for s in sel if not s[3]], [max(s[1], 1e-6) for s in sel if not s[3]], ls="",
+                        marker=markers[k % len(markers)], ms=7, label=lever)
+        part = [s for s in sel if s[3]]   # compared on a part of the targets only: hollow
+        if part:
+            ax.plot([s[0] for s in part], [max(s[1], 1e-6) for s in part], ls="", marker=markers[k % len(markers)],
+                    ms=7, mfc="none", color=line.get_color(), label=f"{lever} (part of the targets)")
+        for x, y, lab, _ in sel:
             ax.annotate(lab, (x, max(y, 1e-6)), textcoords="offset points", xytext=(4, 3), fontsize=6)
-    front = pareto_front(pts)
+    front = front_of(points)
     if front:
         ax.plot([pts[i][0] for i in front], [max(pts[i][1], 1e-6) for i in front], "k--", lw=0.8, label="front")
     ax.axhline(1.0, color="0.5", lw=0.6)
@@ -212,13 +286,16 @@ def accuracy_record(points, names: Mapping, default_config: Mapping, skipped: Ma
             "stated_relative_error": stated, "stated_relative_error_by_mode": by_mode,
             "magnitude_relative_error": dict(dp["errors"]["magnitude"]) if dp else {},
             "meets_targets": {q: bool(e <= TARGETS.get(q, np.inf)) for q, e in stated.items()},
+            "not_measured": dict(dp["errors"].get("not_compared") or {}) if dp else {},
+            "front": [f"{points[i]['lever']}: {points[i]['combo']}" for i in front_of(points)],
             # the layout of a convergence study's file (read_accuracy): the whole error in "mesh"
             "mesh": {"reference": ref, "estimated_relative_error": stated, "stated_relative_error": stated,
                      "by_mode": by_mode},
             "penalty": {"reference": ref, "estimated_relative_error": {}},
             "skipped_levers": dict(skipped),
             "runs": [{"lever": p["lever"], "run": p["run"], "combo": p["combo"], "range_error": p["errors"]["range"],
-                      "magnitude_error": p["errors"]["magnitude"], "worst_ratio": p["worst_ratio"], **p["cost"]}
+                      "magnitude_error": p["errors"]["magnitude"], "worst_ratio": p["worst_ratio"],
+                      "not_compared": p["errors"].get("not_compared") or {}, "meets": p["meets"], **p["cost"]}
                      for p in points]}
 
 

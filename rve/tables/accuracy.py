@@ -15,7 +15,8 @@ has the same ``default``, ``mesh`` and ``penalty`` keys (so it reads the same wa
 own ``stated_relative_error`` (the default run against the study's one reference, range
 measure) and ``stated_relative_error_by_mode``: those become ``estimated_relative_error``
 and ``estimated_relative_error_<mode>``, without a mesh / penalty split; the default's
-``mesh_order`` and ``contact_n_gp`` are checked too where the table's config records them.
+``mesh_order``, ``contact_n_gp``, ``boundary`` and ``cell_repeat`` are checked too where the
+table's config records them.
 
 ``read_accuracy(path) -> dict``: the study's ``accuracy.json`` (``default``, ``mesh`` and
 ``penalty`` with ``estimated_relative_error`` per quantity); a missing or malformed file is
@@ -135,10 +136,14 @@ def _same_default(accuracy: dict, ds: xr.Dataset, mesh_elements: int, contact_pe
         scene = json.loads(ds.attrs.get("config", "{}")).get("scene") or {}
     except (TypeError, ValueError):
         scene = {}
-    for key, path in (("mesh_order", ("mesh", "order")), ("contact_n_gp", ("contact", "n_gp"))):
+    for key, path in (("mesh_order", ("mesh", "order")), ("contact_n_gp", ("contact", "n_gp")),
+                      ("cell_repeat", ("cell", "repeat"))):
         have = (scene.get(path[0]) or {}).get(path[1])
         if key in d and have is not None and int(have) != int(d[key]):
             return f"{key} = {d[key]}, this table's run has {have}"
+    have = scene.get("boundary", "pinned")
+    if "boundary" in d and str(have) != str(d["boundary"]):
+        return f"boundary = {d['boundary']}, this table's run has {have}"
     return None
 
 

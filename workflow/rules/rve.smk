@@ -367,7 +367,8 @@ rule rve_work_precision_report:
         default = wp["default"]
         cfg = load_run_config(config["rve"]["runs"][default or wp["reference"]])
         default_config = {"mesh_elements": float(cfg.mesh.elements), "contact_penalty": float(cfg.contact.penalty),
-                          "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp)}
+                          "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp),
+                          "boundary": str(cfg.boundary), "cell_repeat": int(cfg.cell.repeat)}
         runs = [wp["reference"]] + ([default] if default else []) + list(wp["levers"].values())
         costs = {r: combo_costs(rve_layout.BENCHMARK_DIR, r) for r in runs}
         work_precision_job(open_table(input.reference), (default, open_table(input.default[0])) if default else None,
