@@ -15,7 +15,7 @@ import pytest
 from rve.fem.assembly import DofLayout
 from rve.fem.mesh import fibril_mesh, straight_fibril
 from rve.model import BeamMaterial, BeamModel
-from rve.model.periodic import PeriodicSystem, fibril_end_ties, polar_rotation
+from rve.model.periodic import PeriodicSystem, fibril_end_ties, in_plane_gradient as in_plane, polar_rotation
 from rve.solvers.static import static_solve
 from rve.testing import fd_jacobian, rel_err
 
@@ -160,6 +160,41 @@ def test_hill_mandel_macro_work_equals_the_micro_energy_change(woven_cell):
     d2 = (energies[2e-4] - energies[-2e-4]) / 4e-4
     micro = (4.0 * d1 - d2) / 3.0  # Richardson: O(h^4)
     assert abs(macro) > 1e-4
+    assert micro == pytest.approx(macro, rel=1e-8)
+
+
+
+def test_hill_mandel_with_contact_across_the_cell_face():
+    """One straight fibril along x in a cell narrower than its diameter: it is pressed
+    against its own periodic images across the y face, so all of the y stress is image
+    contact (no pair inside the cell)."""
+    from rve.model import ContactParams, ContactSystem
+
+    L, W = 4.0, 0.28  # W < 2 R: an overlap of 0.02 with each image
+    mesh = fibril_mesh([straight_fibril([-L / 2, 0.0, 0.0], [L / 2, 0.0, 0.0], RADIUS)], 6, 1)
+    ties = fibril_end_ties(mesh, [[L, 0, 0], [0, W, 0]])
+    base = BeamModel(mesh, BeamMaterial(E_MOD, 0.0, 1e-3))
+    full = ContactSystem(base, ContactParams(penalty=50.0, n_gp=4, margin=0.1, onset=0.05 * RADIUS), mesh.X0.reshape(-1))
+    held = _per_fibril_gauge(ties, mesh)
+    F0 = np.array([[1.03, 0.0], [0.02, 0.995]])
+    dF = np.array([[0.2, 0.0, 0.0], [0.4, 0.7, 0.0], [0.0, 0.0, 0.0]])
+
+    def equilibrium(t):
+        F = in_plane(F0) + t * dF
+        psys = PeriodicSystem(full, ties, held, 0.0, F=F, contact_images=True)
+        x = mesh.X0.reshape(-1, 3) @ F.T
+        xr = psys.restrict(x.reshape(-1))
+        psys.rebuild(xr)
+        return psys, _solve(psys, xr)
+
+    psys, xs = equilibrium(0.0)
+    act = psys.active_pairs(xs)
+    assert len(act) > 0 and np.all(np.abs(psys.map.shifts[act][:, 1]) > 0)  # every active pair is an image pair
+    moment = psys.image_contact_moment(xs)
+    assert moment[1, 1] < 0 and abs(moment[1, 1]) > 1e-4  # compression across y, from the images only
+    macro = psys.ties.area * float(np.sum(psys.macro_stress(xs) * dF))
+    e = {t: p_.energy(x_) for t in (-2e-4, -1e-4, 1e-4, 2e-4) for p_, x_ in [equilibrium(t)]}
+    micro = (4.0 * (e[1e-4] - e[-1e-4]) / 2e-4 - (e[2e-4] - e[-2e-4]) / 4e-4) / 3.0
     assert micro == pytest.approx(macro, rel=1e-8)
 
 
