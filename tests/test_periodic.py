@@ -219,3 +219,70 @@ def test_one_and_two_repeats_give_the_same_per_width_figures():
         out[repeat] = np.array([reac["x+"][0] / L[1], reac["y+"][1] / L[0],
                                 probes["field_x"].resistance, probes["field_y"].resistance])
     assert np.allclose(out[2], out[1], rtol=1e-6, atol=0)
+
+
+def _crossing_cell(repeat, L=2.0, delta=0.05, elements=8, order=1):
+    """``repeat`` x ``repeat`` copies of one crossing: a fibril along x at y = 0 (z = 0) under
+    one along y at x = L/2 - delta (z = 0.26 < 2 R), in a cell [-L/2, (repeat - 1/2) L]^2 whose
+    x faces cut the crossing's contact zone (delta < its half-length)."""
+    n, cell = int(repeat), int(repeat) * L
+    lo, hi = -L / 2, -L / 2 + cell
+    fibs = [straight_fibril([lo, k * L, 0.0], [hi, k * L, 0.0], RADIUS) for k in range(n)]
+    fibs += [straight_fibril([L / 2 - delta + k * L, lo, 0.26], [L / 2 - delta + k * L, hi, 0.26], RADIUS)
+             for k in range(n)]
+    mesh = fibril_mesh(fibs, elements * n, order)
+    return mesh, fibril_end_ties(mesh, [[cell, 0, 0], [0, cell, 0]])
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_a_crossing_cut_by_the_cell_face_gets_its_contact_force(order):
+    """The 1 x 1 cell's crossing straddles its x face; in the 2 x 2 cell the same crossing
+    (one of four) lies inside. At the same periodic (bent, sheared) state, every reduced
+    node of the 1 x 1 cell has the residual of its copies in the 2 x 2 cell, the energy is a
+    quarter and the Hill-Mandel stress is the same; without the images the face crossing
+    loses the part of its force beyond the face."""
+    from rve.model import ContactParams, ContactSystem
+
+    L, F = 2.0, np.array([[1.02, 0.03], [-0.01, 0.99]])
+    params = ContactParams(penalty=50.0, n_gp=4, margin=0.1, onset=0.05 * RADIUS)
+
+    def periodic_state(mesh):
+        # the affine map of the reference plus a periodic bend (period L in x and y)
+        X = mesh.X0.reshape(mesh.n_nodes, 9)
+        x = X.reshape(-1, 3) @ in_plane(F).T
+        x = x.reshape(mesh.n_nodes, 9)
+        k = 2 * np.pi / L
+        x[:, 2] += 0.01 * np.sin(k * X[:, 0] + 0.3) * np.cos(k * X[:, 1]) - 0.008 * np.cos(k * X[:, 1] + 0.5)
+        return x.reshape(-1)
+
+    def evaluate(repeat, images):
+        mesh, ties = _crossing_cell(repeat, L, order=order)
+        x = periodic_state(mesh)
+        full = ContactSystem(BeamModel(mesh, BeamMaterial(E_MOD, 0.0, 1e-3)), params, x)
+        psys = PeriodicSystem(full, ties, (), 0.0, F=F, contact_images=images)
+        xr = psys.restrict(x)
+        assert np.allclose(psys.expand(xr), x, atol=1e-13)  # the state is periodic at F
+        psys.rebuild(xr)
+        R = psys.evaluate(xr, np.zeros(psys.n), 0.0, jacobian=False)[0]
+        return mesh, ties, psys, xr, R
+
+    m1, t1, p1, x1, R1 = evaluate(1, True)
+    m2, t2, p2, x2, R2 = evaluate(2, True)
+    assert len(p1.active_pairs(x1)) > 0 and np.any(p1.map.shifts[p1.active_pairs(x1)][:, 0] != 0)
+    # the reduced node of fibril f, node j of the 1 x 1 cell and its copies in the 2 x 2 cell
+    per = order * 8  # reduced nodes per fibril of the 1 x 1 cell (the image node dropped)
+    R1n, R2n = R1.reshape(-1, 9), R2.reshape(-1, 9)
+    for f in range(2):
+        for copy in range(2):
+            for half in range(2):
+                f2 = 2 * f + copy
+                rows = f2 * 2 * per + half * per + np.arange(per)
+                assert np.allclose(R2n[rows], R1n[f * per + np.arange(per)], rtol=0, atol=1e-12 * np.abs(R1).max())
+    assert p2.energy(x2) == pytest.approx(4.0 * p1.energy(x1), rel=1e-12)
+    assert np.allclose(p2.macro_stress(x2), p1.macro_stress(x1), rtol=0, atol=1e-12 * np.abs(p1.macro_stress(x1)).max())
+    # without the images the crossing cut by the face is not whole
+    *_, p0, x0, _ = evaluate(1, False)
+    contact = {k: p_.full.contact_energy(p_.expand(x_)) for k, p_, x_ in (("none", p0, x0), ("1x1", p1, x1),
+                                                                          ("2x2", p2, x2))}
+    assert contact["1x1"] == pytest.approx(contact["2x2"] / 4.0, rel=1e-12)
+    assert contact["none"] < 0.9 * contact["1x1"]

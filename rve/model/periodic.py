@@ -305,8 +305,9 @@ class PeriodicSystem:
         act, R, _, _ = term.forms(self.expand(x), np.zeros(self.full.n), jacobian=False)
         if act.size == 0:
             return np.zeros((3, 3))
+        # the local nodes of a pair are its + element's, then its - element's
         R = np.asarray(R).reshape(act.size, term.m, -1)[:, :, :3]
-        f_minus = R[:, term.endpos[2:], :].sum(axis=1)
+        f_minus = R[:, term.m // 2:, :].sum(axis=1)
         ref = np.linalg.solve(self.F, cmap.shifts[act].T).T
         return f_minus.T @ ref
 
