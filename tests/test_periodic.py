@@ -88,6 +88,38 @@ def test_straight_fibrils_sheet_resistance_is_exact_and_the_joule_power_is_j_dot
         assert np.abs(sol["T"]).max() < 1e-12  # uniform Joule heat, uniform sink: no fluctuation
 
 
+def test_current_across_the_cell_face_through_the_image_contacts_only():
+    """One straight fibril along x pressed against its own images across the y face: along
+    y it conducts only through the contacts with its images, whose potential is the macro
+    jump E W lower (V is uniform on the fibril): j = G E W / L, G the contact conductance
+    of one interface; without the images nothing crosses the y face, and along x the
+    fibril is a wire (j = sigma A E / W)."""
+    from rve.homogenisation.periodic_probes import field_solve
+    from rve.model import ContactParams, ContactSystem
+
+    L, W, E0 = 4.0, 0.28, 0.25
+    mesh = fibril_mesh([straight_fibril([-L / 2, 0.0, 0.0], [L / 2, 0.0, 0.0], RADIUS)], 6, 1)
+    ties = fibril_end_ties(mesh, [[L, 0, 0], [0, W, 0]])
+    mat = BeamMaterial(E_MOD, 0.0, 1e-3, electrical_conductivity=SIGMA, thermal_conductivity=1.0)
+    cp = ContactParams(penalty=50.0, n_gp=4, margin=0.1, conductance=3.0)
+    xn = mesh.X0.copy()
+    contact = ContactSystem(BeamModel(mesh, mat), cp, xn.reshape(-1))
+    psys = PeriodicSystem(contact, ties, F=np.eye(2), contact_images=True)
+    psys.rebuild(psys.restrict(xn.reshape(-1)))
+    G = psys.full.term.conductance_by_pair(psys.expand(psys.restrict(xn.reshape(-1))))
+    assert list(G) == [(0, 0)]  # one interface per cell: the fibril and its image
+    A = np.pi * RADIUS ** 2
+    along_y = field_solve(mesh, ties, xn, np.eye(3), mat, cp, np.array([0, E0, 0]), temperature=False)
+    assert along_y["macro_current"][1] == pytest.approx(G[(0, 0)] * E0 * W / L, rel=1e-10)
+    assert np.abs(along_y["tie_currents"]).max() < 1e-12 * along_y["macro_current"][1]  # no tie crosses y
+    off = field_solve(mesh, ties, xn, np.eye(3), mat, cp, np.array([0, E0, 0]), temperature=False,
+                      contact_images=False)
+    assert abs(off["macro_current"][1]) < 1e-14
+    wire = field_solve(mesh, ties, xn, np.eye(3), mat, cp, np.array([E0, 0, 0]), temperature=False,
+                       contact_images=False)
+    assert wire["macro_current"][0] == pytest.approx(SIGMA * A * E0 / W, rel=1e-12)
+
+
 def test_rigid_rotation_gives_zero_stress_and_rotates_every_director():
     mesh, ties = _straight_cell(n=2, cross=True)
     Q = _rotation(0.5)
@@ -286,3 +318,13 @@ def test_a_crossing_cut_by_the_cell_face_gets_its_contact_force(order):
                                                                           ("2x2", p2, x2))}
     assert contact["1x1"] == pytest.approx(contact["2x2"] / 4.0, rel=1e-12)
     assert contact["none"] < 0.9 * contact["1x1"]
+    # and its current: the sheet currents of the two cells agree (the contact conducts
+    # across the face through the image, at the potential the macro field gives it)
+    from rve.homogenisation.periodic_probes import field_solve
+
+    mat = BeamMaterial(E_MOD, 0.0, 1e-3, electrical_conductivity=SIGMA, thermal_conductivity=1.0)
+    cp = ContactParams(penalty=50.0, n_gp=4, margin=0.1, onset=0.05 * RADIUS, conductance=3.0)
+    for E in ([0.25, 0.0, 0.0], [0.1, -0.2, 0.0]):
+        j = [field_solve(m_, t_, p_.expand(x_).reshape(m_.n_nodes, 9), in_plane(F), mat, cp, np.array(E),
+                         temperature=False)["macro_current"] for m_, t_, p_, x_ in ((m1, t1, p1, x1), (m2, t2, p2, x2))]
+        assert np.allclose(j[0], j[1], rtol=0, atol=1e-10 * np.abs(j[0]).max())

@@ -192,16 +192,12 @@ class PeriodicSystem:
         ``rebuild``, which the caller makes at the new state."""
         if F is not None:
             self.F = in_plane_gradient(F)
-            if self.contact_images:
-                a1, a2 = self.ties.periods @ self.F.T
-                images = [i * a1 + j * a2 for i in (-1, 0, 1) for j in (-1, 0, 1) if (i, j) != (0, 0)]
-                wrap = np.zeros((self.full.mesh.n_fibrils, 3))
-                wrap[self.full.mesh.node_fibril[self.ties.image]] = self.ties.jump @ self.F.T
-                self.full.set_periodic(np.array(images), wrap)
         if grad_T is not None or not hasattr(self, "grad_T"):
             self.grad_T = np.zeros(3) if grad_T is None else np.asarray(grad_T, float)
         if E is not None or not hasattr(self, "E"):
             self.E = np.zeros(3) if E is None else np.asarray(E, float)
+        if self.contact_images:
+            self._set_images()
         s = np.zeros(self.full.n)
         s[self._image_r] = self.ties.jump @ self.F.T
         if self._image_T is not None:
@@ -211,6 +207,17 @@ class PeriodicSystem:
         mech = np.asarray(self.full.mech, bool)
         self._shift_x = np.where(mech, s, 0.0)
         self._shift_w = np.where(mech, 0.0, s)
+
+    def _set_images(self) -> None:
+        """The contact search's lattice (F L1, F L2 and their sums), the fibrils' wraps (each
+        into its image F dX) and the field values of an image at deformed shift T: T + grad_T
+        . F^-1 T, V - E . F^-1 T (the ties' jumps over the reference lattice vector)."""
+        a1, a2 = self.ties.periods @ self.F.T
+        images = [i * a1 + j * a2 for i in (-1, 0, 1) for j in (-1, 0, 1) if (i, j) != (0, 0)]
+        wrap = np.zeros((self.full.mesh.n_fibrils, 3))
+        wrap[self.full.mesh.node_fibril[self.ties.image]] = self.ties.jump @ self.F.T
+        Finv_T = np.linalg.inv(self.F).T
+        self.full.set_periodic(np.array(images), wrap, field_jumps={"T": Finv_T @ self.grad_T, "V": -(Finv_T @ self.E)})
 
     def expand(self, x_red) -> np.ndarray:
         """The full (unrolled) ``x`` of a reduced one: ``T x + s`` on the mechanical dofs (the
@@ -294,22 +301,29 @@ class PeriodicSystem:
         neighbour exerts through the tie on the image (internal + contact)."""
         return self.full_residual(x, w, t)[self._image_r]
 
+    def _image_pair_moment(self, x, w, cols) -> np.ndarray:
+        """(len(cols), 3): sum over the active contact pairs with a periodic image of the
+        residual components ``cols`` (local pair columns) on the - side (x) the reference
+        lattice vector F^-1 T of the pair."""
+        cmap = self.full.map if self.contact_images else None
+        if cmap is None or cmap.shift is None:
+            return np.zeros((len(cols), 3))
+        term = self.full.term
+        w_full = np.zeros(self.full.n) if w is None else self.expand_rates(w)
+        act, R, _, _ = term.forms(self.expand(x), w_full, jacobian=False)
+        if act.size == 0:
+            return np.zeros((len(cols), 3))
+        # the local nodes of a pair are its + element's, then its - element's
+        R = np.asarray(R).reshape(act.size, term.m, -1)[:, :, cols]
+        f_minus = R[:, term.m // 2:, :].sum(axis=1)
+        ref = np.linalg.solve(self.F, cmap.shifts[act].T).T
+        return f_minus.T @ ref
+
     def image_contact_moment(self, x) -> np.ndarray:
         """(3, 3): sum over the contact pairs with a periodic image of the force on the image
         side (x) its reference lattice vector F^-1 T: the derivative of the contact energy
         with respect to F through the shifts T = F (i L1 + j L2)."""
-        cmap = self.full.map if self.contact_images else None
-        if cmap is None or cmap.shift is None:
-            return np.zeros((3, 3))
-        term = self.full.term
-        act, R, _, _ = term.forms(self.expand(x), np.zeros(self.full.n), jacobian=False)
-        if act.size == 0:
-            return np.zeros((3, 3))
-        # the local nodes of a pair are its + element's, then its - element's
-        R = np.asarray(R).reshape(act.size, term.m, -1)[:, :, :3]
-        f_minus = R[:, term.m // 2:, :].sum(axis=1)
-        ref = np.linalg.solve(self.F, cmap.shifts[act].T).T
-        return f_minus.T @ ref
+        return self._image_pair_moment(x, None, [0, 1, 2])
 
     def macro_stress(self, x, w=None, t: float = 0.0) -> np.ndarray:
         """First Piola-Kirchhoff membrane stress (3, 3), N/mm: (sum_ties f (x) dX + the image
@@ -321,3 +335,15 @@ class PeriodicSystem:
         """(n_ties,): the V residual at every image node: the current leaving the cell
         through the tie into the periodic neighbour (A)."""
         return self.full_residual(x, w)[self._image_V]
+
+    def macro_current(self, x, w) -> np.ndarray:
+        """(3,): the macro current per unit reference width (A/mm) leaving the cell,
+        -(sum_ties i dX + the image contacts' current (x) F^-1 T) / A: the conduction
+        counterpart of ``macro_stress`` (the current of a face is carried by its ties and by
+        the contacts across it)."""
+        i = self.tie_currents(x, w)
+        term = getattr(self.full, "term", None)
+        img = np.zeros(3)
+        if term is not None and "V" in getattr(term, "scalar", ()):
+            img = self._image_pair_moment(x, w, [3 + term.scalar.index("V")])[0]
+        return -(i @ self.ties.jump + img) / self.ties.area
