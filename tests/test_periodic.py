@@ -15,7 +15,7 @@ import pytest
 from rve.fem.assembly import DofLayout
 from rve.fem.mesh import fibril_mesh, straight_fibril
 from rve.model import BeamMaterial, BeamModel
-from rve.model.periodic import PeriodicSystem, fibril_end_ties, polar_rotation
+from rve.model.periodic import PeriodicSystem, fibril_end_ties, in_plane_gradient as in_plane, polar_rotation
 from rve.solvers.static import static_solve
 from rve.testing import fd_jacobian, rel_err
 
@@ -86,6 +86,38 @@ def test_straight_fibrils_sheet_resistance_is_exact_and_the_joule_power_is_j_dot
         assert (E / j) * L == pytest.approx(L / (SIGMA * A * (n / W)), rel=1e-12)
         assert sol["joule_power"] / (L * W) == pytest.approx(j * E, rel=1e-12)  # Hill-Mandel of conduction
         assert np.abs(sol["T"]).max() < 1e-12  # uniform Joule heat, uniform sink: no fluctuation
+
+
+def test_current_across_the_cell_face_through_the_image_contacts_only():
+    """One straight fibril along x pressed against its own images across the y face: along
+    y it conducts only through the contacts with its images, whose potential is the macro
+    jump E W lower (V is uniform on the fibril): j = G E W / L, G the contact conductance
+    of one interface; without the images nothing crosses the y face, and along x the
+    fibril is a wire (j = sigma A E / W)."""
+    from rve.homogenisation.periodic_probes import field_solve
+    from rve.model import ContactParams, ContactSystem
+
+    L, W, E0 = 4.0, 0.28, 0.25
+    mesh = fibril_mesh([straight_fibril([-L / 2, 0.0, 0.0], [L / 2, 0.0, 0.0], RADIUS)], 6, 1)
+    ties = fibril_end_ties(mesh, [[L, 0, 0], [0, W, 0]])
+    mat = BeamMaterial(E_MOD, 0.0, 1e-3, electrical_conductivity=SIGMA, thermal_conductivity=1.0)
+    cp = ContactParams(penalty=50.0, n_gp=4, margin=0.1, conductance=3.0)
+    xn = mesh.X0.copy()
+    contact = ContactSystem(BeamModel(mesh, mat), cp, xn.reshape(-1))
+    psys = PeriodicSystem(contact, ties, F=np.eye(2), contact_images=True)
+    psys.rebuild(psys.restrict(xn.reshape(-1)))
+    G = psys.full.term.conductance_by_pair(psys.expand(psys.restrict(xn.reshape(-1))))
+    assert list(G) == [(0, 0)]  # one interface per cell: the fibril and its image
+    A = np.pi * RADIUS ** 2
+    along_y = field_solve(mesh, ties, xn, np.eye(3), mat, cp, np.array([0, E0, 0]), temperature=False)
+    assert along_y["macro_current"][1] == pytest.approx(G[(0, 0)] * E0 * W / L, rel=1e-10)
+    assert np.abs(along_y["tie_currents"]).max() < 1e-12 * along_y["macro_current"][1]  # no tie crosses y
+    off = field_solve(mesh, ties, xn, np.eye(3), mat, cp, np.array([0, E0, 0]), temperature=False,
+                      contact_images=False)
+    assert abs(off["macro_current"][1]) < 1e-14
+    wire = field_solve(mesh, ties, xn, np.eye(3), mat, cp, np.array([E0, 0, 0]), temperature=False,
+                       contact_images=False)
+    assert wire["macro_current"][0] == pytest.approx(SIGMA * A * E0 / W, rel=1e-12)
 
 
 def test_rigid_rotation_gives_zero_stress_and_rotates_every_director():
@@ -163,6 +195,41 @@ def test_hill_mandel_macro_work_equals_the_micro_energy_change(woven_cell):
     assert micro == pytest.approx(macro, rel=1e-8)
 
 
+
+def test_hill_mandel_with_contact_across_the_cell_face():
+    """One straight fibril along x in a cell narrower than its diameter: it is pressed
+    against its own periodic images across the y face, so all of the y stress is image
+    contact (no pair inside the cell)."""
+    from rve.model import ContactParams, ContactSystem
+
+    L, W = 4.0, 0.28  # W < 2 R: an overlap of 0.02 with each image
+    mesh = fibril_mesh([straight_fibril([-L / 2, 0.0, 0.0], [L / 2, 0.0, 0.0], RADIUS)], 6, 1)
+    ties = fibril_end_ties(mesh, [[L, 0, 0], [0, W, 0]])
+    base = BeamModel(mesh, BeamMaterial(E_MOD, 0.0, 1e-3))
+    full = ContactSystem(base, ContactParams(penalty=50.0, n_gp=4, margin=0.1, onset=0.05 * RADIUS), mesh.X0.reshape(-1))
+    held = _per_fibril_gauge(ties, mesh)
+    F0 = np.array([[1.03, 0.0], [0.02, 0.995]])
+    dF = np.array([[0.2, 0.0, 0.0], [0.4, 0.7, 0.0], [0.0, 0.0, 0.0]])
+
+    def equilibrium(t):
+        F = in_plane(F0) + t * dF
+        psys = PeriodicSystem(full, ties, held, 0.0, F=F, contact_images=True)
+        x = mesh.X0.reshape(-1, 3) @ F.T
+        xr = psys.restrict(x.reshape(-1))
+        psys.rebuild(xr)
+        return psys, _solve(psys, xr)
+
+    psys, xs = equilibrium(0.0)
+    act = psys.active_pairs(xs)
+    assert len(act) > 0 and np.all(np.abs(psys.map.shifts[act][:, 1]) > 0)  # every active pair is an image pair
+    moment = psys.image_contact_moment(xs)
+    assert moment[1, 1] < 0 and abs(moment[1, 1]) > 1e-4  # compression across y, from the images only
+    macro = psys.ties.area * float(np.sum(psys.macro_stress(xs) * dF))
+    e = {t: p_.energy(x_) for t in (-2e-4, -1e-4, 1e-4, 2e-4) for p_, x_ in [equilibrium(t)]}
+    micro = (4.0 * (e[1e-4] - e[-1e-4]) / 2e-4 - (e[2e-4] - e[-2e-4]) / 4e-4) / 3.0
+    assert micro == pytest.approx(macro, rel=1e-8)
+
+
 def test_one_and_two_repeats_give_the_same_per_width_figures():
     from rve.fabrics.setup import clamp_reactions, fabric_and_mesh
     from rve.homogenisation.config import RVEConfig
@@ -184,3 +251,80 @@ def test_one_and_two_repeats_give_the_same_per_width_figures():
         out[repeat] = np.array([reac["x+"][0] / L[1], reac["y+"][1] / L[0],
                                 probes["field_x"].resistance, probes["field_y"].resistance])
     assert np.allclose(out[2], out[1], rtol=1e-6, atol=0)
+
+
+def _crossing_cell(repeat, L=2.0, delta=0.05, elements=8, order=1):
+    """``repeat`` x ``repeat`` copies of one crossing: a fibril along x at y = 0 (z = 0) under
+    one along y at x = L/2 - delta (z = 0.26 < 2 R), in a cell [-L/2, (repeat - 1/2) L]^2 whose
+    x faces cut the crossing's contact zone (delta < its half-length)."""
+    n, cell = int(repeat), int(repeat) * L
+    lo, hi = -L / 2, -L / 2 + cell
+    fibs = [straight_fibril([lo, k * L, 0.0], [hi, k * L, 0.0], RADIUS) for k in range(n)]
+    fibs += [straight_fibril([L / 2 - delta + k * L, lo, 0.26], [L / 2 - delta + k * L, hi, 0.26], RADIUS)
+             for k in range(n)]
+    mesh = fibril_mesh(fibs, elements * n, order)
+    return mesh, fibril_end_ties(mesh, [[cell, 0, 0], [0, cell, 0]])
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_a_crossing_cut_by_the_cell_face_gets_its_contact_force(order):
+    """The 1 x 1 cell's crossing straddles its x face; in the 2 x 2 cell the same crossing
+    (one of four) lies inside. At the same periodic (bent, sheared) state, every reduced
+    node of the 1 x 1 cell has the residual of its copies in the 2 x 2 cell, the energy is a
+    quarter and the Hill-Mandel stress is the same; without the images the face crossing
+    loses the part of its force beyond the face."""
+    from rve.model import ContactParams, ContactSystem
+
+    L, F = 2.0, np.array([[1.02, 0.03], [-0.01, 0.99]])
+    params = ContactParams(penalty=50.0, n_gp=4, margin=0.1, onset=0.05 * RADIUS)
+
+    def periodic_state(mesh):
+        # the affine map of the reference plus a periodic bend (period L in x and y)
+        X = mesh.X0.reshape(mesh.n_nodes, 9)
+        x = X.reshape(-1, 3) @ in_plane(F).T
+        x = x.reshape(mesh.n_nodes, 9)
+        k = 2 * np.pi / L
+        x[:, 2] += 0.01 * np.sin(k * X[:, 0] + 0.3) * np.cos(k * X[:, 1]) - 0.008 * np.cos(k * X[:, 1] + 0.5)
+        return x.reshape(-1)
+
+    def evaluate(repeat, images):
+        mesh, ties = _crossing_cell(repeat, L, order=order)
+        x = periodic_state(mesh)
+        full = ContactSystem(BeamModel(mesh, BeamMaterial(E_MOD, 0.0, 1e-3)), params, x)
+        psys = PeriodicSystem(full, ties, (), 0.0, F=F, contact_images=images)
+        xr = psys.restrict(x)
+        assert np.allclose(psys.expand(xr), x, atol=1e-13)  # the state is periodic at F
+        psys.rebuild(xr)
+        R = psys.evaluate(xr, np.zeros(psys.n), 0.0, jacobian=False)[0]
+        return mesh, ties, psys, xr, R
+
+    m1, t1, p1, x1, R1 = evaluate(1, True)
+    m2, t2, p2, x2, R2 = evaluate(2, True)
+    assert len(p1.active_pairs(x1)) > 0 and np.any(p1.map.shifts[p1.active_pairs(x1)][:, 0] != 0)
+    # the reduced node of fibril f, node j of the 1 x 1 cell and its copies in the 2 x 2 cell
+    per = order * 8  # reduced nodes per fibril of the 1 x 1 cell (the image node dropped)
+    R1n, R2n = R1.reshape(-1, 9), R2.reshape(-1, 9)
+    for f in range(2):
+        for copy in range(2):
+            for half in range(2):
+                f2 = 2 * f + copy
+                rows = f2 * 2 * per + half * per + np.arange(per)
+                assert np.allclose(R2n[rows], R1n[f * per + np.arange(per)], rtol=0, atol=1e-12 * np.abs(R1).max())
+    assert p2.energy(x2) == pytest.approx(4.0 * p1.energy(x1), rel=1e-12)
+    assert np.allclose(p2.macro_stress(x2), p1.macro_stress(x1), rtol=0, atol=1e-12 * np.abs(p1.macro_stress(x1)).max())
+    # without the images the crossing cut by the face is not whole
+    *_, p0, x0, _ = evaluate(1, False)
+    contact = {k: p_.full.contact_energy(p_.expand(x_)) for k, p_, x_ in (("none", p0, x0), ("1x1", p1, x1),
+                                                                          ("2x2", p2, x2))}
+    assert contact["1x1"] == pytest.approx(contact["2x2"] / 4.0, rel=1e-12)
+    assert contact["none"] < 0.9 * contact["1x1"]
+    # and its current: the sheet currents of the two cells agree (the contact conducts
+    # across the face through the image, at the potential the macro field gives it)
+    from rve.homogenisation.periodic_probes import field_solve
+
+    mat = BeamMaterial(E_MOD, 0.0, 1e-3, electrical_conductivity=SIGMA, thermal_conductivity=1.0)
+    cp = ContactParams(penalty=50.0, n_gp=4, margin=0.1, onset=0.05 * RADIUS, conductance=3.0)
+    for E in ([0.25, 0.0, 0.0], [0.1, -0.2, 0.0]):
+        j = [field_solve(m_, t_, p_.expand(x_).reshape(m_.n_nodes, 9), in_plane(F), mat, cp, np.array(E),
+                         temperature=False)["macro_current"] for m_, t_, p_, x_ in ((m1, t1, p1, x1), (m2, t2, p2, x2))]
+        assert np.allclose(j[0], j[1], rtol=0, atol=1e-10 * np.abs(j[0]).max())

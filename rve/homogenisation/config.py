@@ -222,6 +222,8 @@ class PeriodicCell(Section):
     its end is tied to its start."""
 
     repeat: Integer = Field(1, ge=1, le=8, description="pattern repeats per cell side (n x n)")
+    contact_images: bool = Field(True, description="the contact search sees the periodic images of the fibrils "
+                                                   "across the cell faces (false: only the pairs inside the cell)")
 
 
 class RVEConfig(SceneConfig):

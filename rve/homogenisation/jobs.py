@@ -150,7 +150,8 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
         st0 = load_state(in_state, quarantine=True)
         _check_state(st0, mesh, in_state)
         x, system, info = relax_fabric(cfg, fab, mesh, st0.x)
-        reac = clamp_reactions(fab, system, x)
+        # a periodic cell gives its face forces (the Hill-Mandel stress); the pinned cell its clamps
+        reac = info.pop("reaction_force", None) or clamp_reactions(fab, system, x)
         cstate = system.contact_state(x.reshape(-1))
         st = State(x=x, w=np.zeros_like(x), origin=x, kind="relaxed", step=0, strain=0.0,
                    time=float(cfg.relaxation.duration), combo=combo, params=combo_params(spec, combo),
@@ -182,7 +183,8 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
             raise ValueError(f"{in_state}: expected the {expect} state before {mode} step {step}, got kind="
                              f"{prev.kind} mode={prev.mode!r} step={prev.step}")
         x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step)
-        reac = clamp_reactions(fab, system, x)
+        # a periodic cell gives its face forces (the Hill-Mandel stress); the pinned cell its clamps
+        reac = info.pop("reaction_force", None) or clamp_reactions(fab, system, x)
         cstate = system.contact_state(x.reshape(-1))
         st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="strained", mode=mode, step=step,
                    strain=float(info["strain"]), time=prev.time + cfg.strain.t_step + cfg.strain.t_relax,

@@ -26,11 +26,12 @@ pinned state):
   :func:`periodic_free_residual` -- |F| on the free reduced dofs of a stored state;
 * :func:`gauge_dofs` -- the held reduced dofs above.
 
-The clamp-force sums of the full system at the full state are the tie forces per cell
-face: ``x+`` sums the residual at the images on the x face (the force the neighbour cell
-exerts through the ties), ``x-`` at their masters (minus that, at an equilibrium of the
-reduced dofs). So the table's ``membrane_force`` (the + side force over the edge
-length) is the column P e_j of the Hill-Mandel stress ``PeriodicSystem.macro_stress``.
+The face forces of a state (``info["reaction_force"]``, :func:`cell_reactions`) are the
+Hill-Mandel stress ``PeriodicSystem.macro_stress`` (the tie forces and the contact forces
+on the periodic images) times the face lengths, in the layout of the pinned cell's clamp
+forces, so the table's ``membrane_force`` (the + side force over the edge length) is the
+column P e_j. (The clamp-force sums of the full system alone would miss the contacts
+with the images.)
 """
 from __future__ import annotations
 
@@ -45,7 +46,7 @@ from ..model import BeamMaterial, BeamModel, ContactSystem
 from ..model.periodic import PeriodicSystem, fibril_end_ties
 
 __all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
-           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state"]
+           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions"]
 
 log = logging.getLogger("rve.homogenisation.periodic")
 
@@ -67,15 +68,34 @@ def gauge_dofs(ties, mesh, fields=("mech",)) -> np.ndarray:
 
 def periodic_system(cfg, fab, mesh, x_full, F, damping: float = 0.0, params=None) -> PeriodicSystem:
     """The reduced mechanics system of the cell at macro gradient ``F`` (module docstring),
-    its contact map built at the full state ``x_full``."""
+    its contact map built at the reduced dofs of the full state ``x_full`` (its image nodes
+    placed by ``F``)."""
     m = cfg.material
     params = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False) \
         if params is None else params
     mat = BeamMaterial(m.youngs_modulus, m.poisson_ratio, m.density, damping=float(damping))
     base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points)
-    full = ContactSystem(base, params, np.asarray(x_full, float).reshape(-1))
+    x_full = np.asarray(x_full, float).reshape(-1)
+    full = ContactSystem(base, params, x_full)
     ties = cell_ties(fab, mesh)
-    return PeriodicSystem(full, ties, gauge_dofs(ties, mesh), 0.0, F=F)
+    psys = PeriodicSystem(full, ties, gauge_dofs(ties, mesh), 0.0, F=F, contact_images=cfg.cell.contact_images)
+    # the map at the state the reduced dofs describe (the images where F puts them)
+    psys.rebuild(psys.restrict(x_full))
+    return psys
+
+
+def cell_reactions(fab, psys, x_red) -> dict:
+    """The Hill-Mandel stress as forces per cell face (N), the layout of the pinned cell's
+    clamp forces: ``x+`` = P e1 L_y (``x-`` minus that), ``y+`` = P e2 L_x; so the table's
+    ``membrane_force`` (the + side force over the edge length) is P e_j."""
+    P = psys.macro_stress(x_red)
+    L = 2.0 * np.asarray(fab.half_widths[:2], float)
+    out = {}
+    for j, name in ((0, "x"), (1, "y")):
+        col = P[:, j] * L[1 - j]
+        out[f"{name}-"] = [float(-v) for v in col]
+        out[f"{name}+"] = [float(v) for v in col]
+    return out
 
 
 def macro_gradient(mode: str, eps: float) -> np.ndarray:
@@ -140,7 +160,8 @@ def periodic_relax(cfg, fab, mesh, x0):
             "residual_N": free_residual(psys, res.x), "wall_s": time.perf_counter() - t0, "dofs": int(psys.n),
             "static_newton_iterations": int(res.static_newton_iterations),
             "max_overlap_over_R": float(st["max_overlap_over_R"]), "active_pairs": int(st["active_pairs"]),
-            "macro_stress_N_per_mm": psys.macro_stress(res.x)[:2, :2].tolist()}
+            "macro_stress_N_per_mm": psys.macro_stress(res.x)[:2, :2].tolist(),
+            "reaction_force": cell_reactions(fab, psys, res.x)}
     if not info["converged"]:
         log.warning("periodic relaxation: not converged (|F| = %.3e N)", info["residual_N"])
     return full_state(psys, res.x), psys.full, info
@@ -185,7 +206,7 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
             "macro_gradient": F_next.tolist(), "static": sinfo, "converged": bool(sinfo["converged"]),
             "residual_N": free_residual(psys, xs), "energy_mJ": float(psys.energy(xs)),
             "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
-            "wall_s": time.perf_counter() - t0}
+            "reaction_force": cell_reactions(fab, psys, xs), "wall_s": time.perf_counter() - t0}
     if not info["converged"]:
         log.warning("%s step %d (periodic): static solve did not reach %.1e N (|F| = %.3e N)", mode, step,
                     sp_.static_atol, info["residual_N"])

@@ -7,8 +7,10 @@ period along x, per unit reference length) as the potential jump of the ties,
 reference. Out:
 
 * the current per unit reference width through the cell face normal to the field,
-  ``j = I_face / L_y`` (A/mm; ``I_face`` the current leaving through the ties of that
-  face), recorded as the current through a **square** of the fabric with U across it,
+  ``j = I_face / L_y`` (A/mm; ``I_face`` the current leaving through that face: its ties
+  and, with ``cell.contact_images``, the contacts with the periodic images across it,
+  ``PeriodicSystem.macro_current``; an image's potential is lower by E . dX over the
+  lattice vector), recorded as the current through a **square** of the fabric with U across it,
   ``I = j L_x`` (``current`` +I / -I), so the record's resistance ``U / I = E / j`` is
   the sheet resistance (ohm per square): independent of the cell size;
 * the transverse current per width (``current_transverse``, the face along the field);
@@ -79,34 +81,45 @@ def _solve(psys, x_full, w_red, opts, what):
     return xs, ws, res
 
 
+def _periodic(full, ties, x, held, values, F, E, contact_images):
+    """The reduced system of a frozen state; with ``contact_images`` the contact map sees
+    the periodic images (their potential jumps by E over the lattice vector)."""
+    psys = PeriodicSystem(full, ties, held, values, F=F, E=E, contact_images=contact_images)
+    if psys.contact_images:
+        psys.rebuild(psys.restrict(x))
+    return psys
+
+
 def field_solve(mesh, ties, xn, F, material, cparams, E, temperature=True, disk_points=4, axial_points=None,
-                newton_opts=None) -> dict:
+                newton_opts=None, contact_images: bool = True) -> dict:
     """Potential (and Joule temperature) of the frozen periodic state ``xn`` (n_nodes, 9) at
     macro gradient ``F`` under the macro field ``E`` (3,), V/mm per reference length.
-    Returns ``{"V", "T" (nodal, full mesh), "tie_currents" (n_ties,), "conservation",
+    Returns ``{"V", "T" (nodal, full mesh), "tie_currents" (n_ties,), "macro_current" (3,)
+    (A per mm of reference width: the ties' and the image contacts' currents), "conservation",
     "iterations", "joule_power"}``."""
     opts = {"atol": 1e-12, "rtol": 1e-12, **(newton_opts or {})}
     full, x = _frozen(mesh, material, ("mech", "V"), False, cparams, xn, disk_points, axial_points)
+    lay = _periodic(full, ties, x, (), 0.0, F, None, contact_images).layout
     comp = _components(full, mesh, x)
     refs = _reference_nodes(ties, mesh, comp)
-    lay = PeriodicSystem(full, ties, F=F).layout
     held = np.concatenate([lay.dofs("mech"), lay.dofs("V", refs)])
-    psys = PeriodicSystem(full, ties, held, 0.0, F=F, E=E)
+    psys = _periodic(full, ties, x, held, 0.0, F, E, contact_images)
     xs, ws, res = _solve(psys, x, np.zeros(psys.n), opts, "voltage")
     R_red = psys.evaluate(xs, ws, 0.0, jacobian=False)[0]
-    out = {"tie_currents": psys.tie_currents(xs, ws), "iterations": {"V": int(res.iterations)},
+    out = {"tie_currents": psys.tie_currents(xs, ws), "macro_current": psys.macro_current(xs, ws),
+           "iterations": {"V": int(res.iterations)},
            "reference_current": float(np.abs(R_red[lay.dofs("V", refs)]).sum()), "components": comp}
     w_full = psys.expand_rates(ws)
     out["V"] = full.nodal(w_full)[:, full.layout.offset["V"]].copy()
     out["T"] = None
     if temperature:
         out.update(_joule_temperature(mesh, ties, xn, F, material, cparams, E, ws, lay, comp, disk_points,
-                                      axial_points, opts))
+                                      axial_points, opts, contact_images))
     return out
 
 
 def _joule_temperature(mesh, ties, xn, F, material, cparams, E, V_ws, vlay, comp, disk_points, axial_points,
-                       opts):
+                       opts, contact_images):
     """The periodic Joule temperature with the uniform sink of each conduction component
     (module docstring)."""
     from .probes import _length_weights
@@ -118,7 +131,7 @@ def _joule_temperature(mesh, ties, xn, F, material, cparams, E, V_ws, vlay, comp
     refs = _reference_nodes(ties, mesh, comp)
     held = np.concatenate([lay.dofs("mech"), lay.dofs("V"), lay.dofs("T", refs)])
     values = np.concatenate([np.zeros(lay.dofs("mech").size), V_red, np.zeros(refs.size)])
-    psys = PeriodicSystem(full, ties, held, values, F=F, E=E)
+    psys = _periodic(full, ties, x, held, values, F, E, contact_images)
     w0 = np.zeros(psys.n)
     w0[lay.dofs("V")] = V_red
     # the Joule heat the fibrils make (the T rows at T = 0), removed again by the sink
@@ -151,11 +164,9 @@ def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False):
     cparams = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=True)
     sol = field_solve(mesh, ties, xn, cell_gradient(fab, mesh, xn), conduction_material(cfg), cparams, E,
                       ps.temperature, cfg.mesh.disk_points, cfg.mesh.axial_points,
-                      {"atol": ps.newton_atol, "rtol": ps.newton_rtol})
-    along = np.abs(ties.jump[:, axis]) > 0.5 * np.abs(ties.jump).max(axis=1)
-    I_face = -float(sol["tie_currents"][along].sum())  # leaving through the + face
-    I_side = -float(sol["tie_currents"][~along].sum())
-    j, j_side = I_face / L[1 - axis], I_side / L[axis]
+                      {"atol": ps.newton_atol, "rtol": ps.newton_rtol}, cfg.cell.contact_images)
+    j, j_side = (float(v) for v in sol["macro_current"][[axis, 1 - axis]])
+    I_face = j * L[1 - axis]  # leaving through the + face (its ties and the contacts across it)
     I_sq = j * L[axis]
     res = ProbeResult(probe.name, float(ps.voltage), I_sq, -I_sq, 0.0,
                       abs(sol["reference_current"]) / max(abs(I_face), 1e-300),

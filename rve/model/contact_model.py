@@ -109,10 +109,10 @@ class ContactSystem:
         _timer(self.stats, "rebuild_s", t0)
         return self.term.map
 
-    def set_periodic(self, images=None, wrap=None, x=None) -> None:
+    def set_periodic(self, images=None, wrap=None, x=None, field_jumps=None) -> None:
         """Periodic images of the contact search (``ContactTerm.set_periodic``); with ``x``
         the map and the union structure are rebuilt at once."""
-        self.term.set_periodic(images, wrap)
+        self.term.set_periodic(images, wrap, field_jumps)
         if x is not None:
             self.rebuild(x)
 

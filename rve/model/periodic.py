@@ -158,8 +158,10 @@ class PeriodicSystem:
     ``F`` (2x2 in-plane or 3x3), ``grad_T`` (3,), ``E`` (3,): the macro jumps."""
 
     def __init__(self, full, ties: PeriodicTies, constrained=(), values=0.0, F=None, grad_T=None, E=None,
-                 load=None):
+                 load=None, contact_images: bool = False):
         self.full = full
+        #: the contact search sees the periodic images (a ``ContactSystem`` full system)
+        self.contact_images = bool(contact_images) and hasattr(full, "set_periodic")
         #: a constant vector added to the full residual (e.g. a uniform heat sink), or None
         self.load = None if load is None else np.asarray(load, float)
         self.ties = ties
@@ -184,13 +186,18 @@ class PeriodicSystem:
 
     # ------------------------------------------------------------------ maps
     def set_macro(self, F=None, grad_T=None, E=None) -> None:
-        """Set the macro jumps (None keeps the current one); the shift follows."""
+        """Set the macro jumps (None keeps the current one); the shift follows, and with
+        ``contact_images`` the lattice of the contact search (the images F L1, F L2 and
+        their sums; every fibril wraps into its image F dX): it takes effect at the next
+        ``rebuild``, which the caller makes at the new state."""
         if F is not None:
             self.F = in_plane_gradient(F)
         if grad_T is not None or not hasattr(self, "grad_T"):
             self.grad_T = np.zeros(3) if grad_T is None else np.asarray(grad_T, float)
         if E is not None or not hasattr(self, "E"):
             self.E = np.zeros(3) if E is None else np.asarray(E, float)
+        if self.contact_images:
+            self._set_images()
         s = np.zeros(self.full.n)
         s[self._image_r] = self.ties.jump @ self.F.T
         if self._image_T is not None:
@@ -200,6 +207,17 @@ class PeriodicSystem:
         mech = np.asarray(self.full.mech, bool)
         self._shift_x = np.where(mech, s, 0.0)
         self._shift_w = np.where(mech, 0.0, s)
+
+    def _set_images(self) -> None:
+        """The contact search's lattice (F L1, F L2 and their sums), the fibrils' wraps (each
+        into its image F dX) and the field values of an image at deformed shift T: T + grad_T
+        . F^-1 T, V - E . F^-1 T (the ties' jumps over the reference lattice vector)."""
+        a1, a2 = self.ties.periods @ self.F.T
+        images = [i * a1 + j * a2 for i in (-1, 0, 1) for j in (-1, 0, 1) if (i, j) != (0, 0)]
+        wrap = np.zeros((self.full.mesh.n_fibrils, 3))
+        wrap[self.full.mesh.node_fibril[self.ties.image]] = self.ties.jump @ self.F.T
+        Finv_T = np.linalg.inv(self.F).T
+        self.full.set_periodic(np.array(images), wrap, field_jumps={"T": Finv_T @ self.grad_T, "V": -(Finv_T @ self.E)})
 
     def expand(self, x_red) -> np.ndarray:
         """The full (unrolled) ``x`` of a reduced one: ``T x + s`` on the mechanical dofs (the
@@ -283,12 +301,49 @@ class PeriodicSystem:
         neighbour exerts through the tie on the image (internal + contact)."""
         return self.full_residual(x, w, t)[self._image_r]
 
+    def _image_pair_moment(self, x, w, cols) -> np.ndarray:
+        """(len(cols), 3): sum over the active contact pairs with a periodic image of the
+        residual components ``cols`` (local pair columns) on the - side (x) the reference
+        lattice vector F^-1 T of the pair."""
+        cmap = self.full.map if self.contact_images else None
+        if cmap is None or cmap.shift is None:
+            return np.zeros((len(cols), 3))
+        term = self.full.term
+        w_full = np.zeros(self.full.n) if w is None else self.expand_rates(w)
+        act, R, _, _ = term.forms(self.expand(x), w_full, jacobian=False)
+        if act.size == 0:
+            return np.zeros((len(cols), 3))
+        # the local nodes of a pair are its + element's, then its - element's
+        R = np.asarray(R).reshape(act.size, term.m, -1)[:, :, cols]
+        f_minus = R[:, term.m // 2:, :].sum(axis=1)
+        ref = np.linalg.solve(self.F, cmap.shifts[act].T).T
+        return f_minus.T @ ref
+
+    def image_contact_moment(self, x) -> np.ndarray:
+        """(3, 3): sum over the contact pairs with a periodic image of the force on the image
+        side (x) its reference lattice vector F^-1 T: the derivative of the contact energy
+        with respect to F through the shifts T = F (i L1 + j L2)."""
+        return self._image_pair_moment(x, None, [0, 1, 2])
+
     def macro_stress(self, x, w=None, t: float = 0.0) -> np.ndarray:
-        """First Piola-Kirchhoff membrane stress (3, 3), N/mm: sum f (x) dX / A."""
+        """First Piola-Kirchhoff membrane stress (3, 3), N/mm: (sum_ties f (x) dX + the image
+        contacts' ``image_contact_moment``) / A, i.e. dPi/dF / A at an equilibrium."""
         f = self.tie_forces(x, w, t)
-        return f.T @ self.ties.jump / self.ties.area
+        return (f.T @ self.ties.jump + self.image_contact_moment(x)) / self.ties.area
 
     def tie_currents(self, x, w) -> np.ndarray:
         """(n_ties,): the V residual at every image node: the current leaving the cell
         through the tie into the periodic neighbour (A)."""
         return self.full_residual(x, w)[self._image_V]
+
+    def macro_current(self, x, w) -> np.ndarray:
+        """(3,): the macro current per unit reference width (A/mm) leaving the cell,
+        -(sum_ties i dX + the image contacts' current (x) F^-1 T) / A: the conduction
+        counterpart of ``macro_stress`` (the current of a face is carried by its ties and by
+        the contacts across it)."""
+        i = self.tie_currents(x, w)
+        term = getattr(self.full, "term", None)
+        img = np.zeros(3)
+        if term is not None and "V" in getattr(term, "scalar", ()):
+            img = self._image_pair_moment(x, w, [3 + term.scalar.index("V")])[0]
+        return -(i @ self.ties.jump + img) / self.ties.area

@@ -139,14 +139,20 @@ class ContactTerm:
         #: fibrils that wrap into their own image (``set_periodic``); None: a plain cell
         self.images = None
         self.wrap = None
+        #: {field: c (3,)}: on a pair with the image at shift T the - side's field value is
+        #: its node value + T . c (the macro jump of T or V over the lattice vector)
+        self.field_jumps = {}
 
-    def set_periodic(self, images=None, wrap=None) -> None:
+    def set_periodic(self, images=None, wrap=None, field_jumps=None) -> None:
         """Periodic images for the next ``rebuild``: ``images`` (K, 3) lattice translations
         (each pair with an image of the - element carries that shift), ``wrap`` the period
         vector of every fibril that continues into its own image (``{fibril: L_f}`` or
-        (n_fibrils, 3), zero/NaN rows: no wrap). ``set_periodic()`` returns to a plain cell."""
+        (n_fibrils, 3), zero/NaN rows: no wrap), ``field_jumps`` ``{"T"/"V": c (3,)}``: an
+        image at shift T carries the field value + T . c (takes effect at once; a constant
+        of each pair, so no tangent entry). ``set_periodic()`` returns to a plain cell."""
         self.images = None if images is None else np.asarray(images, float).reshape(-1, 3)
         self.wrap = wrap
+        self.field_jumps = {f: np.asarray(c, float).reshape(3) for f, c in (field_jumps or {}).items()}
 
     def rebuild(self, x) -> np.ndarray:
         """Contact map at state ``x``; returns the pair connectivity (P, m)."""
@@ -274,7 +280,10 @@ class ContactTerm:
                 off = self.layout.offset[f]
                 coef = self.params.heat_transfer if f == "T" else self.params.conductance
                 u = wn[:, off]
-                R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u[conn[mpair]], wgt, coef,
+                u_minus = u[conn[mpair]]
+                if f in self.field_jumps and self.map.shift is not None:
+                    u_minus = u_minus + (self.map.shift[act] @ self.field_jumps[f])[:, None]
+                R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u_minus, wgt, coef,
                                         self.kappa[act], self.g_eps, jacobian)
                 Rl[:, :, c] += R
                 if jacobian:
