@@ -135,3 +135,37 @@ def test_pinned_work_rate_is_the_load_derivative_of_the_energy():
         fd = (vals[0] - vals[1]) / (2 * h)
         assert abs(rate) > 0
         assert rate == pytest.approx(fd, rel=1e-5), mode
+
+
+def test_periodic_work_rate_is_the_derivative_of_the_energy_along_the_branch():
+    """``periodic_energy``'s dPi/deps (the Hill-Mandel A P : dF/deps) is the derivative of
+    the potential along the equilibrium branch: central differences of Pi over equilibria of
+    the CI-size periodic cell at eps +- h (uniaxial and shear); a uniaxial strain step
+    through the one-path test passes it and keeps the plain step's bits. (This cell's
+    shear step is a detection: the small steps stay on a branch with 3 negative pivots, the
+    whole step drops 2e-4 N mm below it into a minimum; a limit point, the naive state kept.)"""
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.config import RVEConfig
+    from rve.homogenisation.periodic import periodic_energy, periodic_strain_step
+    from rve.homogenisation.strain import relax_fabric, strain_step
+
+    cfg = RVEConfig(scene="rve", boundary="periodic", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 6},
+                    contact={"onset": 0.05}, strain={"total": 0.1, "steps": 2, "static_atol": 1e-8})
+    fab, mesh = fabric_and_mesh(cfg)
+    x0, _, info = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    assert info["converged"]
+    eps, h = 0.03, 1e-3
+    for mode in ("uniaxial", "shear"):
+        x_eps, _, inf = periodic_strain_step(cfg, fab, mesh, x0, x0, mode, 1, (0.0, eps))
+        assert inf["converged"]
+        Pi, rate = periodic_energy(cfg, fab, mesh, x_eps, mode, eps)
+        ends = [periodic_energy(cfg, fab, mesh, periodic_strain_step(cfg, fab, mesh, x_eps, x0, mode, 1,
+                                                                     (eps, eps + s))[0], mode, eps + s)[0]
+                for s in (h, -h)]
+        fd = (ends[0] - ends[1]) / (2 * h)
+        assert abs(rate) > 0
+        assert rate == pytest.approx(fd, rel=1e-4), mode
+    x_plain, _, _ = periodic_strain_step(cfg, fab, mesh, x0, x0, "uniaxial", 1)
+    x_followed, _, inf = strain_step(cfg, fab, mesh, x0, x0, "uniaxial", 1)
+    assert inf["branch"]["detections"] == 0 and inf["branch"]["kept"] == "naive"
+    assert np.array_equal(x_followed, x_plain)

@@ -21,7 +21,10 @@ pinned state):
   reduced system, the config's relaxation settings);
 * :func:`periodic_strain_step` -- one step: F_{n-1} -> F_n, predictor the affine map
   F_n F_{n-1}^-1 of the previous state about the held node, then the static minimisation
-  (``strain.static_minimize``);
+  (``strain.static_minimize``), or a part of it (``eps_range``: the step halving of
+  ``strain.follow_branch``);
+* :func:`periodic_energy` -- the potential of a state and its load derivative, the
+  Hill-Mandel work rate (the one-path test of ``rve.homogenisation.branch``);
 * :func:`cell_gradient` -- the F a stored full state carries (its tie jumps), and
   :func:`periodic_free_residual` -- |F| on the free reduced dofs of a stored state;
 * :func:`gauge_dofs` -- the held reduced dofs above.
@@ -46,7 +49,7 @@ from ..model import BeamMaterial, BeamModel, ContactSystem
 from ..model.periodic import PeriodicSystem, fibril_end_ties
 
 __all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
-           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions"]
+           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "periodic_energy"]
 
 log = logging.getLogger("rve.homogenisation.periodic")
 
@@ -177,11 +180,12 @@ def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
     return x
 
 
-def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
+def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_range=None):
     """One strain step of the periodic cell from ``x_prev`` (full, n_nodes x 9) at strain
-    eps_{step-1} to eps_step (module docstring). ``origin`` (the relaxed state) is not
-    used: the cell's strain is its macro gradient, exact by construction. Returns
-    ``(x (n_nodes, 9), full system, info)``."""
+    eps_{step-1} to eps_step (module docstring), or between the strains ``eps_range = (from,
+    to)`` (a part of the step, ``strain.follow_branch``; ``step`` labels the record).
+    ``origin`` (the relaxed state) is not used: the cell's strain is its macro gradient,
+    exact by construction. Returns ``(x (n_nodes, 9), full system, info)``."""
     from .strain import free_residual, static_minimize, strain_levels
 
     del origin
@@ -190,19 +194,18 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
         raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
     t0 = time.perf_counter()
     levels = strain_levels(cfg)
-    F_prev, F_next = macro_gradient(mode, float(levels[step - 1])), macro_gradient(mode, float(levels[step]))
+    eps_from, eps_to = (float(levels[step - 1]), float(levels[step])) if eps_range is None else map(float, eps_range)
+    F_prev, F_next = macro_gradient(mode, eps_from), macro_gradient(mode, eps_to)
     dF = F_next @ np.linalg.inv(F_prev)
     x_prev = np.asarray(x_prev, float).reshape(mesh.n_nodes, 9)
     held = int(mesh.node_offsets[0])
     x_pred = _affine_predictor(x_prev, dF, x_prev[held, :3])
     psys = periodic_system(cfg, fab, mesh, x_pred, F_next)
     xr = psys.restrict(x_pred.reshape(-1))
-    # (the equilibrium-branch check of a step, rve.homogenisation.branch, compares this
-    # step's result with x_prev and retries with smaller F increments; it goes here)
     xs, sinfo = static_minimize(psys, xr, sp_.static_atol, sp_.static_max_iter)
     sinfo["wall_s"] = time.perf_counter() - t0
-    info = {"mode": mode, "step": int(step), "strain": float(levels[step]),
-            "strain_increment": float(levels[step] - levels[step - 1]), "boundary": "periodic",
+    info = {"mode": mode, "step": int(step), "strain": eps_to,
+            "strain_increment": eps_to - eps_from, "boundary": "periodic",
             "macro_gradient": F_next.tolist(), "static": sinfo, "converged": bool(sinfo["converged"]),
             "residual_N": free_residual(psys, xs), "energy_mJ": float(psys.energy(xs)),
             "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
@@ -211,3 +214,17 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
         log.warning("%s step %d (periodic): static solve did not reach %.1e N (|F| = %.3e N)", mode, step,
                     sp_.static_atol, info["residual_N"])
     return full_state(psys, xs), psys.full, info
+
+
+def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float) -> tuple:
+    """``(Pi, dPi/deps)`` of an equilibrium of the cell at strain ``eps`` (the one-path test
+    of ``rve.homogenisation.branch``): the potential of the reduced system at the mode's
+    macro gradient (N mm) and its load derivative, the Hill-Mandel work rate A P : dF/deps
+    (``PeriodicSystem.macro_stress`` is dPi/dF / A at an equilibrium)."""
+    F = macro_gradient(mode, eps)
+    psys = periodic_system(cfg, fab, mesh, x_full, F)
+    xr = psys.restrict(np.asarray(x_full, float).reshape(-1))
+    h = 1e-6   # dF/deps: exact for the linear modes, the trellis gradient's central difference
+    dF = (macro_gradient(mode, eps + h) - macro_gradient(mode, eps - h)) / (2.0 * h)
+    return float(psys.energy(xr)), float(psys.ties.area * np.sum(psys.macro_stress(xr) * dF))
+

@@ -285,42 +285,55 @@ def end_targets(origin_ends: np.ndarray, mode: str, eps: float) -> np.ndarray:
 
 
 def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
-    """One step of Algorithm 7.1 from ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to
-    eps_step (module docstring). Returns ``(x (n_nodes, 9), system, info)``."""
+    """One step of Algorithm 7.1 (or of the periodic cell, ``boundary: periodic``) from
+    ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to eps_step (module docstring). Returns
+    ``(x (n_nodes, 9), system, info)``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
-    if getattr(cfg, "boundary", "pinned") == "periodic":
-        from .periodic import periodic_strain_step
-
-        return periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode, step)
     sp_ = cfg.strain
+    periodic = getattr(cfg, "boundary", "pinned") == "periodic"
+    if periodic:
+        from .periodic import periodic_energy, periodic_strain_step
+
+        def part(x, e_from, e_to, whole=False):
+            return periodic_strain_step(cfg, fab, mesh, x, origin, mode, step, None if whole else (e_from, e_to))
+
+        def energy(system, x, e):
+            return periodic_energy(cfg, fab, mesh, x, mode, e)
+    else:
+        def part(x, e_from, e_to, whole=False):
+            return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to)
+
+        def energy(system, x, e):
+            if system is None:
+                system = mech_system(fab, mesh, cfg, sp_.relax_damping, np.asarray(x, float).reshape(-1))
+            return pinned_energy(fab, mesh, system, x, origin, mode, e)
     if not 1 <= step <= sp_.steps:
         raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
     levels = strain_levels(cfg)
     eps_prev, eps = float(levels[step - 1]), float(levels[step])
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
-        return _branch_step(cfg, fab, mesh, x_prev, origin, mode, step, eps_prev, eps)
-    return _algorithm_step(cfg, fab, mesh, x_prev, origin, mode, step, eps_prev, eps)
+        return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy)
+    return part(x_prev, eps_prev, eps, whole=True)
 
 
-def _branch_step(cfg, fab, mesh, x_prev, origin, mode, step, eps_prev, eps):
-    """``_algorithm_step`` through ``branch.follow_branch``: the potential of a state and its
-    load derivative, the clamp forces times the end velocity per unit strain
-    (``pinned_energy``); the inertia from the energy minimiser's definiteness verdict."""
+def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of):
+    """The step ``part(x, eps_from, eps_to)`` through ``branch.follow_branch``: the potential
+    of a state and its load derivative ``energy_of(system, x, eps)`` (pinned: the clamp
+    forces times the end velocity per unit strain, ``pinned_energy``; periodic: the
+    Hill-Mandel work rate, ``periodic.periodic_energy``); the inertia from the energy
+    minimiser's definiteness verdict."""
     from .branch import BranchSettings, StepSolution, follow_branch
 
     t0 = time.perf_counter()
-    sp_ = cfg.strain
     nn = mesh.n_nodes
 
     def solve(start, e_from, e_to):
-        x2, sys2, inf = _algorithm_step(cfg, fab, mesh, start.x, origin, mode, step, e_from, e_to)
+        x2, sys2, inf = part(start.x, e_from, e_to)
         return StepSolution(x2, inf, sys2)
 
     def energy(sol, e):
-        system = sol.extra if sol.extra is not None else mech_system(fab, mesh, cfg, sp_.relax_damping,
-                                                                     np.asarray(sol.x, float).reshape(-1))
-        return pinned_energy(fab, mesh, system, sol.x, origin, mode, e)
+        return energy_of(sol.extra, sol.x, e)
 
     def inertia(sol):
         k = (sol.info.get("static") or {}).get("negative_pivots")
