@@ -19,7 +19,9 @@ and their closest points on element b. A point sits at the element parameter ``s
   the pair whose b holds the closest point of b's *fibril*: an interior ``s_b`` always
   (a local minimum of the distance); ``s_b = 1`` only when b has no next element (a free
   fibril end) or the distance to the next element grows from the shared node,
-  ``(x_b(1) - p).t_next(0) >= 0``; ``s_b = 0`` only when b has no previous element. So of
+  ``(x_b(1) - p).t_next(0) >= 0`` (to a tolerance that matches the projection's snap of
+  parameters within 1e-9 of an end to the end); ``s_b = 0`` only when b has no previous
+  element. So of
   the pairs (a, b) and (a, next b) exactly one takes a point whose closest point is the
   shared node, and a point whose projection moves on leaves one pair for the other with
   the same position, gap and normal: the force is continuous. Not owned points carry no
@@ -65,6 +67,8 @@ __all__ = [
 ]
 
 _TINY = 1e-300
+#: closest-point parameters this close to 0 or 1 are taken as the element end
+_END_SNAP = 1e-9
 
 
 def gauss_legendre_01(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -127,6 +131,10 @@ def project_to_curve(order: int, Xb, p, iterations: int = 12):
         s = s_new
         if done:
             break
+    # a closest point within _END_SNAP of an element end is that end, so that of two
+    # neighbour elements exactly one owns a point whose projection is their shared node
+    # (round-off in the tangents decides the sign of a zero derivative otherwise)
+    s = np.where(s < _END_SNAP, 0.0, np.where(s > 1.0 - _END_SNAP, 1.0, s))
     return s
 
 
@@ -181,7 +189,11 @@ def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_pr
     g = (gr[:, None] if gr.ndim == 1 else gr) - rho
     interior = (s_b > 0.0) & (s_b < 1.0)
     end_b = Xb[:, -1]
-    grows = np.einsum("pgi,pi->pg", end_b[:, None, :] - p, np.asarray(t_next, float)) >= 0.0
+    tn = np.asarray(t_next, float)
+    # the distance grows into the next element (its derivative there, d/ds (q - p)^2 / 2,
+    # is >= 0); the tolerance matches the end snap of the projection: f ~ -|t|^2 s
+    tt_next = np.einsum("pi,pi->p", tn, tn)[:, None]
+    grows = np.einsum("pgi,pi->pg", end_b[:, None, :] - p, tn) >= -2.0 * _END_SNAP * tt_next
     hn = np.asarray(has_next, bool)[:, None]
     hp = np.asarray(has_prev, bool)[:, None]
     owned = interior | ((s_b >= 1.0) & (~hn | grows)) | ((s_b <= 0.0) & ~hp)

@@ -1,0 +1,132 @@
+"""Contact on the chord vs on the centroid curve: analytic cases at p = 1, 2, 3
+(docs/contact.md "Contact on the centroid curve"). Prints:
+
+(a) two straight crossed fibrils (rigid, held at a centre distance d = R+ + R- - delta):
+    the contact force against the closed form of the linear penalty law,
+    F(delta) = 2 P* d [ Rs asinh(L/d) - L ],  Rs = R+ + R-,  L = sqrt(Rs^2 - d^2)
+    (the integral of P* g n_z along either fibril), for 4..64 elements per fibril, and the
+    observed order;
+(b) a fibril slid across another one over several element ends (rigid, constant approach):
+    the exact force is constant; the relative spread of the force history, its largest jump
+    between two steps and the largest jump of its slope;
+(c) an augmented Lagrangian solve of two pressed fibrils (pinned ends): the largest overlap
+    and the contact force for P* = 50 and 500, with each Newton solve's residuals.
+
+Usage: nice -n 10 python benchmarks/contact_order.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from rve.fem.mesh import fibril_mesh, straight_fibril
+from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+
+R = 0.15
+PSTAR = 50.0
+
+
+def closed_form_force(delta, radius_sum=2 * R, penalty=PSTAR):
+    d = radius_sum - delta
+    L = np.sqrt(radius_sum**2 - d**2)
+    return 2.0 * penalty * d * (radius_sum * np.arcsinh(L / d) - L)
+
+
+def crossed_force(order, ne, geometry, delta, x0=0.0, y0=0.0, n_gp=4):
+    """z-force on the upper fibril of two rigid straight crossed fibrils (a along x at z = 0,
+    b along y at z = -(2R - delta), crossing at (x0, y0))."""
+    fibs = [straight_fibril([-1, y0, 0], [1, y0, 0], R, "a"),
+            straight_fibril([x0, -1, -(2 * R - delta)], [x0, 1, -(2 * R - delta)], R, "b")]
+    mesh = fibril_mesh(fibs, ne, order)
+    base = BeamModel(mesh, BeamMaterial(126.0))
+    x = np.zeros(base.n)
+    base.nodal(x)[:, :9] = mesh.X0
+    sysm = ContactSystem(base, ContactParams(penalty=PSTAR, n_gp=n_gp, geometry=geometry), x)
+    return float(sysm.fibril_contact_forces(x)[0, 2])
+
+
+def case_a(quick: bool):
+    delta = 0.02
+    F = closed_form_force(delta)
+    nes = (4, 8, 16, 32) if quick else (4, 8, 16, 32, 64)
+    print(f"(a) crossed fibrils, R = {R}, P* = {PSTAR}, approach delta = {delta} mm: closed form F = {F:.6f} N")
+    print("    crossing at (0.0137, 0.0291) (inside elements); relative error of F, n_gp = 4")
+    for geometry in ("chord", "curve"):
+        for order in (1, 2, 3):
+            errs = [crossed_force(order, ne, geometry, delta, 0.0137, 0.0291) / F - 1 for ne in nes]
+            rates = [np.log2(abs(errs[k] / errs[k + 1])) if errs[k + 1] != 0 else np.nan for k in range(len(errs) - 1)]
+            print(f"    {geometry:5s} p={order}: " + " ".join(f"{ne}:{e:+.2e}" for ne, e in zip(nes, errs))
+                  + "   orders " + " ".join(f"{r:.2f}" for r in rates))
+
+
+def case_b(quick: bool):
+    delta = 0.02
+    F = closed_form_force(delta)
+    ne = 8
+    h = 2.0 / ne
+    steps = 81 if quick else 241
+    s = np.linspace(0.0, 2.5 * h, steps)  # the crossing moves over 2.5 elements of both fibrils
+    print(f"(b) sliding: the crossing moves along the diagonal over 2.5 elements (h = {h} mm, {ne} el/fibril), "
+          f"{steps} positions; exact F = {F:.6f} N (constant)")
+    for order in (1, 2, 3):
+        for geometry in ("chord", "curve"):
+            hist = np.array([crossed_force(order, ne, geometry, delta, -0.3 + t, -0.3 + t) for t in s])
+            jump = np.abs(np.diff(hist)).max() / F
+            slope = np.diff(hist) / np.diff(s)
+            djump = np.abs(np.diff(slope)).max() * np.diff(s)[0] / F  # slope change per step, relative
+            print(f"    p={order} {geometry:5s}: F/F_exact in [{hist.min() / F:.4f}, {hist.max() / F:.4f}], "
+                  f"max |dF| per step {jump:.2e} F, max |d(dF/ds)| per step x ds {djump:.2e} F")
+
+
+def case_c():
+    from rve.model import DirichletBC
+    from rve.solvers.augmented import solve_with_multipliers
+    from rve.solvers.static import static_solve
+
+    print("(c) augmented Lagrangian, two fibrils pressed by prescribed end displacements (0.08 mm each), "
+          "p = 2, 8 el/fibril, tolerance 1e-4 R")
+    for geometry in ("chord", "curve"):
+        for P in (50.0, 500.0):
+            for enforcement in ("penalty", "augmented_lagrangian"):
+                fibs = [straight_fibril([-1, 0, R], [1, 0, R], R, "a"),
+                        straight_fibril([0.03, -1, -R], [0.03, 1, -R], R, "b")]
+                mesh = fibril_mesh(fibs, 8, 2)
+                ends = [n for f in (0, 1) for n in mesh.end_nodes(f)]
+                pinned = np.array([n * 9 + k for n in ends for k in range(3)])
+                gauge = np.array([mesh.end_nodes(0)[0] * 9 + 5, mesh.end_nodes(1)[0] * 9 + 5])
+                base = BeamModel(mesh, BeamMaterial(126.0, density=1e-3),
+                                 bcs=[DirichletBC(pinned, 0.0), DirichletBC(gauge, 0.0)])
+                x = np.zeros(base.n)
+                xn = base.nodal(x)
+                xn[:, :9] = mesh.X0
+                xn[list(mesh.end_nodes(0)), 2] -= 0.08
+                xn[list(mesh.end_nodes(1)), 2] += 0.08
+                sysm = ContactSystem(base, ContactParams(penalty=P, geometry=geometry, enforcement=enforcement), x)
+                log = []
+
+                def solve(y):
+                    xs, _, res = static_solve(sysm, y, np.zeros(base.n), 0.0,
+                                              {"atol": 1e-11, "rtol": 1e-13, "max_iter": 40})
+                    log.append(res)
+                    return xs
+
+                xs, loop = solve_with_multipliers(sysm, solve, x)
+                Fz = sysm.fibril_contact_forces(xs)[0, 2]
+                print(f"    {geometry:5s} P*={P:5.0f} {enforcement:20s}: F = {Fz:.7f} N, max overlap "
+                      f"{sysm.max_penetration(xs):.2e} R, updates {loop.updates}")
+                for res in log:
+                    print("        Newton residuals " + " ".join(f"{r:.1e}" for r in res.residuals))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    case_a(args.quick)
+    case_b(args.quick)
+    case_c()
+
+
+if __name__ == "__main__":
+    main()
