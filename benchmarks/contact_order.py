@@ -10,7 +10,8 @@
     the exact force is constant; the relative spread of the force history, its largest jump
     between two steps and the largest jump of its slope;
 (c) an augmented Lagrangian solve of two pressed fibrils (pinned ends): the largest overlap
-    and the contact force for P* = 50 and 500, with each Newton solve's residuals.
+    and the contact force for P* = 50 and 500, with each Newton solve's residuals;
+(d) the width and Holm conductance laws on the crossed pair against the contact force.
 
 Usage: nice -n 10 python benchmarks/contact_order.py [--quick]
 """
@@ -69,14 +70,20 @@ def case_b(quick: bool):
     s = np.linspace(0.0, 2.5 * h, steps)  # the crossing moves over 2.5 elements of both fibrils
     print(f"(b) sliding: the crossing moves along the diagonal over 2.5 elements (h = {h} mm, {ne} el/fibril), "
           f"{steps} positions; exact F = {F:.6f} N (constant)")
+    print("    a jump of F shows as a max step change that does not halve when the step halves (ratio ~1);"
+          " a continuous history gives ratio ~2")
+    fine = np.linspace(0.0, 2.5 * h, 2 * steps - 1)
     for order in (1, 2, 3):
         for geometry in ("chord", "curve"):
             hist = np.array([crossed_force(order, ne, geometry, delta, -0.3 + t, -0.3 + t) for t in s])
+            hist2 = np.array([crossed_force(order, ne, geometry, delta, -0.3 + t, -0.3 + t) for t in fine])
             jump = np.abs(np.diff(hist)).max() / F
+            jump2 = np.abs(np.diff(hist2)).max() / F
             slope = np.diff(hist) / np.diff(s)
             djump = np.abs(np.diff(slope)).max() * np.diff(s)[0] / F  # slope change per step, relative
             print(f"    p={order} {geometry:5s}: F/F_exact in [{hist.min() / F:.4f}, {hist.max() / F:.4f}], "
-                  f"max |dF| per step {jump:.2e} F, max |d(dF/ds)| per step x ds {djump:.2e} F")
+                  f"max |dF| per step {jump:.2e} F (half step {jump2:.2e} F, ratio {jump / jump2:.2f}), "
+                  f"max |d(dF/ds)| per step x ds {djump:.2e} F")
 
 
 def case_c():
@@ -119,6 +126,36 @@ def case_c():
                     print("        Newton residuals " + " ".join(f"{r:.1e}" for r in res.residuals))
 
 
+def case_d():
+    """The two conductance laws on the crossed pair (rigid, the approach varied)."""
+    hard, spot, sigma0, sigma_c = 100.0, 1e-3, 10.0, 1.0
+    print(f"(d) contact conductance of the crossed pair, width law (sigma_C = {sigma_c} A/(mm^2 V), Hertz width "
+          f"of the line load) vs Holm a-spots (H = {hard} MPa, a_s = {spot} mm, sigma0 = {sigma0} S/mm); curve, p = 2, "
+          "16 el/fibril")
+    rows = []
+    for delta in (0.0025, 0.005, 0.01, 0.02, 0.04):
+        G = {}
+        for law in ("width", "holm"):
+            fibs = [straight_fibril([-1, 0.0291, 0], [1, 0.0291, 0], R, "a"),
+                    straight_fibril([0.0137, -1, -(2 * R - delta)], [0.0137, 1, -(2 * R - delta)], R, "b")]
+            mesh = fibril_mesh(fibs, 16, 2)
+            base = BeamModel(mesh, BeamMaterial(126.0, electrical_conductivity=sigma0), fields=("mech", "V"))
+            x = np.zeros(base.n)
+            base.nodal(x)[:, :9] = mesh.X0
+            sysm = ContactSystem(base, ContactParams(penalty=PSTAR, conductance=sigma_c, geometry="curve",
+                                                     conductance_law=law, hardness=hard, spot_radius=spot), x)
+            G[law] = sum(sysm.contact_conductance(x, "V").values())
+            Fz = sysm.fibril_contact_forces(x)[0, 2]
+        rows.append((delta, Fz, G["width"], G["holm"]))
+    for k, (delta, Fz, gw, gh) in enumerate(rows):
+        line = f"    delta {delta:.4f} mm  F {Fz:.4e} N  G_width {gw:.4e} A/V  G_holm {gh:.4e} A/V  holm/width {gh / gw:.3f}"
+        if k:
+            d0 = rows[k - 1]
+            line += (f"   dlnG/dlnF: width {np.log(gw / d0[2]) / np.log(Fz / d0[1]):.2f},"
+                     f" holm {np.log(gh / d0[3]) / np.log(Fz / d0[1]):.2f}")
+        print(line)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
@@ -126,6 +163,7 @@ def main():
     case_a(args.quick)
     case_b(args.quick)
     case_c()
+    case_d()
 
 
 if __name__ == "__main__":

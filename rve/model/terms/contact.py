@@ -21,6 +21,15 @@ params, E_star)``: a term of *pair elements*, not of beam elements:
   energy, the potential of the mechanical residual), ``contact_state(x)``,
   ``conductance_by_pair(x, field)``; ``onset`` / ``set_onset`` (C² onset of the penalty
   law).
+
+Options (``ContactParams``; the defaults are the chord, the penalty and the width law, as in
+the thesis): ``geometry="curve"`` evaluates the contact on the elements' Lagrange curves
+with two half passes (``rve.model.terms.contact_pairs.HalfPasses``; every pair has m = 2nn
+local nodes, its rows are the oriented pairs); ``enforcement="augmented_lagrangian"`` carries
+multipliers per point (``multipliers`` (rows, n_gp), kept by point key over rebuilds) that
+shift the penalty law's overlap to ``g + lambda/P*``, updated by ``update_multipliers(x)``
+(driven by ``rve.solvers.augmented``), ``penetration`` / ``max_penetration`` the true
+overlaps; ``conductance_law="holm"`` the a-spot law (``conductance_law``).
 """
 from __future__ import annotations
 
@@ -70,8 +79,11 @@ class ContactParams:
     until the largest overlap is below ``al_tolerance`` x R, at most ``al_max_iter``
     updates). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
     line load) or ``"holm"`` (the a-spot constriction conductance of the line load with the
-    hardness ``hardness`` (MPa) and a-spot radius ``spot_radius`` (mm); the fibrils' bulk
-    conductivities ``holm_conductivity``/``holm_thermal_conductivity`` from the model)."""
+    hardness ``hardness`` (MPa) and a-spot radius ``spot_radius`` (mm): per unit length
+    ``2 k0 p / (pi H a_s)``, k0 the material's ``electrical_conductivity`` (V) or
+    ``thermal_conductivity`` (T), p the line load; the term of a field is on when that
+    conductivity is > 0, and ``conductance``/``heat_transfer`` are not used).
+    ``al_tolerance`` is a fraction of the fibril radius (default 1e-4 R)."""
 
     penalty: float
     youngs_modulus: Optional[float] = None
