@@ -114,3 +114,69 @@ def test_crossed_fibrils_closed_form(order):
     for x0, y0 in ((0.0137, 0.0291), (0.0, 0.0)):
         assert abs(crossed_force(order, 32, "curve", 0.02, x0, y0) / F - 1) < 5e-3
     assert crossed_force(order, 16, "chord", 0.02, 0.0137, 0.0291) / F - 1 > 0.5
+
+
+def test_holm_conductance_is_proportional_to_the_contact_force():
+    """Holm a-spots: the pair's conductance is 2 sigma0 / (pi H a_s) times the normal force
+    (sum of w times the line load), for the chord and the curve; doubling H halves it."""
+    for geometry in ("chord", "curve"):
+        G = []
+        for H in (100.0, 200.0):
+            sysm, x, _ = _crossed(2, fields=("mech", "V"), geometry=geometry, conductance_law="holm", hardness=H,
+                                  spot_radius=1e-3)
+            Fn = sysm.contact_state(x)["total_normal_force"]
+            G.append(sum(sysm.contact_conductance(x, "V").values()))
+            np.testing.assert_allclose(G[-1], 2 * 10.0 / (np.pi * H * 1e-3) * Fn, rtol=1e-12)
+        np.testing.assert_allclose(G[1], G[0] / 2, rtol=1e-12)
+
+
+def test_active_points_per_pair():
+    for geometry in ("chord", "curve"):
+        sysm, x, _ = _crossed(2, fields=("mech",), geometry=geometry)
+        n = sysm.active_points(x)
+        assert n.shape == (sysm.map.n_pairs,) and n.sum() > 0
+        assert set(np.flatnonzero(n)) == set(sysm.active_pairs(x))
+
+
+def test_sliding_force_history_is_continuous():
+    """The crossing slid over element ends of both fibrils (rigid, constant approach): the
+    curve's largest force change per step halves when the step halves (no jump), and the
+    force stays within 6 % of the closed form (n_gp = 4 quadrature ripple); the chord's
+    over-count swings it by more than 50 %."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from contact_order import closed_form_force, crossed_force
+
+    F = closed_form_force(0.02)
+    h = 0.25
+    coarse = np.linspace(0.0, 1.2 * h, 25)
+    fine = np.linspace(0.0, 1.2 * h, 49)
+    hist = {n: np.array([crossed_force(2, 8, "curve", 0.02, -0.3 + t, -0.3 + t) for t in s])
+            for n, s in (("coarse", coarse), ("fine", fine))}
+    jc = np.abs(np.diff(hist["coarse"])).max()
+    jf = np.abs(np.diff(hist["fine"])).max()
+    assert jf < 0.6 * jc
+    assert np.abs(hist["fine"] / F - 1).max() < 0.06
+    chord = np.array([crossed_force(2, 8, "chord", 0.02, -0.3 + t, -0.3 + t) for t in coarse])
+    assert chord.max() / chord.min() > 1.5
+
+
+def test_config_keys_reach_the_contact_params():
+    from rve.config.fabric import FabricContact
+    from rve.fabrics.setup import contact_params
+    from rve.model import ContactParams
+
+    d = contact_params(FabricContact(), 5)
+    ref = ContactParams(penalty=50.0, heat_transfer=0.1, conductance=1.0, rebuild_every=5)
+    assert d == ref  # the defaults: chord, penalty, width law
+    p = contact_params(FabricContact(geometry="curve", enforcement="augmented_lagrangian", al_tolerance=1e-5,
+                                     conductance_law="holm", hardness="0.1 GPa", spot_radius="2 um"), 5)
+    assert (p.geometry, p.enforcement, p.al_tolerance, p.conductance_law) == ("curve", "augmented_lagrangian", 1e-5,
+                                                                                "holm")
+    np.testing.assert_allclose([p.hardness, p.spot_radius], [100.0, 2e-3])
+    with pytest.raises(ValueError, match="contact.hardness"):
+        FabricContact(conductance_law="holm")
+    with pytest.raises(ValueError):
+        FabricContact(geometry="spline")

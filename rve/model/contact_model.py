@@ -137,6 +137,10 @@ class ContactSystem:
         """Indices of the map's pairs with at least one overlapping point at ``x``."""
         return self.term.active_pairs(x)
 
+    def active_points(self, x) -> np.ndarray:
+        """Overlapping points of every map pair at ``x``, (n_pairs,) int32."""
+        return self.term.active_points(x)
+
     def contact_energy(self, x) -> float:
         """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x``."""
         return self.term.energy(x)

@@ -351,6 +351,14 @@ class ContactTerm:
             return np.zeros(0, dtype=np.int64)
         return self._pairs_of_rows(self.gaps(x) > 0.0)
 
+    def active_points(self, x) -> np.ndarray:
+        """Overlapping (for the curve: owned and overlapping) points of every map pair at
+        ``x``, (P,) int32 (the curve's two half passes added)."""
+        if self.map.n_pairs == 0:
+            return np.zeros(0, np.int32)
+        n = self.geometry(x).active.sum(axis=1)
+        return n.reshape(-1, self.map.n_pairs).sum(axis=0).astype(np.int32)
+
     def energy(self, x) -> float:
         """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x`` (with multipliers:
         of the shifted overlap, the potential of the residual at fixed multipliers)."""
