@@ -11,7 +11,11 @@
     between two steps and the largest jump of its slope;
 (c) an augmented Lagrangian solve of two pressed fibrils (pinned ends): the largest overlap
     and the contact force for P* = 50 and 500, with each Newton solve's residuals;
-(d) the width and Holm conductance laws on the crossed pair against the contact force.
+(d) the width and Holm conductance laws on the crossed pair against the contact force;
+(e) a curved fibril (circular arc) crossing a straight one: the force against the continuous
+    limit of the two half passes (adaptive quadrature), chord vs curve at p = 1, 2, 3: the
+    order of the geometry;
+(f) two parallel fibrils at a uniform overlap (the neighbours in a yarn): F = P* delta L.
 
 Usage: nice -n 10 python benchmarks/contact_order.py [--quick]
 """
@@ -126,6 +130,92 @@ def case_c():
                     print("        Newton residuals " + " ".join(f"{r:.1e}" for r in res.residuals))
 
 
+def arc_fibril(curvature_radius, length, y0, radius, name="arc"):
+    """A circular arc in the plane y = y0, apex at the origin, centre (0, y0, rc) above it."""
+    from rve.fem.mesh import Fibril, orthonormal_directors
+
+    rc = float(curvature_radius)
+
+    def frame(s):
+        th = (np.asarray(s, float) - 0.5 * length) / rc
+        r0 = np.stack([rc * np.sin(th), np.full_like(th, y0), rc * (1.0 - np.cos(th))], 1)
+        t = np.stack([np.cos(th), np.zeros_like(th), np.sin(th)], 1)
+        g1, g2 = orthonormal_directors(t)
+        return r0, g1, g2
+
+    return Fibril(length=float(length), radius=float(radius), frame=frame, name=name)
+
+
+def arc_reference_force(rc, delta, x0, radius_sum=2 * R, penalty=PSTAR):
+    """z-force on the arc of the two half passes' continuous limit: half the integral of
+    P* g n_z along the arc (closest points on the straight fibril) plus half of it along the
+    straight fibril (closest points on the arc), by adaptive quadrature."""
+    from scipy.integrate import quad
+
+    zb = -(radius_sum - delta)
+
+    def on_arc(th):  # point on the arc, closest point on the line x = x0, z = zb
+        jx, jz = rc * np.sin(th) - x0, rc * (1.0 - np.cos(th)) - zb
+        rho = np.hypot(jx, jz)
+        return max(radius_sum - rho, 0.0) * jz / rho * rc
+
+    def on_line(y):  # point (x0, y, zb) on the line (y measured from the arc's plane)
+        cx, cz = x0, zb - rc  # relative to the centre (0, rc)
+        din = np.hypot(cx, cz) - rc
+        rho = np.hypot(y, din)
+        nz = -cz / np.hypot(cx, cz) * din / rho  # z of the unit vector from the line to the arc
+        return max(radius_sum - rho, 0.0) * nz
+
+    Ia = quad(on_arc, -0.5, 0.5, points=[0.0], limit=400, epsabs=1e-14, epsrel=1e-13)[0]
+    Ib = quad(on_line, -radius_sum, radius_sum, points=[0.0], limit=400, epsabs=1e-14, epsrel=1e-13)[0]
+    return 0.5 * penalty * (Ia + Ib)
+
+
+def case_e(quick: bool):
+    rc, delta, x0 = 1.0, 0.02, 0.0137
+    Fref = arc_reference_force(rc, delta, x0)
+    nes = (4, 8, 16) if quick else (4, 8, 16, 32)
+    print(f"(e) a circular arc (curvature radius {rc} mm, 2 mm long) crossing a straight fibril, approach "
+          f"{delta} mm: reference F = {Fref:.6f} N (adaptive quadrature of the two half passes); "
+          "relative error of F (n_gp = 64 isolates the geometry; n_gp = 4 is the default quadrature)")
+    for geometry, n_gp in (("chord", 64), ("curve", 64), ("curve", 4)):
+        for order in (1, 2, 3):
+            errs = []
+            for ne in nes:
+                fibs = [arc_fibril(rc, 2.0, 0.0, R), straight_fibril([x0, -1, -(2 * R - delta)],
+                                                                     [x0, 1, -(2 * R - delta)], R, "b")]
+                mesh = fibril_mesh(fibs, ne, order)
+                base = BeamModel(mesh, BeamMaterial(126.0))
+                x = np.zeros(base.n)
+                base.nodal(x)[:, :9] = mesh.X0
+                sysm = ContactSystem(base, ContactParams(penalty=PSTAR, n_gp=n_gp, geometry=geometry), x)
+                errs.append(sysm.fibril_contact_forces(x)[0, 2] / Fref - 1)
+            rates = [np.log2(abs(errs[k] / errs[k + 1])) for k in range(len(errs) - 1)]
+            print(f"    {geometry:5s} n_gp={n_gp:2d} p={order}: " + " ".join(f"{ne}:{e:+.2e}" for ne, e in zip(nes, errs))
+                  + "   orders " + " ".join(f"{r:.2f}" for r in rates))
+
+
+def case_f():
+    """Two straight parallel fibrils (8 mm, a yarn's neighbours) at a uniform overlap: the
+    exact force is P* delta times the length."""
+    print("(f) parallel fibrils, 8 mm long, uniform overlap delta: relative error of F against P* delta L "
+          "(p = 1, n_gp = 4)")
+    for delta in (0.0075, 0.0015):
+        for ne in (8, 16, 32, 64):
+            errs = {}
+            for geometry in ("chord", "curve"):
+                fibs = [straight_fibril([0, 0, 0], [8, 0, 0], R, "a"),
+                        straight_fibril([0, 0, -(2 * R - delta)], [8, 0, -(2 * R - delta)], R, "b")]
+                mesh = fibril_mesh(fibs, ne, 1)
+                base = BeamModel(mesh, BeamMaterial(126.0))
+                x = np.zeros(base.n)
+                base.nodal(x)[:, :9] = mesh.X0
+                sysm = ContactSystem(base, ContactParams(penalty=PSTAR, geometry=geometry), x)
+                errs[geometry] = sysm.fibril_contact_forces(x)[0, 2] / (PSTAR * delta * 8.0) - 1
+            print(f"    delta {delta / R:.3f} R, {ne:2d} el (h = {8 / ne:.3f} mm): chord {errs['chord']:+.3f}, "
+                  f"curve {errs['curve']:+.1e}")
+
+
 def case_d():
     """The two conductance laws on the crossed pair (rigid, the approach varied)."""
     hard, spot, sigma0, sigma_c = 100.0, 1e-3, 10.0, 1.0
@@ -164,6 +254,8 @@ def main():
     case_b(args.quick)
     case_c()
     case_d()
+    case_e(args.quick)
+    case_f()
 
 
 if __name__ == "__main__":

@@ -62,7 +62,9 @@ __all__ = [
     "curve_penalty_forces",
     "curve_penalty_energy",
     "curve_scalar_jump",
+    "chord_deviation",
     "gauss_legendre_01",
+    "lebesgue_constant",
     "project_to_curve",
 ]
 
@@ -117,9 +119,9 @@ def project_to_curve(order: int, Xb, p, iterations: int = 12):
         return s
     for _ in range(iterations):
         N, dN, d2N = curve_basis(order, s)
-        q = np.einsum("pgb,pbi->pgi", N, Xb)
-        t = np.einsum("pgb,pbi->pgi", dN, Xb)
-        t2 = np.einsum("pgb,pbi->pgi", d2N, Xb)
+        q = np.matmul(N, Xb)
+        t = np.matmul(dN, Xb)
+        t2 = np.matmul(d2N, Xb)
         e = q - p
         f = np.einsum("pgi,pgi->pg", e, t)
         tt = np.einsum("pgi,pgi->pg", t, t)
@@ -136,6 +138,27 @@ def project_to_curve(order: int, Xb, p, iterations: int = 12):
     # (round-off in the tangents decides the sign of a zero derivative otherwise)
     s = np.where(s < _END_SNAP, 0.0, np.where(s > 1.0 - _END_SNAP, 1.0, s))
     return s
+
+
+@lru_cache(maxsize=None)
+def lebesgue_constant(order: int) -> float:
+    """max_s sum_a |N_a(s)| of the equispaced Lagrange basis (sampled finely, rounded up by
+    1e-6): the interpolant of nodal deviations is at most this times the largest one."""
+    N, _, _ = curve_basis(order, np.linspace(0.0, 1.0, 4001))
+    return float(np.abs(N).sum(axis=1).max()) + 1e-6
+
+
+def chord_deviation(order: int, X) -> np.ndarray:
+    """Bound on the distance between each element curve ``X`` (E, nn, 3) and its chord at
+    the same parameter: the Lebesgue constant times the largest nodal deviation from the
+    chord (the chord is reproduced exactly by the basis). Zero for p = 1."""
+    X = np.asarray(X, float)
+    if order == 1:
+        return np.zeros(X.shape[0])
+    u = np.linspace(0.0, 1.0, order + 1)
+    chord = X[:, :1, :] + u[None, :, None] * (X[:, -1:, :] - X[:, :1, :])
+    dev = np.sqrt(((X - chord) ** 2).sum(axis=-1)).max(axis=1)
+    return lebesgue_constant(order) * dev
 
 
 @dataclass
@@ -176,12 +199,12 @@ def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_pr
     G = s_a.shape[-1]
     Na, _, _ = curve_basis(order, s_a)
     Na = np.broadcast_to(Na, (P, G, nn))
-    p = np.einsum("pga,pai->pgi", Na, Xa)
+    p = np.matmul(Na, Xa)
     s_b = project_to_curve(order, Xb, p)
     Nb, dNb, d2Nb = curve_basis(order, s_b)
-    q = np.einsum("pgb,pbi->pgi", Nb, Xb)
-    t = np.einsum("pgb,pbi->pgi", dNb, Xb)
-    t2 = np.einsum("pgb,pbi->pgi", d2Nb, Xb)
+    q = np.matmul(Nb, Xb)
+    t = np.matmul(dNb, Xb)
+    t2 = np.matmul(d2Nb, Xb)
     j = p - q
     rho = np.sqrt(np.einsum("pgi,pgi->pg", j, j))
     n = j / np.maximum(rho, _TINY)[..., None]
@@ -224,7 +247,7 @@ def curve_penalty_forces(geo: CurveGeometry, weight, penalty, jacobian: bool = T
     w = np.broadcast_to(np.asarray(weight, float), (P, G))
     _, phi1, phi2 = penalty_law(np.where(geo.active, geo.g, 0.0), penalty, onset)
     f = np.where(geo.active, w * phi1, 0.0)
-    R = -np.einsum("pg,pgk,pgi->pki", f, geo.c, geo.n)
+    R = -np.matmul(np.swapaxes(f[..., None] * geo.c, 1, 2), geo.n)
     if not jacobian:
         return R, None
     k = np.where(geo.active, w * phi2, 0.0)

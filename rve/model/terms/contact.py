@@ -38,9 +38,9 @@ from typing import Optional
 
 import numpy as np
 
-from ...contact.search import ContactMap, build_contact_map, element_neighbours
+from ...contact.search import ContactMap, build_contact_map, element_neighbours, segment_distance
 from ...kernels import use_numba
-from ...physics.contact_curve import curve_penalty_forces, curve_scalar_jump
+from ...physics.contact_curve import chord_deviation, curve_penalty_forces, curve_scalar_jump
 from ...physics.contact_forms import (
     chord_gaps, chord_geometry, effective_radius, hertz_kappa, hertz_width, penalty_energy,
     penalty_forces, penalty_law, scalar_jump,
@@ -328,8 +328,12 @@ class ContactTerm:
         ``x``, (rows, n_gp); -inf where a curve point is not owned."""
         cmap = self.map
         if self.curve:
-            geo = self.geometry(x)
-            return np.where(geo.owned, geo.g, -np.inf)
+            out = np.full((self.row_pair.size, self.params.n_gp), -np.inf)
+            cand = self.curve_candidates(x)
+            if cand.size:
+                geo = self.geometry(x, cand)
+                out[self.passes.rows(cand)] = np.where(geo.owned, geo.g, -np.inf)
+            return out
         sm = None if self.params.recompute_closest else cmap.s_minus
         if self.multipliers is None and use_numba():
             from ...kernels.contact import chord_gaps as compiled
@@ -338,6 +342,25 @@ class ContactTerm:
             return compiled(r, cmap.nodes_plus, nminus, cmap.s_plus, self.gap_radius, sm,
                             bool(self.params.recompute_closest))
         return chord_gaps(*self.ends(x), cmap.s_plus, self.row_gap_radius(), sm)
+
+    def curve_candidates(self, x) -> np.ndarray:
+        """Map pairs whose curves may overlap at ``x``: the distance of their chords minus the
+        curves' deviation bounds (``chord_deviation``) below the largest gap radius of the
+        pair (with its multipliers). The others have no active point, so the curve's
+        Newton projection and forms run on these only."""
+        cmap, mesh = self.map, self.mesh
+        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        conn = mesh.conn
+        X = r[conn]
+        dev = chord_deviation(mesh.order, X)
+        S = cmap.shifts
+        d, _, _ = segment_distance(X[cmap.e_plus, 0], X[cmap.e_plus, -1], X[cmap.e_minus, 0] + S,
+                                   X[cmap.e_minus, -1] + S)
+        reach = self.gap_radius.copy()
+        if self.multipliers is not None:
+            lam = self.multipliers.reshape(-1, cmap.n_pairs, self.params.n_gp).max(axis=(0, 2))
+            reach = reach + lam / float(self.params.penalty)
+        return np.flatnonzero(d - dev[cmap.e_plus] - dev[cmap.e_minus] < reach)
 
     def _pairs_of_rows(self, flags) -> np.ndarray:
         """Map pairs with a True in any of their rows' (rows, G) ``flags``."""
@@ -436,12 +459,16 @@ class ContactTerm:
         """``forms`` on the centroid curves: both half passes of every active pair, folded
         into the pair's (e+ nodes, e- nodes) layout."""
         ps, nn = self.passes, self.mesh.order + 1
-        geo_all = self.geometry(x)
-        act = self._pairs_of_rows(geo_all.active)
+        cand = self.curve_candidates(x)
+        if cand.size == 0:
+            return np.zeros(0, np.int64), np.zeros(0), None, None
+        geo_c = self.geometry(x, cand)
+        hit = geo_c.active.any(axis=1).reshape(2, -1).any(axis=0)
+        act = cand[hit]
         if act.size == 0:
             return np.zeros(0, np.int64), np.zeros(0), None, None
         rows = ps.rows(act)
-        geo = HalfPasses.take(geo_all, rows)
+        geo = HalfPasses.take(geo_c, np.concatenate([np.flatnonzero(hit), cand.size + np.flatnonzero(hit)]))
         wgt = self.weight[rows]
         Rm, Km = curve_penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
         Rm = HalfPasses.fold(Rm, nn)
