@@ -180,3 +180,22 @@ def test_config_keys_reach_the_contact_params():
         FabricContact(conductance_law="holm")
     with pytest.raises(ValueError):
         FabricContact(geometry="spline")
+
+
+@pytest.mark.parametrize("order", [2, 3])
+def test_candidates_hold_every_active_pair(order):
+    """The chord-distance prefilter never drops a pair with an active point: on bowed
+    elements (nodes pushed off their chords) the full geometry's active pairs are among the
+    candidates, and the forms equal those of the full geometry."""
+    sysm, x, w = _crossed(order, ne=6, fields=("mech",), geometry="curve", seed=5)
+    assert sysm.term.curve_candidates(x).size < sysm.map.n_pairs  # the filter drops far pairs
+    xn = sysm.nodal(x)
+    rng = np.random.default_rng(9)
+    xn[:, :3] += rng.normal(scale=0.03, size=(xn.shape[0], 3))
+    term = sysm.term
+    full = term.geometry(x)
+    act_full = term._pairs_of_rows(full.active)
+    cand = term.curve_candidates(x)
+    assert act_full.size > 0 and set(act_full) <= set(cand)
+    act, R, _, _ = term.forms(x, w, False)
+    np.testing.assert_array_equal(np.sort(act), np.sort(act_full))
