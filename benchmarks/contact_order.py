@@ -18,6 +18,7 @@
 (f) two parallel fibrils at a uniform overlap (the neighbours in a yarn): F = P* delta L.
 
 Usage: nice -n 10 python benchmarks/contact_order.py [--quick]
+       nice -n 10 python benchmarks/contact_order.py --cost   (chord vs curve on the weave)
 """
 from __future__ import annotations
 
@@ -246,10 +247,53 @@ def case_d():
         print(line)
 
 
+def case_cost(repeat: int = 3):
+    """Wall time of the contact forms (mechanics only, residual + tangent), of a whole
+    evaluate and of a rebuild on the plain-weave relaxation scene's designed state, chord
+    (compiled kernel when numba is available) vs curve (numpy), 12 and 30 el/fibril."""
+    import time
+    from dataclasses import replace
+    from pathlib import Path
+
+    from rve.config.loader import load_config
+    from rve.scenes.fabric_relax import setup
+
+    root = Path(__file__).resolve().parents[1]
+    print("(cost) plain weave (configs/scenes/plain_weave_relax.yaml), designed state, p = 1; medians of "
+          f"{repeat} calls")
+    for el in (12, 30):
+        cfg = load_config(root / "configs/scenes/plain_weave_relax.yaml", [f"mesh.elements={el}"])
+        _, system, x = setup(cfg)
+        w = np.zeros(system.n)
+        for geometry in ("chord", "curve"):
+            sysm = ContactSystem(system.base, replace(system.params, geometry=geometry), x)
+            sysm.evaluate(x, w, 0.0)
+
+            def med(f):
+                ts = []
+                for _ in range(repeat):
+                    t0 = time.perf_counter()
+                    f()
+                    ts.append(time.perf_counter() - t0)
+                return 1e3 * float(np.median(ts))
+
+            tf = med(lambda: sysm.term.forms(x, w, True))
+            te = med(lambda: sysm.evaluate(x, w, 0.0))
+            tr = med(lambda: sysm.rebuild(x))
+            st = sysm.contact_state(x)
+            print(f"    {el} el {geometry:5s}: pairs {sysm.map.n_pairs}, active {st['active_pairs']}, forms + tangent "
+                  f"{tf:.1f} ms, evaluate {te:.1f} ms, rebuild {tr:.1f} ms; total normal force "
+                  f"{st['total_normal_force']:.2f} N, max overlap {st['max_overlap_over_R']:.4f} R")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--cost", action="store_true", help="only the cost on the plain-weave scene")
     args = ap.parse_args()
+    if args.cost:
+        case_cost()
+        return
     case_a(args.quick)
     case_b(args.quick)
     case_c()
