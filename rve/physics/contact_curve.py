@@ -63,6 +63,8 @@ __all__ = [
     "curve_penalty_energy",
     "curve_scalar_jump",
     "chord_deviation",
+    "END_SNAP",
+    "lagrange_monomials",
     "gauss_legendre_01",
     "lebesgue_constant",
     "project_to_curve",
@@ -70,7 +72,7 @@ __all__ = [
 
 _TINY = 1e-300
 #: closest-point parameters this close to 0 or 1 are taken as the element end
-_END_SNAP = 1e-9
+END_SNAP = 1e-9
 
 
 def gauss_legendre_01(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -80,8 +82,8 @@ def gauss_legendre_01(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @lru_cache(maxsize=None)
-def _second_derivative_coefficients(order: int) -> np.ndarray:
-    """(nn, nn) monomial coefficients of the Lagrange basis in xi (row a: N_a)."""
+def lagrange_monomials(order: int) -> np.ndarray:
+    """(nn, nn) monomial coefficients C of the Lagrange basis in xi: N_a(xi) = sum_k C[a, k] xi^k."""
     xi = lagrange_nodes(order)
     V = np.vander(xi, order + 1, increasing=True)
     return np.linalg.inv(V).T  # N_a(xi) = sum_k C[a, k] xi^k
@@ -93,7 +95,7 @@ def curve_basis(order: int, s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     s = np.asarray(s, float)
     xi = (2.0 * s - 1.0).ravel()
     N, dN = lagrange_basis(order, xi)
-    C = _second_derivative_coefficients(order)
+    C = lagrange_monomials(order)
     nn = order + 1
     k = np.arange(2, nn)
     if k.size:
@@ -133,10 +135,10 @@ def project_to_curve(order: int, Xb, p, iterations: int = 12):
         s = s_new
         if done:
             break
-    # a closest point within _END_SNAP of an element end is that end, so that of two
+    # a closest point within END_SNAP of an element end is that end, so that of two
     # neighbour elements exactly one owns a point whose projection is their shared node
     # (round-off in the tangents decides the sign of a zero derivative otherwise)
-    s = np.where(s < _END_SNAP, 0.0, np.where(s > 1.0 - _END_SNAP, 1.0, s))
+    s = np.where(s < END_SNAP, 0.0, np.where(s > 1.0 - END_SNAP, 1.0, s))
     return s
 
 
@@ -216,7 +218,7 @@ def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_pr
     # the distance grows into the next element (its derivative there, d/ds (q - p)^2 / 2,
     # is >= 0); the tolerance matches the end snap of the projection: f ~ -|t|^2 s
     tt_next = np.einsum("pi,pi->p", tn, tn)[:, None]
-    grows = np.einsum("pgi,pi->pg", end_b[:, None, :] - p, tn) >= -2.0 * _END_SNAP * tt_next
+    grows = np.einsum("pgi,pi->pg", end_b[:, None, :] - p, tn) >= -2.0 * END_SNAP * tt_next
     hn = np.asarray(has_next, bool)[:, None]
     hp = np.asarray(has_prev, bool)[:, None]
     owned = interior | ((s_b >= 1.0) & (~hn | grows)) | ((s_b <= 0.0) & ~hp)

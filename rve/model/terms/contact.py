@@ -40,7 +40,9 @@ import numpy as np
 
 from ...contact.search import ContactMap, build_contact_map, element_neighbours, segment_distance
 from ...kernels import use_numba
-from ...physics.contact_curve import chord_deviation, curve_penalty_forces, curve_scalar_jump
+from ...physics.contact_curve import (
+    END_SNAP, chord_deviation, curve_basis, curve_penalty_forces, curve_scalar_jump, lagrange_monomials,
+)
 from ...physics.contact_forms import (
     chord_gaps, chord_geometry, effective_radius, hertz_kappa, hertz_width, penalty_energy,
     penalty_forces, penalty_law, scalar_jump,
@@ -462,6 +464,8 @@ class ContactTerm:
         cand = self.curve_candidates(x)
         if cand.size == 0:
             return np.zeros(0, np.int64), np.zeros(0), None, None
+        if not self.scalar and use_numba():
+            return self._forms_curve_compiled(x, cand, jacobian)
         geo_c = self.geometry(x, cand)
         hit = geo_c.active.any(axis=1).reshape(2, -1).any(axis=0)
         act = cand[hit]
@@ -499,6 +503,29 @@ class ContactTerm:
         if not jacobian:
             return act, Rl, None, None
         return act, Rl, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
+
+    def _forms_curve_compiled(self, x, cand, jacobian: bool):
+        """Mechanics-only curve ``forms`` on the candidate pairs by the compiled kernel
+        (``rve.kernels.contact_curve``)."""
+        from ...kernels.contact_curve import curve_penalty_rows
+
+        ps, nn, order = self.passes, self.mesh.order + 1, self.mesh.order
+        rows = ps.rows(cand)
+        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        Xa, Xb, has_next, t_next, has_prev = ps.inputs(order, self.mesh.conn, r, rows)
+        gr = self.row_gap_radius(rows)
+        active, Rr, Kr = curve_penalty_rows(order, lagrange_monomials(order), curve_basis(order, ps.s)[0], END_SNAP,
+                                            Xa, Xb, t_next, has_next, has_prev, ps.s, gr, self.weight[rows],
+                                            float(self.params.penalty), self.onset, jacobian)
+        hit = active.reshape(2, -1).any(axis=0)
+        act = cand[hit]
+        if act.size == 0:
+            return np.zeros(0, np.int64), np.zeros(0), None, None
+        sel = np.concatenate([np.flatnonzero(hit), cand.size + np.flatnonzero(hit)])
+        Rm = HalfPasses.fold(Rr[sel], nn)
+        if not jacobian:
+            return act, Rm, None, None
+        return act, Rm, HalfPasses.fold(Kr[sel], nn, axes=(1, 3)).reshape(act.size, -1), None
 
     def _forms_compiled(self, x, jacobian: bool):
         """``forms`` of a mechanics-only term by the compiled kernel (rve.kernels.contact)."""

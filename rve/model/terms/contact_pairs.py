@@ -68,16 +68,23 @@ class HalfPasses:
         sel = np.arange(self.n_pairs) if sel is None else np.asarray(sel, np.int64)
         return np.concatenate([sel, self.n_pairs + sel])
 
-    def geometry(self, order: int, conn, r, gap_radius, rows) -> CurveGeometry:
-        """``CurveGeometry`` of the oriented ``rows`` at positions ``r`` (n_nodes, 3);
-        ``gap_radius`` (len(rows),) or (len(rows), G)."""
+    def inputs(self, order: int, conn, r, rows):
+        """``(Xa, Xb, has_next, t_next, has_prev)`` of the oriented ``rows`` at positions ``r``
+        (n_nodes, 3): the element curves (shifts applied), whether b has a next element and
+        that element's tangent at its first node (shifts drop out), whether b has a previous."""
         ea, eb, nx = self.a_elem[rows], self.b_elem[rows], self.next_elem[rows]
         Xa = r[conn[ea]] + self.a_shift[rows][:, None, :]
         Xb = r[conn[eb]] + self.b_shift[rows][:, None, :]
         has_next = nx >= 0
         _, dN0, _ = curve_basis(order, np.zeros(1))
-        t_next = np.einsum("b,pbi->pi", dN0[0], r[conn[np.where(has_next, nx, 0)]])  # shifts drop out
-        return curve_geometry(order, Xa, Xb, self.s, gap_radius, has_next, t_next, self.has_prev[rows])
+        t_next = np.einsum("b,pbi->pi", dN0[0], r[conn[np.where(has_next, nx, 0)]])
+        return Xa, Xb, has_next, t_next, self.has_prev[rows]
+
+    def geometry(self, order: int, conn, r, gap_radius, rows) -> CurveGeometry:
+        """``CurveGeometry`` of the oriented ``rows`` at positions ``r`` (n_nodes, 3);
+        ``gap_radius`` (len(rows),) or (len(rows), G)."""
+        Xa, Xb, has_next, t_next, has_prev = self.inputs(order, conn, r, rows)
+        return curve_geometry(order, Xa, Xb, self.s, gap_radius, has_next, t_next, has_prev)
 
     @staticmethod
     def fold(R, nn: int, axes=(1,)) -> np.ndarray:
