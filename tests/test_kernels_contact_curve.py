@@ -8,6 +8,7 @@ import pytest
 pytest.importorskip("numba")
 
 from rve.kernels.contact_curve import curve_penalty_rows
+from rve.model.terms.contact_pairs import HalfPasses
 from rve.physics.contact_curve import (
     END_SNAP, curve_basis, curve_geometry, curve_penalty_forces, gauss_legendre_01, lagrange_monomials,
 )
@@ -35,7 +36,7 @@ def _rows(order, P=40, seed=0):
 @pytest.mark.parametrize("order", [1, 2, 3])
 @pytest.mark.parametrize("onset", [0.0, 0.01])
 def test_curve_kernel_matches_reference(order, onset):
-    Xa, Xb, tn, hn, hp = _rows(order, seed=order)
+    Xa, Xb, tn, hn, hp = _rows(order, P=2200, seed=order)  # > 2 x MIN_CHUNK pairs: split over threads
     P = Xa.shape[0]
     s, W = gauss_legendre_01(4)
     rng = np.random.default_rng(7)
@@ -45,8 +46,11 @@ def test_curve_kernel_matches_reference(order, onset):
     R0, K0 = curve_penalty_forces(geo, w, 50.0, True, onset)
     basis = (lagrange_monomials(order), curve_basis(order, s)[0], END_SNAP)
     act, R1, K1 = curve_penalty_rows(order, *basis, Xa, Xb, tn, hn, hp, s, gr, w, 50.0, onset, True)
-    assert act.sum() > P // 4 and np.any(geo.active & (geo.s_b >= 1.0))
-    np.testing.assert_array_equal(act, geo.active.any(axis=1))
+    # the kernel folds rows i and P/2 + i into pair i
+    R0 = HalfPasses.fold(R0, order + 1)
+    K0 = HalfPasses.fold(K0, order + 1, axes=(1, 3))
+    assert act.sum() > P // 8 and np.any(geo.active & (geo.s_b >= 1.0))
+    np.testing.assert_array_equal(act, geo.active.any(axis=1).reshape(2, -1).any(axis=0))
     np.testing.assert_allclose(R1, R0, rtol=0, atol=1e-12 * np.abs(R0).max())
     np.testing.assert_allclose(K1, K0, rtol=0, atol=1e-12 * np.abs(K0).max())
     _, R2, K2 = curve_penalty_rows(order, *basis, Xa, Xb, tn, hn, hp, s, gr, w, 50.0, onset, False)

@@ -4,8 +4,10 @@ centroid curve", docs/kernels.md).
 Contract
 --------
 ``curve_penalty_rows(order, C, Na, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a,
-gap_radius, weight, penalty, onset, jacobian)`` -> ``(active (Pr,) bool, R (Pr, M, 3), K (Pr, M, 3, M, 3) or
-None)`` for Pr oriented rows (a nodes, then b nodes; M = 2 nn): the closest point, the
+gap_radius, weight, penalty, onset, jacobian)`` -> ``(active (P,) bool, R (P, M, 3), K (P, M,
+3, M, 3) or None)`` for the 2P oriented rows of P pairs (row i: points on e+, row P + i:
+points on e-; each row's a nodes, then b nodes; M = 2 nn), both rows of a pair added into
+the pair's (e+ nodes, e- nodes) layout (``HalfPasses.fold``): the closest point, the
 ownership and the penalty residual and tangent of ``rve.physics.contact_curve``
 (``curve_geometry`` + ``curve_penalty_forces``, the reference, formulas there), fused in one
 pass per point with no (Pr, G, M, 3) temporaries. ``gap_radius`` and ``weight`` are (Pr, G).
@@ -105,8 +107,11 @@ def _project(order, C, end_snap, Xb, r, p, N, dN, d2N):
 
 
 @njit(cache=True, nogil=True)
-def _rows(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a, Na, gr, w, Pstar, eps, jacobian, active, R, K):
-    Pr = Xa.shape[0]
+def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a, Na, gr, w, Pstar, eps, jacobian, lo, hi,
+           active, R, K):
+    """Pairs lo..hi-1: rows i (points on e+) and half + i (points on e-), each folded into
+    the pair's (e+ nodes, e- nodes) layout of R[i - lo], K[i - lo]."""
+    half = Xa.shape[0] // 2
     nn = C.shape[0]
     M = 2 * nn
     G = s_a.shape[0]
@@ -120,68 +125,75 @@ def _rows(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a, Na, gr, w
     j = np.empty(3)
     t = np.empty(3)
     t2 = np.empty(3)
-    for r in range(Pr):
-        for g in range(G):
-            for i in range(3):
-                v = 0.0
+    slot = np.empty(M, np.int64)
+    for i in range(lo, hi):
+        o = i - lo
+        for side in range(2):
+            r = i + side * half
+            for k in range(M):  # the oriented row's (a, b) nodes in the pair's (e+, e-) layout
+                slot[k] = k if side == 0 else (k + nn) % M
+            for g in range(G):
+                for ii in range(3):
+                    v = 0.0
+                    for a in range(nn):
+                        v += Na[g, a] * Xa[r, a, ii]
+                    p[ii] = v
+                s = _project(order, C, end_snap, Xb, r, p, N, dN, d2N)
+                _basis(C, s, N, dN, d2N)
+                for ii in range(3):
+                    q = 0.0
+                    ti = 0.0
+                    t2i = 0.0
+                    for b in range(nn):
+                        q += N[b] * Xb[r, b, ii]
+                        ti += dN[b] * Xb[r, b, ii]
+                        t2i += d2N[b] * Xb[r, b, ii]
+                    j[ii] = p[ii] - q
+                    t[ii] = ti
+                    t2[ii] = t2i
+                rho = np.sqrt(j[0] * j[0] + j[1] * j[1] + j[2] * j[2])
+                gap = gr[r, g] - rho
+                interior = (s > 0.0) and (s < 1.0)
+                tn2 = t_next[r, 0] ** 2 + t_next[r, 1] ** 2 + t_next[r, 2] ** 2
+                grow = 0.0
+                for ii in range(3):
+                    grow += (Xb[r, nn - 1, ii] - p[ii]) * t_next[r, ii]
+                grows = grow >= -2.0 * end_snap * tn2
+                owned = interior or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
+                if not (owned and gap > 0.0 and rho > _TINY):
+                    continue
+                active[o] = True
+                rr = max(rho, _TINY)
+                nv = (j[0] / rr, j[1] / rr, j[2] / rr)
                 for a in range(nn):
-                    v += Na[g, a] * Xa[r, a, i]
-                p[i] = v
-            s = _project(order, C, end_snap, Xb, r, p, N, dN, d2N)
-            _basis(C, s, N, dN, d2N)
-            for i in range(3):
-                q = 0.0
-                ti = 0.0
-                t2i = 0.0
-                for b in range(nn):
-                    q += N[b] * Xb[r, b, i]
-                    ti += dN[b] * Xb[r, b, i]
-                    t2i += d2N[b] * Xb[r, b, i]
-                j[i] = p[i] - q
-                t[i] = ti
-                t2[i] = t2i
-            rho = np.sqrt(j[0] * j[0] + j[1] * j[1] + j[2] * j[2])
-            gap = gr[r, g] - rho
-            interior = (s > 0.0) and (s < 1.0)
-            tn2 = t_next[r, 0] ** 2 + t_next[r, 1] ** 2 + t_next[r, 2] ** 2
-            grow = 0.0
-            for i in range(3):
-                grow += (Xb[r, nn - 1, i] - p[i]) * t_next[r, i]
-            grows = grow >= -2.0 * end_snap * tn2
-            owned = interior or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
-            if not (owned and gap > 0.0 and rho > _TINY):
-                continue
-            active[r] = True
-            rr = max(rho, _TINY)
-            n0, n1, n2 = j[0] / rr, j[1] / rr, j[2] / rr
-            nv = (n0, n1, n2)
-            for a in range(nn):
-                c[a] = Na[g, a]
-                c[nn + a] = -N[a]
-                m[a] = 0.0
-                m[nn + a] = dN[a]
-            f1, f2 = _law(gap, Pstar, eps)
-            f = w[r, g] * f1
-            for k in range(M):
-                for i in range(3):
-                    R[r, k, i] -= f * c[k] * nv[i]
-            if not jacobian:
-                continue
-            A = t[0] * t[0] + t[1] * t[1] + t[2] * t[2] - (j[0] * t2[0] + j[1] * t2[1] + j[2] * t2[2])
-            Asafe = A if (interior and A > 0) else 1.0
-            for k in range(M):
-                for i in range(3):
-                    ds[k, i] = (c[k] * t[i] + m[k] * j[i]) / Asafe if interior else 0.0
-            kk = w[r, g] * f2
-            fr = f / rho
-            beta = fr * A
-            for k in range(M):
-                for i in range(3):
-                    for l in range(M):
-                        ckl = c[k] * c[l]
-                        for jj in range(3):
-                            B = (kk + fr) * nv[i] * nv[jj] - (fr if i == jj else 0.0)
-                            K[r, k, i, l, jj] += ckl * B + beta * ds[k, i] * ds[l, jj]
+                    c[a] = Na[g, a]
+                    c[nn + a] = -N[a]
+                    m[a] = 0.0
+                    m[nn + a] = dN[a]
+                f1, f2 = _law(gap, Pstar, eps)
+                f = w[r, g] * f1
+                for k in range(M):
+                    for ii in range(3):
+                        R[o, slot[k], ii] -= f * c[k] * nv[ii]
+                if not jacobian:
+                    continue
+                A = t[0] * t[0] + t[1] * t[1] + t[2] * t[2] - (j[0] * t2[0] + j[1] * t2[1] + j[2] * t2[2])
+                Asafe = A if (interior and A > 0) else 1.0
+                for k in range(M):
+                    for ii in range(3):
+                        ds[k, ii] = (c[k] * t[ii] + m[k] * j[ii]) / Asafe if interior else 0.0
+                kk = w[r, g] * f2
+                fr = f / rho
+                beta = fr * A
+                for k in range(M):
+                    sk = slot[k]
+                    for ii in range(3):
+                        for l in range(M):
+                            sl = slot[l]
+                            ckl = c[k] * c[l]
+                            for jj in range(3):
+                                B = (kk + fr) * nv[ii] * nv[jj] - (fr if ii == jj else 0.0)
+                                K[o, sk, ii, sl, jj] += ckl * B + beta * ds[k, ii] * ds[l, jj]
 
 
 def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_next, has_prev, s_a, gap_radius,
@@ -203,11 +215,12 @@ def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_n
     hn = np.ascontiguousarray(has_next, dtype=np.bool_)
     hp = np.ascontiguousarray(has_prev, dtype=np.bool_)
     M = 2 * nn
-    active = np.zeros(Pr, np.bool_)
-    R = np.zeros((Pr, M, 3))
-    K = np.zeros((Pr, M, 3, M, 3)) if jacobian else np.zeros((0, M, 3, M, 3))
+    half = Pr // 2
+    active = np.zeros(half, np.bool_)
+    R = np.zeros((half, M, 3))
+    K = np.zeros((half, M, 3, M, 3)) if jacobian else np.zeros((0, M, 3, M, 3))
     jac, snap = bool(jacobian), float(end_snap)
-    run_chunked(Pr, lambda a, b: _rows(int(order), C, snap, Xa[a:b], Xb[a:b], tn[a:b], hn[a:b], hp[a:b], s_a, Na,
-                                       gr[a:b], w[a:b], float(penalty), float(onset), jac, active[a:b], R[a:b],
-                                       K[a:b] if jac else K), MIN_CHUNK)
+    run_chunked(half, lambda a, b: _pairs(int(order), C, snap, Xa, Xb, tn, hn, hp, s_a, Na, gr, w, float(penalty),
+                                          float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
+                MIN_CHUNK)
     return active, R, (K if jacobian else None)

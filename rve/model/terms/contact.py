@@ -509,7 +509,7 @@ class ContactTerm:
         (``rve.kernels.contact_curve``)."""
         from ...kernels.contact_curve import curve_penalty_rows
 
-        ps, nn, order = self.passes, self.mesh.order + 1, self.mesh.order
+        ps, order = self.passes, self.mesh.order
         rows = ps.rows(cand)
         r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
         Xa, Xb, has_next, t_next, has_prev = ps.inputs(order, self.mesh.conn, r, rows)
@@ -517,15 +517,12 @@ class ContactTerm:
         active, Rr, Kr = curve_penalty_rows(order, lagrange_monomials(order), curve_basis(order, ps.s)[0], END_SNAP,
                                             Xa, Xb, t_next, has_next, has_prev, ps.s, gr, self.weight[rows],
                                             float(self.params.penalty), self.onset, jacobian)
-        hit = active.reshape(2, -1).any(axis=0)
-        act = cand[hit]
+        act = cand[active]
         if act.size == 0:
             return np.zeros(0, np.int64), np.zeros(0), None, None
-        sel = np.concatenate([np.flatnonzero(hit), cand.size + np.flatnonzero(hit)])
-        Rm = HalfPasses.fold(Rr[sel], nn)
         if not jacobian:
-            return act, Rm, None, None
-        return act, Rm, HalfPasses.fold(Kr[sel], nn, axes=(1, 3)).reshape(act.size, -1), None
+            return act, Rr[active], None, None
+        return act, Rr[active], Kr[active].reshape(act.size, -1), None
 
     def _forms_compiled(self, x, jacobian: bool):
         """``forms`` of a mechanics-only term by the compiled kernel (rve.kernels.contact)."""
