@@ -178,33 +178,3 @@ def test_scalar_jump_tangents(order):
     U = np.concatenate([ua, ub], axis=1)
     np.testing.assert_allclose(np.einsum("pAB,pB->pA", Ju, U), R, rtol=1e-12, atol=1e-15)  # linear in u
     np.testing.assert_allclose(R.sum(axis=1), 0.0, atol=1e-14)  # conservative
-
-
-def test_concave_kink_counts_a_point_once_and_keeps_the_energy_continuous():
-    """b is a polyline bent at a node (two p = 1 elements, apex up); a point below the apex
-    projects inside both elements. Given the neighbour curves only the nearer element owns
-    it (without them both do), and the energy of the point is continuous as it moves across
-    the switch (equal distances there)."""
-    b0 = np.array([[-0.5, 0.0, -0.1], [0.0, 0.0, 0.0]])
-    b1 = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, -0.1]])
-    Xb = np.stack([b0, b1])
-    Xn = np.stack([b1, b1])  # row 0's next is b1 (row 1 has none)
-    Xp = np.stack([b0, b0])  # row 1's prev is b0
-    hn, hp = np.array([True, False]), np.array([False, True])
-    tn = np.stack([b1[1] - b1[0], b1[1] - b1[0]])
-
-    def geo(x, neighbours=True):
-        p = np.array([x, 0.0, -0.25])
-        Xa = np.stack([np.stack([p - [0, 0.1, 0], p + [0, 0.1, 0]])] * 2)
-        extra = (Xn, Xp) if neighbours else (None, None)
-        return curve_geometry(1, Xa, Xb, np.array([0.5]), np.full(2, 0.3), hn, tn, hp, *extra)
-
-    g = geo(0.02)
-    assert np.all((g.s_b > 0) & (g.s_b < 1))  # interior on both elements
-    assert geo(0.02, neighbours=False).owned.sum() == 2  # counted twice without the rule
-    assert g.owned.sum() == 1 and g.owned[1, 0]  # the nearer one (b1, the point is at x > 0)
-    assert geo(-0.02).owned[0, 0] and geo(-0.02).owned.sum() == 1
-    # the owned gap (the energy's argument) is continuous through the switch at x = 0
-    xs = np.linspace(-1e-3, 1e-3, 41)
-    gaps = np.array([geo(x).g[geo(x).owned][0] for x in xs])
-    assert np.abs(np.diff(gaps)).max() < 1e-4

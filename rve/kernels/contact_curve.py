@@ -4,7 +4,7 @@ centroid curve", docs/kernels.md).
 Contract
 --------
 ``curve_penalty_rows(order, C, Na, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a,
-gap_radius, weight, X_next, X_prev, penalty, onset, jacobian)`` -> ``(active (P,) bool, R (P, M, 3), K (P, M,
+gap_radius, weight, penalty, onset, jacobian)`` -> ``(active (P,) bool, R (P, M, 3), K (P, M,
 3, M, 3) or None)`` for the 2P oriented rows of P pairs (row i: points on e+, row P + i:
 points on e-; each row's a nodes, then b nodes; M = 2 nn), both rows of a pair added into
 the pair's (e+ nodes, e- nodes) layout (``HalfPasses.fold``): the closest point, the
@@ -107,24 +107,6 @@ def _project(order, C, end_snap, Xb, r, p, N, dN, d2N):
 
 
 @njit(cache=True, nogil=True)
-def _nearer(order, C, end_snap, X, r, p, rho, strict, N, dN, d2N):
-    """True when the curve X[r] holds an interior closest point of p nearer than rho."""
-    nn = C.shape[0]
-    s = _project(order, C, end_snap, X, r, p, N, dN, d2N)
-    if not (s > 0.0 and s < 1.0):
-        return False
-    _basis(C, s, N, dN, d2N)
-    D2 = 0.0
-    for i in range(3):
-        q = 0.0
-        for b in range(nn):
-            q += N[b] * X[r, b, i]
-        D2 += (p[i] - q) ** 2
-    D = np.sqrt(D2)
-    return D < rho if strict else D <= rho
-
-
-@njit(cache=True, nogil=True)
 def _accumulate(Ro, Ko, jacobian, slot, c, m, nv, j, t, t2, rho, interior, f, kk, ds):
     """Add one point's residual ``-f c n`` and tangent (``curve_penalty_forces``) to the
     pair's local arrays, row nodes mapped by ``slot``; ``f``, ``kk`` = w phi', w phi''."""
@@ -153,8 +135,8 @@ def _accumulate(Ro, Ko, jacobian, slot, c, m, nv, j, t, t2, rho, interior, f, kk
 
 
 @njit(cache=True, nogil=True)
-def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, Xn, Xp, s_a, Na, gr, w, Pstar, eps, jacobian,
-           lo, hi, active, R, K):
+def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a, Na, gr, w, Pstar, eps, jacobian, lo, hi,
+           active, R, K):
     """Pairs lo..hi-1: rows i (points on e+) and half + i (points on e-), each folded into
     the pair's (e+ nodes, e- nodes) layout of R[i - lo], K[i - lo]."""
     half = Xa.shape[0] // 2
@@ -164,9 +146,6 @@ def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, Xn, Xp, s_a, 
     N = np.empty(nn)
     dN = np.empty(nn)
     d2N = np.empty(nn)
-    Ns = np.empty(nn)
-    dNs = np.empty(nn)
-    d2Ns = np.empty(nn)
     p = np.empty(3)
     c = np.empty(M)
     m = np.empty(M)
@@ -208,15 +187,8 @@ def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, Xn, Xp, s_a, 
                 for ii in range(3):
                     grow += (Xb[r, nn - 1, ii] - p[ii]) * t_next[r, ii]
                 grows = grow >= -2.0 * end_snap * tn2
-                if not (gap > 0.0 and rho > _TINY):
-                    continue
-                inner = interior
-                if inner and has_next[r]:
-                    inner = not _nearer(order, C, end_snap, Xn, r, p, rho, True, Ns, dNs, d2Ns)
-                if inner and has_prev[r]:
-                    inner = not _nearer(order, C, end_snap, Xp, r, p, rho, False, Ns, dNs, d2Ns)
-                owned = inner or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
-                if not owned:
+                owned = interior or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
+                if not (owned and gap > 0.0 and rho > _TINY):
                     continue
                 active[o] = True
                 rr = max(rho, _TINY)
@@ -232,7 +204,7 @@ def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, Xn, Xp, s_a, 
 
 
 def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_next, has_prev, s_a, gap_radius,
-                       weight, X_next, X_prev, penalty: float, onset: float = 0.0, jacobian: bool = True):
+                       weight, penalty: float, onset: float = 0.0, jacobian: bool = True):
     """``(active, R, K)`` of the oriented rows (module docstring). ``C`` (nn, nn) are the
     basis' monomial coefficients and ``Na`` (G, nn) its values at ``s_a`` (from
     ``rve.physics.contact_curve``: ``lagrange_monomials``, ``curve_basis``), ``end_snap`` its
@@ -249,15 +221,13 @@ def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_n
     tn = np.ascontiguousarray(t_next, dtype=np.float64)
     hn = np.ascontiguousarray(has_next, dtype=np.bool_)
     hp = np.ascontiguousarray(has_prev, dtype=np.bool_)
-    Xn = np.ascontiguousarray(X_next, dtype=np.float64)
-    Xp = np.ascontiguousarray(X_prev, dtype=np.float64)
     M = 2 * nn
     half = Pr // 2
     active = np.zeros(half, np.bool_)
     R = np.zeros((half, M, 3))
     K = np.zeros((half, M, 3, M, 3)) if jacobian else np.zeros((1, M, 3, M, 3))  # one scratch block
     jac, snap = bool(jacobian), float(end_snap)
-    run_chunked(half, lambda a, b: _pairs(int(order), C, snap, Xa, Xb, tn, hn, hp, Xn, Xp, s_a, Na, gr, w,
-                                          float(penalty), float(onset), jac, a, b, active[a:b], R[a:b],
-                                          K[a:b] if jac else K), MIN_CHUNK)
+    run_chunked(half, lambda a, b: _pairs(int(order), C, snap, Xa, Xb, tn, hn, hp, s_a, Na, gr, w, float(penalty),
+                                          float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
+                MIN_CHUNK)
     return active, R, (K if jacobian else None)

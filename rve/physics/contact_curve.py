@@ -24,11 +24,8 @@ and their closest points on element b. A point sits at the element parameter ``s
   element. So of
   the pairs (a, b) and (a, next b) exactly one takes a point whose closest point is the
   shared node, and a point whose projection moves on leaves one pair for the other with
-  the same position, gap and normal: the force is continuous. On the concave side of a
-  kink between two elements (C0 curves) a point has an interior closest point on both;
-  given the neighbour curves, only the nearer one owns it (ties: the earlier element), so
-  it is not counted twice and the energy stays continuous (a switch between two closest
-  points at equal distance). Not owned points carry no force; ``active = owned & (g > 0)``.
+  the same position, gap and normal: the force is continuous. Not owned points carry no
+  force; ``active = owned & (g > 0)``.
 * Local unknowns of an oriented pair: the nn nodes of a, then the nn nodes of b (x, y, z).
   With ``c = (N_a(s_a), -N_b(s_b))`` (2nn), ``[[r]] = sum c_K x_K``, ``dg/dX_K = -c_K n``
   (envelope theorem: ``n.t = 0`` at an interior closest point, ``ds = 0`` at a clamped
@@ -190,25 +187,10 @@ class CurveGeometry:
     dNb: np.ndarray
 
 
-def _nearer_neighbour(order, X, p, rho, present, strict):
-    """True where the neighbour curve X (P, nn, 3) holds an interior closest point of p that
-    is nearer than rho (``strict``: <, else <=); False where the neighbour is absent."""
-    s = project_to_curve(order, X, p)
-    N, _, _ = curve_basis(order, s)
-    e = p - np.matmul(N, X)
-    D = np.sqrt(np.einsum("pgi,pgi->pg", e, e))
-    near = D < rho if strict else D <= rho
-    return np.asarray(present, bool)[:, None] & (s > 0.0) & (s < 1.0) & near
-
-
-def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_prev, X_next=None,
-                   X_prev=None) -> CurveGeometry:
+def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_prev) -> CurveGeometry:
     """Contact kinematics of points ``s_a`` (G,) on the curves ``Xa`` (P, nn, 3) against the
     curves ``Xb`` (P, nn, 3) (positions as they are, shifts applied by the caller).
 
-    ``X_next`` / ``X_prev`` (P, nn, 3), optional: b's neighbour curves (any values where
-    absent); with them an interior closest point is owned only if neither neighbour holds a
-    nearer interior one (the concave side of a kink between elements has two).
     ``gap_radius`` (P,) or (P, G); ``has_next`` / ``has_prev`` (P,) whether b has a next /
     previous element along its fibril; ``t_next`` (P, 3) that next element's tangent at its
     first node (any positive scale; only its sign against ``x_b(1) - p`` is used)."""
@@ -239,12 +221,7 @@ def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_pr
     grows = np.einsum("pgi,pi->pg", end_b[:, None, :] - p, tn) >= -2.0 * END_SNAP * tt_next
     hn = np.asarray(has_next, bool)[:, None]
     hp = np.asarray(has_prev, bool)[:, None]
-    inner = interior
-    if X_next is not None:  # of two interior local minima on adjacent elements the nearer owns
-        inner = inner & ~_nearer_neighbour(order, np.asarray(X_next, float), p, rho, has_next, True)
-    if X_prev is not None:
-        inner = inner & ~_nearer_neighbour(order, np.asarray(X_prev, float), p, rho, has_prev, False)
-    owned = inner | ((s_b >= 1.0) & (~hn | grows)) | ((s_b <= 0.0) & ~hp)
+    owned = interior | ((s_b >= 1.0) & (~hn | grows)) | ((s_b <= 0.0) & ~hp)
     c = np.concatenate([Na, -Nb], axis=-1)  # (P, G, M)
     m = np.concatenate([np.zeros_like(Nb), dNb], axis=-1)
     A = np.einsum("pgi,pgi->pg", t, t) - np.einsum("pgi,pgi->pg", j, t2)

@@ -512,10 +512,10 @@ class ContactTerm:
         ps, order = self.passes, self.mesh.order
         rows = ps.rows(cand)
         r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
-        Xa, Xb, has_next, t_next, has_prev, Xn, Xp = ps.inputs(order, self.mesh.conn, r, rows)
+        Xa, Xb, has_next, t_next, has_prev = ps.inputs(order, self.mesh.conn, r, rows)
         gr = self.row_gap_radius(rows)
         active, Rr, Kr = curve_penalty_rows(order, lagrange_monomials(order), curve_basis(order, ps.s)[0], END_SNAP,
-                                            Xa, Xb, t_next, has_next, has_prev, ps.s, gr, self.weight[rows], Xn, Xp,
+                                            Xa, Xb, t_next, has_next, has_prev, ps.s, gr, self.weight[rows],
                                             float(self.params.penalty), self.onset, jacobian)
         act = cand[active]
         if act.size == 0:

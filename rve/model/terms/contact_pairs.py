@@ -37,9 +37,8 @@ _SHIFT_RESOLUTION = 1e-6
 @dataclass(frozen=True)
 class HalfPasses:
     """The 2P oriented rows of a map (module docstring). Per row: ``a_elem``, ``b_elem``
-    (2P,); ``a_shift``, ``b_shift`` (2P, 3); ``next_elem``, ``prev_elem`` (2P,) (b's
-    neighbours, -1 at a free end) and their translations ``next_shift``, ``prev_shift``
-    (2P, 3) relative to b; ``has_prev`` (2P,); ``weight`` (2P, G); ``s`` (G,) the Gauss points."""
+    (2P,); ``a_shift``, ``b_shift`` (2P, 3); ``next_elem`` (2P,) (b's next element, -1 at a
+    free end); ``has_prev`` (2P,); ``weight`` (2P, G); ``s`` (G,) the Gauss points."""
 
     n_pairs: int
     a_elem: np.ndarray
@@ -48,9 +47,6 @@ class HalfPasses:
     b_shift: np.ndarray
     next_elem: np.ndarray
     has_prev: np.ndarray
-    prev_elem: np.ndarray
-    next_shift: np.ndarray
-    prev_shift: np.ndarray
     weight: np.ndarray
     s: np.ndarray
 
@@ -65,9 +61,7 @@ class HalfPasses:
         weight = 0.5 * np.asarray(mesh.elem_length, float)[a_elem][:, None] * W[None, :]
         return cls(n_pairs=P, a_elem=a_elem, b_elem=b_elem, a_shift=np.concatenate([zero, S]),
                    b_shift=np.concatenate([S, zero]), next_elem=np.asarray(neighbours.next)[b_elem],
-                   has_prev=np.asarray(neighbours.prev)[b_elem] >= 0, prev_elem=np.asarray(neighbours.prev)[b_elem],
-                   next_shift=np.asarray(neighbours.next_shift)[b_elem],
-                   prev_shift=np.asarray(neighbours.prev_shift)[b_elem], weight=weight, s=s)
+                   has_prev=np.asarray(neighbours.prev)[b_elem] >= 0, weight=weight, s=s)
 
     def rows(self, sel=None) -> np.ndarray:
         """Oriented rows of the map pairs ``sel`` (all by default): ``sel`` then ``P + sel``."""
@@ -75,26 +69,22 @@ class HalfPasses:
         return np.concatenate([sel, self.n_pairs + sel])
 
     def inputs(self, order: int, conn, r, rows):
-        """``(Xa, Xb, has_next, t_next, has_prev, Xn, Xp)`` of the oriented ``rows`` at
-        positions ``r`` (n_nodes, 3): the element curves (shifts applied), whether b has a
-        next element and that element's tangent at its first node, whether b has a previous,
-        and b's next and previous curves in b's frame (element 0 where absent)."""
-        ea, eb, nx, pv = self.a_elem[rows], self.b_elem[rows], self.next_elem[rows], self.prev_elem[rows]
-        bs = self.b_shift[rows]
+        """``(Xa, Xb, has_next, t_next, has_prev)`` of the oriented ``rows`` at positions ``r``
+        (n_nodes, 3): the element curves (shifts applied), whether b has a next element and
+        that element's tangent at its first node (shifts drop out), whether b has a previous."""
+        ea, eb, nx = self.a_elem[rows], self.b_elem[rows], self.next_elem[rows]
         Xa = r[conn[ea]] + self.a_shift[rows][:, None, :]
-        Xb = r[conn[eb]] + bs[:, None, :]
+        Xb = r[conn[eb]] + self.b_shift[rows][:, None, :]
         has_next = nx >= 0
-        Xn = r[conn[np.where(has_next, nx, 0)]] + (bs + self.next_shift[rows])[:, None, :]
-        Xp = r[conn[np.where(pv >= 0, pv, 0)]] + (bs + self.prev_shift[rows])[:, None, :]
         _, dN0, _ = curve_basis(order, np.zeros(1))
-        t_next = np.einsum("b,pbi->pi", dN0[0], Xn)
-        return Xa, Xb, has_next, t_next, self.has_prev[rows], Xn, Xp
+        t_next = np.einsum("b,pbi->pi", dN0[0], r[conn[np.where(has_next, nx, 0)]])
+        return Xa, Xb, has_next, t_next, self.has_prev[rows]
 
     def geometry(self, order: int, conn, r, gap_radius, rows) -> CurveGeometry:
         """``CurveGeometry`` of the oriented ``rows`` at positions ``r`` (n_nodes, 3);
         ``gap_radius`` (len(rows),) or (len(rows), G)."""
-        Xa, Xb, has_next, t_next, has_prev, Xn, Xp = self.inputs(order, conn, r, rows)
-        return curve_geometry(order, Xa, Xb, self.s, gap_radius, has_next, t_next, has_prev, Xn, Xp)
+        Xa, Xb, has_next, t_next, has_prev = self.inputs(order, conn, r, rows)
+        return curve_geometry(order, Xa, Xb, self.s, gap_radius, has_next, t_next, has_prev)
 
     @staticmethod
     def fold(R, nn: int, axes=(1,)) -> np.ndarray:
