@@ -1,4 +1,4 @@
-"""Fault injection, solvers (issue 15): every time loop ends. Toy systems with a known
+"""Fault injection, solvers: every time loop ends. Toy systems with a known
 exact solution whose stage solves fail in a controlled way: a Zeno system whose admissible
 step shrinks to zero (the livelock of the dynamic wire: tiny accepted steps reset the cut
 counter), the rejection and wall-time budgets, and the minimiser's budgets. The real
@@ -67,7 +67,7 @@ def test_zeno_livelock_stops_at_the_minimum_step_with_the_last_good_state():
 
 def test_without_the_new_budgets_the_zeno_system_livelocks():
     """The same run with the minimum step and the rejection budget switched off does not end
-    within 2000 attempts: what the budgets are for (the failure mode of today's main)."""
+    within 2000 attempts: what the budgets are for (the failure mode without them)."""
     attempts, accepted = [], []
 
     class Counting(Zeno):

@@ -24,7 +24,7 @@ from test_dirk import (MF_STEPS, PR_STEPS, TIGHT, Manufactured, ProtheroRobinson
                        manufactured_initial, observed_order)
 
 ROOT = Path(__file__).resolve().parents[1]
-#: the code before factorisation reuse (issue 10): default-off must reproduce it bit for bit
+#: the commit before factorisation reuse: default-off must reproduce it bit for bit
 BEFORE_REUSE = "9569e2a"
 
 
@@ -113,7 +113,7 @@ class SwitchingPR(ProtheroRobinson):
 
 def _load_before_reuse():
     """newton.py and dirk.py of commit BEFORE_REUSE as modules (linear.py and system.py are
-    today's: only the files reuse touched are swapped)."""
+    the current ones: only the files reuse touched are swapped)."""
     mods = {}
     for name in ("newton", "dirk"):
         try:

@@ -1,7 +1,7 @@
 """PARDISO's LU of real unsymmetric matrices (mtype 11, ``PardisoFactorization(symmetric=False)``,
 registry name ``pardiso_unsym``) and its use for the dynamic scenes' stage matrices
 (``rve.solvers.newton.StageFactorisation``); docs/engine.md "Unsymmetric stage matrices
-(round 4)". References: numpy's dense LU (``np.linalg.solve``) and scipy's SuperLU."""
+". References: numpy's dense LU (``np.linalg.solve``) and scipy's SuperLU."""
 import numpy as np
 import pytest
 import scipy.sparse as sp

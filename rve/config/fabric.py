@@ -37,7 +37,7 @@ class FabricSpec(Section):
     @field_validator("rows")
     @classmethod
     def _rows_hold_fibrils(cls, v):
-        # issue 15: an empty stack row used to fail only in the fabric generator
+        # here rather than in the fabric generator: the error then names the key
         if any(n < 1 for n in v):
             raise ValueError(f"every stack row must hold >= 1 fibril (got {list(v)})")
         return v

@@ -119,7 +119,7 @@ def Quantity(unit: str):
     return Annotated[float, BeforeValidator(_convert), UnitSpec(unit)]
 
 
-# issue 15: every Temperature of rve is a difference (T = 0 is the reference or boundary
+# every Temperature of rve is a difference (T = 0 is the reference or boundary
 # temperature); an offset unit ("20 degC" = 293.15 K) there is always a mistake
 _ABSOLUTE_T = re.compile(r"(?<![A-Za-z_])(degC|degF|degree_Celsius|degree_Fahrenheit|celsius|fahrenheit)\b|°[CF]",
                          re.IGNORECASE)

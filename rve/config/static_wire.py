@@ -103,7 +103,7 @@ class StaticWireConfig(SceneConfig):
 
     @model_validator(mode="after")
     def _feasible(self):
-        # issue 15: radius vs length, mesh vs memory (rve.config.limits)
+        # radius vs length, mesh vs memory (rve.config.limits)
         from .limits import wire_feasibility
 
         return wire_feasibility(self, 9)

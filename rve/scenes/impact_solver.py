@@ -24,7 +24,7 @@ mtype 11, explicit zeros dropped, nonsymmetric matching and scaling, the analysi
 while the nonzero pattern lies in the analysed one, no Schur border: METIS orders the
 projectile's dofs well) where MKL is available, ``PrunedSuperLU`` where it is not and for
 a matrix PARDISO fails on (``kind`` says which factorised the last matrix). Measured on the
-full-size stage matrices (docs/engine.md "Unsymmetric stage matrices (round 4)").
+full-size stage matrices (docs/engine.md "Unsymmetric stage matrices").
 """
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ Contract
   stage states ``[(x_i, w_i)]`` of the mechanical/electrical step (T does not feed back:
   S = alpha_mu = 0), the same stage equations as the monolithic solve: (M + h a_ii K)_ff
   factorised once per h a_ii, the contact part by iterative refinement on that factor
-  (direct fallback); ``reuse=False`` the former path (a fresh solve per stage). Counters
+  (direct fallback); ``reuse=False`` the plain reference (a fresh solve per stage). Counters
   ``solves``, ``refinements``, ``fallbacks``, ``wall``.
 * ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone.
 * ``StateBalances(system, ops, circuits)``: ``__call__(x, w, t, T)`` -> dict of the charge
@@ -198,7 +198,7 @@ class ThermalPostSolver:
     (3-5 solves); if a correction does not shrink by half the stage falls back to a direct
     sparse solve of A (``fallbacks``). Joule heat and the contact matrix come from
     ``ThermalOperators`` (memoised per state: the last stage's values serve the balances of
-    the accepted state). ``reuse=False``: the former path, a fresh ``spsolve`` of A at every
+    the accepted state). ``reuse=False``: the plain reference, a fresh ``spsolve`` of A at every
     stage with active pairs, Joule by ``BeamModel.joule_power`` and the contact matrix by
     ``scalar_jump`` at every stage (the reference of tests/test_induced_deformation.py)."""
 
@@ -286,7 +286,7 @@ class ThermalPostSolver:
         return T
 
     def _step_fresh(self, T0, stages, t0, h):
-        """The former path (class docstring): nothing memoised or kept but the base factor."""
+        """The plain reference (class docstring): nothing memoised or kept but the base factor."""
         op, tab = self.ops, self.tab
         fr, fx = op.free, op.fixed
         MT0 = op.M @ T0

@@ -44,7 +44,7 @@ Contract
   companion (mtype 2, ``PardisoFactorization.cholesky``), which stops at the first pivot
   <= 0 (a tenth of a factorisation or less on the minimiser's indefinite matrices:
   docs/engine.md "Cholesky as the definiteness test"); otherwise ``factor_inertia`` and
-  its count (SuperLU: today's arithmetic).
+  its count (with SuperLU, the LU pivots' signs).
 * ``negative_eigenvalue_count(A, backend=None) -> int``: the stability check of a
   relaxed state (its static tangent's negative eigenvalues): 0 when the Cholesky companion
   of a PARDISO instance succeeds, otherwise ``factor_inertia``'s count (-1 for a zero or
@@ -53,7 +53,7 @@ Contract
   the answer is 0, which it is for every stable state.
 * ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (the minimiser's and
   the pseudo-transient solver's regularised tangent). ``keep_pattern=False`` is scipy's
-  sum (explicit zeros dropped: today's arithmetic); ``True`` keeps ``J``'s stored pattern
+  sum (explicit zeros dropped); ``True`` keeps ``J``'s stored pattern
   (explicit zeros of inactive contact pairs included) when ``M``'s pattern lies in it.
 
 Backends. A backend instance is stateful and used as ``analyse(pattern)`` (fill-reducing
@@ -73,7 +73,7 @@ analysis.
   perturbation 1e-13, the same analysis reuse; no inertia). ``"auto"`` with
   ``symmetric=False`` stays ``"superlu"``; ``rve.solvers.newton.StageFactorisation`` routes
   an unsymmetric stage matrix handed to a symmetric ``"pardiso"`` instance to its mtype-11
-  companion (docs/engine.md "Unsymmetric stage matrices (round 4)").
+  companion (docs/engine.md "Unsymmetric stage matrices").
 * ``"pardiso_unsym"`` (``PardisoUnsymBackend``): mtype 11 whatever ``symmetric`` says.
 * ``"superlu"`` (``SuperLUBackend``): scipy's SuperLU. ``symmetric=True``: minimum degree
   on A^T + A with diagonal pivots only (``SUPERLU_SYMMETRIC``), so the diagonal of U is
@@ -568,7 +568,7 @@ def factor_positive_definite(A, backend: BackendSpec = None, cholesky: bool = Tr
     energy minimiser's test of ``K + sigma M``). ``backend``: a name or an instance (kept).
     A PARDISO instance tries its Cholesky companion (``cholesky()``), which stops at the
     first pivot <= 0; any other PARDISO failure, every other backend, and ``cholesky=False``
-    (the LDL^T test of round 7, for A/B benchmarks) go through ``factor_inertia`` (positive
+    (the LDL^T inertia test, for A/B benchmarks) go through ``factor_inertia`` (positive
     definite = no negative and no zero pivot)."""
     solver = _instance(backend, symmetric=True)
     verdict = _cholesky_verdict(A, solver) if cholesky else None

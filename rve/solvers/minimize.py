@@ -24,7 +24,7 @@ themselves (their one side effect on the system).
   PARDISO's symbolic analysis is reused while the pattern is unchanged (docs/engine.md).
 
 Neither solver raises for non-convergence: the result says ``converged`` and why not
-(``reason``). Moved here from ``rve/contact/relax.py`` (issue 9), arithmetic unchanged.
+(``reason``).
 """
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ PARDISO_OPTIONS: dict = {"drop_zeros": True, "analyse_stored": True}
 
 #: the definiteness test of K + sigma M: PARDISO's Cholesky (True; it stops at the first pivot
 #: <= 0, a fraction of a factorisation on an indefinite matrix) or the LDL^T inertia count
-#: (False, round 7; benchmarks/engine_speed.py's ``pardiso_t2_ldlt``). Same verdicts, same
+#: (False; benchmarks/engine_speed.py's ``pardiso_t2_ldlt``). Same verdicts, same
 #: sigma ladder (tests/test_pardiso.py); docs/engine.md "Cholesky as the definiteness test".
 CHOLESKY_TEST = True
 
@@ -256,7 +256,7 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     one instance for the whole run, so PARDISO's analysis is reused while the pattern is
     unchanged; default ``rve.solvers.linear.resolve_backend()``).
 
-    Every loop ends (issue 15, docs/fault_tolerance.md): ``max_iter`` accepted iterations,
+    Every loop ends (docs/fault_tolerance.md): ``max_iter`` accepted iterations,
     ``max_rejections`` rejected trials in total (default ``max(200, 2 max_iter)``), a
     regularisation above ``max_sigma_rel`` x the stiffest mode's sigma (the trial steps
     have shrunk to nothing: the minimum step) and the optional wall-time budget

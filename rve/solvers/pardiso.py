@@ -1,8 +1,8 @@
 """PARDISO (Intel MKL) as a factorisation backend: supernodal LDLᵀ of real symmetric
 indefinite matrices (``mtype = -2``) and, with ``symmetric=False``, LU of real unsymmetric
-ones (``mtype = 11``), the fill-reducing analysis reused per sparsity pattern (issue 10;
-measurements in docs/engine.md, "Supernodal backend (measured)" and "Unsymmetric stage
-matrices (round 4)").
+ones (``mtype = 11``), the fill-reducing analysis reused per sparsity pattern
+(measurements in docs/engine.md, "Supernodal backend (measured)" and "Unsymmetric stage
+matrices").
 
 Contract
 --------

@@ -48,7 +48,6 @@ energies, pairs, active pairs, max overlap / R, wall time), ``timings`` (seconds
 dynamic, static, total), iteration counts, and the last static ``NewtonResult``
 (``MinimizeResult`` for the energy path).
 
-Moved here from ``rve/contact/relax.py`` (issue 9) with unchanged arithmetic.
 """
 from __future__ import annotations
 

@@ -205,8 +205,8 @@ class FreeDofs:
         conversion per Newton iteration (measured: the conversions cost more than the
         physics on small fibril systems). A term whose column mask is identically zero is
         skipped (it adds exact zeros), a mask of ones is not multiplied, and a single
-        unscaled term is gathered straight from its ``data`` (issue 10: 1.7 s of a 12-element
-        relaxation was this restriction). Otherwise falls back to ``assemble``.
+        unscaled term is gathered straight from its ``data`` (the restriction dominates a
+        small relaxation otherwise: docs/engine.md). Otherwise falls back to ``assemble``.
         """
         mats = [(A, c, m) for A, c, m in terms if A is not None and A.nnz > 0]
         if not mats:

@@ -2,7 +2,7 @@
 # of the configured runs that fails its SHA-256 trailer (rve.io.checksum; bytes only, no
 # HDF5, ~1 ms a file) is moved to <name>.corrupt, so the jobs that wrote them rerun now
 # instead of "Nothing to be done". States must carry a trailer (load_state refuses them
-# otherwise); tables without one (written before issue 15) are kept. Main process only: the
+# otherwise); tables without one (written by an older rve) are kept. Main process only: the
 # spawned jobs re-parse the workflow and must not touch files.
 
 import glob as _glob
