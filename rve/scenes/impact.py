@@ -20,7 +20,7 @@ post-solved on the fabric after every accepted step (S = alpha_mu = 0); balances
 accepted step; ``checkpoint`` (path) written every ``time.checkpoint_every`` steps at a
 chunk boundary and resumed from when present (same config digest).
 ``run(cfg, out_dir) -> dict``: load_or_relax + solve + outputs (``rve.scenes.impact_output``)
-+ the summary (keys of issue 12).
++ the summary (docs/impact.md).
 
 Sampled yarns: the warp yarns nearest y = -R_p/2 (``minus_y``) and +R_p/2 (``plus_y``) of the
 projectile axis, and the warp yarn j = 0 (``edge``, the -y edge).
@@ -75,7 +75,7 @@ def config_digest(cfg, sections=("geometry", "warp", "weft", "material", "projec
     impact speed excluded)."""
     d = {k: cfg.model_dump(mode="json")[k] for k in sections}
     d.get("relaxation", {}).pop("state_file", None)
-    # the factorisation backend changes round-off only (docs/engine.md round 4: states equal to
+    # the factorisation backend changes round-off only (docs/engine.md "Unsymmetric stage matrices": states equal to
     # 4e-15 between superlu_pruned and PARDISO): a checkpoint resumes on another backend
     d.get("newton", {}).pop("linear_backend", None)
     if "time" not in sections:  # a relaxed state: B is off, the circuits and the speed do not matter
@@ -180,72 +180,43 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
                          info)
 
 
-class _StageRecorder:
-    """Wraps a system: remembers the last evaluated state at every time (the converged stage
-    states of a step, for the thermal post-solve) and the evaluation wall time."""
+class ChunkedRebuild:
+    """The impact's ``StructureHook`` (rve.solvers.dirk): both contact maps are rebuilt on
+    segments of ``contact.rebuild_every`` nominal steps of the grid ``k h0`` from t = 0, and
+    early when a centroid or an end node moved half the margin since the last rebuild;
+    every rebuild restarts the step control. ``at_boundary(t, x, w)`` runs at every segment
+    boundary before the rebuild (progress, checkpoints)."""
 
-    def __init__(self, system):
-        self.system = system
-        self.n, self.mech = system.n, system.mech
-        self.last: dict = {}
-        self.wall = 0.0
+    def __init__(self, sysm, t_end: float, steps: int, every: int, guard: float, at_boundary=None):
+        self.sysm, self.t_end, self.steps = sysm, float(t_end), int(steps)
+        self.h0 = (self.t_end - 0.0) / self.steps
+        self.every, self.guard, self.at_boundary = max(1, int(every)), float(guard), at_boundary
+        self.t_stop = None
+        self.rebuilds, self.early, self.wall = 0, 0, 0.0
 
-    def mass(self):
-        return self.system.mass()
+    def horizon(self, t: float):
+        k_cur = int(math.floor(t / self.h0 + 1e-9))
+        k_b = min(self.steps, k_cur + self.every)
+        self.t_stop = self.t_end if k_b >= self.steps else k_b * self.h0
+        return self.t_stop, max(1, k_b - k_cur)
 
-    def constraints(self, t):
-        return self.system.constraints(t)
-
-    def admissible(self, x):
-        return self.system.admissible(x)
-
-    @property
-    def structure_version(self):
-        return self.system.structure_version
-
-    def evaluate(self, x, w, t, jacobian=True):
-        self.last[t] = (np.array(x, copy=True), np.array(w, copy=True))
+    def rebuild(self, x) -> None:
         t0 = time.perf_counter()
-        out = self.system.evaluate(x, w, t, jacobian)
+        self.sysm.rebuild(x)
         self.wall += time.perf_counter() - t0
-        return out
+        self.rebuilds += 1
 
-
-class _Rebuild(Exception):
-    def __init__(self, t, x, w):
-        self.t, self.x, self.w = t, x, w
-
-
-def _chunked(sysm, x, w, t0, t_end, steps, cfg, tab, nopts, iopts, on_step, scale, counters, wall, rec):
-    """Integrate in chunks of ``rebuild_every`` nominal steps, rebuilding the contact maps before
-    every chunk and early when something moved half the margin (on_step raises _Rebuild)."""
-    h0 = (t_end - 0.0) / steps
-    kk = max(1, int(cfg.contact.rebuild_every))
-    t = t0
-    while t < t_end * (1 - 1e-12):
-        k_cur = int(math.floor(t / h0 + 1e-9))
-        k_b = min(steps, k_cur + kk)
-        t_b = t_end if k_b >= steps else k_b * h0
-        m = max(1, k_b - k_cur)
-        tr = time.perf_counter()
-        sysm.rebuild(x)
-        wall["contact_rebuild"] += time.perf_counter() - tr
-        counters["chunks"] += 1
-        rs = RowScaledSystem(rec, scale)
-        ti = time.perf_counter()
-        try:
-            res = integrate(rs, x, w, t, t_b, m, stages=tab.stages, newton_opts=nopts, max_cuts=cfg.time.max_cuts,
-                            on_step=on_step, fixed_step=not cfg.time.step_control, consistent=False, **iopts)
-            x, w, t = res.x, res.w, res.t
-            counters["rejected"] += res.rejected
-            counters["factorizations"] += res.factorizations
-            counters["linear_solves"] += res.linear_solves
-        except _Rebuild as stop:
-            x, w, t = stop.x, stop.w, stop.t
-            counters["extra_rebuilds"] += 1
-        finally:
-            wall["integration"] += time.perf_counter() - ti
-        yield t, x, w
+    def __call__(self, t, x, w) -> bool:
+        if t >= self.t_end * (1 - 1e-12):
+            return False
+        early = self.guard > 0 and self.sysm.max_displacement_since_rebuild(x) > self.guard
+        if not (early or t >= self.t_stop):
+            return False
+        self.early += int(early)
+        if self.at_boundary is not None:
+            self.at_boundary(t, x, w)
+        self.rebuild(x)
+        return True
 
 
 def _integrator_options(cfg, sysm=None) -> dict:
@@ -280,28 +251,25 @@ def relax(cfg, progress: bool = False):
     x = problem.x0.copy()
     scale = sysm.row_scales(r.t_end / r.steps, x, np.zeros(sysm.n))
     w, _ = _initial_w(sysm, x, scale, nopts)
-    rec = _StageRecorder(sysm)
-    counters = {"steps": 0, "rejected": 0, "chunks": 0, "extra_rebuilds": 0, "factorizations": 0, "linear_solves": 0}
-    wall = {"integration": 0.0, "contact_rebuild": 0.0}
-    guard = 0.5 * cfg.contact.margin
 
-    def on_step(t, x_, w_, info):
-        counters["steps"] += 1
-        rec.last.clear()
-        if guard > 0 and sysm.max_displacement_since_rebuild(x_) > guard and t < r.t_end * (1 - 1e-12):
-            raise _Rebuild(t, x_, w_)
+    def at_boundary(t, x_, w_):
+        if progress:
+            log.info("relaxation t = %.4g ms", t)
 
+    hook = ChunkedRebuild(sysm, r.t_end, r.steps, cfg.contact.rebuild_every, 0.5 * cfg.contact.margin, at_boundary)
     try:
-        for t, x, w in _chunked(sysm, x, w, 0.0, r.t_end, r.steps, cfg, tab, nopts, iopts, on_step, scale, counters,
-                                wall, rec):
-            if progress:
-                log.info("relaxation t = %.4g ms", t)
+        hook.rebuild(x)
+        res = integrate(RowScaledSystem(sysm, scale), x, w, 0.0, r.t_end, r.steps, stages=tab.stages,
+                        newton_opts=nopts, max_cuts=cfg.time.max_cuts,
+                        fixed_step=not cfg.time.step_control, consistent=False, rebuild=hook, **iopts)
+        x, w = res.x, res.w
+        at_boundary(res.t, x, w)
     except IntegrationFailure as exc:
         raise SceneFailure("impact", f"relaxation failed: {exc}", phase="relaxation", time=exc.t,
                            state={"x": exc.x, "w": exc.w}, model=sysm) from exc
     vmax = float(np.abs(w[sysm.mech]).max())
     disp = float(np.abs((x - problem.x0)[sysm.mech]).max())
-    info = {"steps": counters["steps"], "rejected": counters["rejected"], "max_velocity_mm_per_ms": vmax,
+    info = {"steps": res.steps, "rejected": res.rejected, "max_velocity_mm_per_ms": vmax,
             "max_displacement_mm": disp, "wall_time_s": time.perf_counter() - wall0,
             "active_pairs": int(sysm.fabric.active_pairs(sysm.split(x)[0]).size)}
     log.info("relaxation: %s", info)
@@ -386,7 +354,6 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     w = np.zeros(sysm.n)
     w[sysm._r_end[:, 2]] = -cfg.projectile.speed
     scale = sysm.row_scales(h0, x, w)
-    rec = _StageRecorder(sysm)
     thermal = ImpactThermal(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes,
                             sink=cfg.contact.projectile_heat_sink)
     post = ThermalPostSolver(thermal, tab, cfg.end_temperature)
@@ -447,19 +414,16 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     if resumed is None:
         record_state(0.0, x, w)
         store(0.0, x, w)
-    guard = 0.5 * float(cfg.contact.margin)
 
     def on_step(t_, x_, w_, info):
         nonlocal T
         counters["steps"] += 1
+        counters["rejected"] += info.rejected_attempts
+        counters["factorizations"] += info.factorizations
+        counters["linear_solves"] += info.linear_solves
         stage_its.append(list(info.stage_iterations))
         tp = time.perf_counter()
-        stages = []  # full states: the thermal operators take the sphere centres from them
-        for i in range(tab.stages - 1):
-            stages.append(rec.last[info.t + tab.c[i] * info.h])
-        stages.append((x_, w_))
-        T = post.step(T, stages, info.t, info.h)
-        rec.last.clear()
+        T = post.step(T, info.stage_states, info.t, info.h)
         wall["thermal_post"] += time.perf_counter() - tp
         record_state(t_, x_, w_)
         counters["since_store"] += 1
@@ -467,39 +431,53 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
         if record and (counters["since_store"] >= cfg.time.store_every or t_ >= t_end * (1 - 1e-12)):
             counters["since_store"] = 0
             store(t_, x_, w_)
-        if guard > 0 and sysm.max_displacement_since_rebuild(x_) > guard and t_ < t_end * (1 - 1e-12):
-            raise _Rebuild(t_, x_, w_)
 
     def save_checkpoint(t_, x_, w_):
         from ..io.atomic import atomic_path
 
         tc = time.perf_counter()
         st = {"x": x_, "w": w_, "T": T, "t": t_, "series": series, "bal": bal, "stored": stored,
-              "counters": dict(counters), "stage_iterations": stage_its}
+              "counters": dict(counters, chunks=hook.rebuilds, extra_rebuilds=hook.early),
+              "stage_iterations": stage_its}
         with atomic_path(Path(checkpoint)) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, digest=np.array(digest), t_end=np.array(t_end), steps=np.array(steps),
                          state=np.array(st, dtype=object))
         wall["checkpoint"] += time.perf_counter() - tc
 
+    def at_boundary(t_, x_, w_):
+        if progress:
+            log.info("impact t = %.5g ms, steps %d, rejected %d, v_z = %.5g mm/ms", t_, counters["steps"],
+                     counters["rejected"], series["v_com"][-1][2])
+        if checkpoint is not None and counters["since_checkpoint"] >= cfg.time.checkpoint_every:
+            counters["since_checkpoint"] = 0
+            save_checkpoint(t_, x_, w_)
+        if stop_after_steps is not None and counters["steps"] >= stop_after_steps and t_ < t_end * (1 - 1e-12):
+            if checkpoint is not None:
+                save_checkpoint(t_, x_, w_)
+            raise SceneFailure("impact", f"stopped after {counters['steps']} steps (stop_after_steps)",
+                               phase="impact", time=t_, state={"x": x_, "w": w_, "T": T}, model=sysm)
+
+    hook = ChunkedRebuild(sysm, t_end, steps, cfg.contact.rebuild_every, 0.5 * float(cfg.contact.margin),
+                          at_boundary)
+    hook.rebuilds, hook.early = counters["chunks"], counters["extra_rebuilds"]
+    ti = time.perf_counter()
     try:
-        for t, x, w in _chunked(sysm, x, w, t, t_end, steps, cfg, tab, nopts, iopts, on_step, scale, counters, wall,
-                                rec):
-            if progress:
-                log.info("impact t = %.5g ms, steps %d, rejected %d, v_z = %.5g mm/ms", t, counters["steps"],
-                         counters["rejected"], series["v_com"][-1][2])
-            if checkpoint is not None and counters["since_checkpoint"] >= cfg.time.checkpoint_every:
-                counters["since_checkpoint"] = 0
-                save_checkpoint(t, x, w)
-            if stop_after_steps is not None and counters["steps"] >= stop_after_steps and t < t_end * (1 - 1e-12):
-                if checkpoint is not None:
-                    save_checkpoint(t, x, w)
-                raise SceneFailure("impact", f"stopped after {counters['steps']} steps (stop_after_steps)",
-                                   phase="impact", time=t, state={"x": x, "w": w, "T": T}, model=sysm)
+        if t < t_end * (1 - 1e-12):
+            hook.rebuild(x)
+            res = integrate(RowScaledSystem(sysm, scale), x, w, t, t_end, steps, stages=tab.stages,
+                            newton_opts=nopts, max_cuts=cfg.time.max_cuts, on_step=on_step,
+                            fixed_step=not cfg.time.step_control, consistent=False, rebuild=hook, **iopts)
+            x, w, t = res.x, res.w, res.t
+            at_boundary(t, x, w)
     except IntegrationFailure as exc:
         raise SceneFailure("impact", f"time integration failed with step size h = {exc.h:.6g} ms: {exc}",
                            phase="impact", time=exc.t, step=f"h = {exc.h:.6g} ms",
                            state={"x": exc.x, "w": exc.w, "T": T}, model=sysm) from exc
+    finally:
+        wall["integration"] += time.perf_counter() - ti
+    counters["chunks"], counters["extra_rebuilds"] = hook.rebuilds, hook.early
+    wall["contact_rebuild"] = hook.wall
     # ------------------------------------------------------------------ summary
     errs = impact_balance_errors({k_: np.asarray(v) for k_, v in bal.items()})
     stats = fab.stats
@@ -508,7 +486,9 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     wall["contact_sphere"] = sysm.stats["sphere_s"]
     wall["compose"] = sysm.stats["compose_s"]
     wall["contact_search"] = wall["contact_rebuild"]
-    wall["linear_solve_and_newton"] = wall["integration"] - rec.wall - wall["thermal_post"] - wall["balances"] \
+    evaluation = stats.get("base_s", 0.0) + stats.get("contact_s", 0.0) + sysm.stats["sphere_s"] \
+        + sysm.stats["compose_s"]
+    wall["linear_solve_and_newton"] = wall["integration"] - evaluation - wall["thermal_post"] - wall["balances"] \
         - wall["contact_rebuild"]
     wall["temperature"] = wall["thermal_post"]
     wall["total"] = time.perf_counter() - wall0

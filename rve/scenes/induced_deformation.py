@@ -21,7 +21,7 @@ assembles the stage matrix then; counted in ``contact_structure_changes``). ``st
 under ``"history"``.
 ``run(cfg, out_dir) -> dict``: ``solve`` + ``induced_deformation.nc`` (netCDF time series),
 ``tubes/induced.pvd`` (tube meshes coloured by current and temperature), PNG frames
-(``frames.png``, ``temperature.png``) and the summary (keys of issue 11: orientation,
+(``frames.png``, ``temperature.png``) and the summary (orientation,
 t_end_ms, steps_accepted, steps_rejected, newton_iterations, dofs, mean_displacement_mm,
 max_temperature_K, terminal_current_A, charge_balance_error, energy_balance_error,
 wall_time_s). A failed integration raises ``SceneFailure`` (last good state; ``run`` saves
@@ -140,69 +140,32 @@ def setup(cfg, mode: str | None = None) -> InducedProblem:
     return InducedProblem(system, weave, mode, x0, circuit_in, circuit_leak, dirichlet_V, ends.ravel(), ends, info)
 
 
-class _StageRecorder:
-    """Wraps a system: remembers the last evaluated state at every time (the converged stage
-    states of a step are the last evaluations at its stage times, rve.solvers.dirk)."""
+class MapRebuild:
+    """The scene's ``StructureHook`` (rve.solvers.dirk): the contact map is rebuilt every
+    ``rebuild_every`` accepted steps (Appendix A) and at once when a centroid has moved
+    ``guard`` (half the search margin) since the last rebuild; the step control restarts
+    only when the rebuild changed the union sparsity pattern."""
 
-    def __init__(self, system, c):
-        self.system = system
-        self.n, self.mech = system.n, system.mech
-        self.last: dict = {}
-        self.wall = 0.0
-        self.c = [float(v) for v in c]   # stage times of the tableau (all > 0 for SDIRK)
-        self.t_accepted, self.attempts, self.accepted, self._attempt = 0.0, 0, 0, None
+    def __init__(self, sysm, t_end: float, every: int, guard: float):
+        self.sysm, self.t_end, self.every, self.guard = sysm, float(t_end), max(1, int(every)), float(guard)
+        self.since, self.early, self.changes, self.wall = 0, 0, 0, 0.0
 
-    def mass(self):
-        return self.system.mass()
-
-    def constraints(self, t):
-        """The stepper asks for the constraints once per stage, in stage order: a call that is
-        not the next stage time t0 + c_i h of the open attempt opens a new step attempt."""
-        tau = t - self.t_accepted
-        a = self._attempt
-        if a is not None and a[1] < len(self.c) and abs(tau - self.c[a[1]] * a[0]) <= 1e-9 * max(a[0], 1e-300):
-            self._attempt = (a[0], a[1] + 1)
-        else:
-            self.attempts += 1
-            self._attempt = (tau / self.c[0], 1)
-        return self.system.constraints(t)
-
-    def accept(self, t):
-        """An attempt was accepted and ended at t."""
-        self.accepted += 1
-        self.t_accepted = t
-        self._attempt = None
-
-    @property
-    def rejected(self) -> int:
-        return self.attempts - self.accepted
-
-    def admissible(self, x):
-        return self.system.admissible(x)
-
-    def evaluate(self, x, w, t, jacobian=True):
+    def __call__(self, t, x, w) -> bool:
+        self.since += 1
+        if t >= self.t_end * (1 - 1e-12):
+            return False
+        early = self.guard > 0 and self.sysm.max_displacement_since_rebuild(x) > self.guard
+        if not (early or self.since >= self.every):
+            return False
         t0 = time.perf_counter()
-        out = self.system.evaluate(x, w, t, jacobian)
+        kept = self.sysm.assembler.reused
+        self.sysm.rebuild(x)
+        changed = self.sysm.assembler.reused == kept
+        self.changes += int(changed)
+        self.early += int(early and self.since < self.every)
+        self.since = 0
         self.wall += time.perf_counter() - t0
-        self.last[t] = (np.array(x, copy=True), np.array(w, copy=True), np.array(out[0], dtype=float, copy=True))
-        return out
-
-    def residual_at(self, x, w, t):
-        """F of the last evaluation at time t if it was at exactly (x, w), else None."""
-        hit = self.last.get(t)
-        if hit is None and self.last:
-            tk = max(self.last)  # the step's end time t0 + h may differ from t in the last bit
-            hit = self.last[tk] if abs(tk - t) <= 1e-12 * max(1.0, abs(t)) else None
-        if hit is not None and np.array_equal(hit[0], x) and np.array_equal(hit[1], w):
-            return hit[2]
-        return None
-
-
-class _Restart(Exception):
-    """Raised from on_step to restart the integrator after a rebuild changed the sparsity pattern."""
-
-    def __init__(self, t, x, w):
-        self.t, self.x, self.w = t, x, w
+        return changed
 
 
 def _initial_w(problem, system, x0, t0, nopts):
@@ -217,7 +180,7 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
           measure_memory: bool = False, post_reuse: bool = True) -> SceneResult:
     """Run the scene in memory (module docstring). ``t_end``/``steps`` override the config
     (short horizons for tests and the convergence study); ``post_reuse`` False: the T
-    post-solve's former path (``ThermalPostSolver(reuse=False)``, the reference of the
+    post-solve without reuse (``ThermalPostSolver(reuse=False)``, the reference of the
     tests and benchmarks). Raises ``SceneFailure``."""
     wall0 = time.perf_counter()
     if measure_memory:
@@ -236,7 +199,6 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     iopts.update(integrator_options or {})
     x = problem.x0.copy()
     scale = base.row_scales(h0, x, np.zeros(base.n))
-    rec = _StageRecorder(sysm, tab.c)
     thermal = ThermalOperators(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes)
     post = ThermalPostSolver(thermal, tab, cfg.end_temperature, reuse=post_reuse) if mode == "post" else None
     balances = StateBalances(sysm, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
@@ -256,29 +218,21 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     stored = {"t": [0.0], "x": [base.nodal(x)[:, :9].copy()], "w": [w.copy()], "T": [T_of(w)]}
     guard = 0.5 * float(sysm.params.margin)
     wall = {"integration": 0.0, "balances": 0.0, "thermal_post": 0.0, "rebuild": 0.0}
-    counters = {"steps": 0, "rejected": 0, "newton": 0, "linear_solves": 0, "extra_rebuilds": 0,
-                "structure_changes": 0, "residual_reused": 0, "factorizations": 0, "jacobians": 0,
-                "integrate_calls": 0, "stage_iterations": [], "since_store": 0, "since_rebuild": 0}
-    kk = max(1, int(cfg.contact.rebuild_every))
+    counters = {"steps": 0, "linear_solves": 0, "residual_reused": 0, "factorizations": 0, "jacobians": 0,
+                "stage_iterations": [], "since_store": 0}
+    rs = RowScaledSystem(sysm, scale)
 
     def on_step(t, x_, w_, info):
         nonlocal T
         counters["steps"] += 1
-        rec.accept(t)
         counters["stage_iterations"].append(list(info.stage_iterations))
         counters["linear_solves"] += info.linear_solves
         counters["factorizations"] += info.factorizations
         counters["jacobians"] += info.jacobians
         if post is not None:
-            stages = []
-            for i in range(tab.stages - 1):
-                ti = info.t + tab.c[i] * info.h
-                stages.append(rec.last[ti][:2])
-            stages.append((x_, w_))
-            T = post.step(T, stages, info.t, info.h)
-        F_end = rec.residual_at(x_, w_, t)
+            T = post.step(T, info.stage_states, info.t, info.h)
+        F_end = rs.residual_at(x_, w_, t)
         counters["residual_reused"] += int(F_end is not None)
-        rec.last.clear()
         tb = time.perf_counter()
         b = balances(x_, w_, t, T_of(w_), F_end)
         b["contact_active_pairs"] = float(thermal.active_pairs(x_).size)  # memoised by the post-solve / balances
@@ -297,49 +251,26 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
             log.info("t = %.5g / %.5g ms: %d steps accepted, %d Newton iterations, max T %.3g K, %.1f s",
                      t, t_end, counters["steps"], sum(map(sum, counters["stage_iterations"])),
                      float(np.max(T_of(w_))), time.perf_counter() - wall0)
-        # contact map: rebuilt every ``rebuild_every`` accepted steps (Appendix A),
-        # and at once when a centroid has moved half the search margin since the last rebuild
-        counters["since_rebuild"] += 1
-        if t >= t_end * (1 - 1e-12):
-            return
-        early = guard > 0 and sysm.max_displacement_since_rebuild(x_) > guard
-        if early or counters["since_rebuild"] >= kk:
-            tr_ = time.perf_counter()
-            kept = sysm.assembler.reused
-            sysm.rebuild(x_)
-            changed = sysm.assembler.reused == kept
-            counters["structure_changes"] += int(changed)
-            counters["extra_rebuilds"] += int(early and counters["since_rebuild"] < kk)
-            counters["since_rebuild"] = 0
-            wall["rebuild"] += time.perf_counter() - tr_
-            if changed:  # a new sparsity pattern: restart the integrator on it (fast stage-matrix path)
-                raise _Restart(t, x_, w_)
 
-    t = 0.0
+    hook = MapRebuild(sysm, t_end, cfg.contact.rebuild_every, 0.5 * float(sysm.params.margin))
     sysm.rebuild(x)
-    while t < t_end * (1 - 1e-12):
-        n_left = max(1, int(math.ceil((t_end - t) / h0 - 1e-6)))   # the nominal grid from t (t on it but after an early rebuild)
-        ti = time.perf_counter()
-        counters["integrate_calls"] += 1
-        try:
-            res = integrate(RowScaledSystem(rec, scale), x, w, t, t_end, n_left, stages=tab.stages,
-                            newton_opts=nopts, max_cuts=cfg.time.max_cuts, on_step=on_step,
-                            fixed_step=not cfg.time.step_control, consistent=False, **iopts)
-            x, w, t = res.x, res.w, res.t
-        except _Restart as stop:
-            x, w, t = stop.x, stop.w, stop.t
-            if progress:
-                log.info("integrator restarted at t = %.6g ms (contact pattern changed)", t)
-        except IntegrationFailure as exc:
-            wall["integration"] += time.perf_counter() - ti
-            raise SceneFailure(
-                "induced_deformation", f"time integration failed with step size h = {exc.h:.6g} ms: {exc}",
-                phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
-                state={"x": exc.x, "w": exc.w, "T": T_of(exc.w)}, model=base,
-                details={"h": exc.h, "residuals": [float(r) for r in exc.residuals],
-                         "history": {"stored": stored, "balances": {"t": bal_t, **bal}}}) from exc
+    ti = time.perf_counter()
+    try:
+        res = integrate(rs, x, w, 0.0, t_end, steps, stages=tab.stages, newton_opts=nopts,
+                        max_cuts=cfg.time.max_cuts, on_step=on_step, fixed_step=not cfg.time.step_control,
+                        consistent=False, rebuild=hook, **iopts)
+        x, w = res.x, res.w
+    except IntegrationFailure as exc:
+        raise SceneFailure(
+            "induced_deformation", f"time integration failed with step size h = {exc.h:.6g} ms: {exc}",
+            phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
+            state={"x": exc.x, "w": exc.w, "T": T_of(exc.w)}, model=base,
+            details={"h": exc.h, "residuals": [float(r) for r in exc.residuals],
+                     "history": {"stored": stored, "balances": {"t": bal_t, **bal}}}) from exc
+    finally:
         wall["integration"] += time.perf_counter() - ti
-    counters["rejected"] = rec.rejected
+    wall["rebuild"] = hook.wall
+
     # newton iterations: count from the stage iterations of the accepted steps (+ rejected attempts)
     stage_its = counters["stage_iterations"]
     newton_acc = int(sum(sum(s) for s in stage_its))
@@ -350,7 +281,8 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     stats = sysm.stats
     wall["assembly"] = stats.get("base_s", 0.0)
     wall["contact"] = stats.get("contact_s", 0.0) + wall["rebuild"]
-    wall["linear_solves_and_other"] = wall["integration"] - rec.wall - wall_post - wall["balances"]
+    wall["linear_solves_and_other"] = wall["integration"] - stats.get("base_s", 0.0) - stats.get("contact_s", 0.0) \
+        - wall_post - wall["balances"]
     wall["total"] = time.perf_counter() - wall0
     peak = None
     if measure_memory:
@@ -370,17 +302,17 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         "h_nominal_ms": h0,
         "stages": tab.stages,
         "steps_accepted": counters["steps"],
-        "steps_rejected": counters["rejected"],
+        "steps_rejected": res.rejected,
         "newton_iterations": newton_acc,
         "newton_iterations_per_stage": newton_acc / n_stages,
         "linear_solves": counters["linear_solves"],
         "factorizations": counters["factorizations"],
         "jacobian_evaluations": counters["jacobians"],
-        "contact_structure_changes": counters["structure_changes"],
-        "integrator_restarts": counters["integrate_calls"] - 1,
+        "contact_structure_changes": hook.changes,
+        "integrator_restarts": res.restarts,
         "balance_residuals_reused": counters["residual_reused"],
         "contact_rebuilds": int(stats.get("rebuilds", 0)),
-        "extra_rebuilds": counters["extra_rebuilds"],
+        "extra_rebuilds": hook.early,
         "dofs": {**base.dof_counts(), **({"thermal_post_solve": int(mesh.n_nodes)} if mode == "post" else {})},
         "mean_displacement_mm": [float(v) for v in disp],
         "max_temperature_K": float(np.max(T_final)),
