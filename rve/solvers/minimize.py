@@ -282,7 +282,7 @@ def _long_lived_objects_frozen():
     thawed after it): the loop makes arrays and sparse matrices, no reference cycles of note,
     but every full collection it triggered traversed the ~10^5 objects of the imported modules
     (numba's type system, pint's registry): 3 collections of ~60 ms in a 12-element relaxation
-    (docs/engine.md "Round 9"). Nothing is frozen when a caller has already frozen objects."""
+    (docs/engine.md, "the fixed costs of a process"). Nothing is frozen when a caller has already frozen objects."""
     if gc.get_freeze_count():
         yield
         return

@@ -239,7 +239,7 @@ def _sorted_unique(keys):
     measured 10x slower on these ~10^5-10^6 keys). The keys come as a few sorted runs (the
     entries of a canonical matrix, the diagonal, the old pattern): timsort (``stable``) merges
     them in linear time where quicksort sorted them afresh (1.4 s of a 30-element
-    relaxation's profile, docs/engine.md "Round 8")."""
+    relaxation's profile, docs/engine.md "The pattern bookkeeping")."""
     k = np.sort(keys, kind="stable")
     if k.size:
         k = k[np.concatenate(([True], k[1:] != k[:-1]))]
