@@ -33,25 +33,11 @@ superlu / this (same invocation), peak RSS, Newton iterations, factorisations an
 analyses, final energy and its relative difference to superlu's, max overlap / R,
 negative pivots of the final tangent (stable), |x - x_superlu|_max, and the split of the
 solve time measured by wrapping (factorisation + solve, assembly, contact rebuild,
-energy, other). Backends: ``superlu`` (today's arithmetic: = today's main), ``pardiso``
-(the default "auto" where MKL is present, = ``pardiso_stored`` since the measurements of
-docs/engine.md; the figures there labelled "pardiso" were taken with the then default,
-now ``pardiso_nonzero``: the nonzero pattern, analysis redone when it leaves the analysed
-one or its union), ``pardiso_nonzero``,
-``pardiso_keep`` (PARDISO on the contact map's stored pattern, explicit zeros kept:
-``rve.solvers.minimize.KEEP_STORED_PATTERN = True``), ``pardiso_stored`` (the stored
-pattern handed in, the nonzero pattern factorised on
-the analysed one while it lies in it, a new analysis on the stored pattern when not:
-``analyse_stored``), ``pardiso_grow`` (the analysed
-pattern is always the union of the patterns met: ``grow_limit = inf``), ``pardiso_nosub``
-(a new analysis for every new nonzero pattern: ``reuse_subpattern = False``),
-``pardiso_amd`` (minimum-degree ordering, no weighted matching: a cheaper analysis),
-``pardiso_t2`` (the default, CNR mode for up to two threads, iparm(34) = 2, on two PARDISO
-threads instead of one), ``pardiso_t2_ldlt`` (``pardiso_t2`` with the LDL^T inertia count as
-the minimiser's definiteness test instead of the Cholesky: ``rve.solvers.minimize.
-CHOLESKY_TEST = False``, round 7's test), ``pardiso_nocnr`` (the default with CNR off: the
-arithmetic before round 7). Whole runs get ``RVE_PARDISO_THREADS=1`` unless it is set, so only ``pardiso_t2``
-uses two threads.
+energy, other). Backends: ``superlu`` (scipy's SuperLU) and ``pardiso`` (the default
+"auto" where MKL is present, with the minimiser's ``MinimizeOptions`` defaults). The
+PARDISO variants measured against them (nonzero vs stored pattern, analysis growth,
+orderings, CNR, two threads, the LDL^T test) are decided; their figures stay in
+docs/engine.md and in git. Whole runs get ``RVE_PARDISO_THREADS=1`` unless it is set.
 
 For every saved matrix and every variant, in a fresh subprocess (so ``ru_maxrss`` is the
 peak of that variant alone): median wall time of one numeric factorisation and of one
@@ -135,7 +121,7 @@ def worker(path: str, variant: str, repeats: int) -> dict:
         rec.update(factor_s=tf, solve_s=ts, factor_nnz=int(lu.L.nnz + lu.U.nnz),
                    negative_pivots=int(np.count_nonzero(lu.U.diagonal() < 0)))
     else:
-        from rve.solvers import pardiso
+        from rve.solvers.backends import pardiso
 
         if not pardiso.available():
             return {"variant": variant, "skipped": pardiso.unavailable_reason()}
@@ -173,7 +159,7 @@ def worker(path: str, variant: str, repeats: int) -> dict:
 
 def _cholesky_record(A, b, rec: dict, repeats: int, rss0: float) -> dict:
     """``pardiso_chol_t2``: the Cholesky companion on two threads (CNR), zeros dropped."""
-    from rve.solvers import pardiso
+    from rve.solvers.backends import pardiso
     from rve.solvers.linear import NotPositiveDefiniteError
 
     f = pardiso.PardisoFactorization(positive_definite=True, drop_zeros=True, cnr=2, threads=2)
@@ -209,7 +195,7 @@ def threads_check(path: Path, repeats: int) -> None:
     difference of every solution to the first one of its CNR mode."""
     import scipy.sparse as sp
 
-    from rve.solvers import pardiso
+    from rve.solvers.backends import pardiso
 
     A = sp.load_npz(path).tocsc()
     b = np.random.default_rng(0).standard_normal(A.shape[0])
@@ -304,7 +290,7 @@ def worker_unsym(path: str, variant: str, repeats: int) -> dict:
         L = lu.lu if variant == "superlu_pruned" else lu
         rec.update(factor_s=tf, solve_s=ts, factor_nnz=int(L.L.nnz + L.U.nnz))
     else:
-        from rve.solvers import pardiso
+        from rve.solvers.backends import pardiso
 
         if not pardiso.available():
             return {"variant": variant, "skipped": pardiso.unavailable_reason()}
@@ -407,7 +393,8 @@ class _Timers:
 
     def __init__(self):
         from rve.scenes.impact_solver import PrunedSuperLU
-        from rve.solvers import linear, pardiso
+        from rve.solvers import linear
+        from rve.solvers.backends import pardiso
 
         self.t, self.n = {}, {}
         targets = [(pardiso.PardisoFactorization, "analyse", "pardiso_analyse"),
@@ -461,7 +448,8 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from rve.config.loader import load_config
 
-    from rve.solvers import linear, pardiso as _pardiso
+    from rve.solvers import linear
+    from rve.solvers.backends import pardiso as _pardiso
 
     # a benchmark-only variant: mtype 11 analysing the stored pattern (candidate contact pairs
     # included), so that later nonzero patterns of the same contact map lie in it
@@ -558,17 +546,7 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
 
 
 # ----------------------------------------------------------------------------- whole runs
-RUN_BACKENDS = ("superlu", "pardiso", "pardiso_nonzero", "pardiso_keep", "pardiso_stored", "pardiso_grow",
-                "pardiso_nosub", "pardiso_amd", "pardiso_nocnr", "pardiso_t2", "pardiso_t2_ldlt")
-#: PARDISO variants of the whole runs: rve.solvers.minimize.PARDISO_OPTIONS
-RUN_VARIANT_OPTIONS = {"pardiso_stored": {"drop_zeros": True, "analyse_stored": True},
-                       "pardiso": {"drop_zeros": True, "analyse_stored": True},
-                       "pardiso_grow": {"grow_limit": float("inf")}, "pardiso_nosub": {"reuse_subpattern": False},
-                       "pardiso_amd": {"ordering": 0, "matching": False},
-                       # the minimiser's default is CNR mode for up to 2 threads (iparm(34) = 2)
-                       "pardiso_nocnr": {"drop_zeros": True, "analyse_stored": True, "cnr": 0},
-                       "pardiso_t2": {"drop_zeros": True, "analyse_stored": True, "threads": 2},
-                       "pardiso_t2_ldlt": {"drop_zeros": True, "analyse_stored": True, "threads": 2}}
+RUN_BACKENDS = ("superlu", "pardiso")
 RELAX_CONFIG = ROOT / "configs/scenes/plain_weave_relax.yaml"
 STRAIN_CONFIG = ROOT / "configs/rve/plain_weave.yaml"
 
@@ -619,14 +597,6 @@ def run_worker(kind: str, arg: str, backend: str, out_npz: str) -> dict:
     """One whole run in this process (``RVE_LINEAR_BACKEND`` is already set by the parent)."""
     t_import = time.perf_counter()
     import rve.scenes  # noqa: F401
-    from rve.solvers import minimize
-
-    # the variants are set explicitly (independent of the defaults of rve.solvers.minimize)
-    minimize.KEEP_STORED_PATTERN = backend in ("pardiso", "pardiso_keep", "pardiso_stored", "pardiso_nocnr",
-                                               "pardiso_t2", "pardiso_t2_ldlt")
-    minimize.CHOLESKY_TEST = backend != "pardiso_t2_ldlt"  # the LDL^T inertia as the test (round 7)
-    minimize.PARDISO_OPTIONS.clear()
-    minimize.PARDISO_OPTIONS.update(RUN_VARIANT_OPTIONS.get(backend, {}))
     split = _instrument()
     rec = {"kind": kind, "arg": arg, "backend": backend, "env": os.environ.get("RVE_LINEAR_BACKEND", "")}
     t0 = time.perf_counter()

@@ -96,7 +96,7 @@ def _register_pardiso() -> None:
 
     if "pardiso" in linear.BACKENDS:
         return
-    from rve.solvers.pardiso import PardisoFactorization, available
+    from rve.solvers.backends.pardiso import PardisoFactorization, available
 
     if not available():
         raise SystemExit("pardiso is not available here")

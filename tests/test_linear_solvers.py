@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from rve.solvers import linear, pardiso
+from rve.solvers import linear
+from rve.solvers.backends import pardiso
 from rve.solvers.linear import (BandedBackend, NotBandedError, SingularFactorError, SuperLUBackend, band_of,
                                 factor_inertia, factorize, resolve_backend, shifted, sparse_solve)
 
@@ -287,7 +288,7 @@ def test_stage_factorisation_sends_unsymmetric_matrices_past_pardiso():
     upper triangle, so the unsymmetric coupled matrices go past it, to its mtype-11 LU
     companion (a regression guard: with SuperLU's symmetric mode the induced-deformation
     scene's Newton converged only linearly)."""
-    from rve.solvers import pardiso
+    from rve.solvers.backends import pardiso
     from rve.solvers.newton import StageFactorisation
 
     if not pardiso.available():

@@ -7,7 +7,8 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from rve.solvers import linear, pardiso
+from rve.solvers import linear
+from rve.solvers.backends import pardiso
 from rve.solvers.newton import JacobianReuse, StageFactorisation
 
 needs_mkl = pytest.mark.skipif(not pardiso.available(), reason=f"PARDISO unavailable: {pardiso.unavailable_reason()}")

@@ -19,7 +19,7 @@ as the integrator solves it): threshold 0.1: 10.3 s, fill 23.8M (off-diagonal pi
 0.01: 0.49 s, fill 3.6M; 0.0: 0.74 s, fill 3.6M.
 
 ``PardisoOrPruned`` (registry name ``"auto_pruned"``, added by ``register()`` too): PARDISO's
-LU of the unsymmetric stage matrix (``rve.solvers.pardiso.PardisoFactorization(symmetric=False)``:
+LU of the unsymmetric stage matrix (``rve.solvers.backends.pardiso.PardisoFactorization(symmetric=False)``:
 mtype 11, explicit zeros dropped, nonsymmetric matching and scaling, the analysis reused
 while the nonzero pattern lies in the analysed one, no Schur border: METIS orders the
 projectile's dofs well) where MKL is available, ``PrunedSuperLU`` where it is not and for
@@ -115,7 +115,7 @@ class PardisoOrPruned:
     symmetric = False
 
     def __init__(self, symmetric: bool = False):
-        from ..solvers import pardiso
+        from ..solvers.backends import pardiso
 
         self._pardiso = pardiso.PardisoFactorization(symmetric=False) if pardiso.available() else None
         self._pruned = None

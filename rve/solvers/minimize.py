@@ -33,67 +33,45 @@ import gc
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
-from .linear import (factor_inertia, factor_positive_definite, get_backend, resolve_backend, shifted, solver_threads,
-                     sparse_solve)
+from .backends.registry import run_backend
+from .linear import factor_inertia, factor_positive_definite, shifted, sparse_solve
 from .newton import NewtonResult, convergence_rates
 from .static import StaticProblem
 
-__all__ = ["minimize_energy", "MinimizeResult", "capped_newton", "active_pair_keys", "run_backend",
-           "KEEP_STORED_PATTERN"]
+__all__ = ["minimize_energy", "MinimizeResult", "MinimizeOptions", "capped_newton", "active_pair_keys"]
 
 log = logging.getLogger("rve.solvers.minimize")
 
-#: Pattern the minimiser hands to PARDISO: True (default) K + sigma M on the contact map's
-#: stored pattern (explicit zeros of inactive candidate pairs kept, ``shifted(...,
-#: keep_pattern=True)``), which PARDISO (``PARDISO_OPTIONS``: ``analyse_stored``) analyses
-#: when the nonzero pattern leaves the analysed one and otherwise factorises on the analysed
-#: pattern; False: the nonzero pattern of scipy's sum. Measured on the 80-fibril weave
-#: (docs/engine.md, "Backend choice"): 30 analyses instead of 283 at 30 el/fibril, 153 vs
-#: 169 s of CPU; 4 instead of 50 at 12.
-KEEP_STORED_PATTERN = True
+@dataclass(frozen=True)
+class MinimizeOptions:
+    """The linear-algebra policy of one minimiser run (``minimize_energy``, ``capped_newton``).
 
-#: options of the PARDISO instance a run keeps (``PardisoFactorization``'s keywords;
-#: benchmarks/engine_speed.py measures variants through it)
-PARDISO_OPTIONS: dict = {"drop_zeros": True, "analyse_stored": True}
+    ``keep_stored_pattern``: True (default) factorises K + sigma M on the contact map's
+    stored pattern (explicit zeros of inactive candidate pairs kept, ``shifted(...,
+    keep_pattern=True)``), which PARDISO analyses when the nonzero pattern leaves the
+    analysed one (docs/engine.md, "Backend choice": 30 analyses instead of 283 on the
+    30-element weave); False: the nonzero pattern of scipy's sum. ``pardiso_options``:
+    ``PardisoFactorization`` keywords of the run's instance (None:
+    ``rve.solvers.backends.registry.PARDISO_RUN_OPTIONS``). ``cholesky_test``: the
+    definiteness test of K + sigma M is PARDISO's Cholesky (True; it stops at the first
+    pivot <= 0) or the LDL^T inertia count (False); the same verdicts and sigma ladder
+    (tests/test_pardiso.py; docs/engine.md "Cholesky as the definiteness test").
+    """
 
-#: the definiteness test of K + sigma M: PARDISO's Cholesky (True; it stops at the first pivot
-#: <= 0, a fraction of a factorisation on an indefinite matrix) or the LDL^T inertia count
-#: (False; benchmarks/engine_speed.py's ``pardiso_t2_ldlt``). Same verdicts, same
-#: sigma ladder (tests/test_pardiso.py); docs/engine.md "Cholesky as the definiteness test".
-CHOLESKY_TEST = True
+    keep_stored_pattern: bool = True
+    pardiso_options: Optional[dict] = None
+    cholesky_test: bool = True
 
-#: MKL's conditional numerical reproducibility for up to this many threads (iparm(34)):
-#: the minimiser's factorisations give the same bits on 1 and 2 threads, so a Snakemake job
-#: scaled down from 2 threads to 1 (``-j1``) computes the same table (docs/engine.md "Two
-#: threads"). More threads than this (``RVE_PARDISO_THREADS`` > 2) set CNR for that many:
-#: reproducible run to run, but other rounding than on 1-2 threads.
-CNR_THREADS = 2
+    def run_backend(self, backend=None):
+        """The run's backend instance (``rve.solvers.backends.run_backend``)."""
+        return run_backend(backend, keep_pattern=self.keep_stored_pattern, pardiso_options=self.pardiso_options)
 
 
-def run_backend(backend=None, keep_pattern: bool = None):
-    """``(instance, owned)``: the linear-solver backend one solver run keeps for all its
-    factorisations (``backend``: an instance, used as is, or a name / None:
-    ``rve.solvers.linear.resolve_backend``), so PARDISO's analysis is reused while the
-    pattern is unchanged; ``owned`` says whether the run must release it."""
-    if backend is not None and not isinstance(backend, str):
-        return backend, False
-    keep = KEEP_STORED_PATTERN if keep_pattern is None else bool(keep_pattern)
-    name = resolve_backend(backend, symmetric=True)
-    if name == "pardiso":
-        from .pardiso import PardisoFactorization
-
-        threads = solver_threads()
-        opts = {"drop_zeros": not keep, "threads": threads, "cnr": max(CNR_THREADS, threads), **PARDISO_OPTIONS}
-        return PardisoFactorization(**opts), True
-    return get_backend(name, symmetric=True), True
-
-
-def _release(solver, owned: bool) -> None:
-    if owned and hasattr(solver, "release"):
-        solver.release()
+DEFAULT_OPTIONS = MinimizeOptions()
 
 
 def _analyses(solver) -> int:
@@ -109,21 +87,19 @@ def _free_centroids(prob, layout) -> np.ndarray:
 
 
 def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20,
-                  max_rejections=12, backend=None):
+                  max_rejections=12, backend=None, options: MinimizeOptions = DEFAULT_OPTIONS):
     """Static Newton on ``F(x, 0, t) = 0`` with the centroid motion per iteration capped
     at ``step_cap``, the contact map rebuilt after ``step_cap`` of motion, and a
     Levenberg-Marquardt safeguard: a step that increases |F| is rejected and retried
     with ``(K + sigma M) du = -F`` (sigma raised 8x per rejection, lowered 4x after an
-    accepted step, down to pure Newton). ``backend``: the linear solver (``run_backend``;
-    one instance for the run). Returns ``(x, w, NewtonResult)``."""
-    solver, owned = run_backend(backend)
-    try:
-        return _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver)
-    finally:
-        _release(solver, owned)
+    accepted step, down to pure Newton). ``backend``: the linear solver (one instance for
+    the run, ``options.run_backend``). Returns ``(x, w, NewtonResult)``."""
+    with options.run_backend(backend) as solver:
+        return _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver,
+                              options.keep_stored_pattern)
 
 
-def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver):
+def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver, keep_stored):
     w0 = np.zeros(system.n)
     lay = system.layout
 
@@ -146,7 +122,7 @@ def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, m
             return (*prob.state(u), NewtonResult(u, False, it, res, "non-finite residual"))
         if rn <= atol or rn <= rtol * r0:
             return (*prob.state(u), NewtonResult(u, True, it, res))
-        A = shifted(J, Mff, sigma, keep_pattern=KEEP_STORED_PATTERN and solver.name == "pardiso")
+        A = shifted(J, Mff, sigma, keep_pattern=keep_stored and solver.name == "pardiso")
         try:
             du = -sparse_solve(A, r, backend=solver)
         except RuntimeError as exc:
@@ -230,7 +206,7 @@ class MinimizeResult(NewtonResult):
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
                     label="minimize", time_budget=None, backtrack=0, backend=None, max_rejections=None,
-                    max_sigma_rel=1e16):
+                    max_sigma_rel=1e16, options: MinimizeOptions = DEFAULT_OPTIONS):
     """Static equilibrium of a mechanics-only ``ContactRelaxable`` system (e.g. a
     ``ContactSystem``) as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
@@ -252,9 +228,10 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     step, x4 after a poor or rejected one; below 1e-8 of the stiffest mode's sigma it is 0:
     plain Newton, quadratic convergence. ``sigma0`` is the first sigma (default 1e-6 of the
     stiffest mode's; 0 to start with plain Newton from a near solution). Converged when
-    ``|F_free| <= atol`` or ``<= rtol |F_0|``. ``backend``: the linear solver of the inertia check (``run_backend``:
-    one instance for the whole run, so PARDISO's analysis is reused while the pattern is
-    unchanged; default ``rve.solvers.linear.resolve_backend()``).
+    ``|F_free| <= atol`` or ``<= rtol |F_0|``. ``backend``: the linear solver of the
+    definiteness test (one instance for the whole run, ``options.run_backend``, so PARDISO's
+    analysis is reused while the pattern is unchanged; default
+    ``rve.solvers.linear.resolve_backend()``); ``options``: ``MinimizeOptions``.
 
     Every loop ends (docs/fault_tolerance.md): ``max_iter`` accepted iterations,
     ``max_rejections`` rejected trials in total (default ``max(200, 2 max_iter)``), a
@@ -266,14 +243,10 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
 
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
     """
-    solver, owned = run_backend(backend)
     budget = max(200, 2 * int(max_iter)) if max_rejections is None else int(max_rejections)
-    try:
-        with _long_lived_objects_frozen():
-            return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
-                                    backtrack, solver, budget, float(max_sigma_rel))
-    finally:
-        _release(solver, owned)
+    with options.run_backend(backend) as solver, _long_lived_objects_frozen():
+        return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
+                                backtrack, solver, budget, float(max_sigma_rel), options)
 
 
 @contextlib.contextmanager
@@ -294,9 +267,9 @@ def _long_lived_objects_frozen():
 
 
 def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, solver,
-                     max_rejections=None, max_sigma_rel=1e16):
+                     max_rejections, max_sigma_rel, options: MinimizeOptions):
     t0 = time.perf_counter()
-    keep = KEEP_STORED_PATTERN and solver.name == "pardiso"
+    keep = options.keep_stored_pattern and solver.name == "pardiso"
     analyses0 = _analyses(solver)
     w0 = np.zeros(system.n)
     lay = system.layout
@@ -355,7 +328,7 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
         # Cholesky where PARDISO is there: it stops at the first pivot <= 0, docs/engine.md)
         for _ in range(60):
             A = shifted(J, Mff, sigma, keep_pattern=keep)
-            lu = factor_positive_definite(A, backend=solver, cholesky=CHOLESKY_TEST)
+            lu = factor_positive_definite(A, backend=solver, cholesky=options.cholesky_test)
             out.factorizations += 1
             if sigma == 0.0:
                 # inertia of the unregularised tangent: 0 when definite; otherwise counted

@@ -124,12 +124,13 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .linear import NotPositiveDefiniteError, SingularFactorError, _same_buffer
-from ..kernels import index_kernels as _index_kernels
+from ...kernels import index_kernels as _index_kernels
+from .base import NotPositiveDefiniteError, SingularFactorError
+from .base import same_structure as _same_structure
 
 __all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
 
-log = logging.getLogger("rve.solvers.pardiso")
+log = logging.getLogger("rve.solvers.backends.pardiso")
 
 #: MKL_DOMAIN_PARDISO of mkl_types.h
 _MKL_DOMAIN_PARDISO = 4
@@ -244,14 +245,6 @@ def _sorted_unique(keys):
     if k.size:
         k = k[np.concatenate(([True], k[1:] != k[:-1]))]
     return k
-
-
-def _same_structure(A, indptr, indices) -> bool:
-    """``A`` has exactly these index arrays (identity first, then contents)."""
-    if _same_buffer(A.indices, indices) and _same_buffer(A.indptr, indptr):
-        return True
-    return (A.indptr.size == indptr.size and A.indices.size == indices.size
-            and np.array_equal(A.indptr, indptr) and np.array_equal(A.indices, indices))
 
 
 def _upper_entries(A):
