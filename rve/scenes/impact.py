@@ -45,7 +45,9 @@ from ..model import RowScaledSystem
 from ..model.projectile import ImpactSystem, projectile_mesh
 from ..model.terms.projectile_contact import SphereContactTerm
 from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate, sdirk
-from .impact_balances import ImpactBalances, impact_balance_errors
+from .impact_balances import ImpactBalances
+from .impact_record import (ImpactCheckpoint, ImpactRecorder, angular_velocity, impact_summary,
+                            wall_split)
 from .impact_thermal import ImpactThermal
 from .induced_balances import ThermalPostSolver
 from .induced_deformation import warp_circuit
@@ -298,30 +300,55 @@ def load_or_relax(cfg, path: Path | None):
     return x, info
 
 
-def angular_velocity(q_top, q_bot, v_top, v_bot, L):
-    """Rigid-body estimate of §8.4: omega = r x v_rel / (r . r), r = (q_top - q_bot)/2 + L/2 e_z,
-    v_rel = (v_top - v_bot)/2 (q: displacements of the end nodes). Arrays (..., 3)."""
-    r = 0.5 * (np.asarray(q_top) - np.asarray(q_bot))
-    r = r + np.array([0.0, 0.0, 0.5 * L])
-    v = 0.5 * (np.asarray(v_top) - np.asarray(v_bot))
-    return np.cross(r, v) / np.einsum("...i,...i->...", r, r)[..., None]
-
-
-def _probe(problem, x, w, X0p, L, bal):
-    """Projectile CoM velocity, end velocities, omega, sampled yarn currents of a state."""
+def _impact_start(cfg, problem, x_start, t_end, steps, tab, nopts, checkpoint, record):
+    """The recorder, the checkpoint and the start state ``(t, x, w, resumed, rebuilds, early)``
+    of ``solve``: a matching checkpoint's state, else the relaxed state with the impact speed
+    and consistent massless dofs (recorded and stored)."""
     sysm = problem.system
-    xp, wp = sysm.split(x)[1], sysm.split(w)[1]
-    pn, pv = problem.projectile.nodal(xp), problem.projectile.nodal(wp)
-    Mp = problem.projectile.assembler.mass()
-    rdofs = problem.projectile.layout.dofs("r").reshape(-1, 3)
-    mass = float(problem.info["projectile_mass_g"])
-    v_com = (Mp @ np.asarray(wp, float))[rdofs].sum(axis=0) / mass
-    bot, top = sysm.ends
-    om = angular_velocity(pn[top, :3] - X0p[top, :3], pn[bot, :3] - X0p[bot, :3], pv[top, :3], pv[bot, :3], L)
-    cur = bal["terminal_currents"]
-    return {"v_com": v_com, "v_bottom": pv[bot, :3].copy(), "v_top": pv[top, :3].copy(), "omega": om,
-            "com": 0.5 * (pn[bot, :3] + pn[top, :3]),
-            "yarn_currents": np.array([cur[problem.sampled[k]] for k in ("minus_y", "plus_y", "edge")])}
+    X0p = sysm.projectile.nodal(sysm.split(problem.x0)[1])[:, :9].copy()
+    x = np.array(x_start, float, copy=True)
+    w = np.zeros(sysm.n)
+    w[sysm._r_end[:, 2]] = -cfg.projectile.speed
+    thermal = ImpactThermal(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes,
+                            sink=cfg.contact.projectile_heat_sink)
+    rec = ImpactRecorder(problem, ImpactBalances(problem, thermal), ThermalPostSolver(thermal, tab, cfg.end_temperature),
+                         np.full(sysm.fabric.mesh.n_nodes, float(cfg.end_temperature)), X0p,
+                         float(problem.info["projectile_length_mm"]), cfg.time.store_every, t_end, record)
+    digest = config_digest(cfg, ("geometry", "warp", "weft", "material", "projectile", "contact", "field", "mesh",
+                                 "relaxation", "time", "newton"))
+    ck = None if checkpoint is None else ImpactCheckpoint(checkpoint, digest, t_end, steps)
+    scale = sysm.row_scales(t_end / steps, x, w)
+    start = None if ck is None else ck.load(rec)
+    if start is not None:
+        t, x, w, rebuilds, early = start
+        return rec, ck, scale, (t, x, w, t, rebuilds, early)
+    w, _ = _initial_w(sysm, x, scale, nopts, 0.0, w)
+    rec.record_state(0.0, x, w)
+    rec.store(0.0, x, w)
+    return rec, ck, scale, (0.0, x, w, None, 0, 0)
+
+
+class _Boundary:
+    """What ``solve`` does at every contact-rebuild boundary: progress, checkpoints, and the
+    ``stop_after_steps`` end (as a kill would, after a checkpoint)."""
+
+    def __init__(self, rec, ck, every: int, stop_after, t_end: float, progress: bool):
+        self.rec, self.ck, self.every, self.stop_after = rec, ck, int(every), stop_after
+        self.t_end, self.progress, self.hook = float(t_end), progress, None
+
+    def __call__(self, t, x, w) -> None:
+        c = self.rec.counters
+        if self.progress:
+            log.info("impact t = %.5g ms, steps %d, rejected %d, v_z = %.5g mm/ms", t, c["steps"], c["rejected"],
+                     self.rec.series["v_com"][-1][2])
+        if self.ck is not None and c["since_checkpoint"] >= self.every:
+            c["since_checkpoint"] = 0
+            self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
+        if self.stop_after is not None and c["steps"] >= self.stop_after and t < self.t_end * (1 - 1e-12):
+            if self.ck is not None:
+                self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
+            raise SceneFailure("impact", f"stopped after {c['steps']} steps (stop_after_steps)", phase="impact",
+                               time=t, state={"x": x, "w": w, "T": self.rec.T}, model=self.rec.problem.system)
 
 
 def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: float | None = None,
@@ -339,205 +366,52 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
         x_start, relax_info = relax(cfg)
     problem = setup(cfg, "impact")
     sysm = problem.system
-    fab, proj = sysm.fabric, sysm.projectile
-    mesh = fab.mesh
     t_end = float(cfg.time.t_end if t_end is None else t_end)
     steps = int(nominal_steps(cfg) if steps is None else steps)
-    h0 = t_end / steps
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = _integrator_options(cfg, sysm)
-    iopts.update(integrator_options or {})
-    X0p = proj.nodal(sysm.split(problem.x0)[1])[:, :9].copy()
-    L = float(problem.info["projectile_length_mm"])
-    x = np.array(x_start, float, copy=True)
-    w = np.zeros(sysm.n)
-    w[sysm._r_end[:, 2]] = -cfg.projectile.speed
-    scale = sysm.row_scales(h0, x, w)
-    thermal = ImpactThermal(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes,
-                            sink=cfg.contact.projectile_heat_sink)
-    post = ThermalPostSolver(thermal, tab, cfg.end_temperature)
-    balances = ImpactBalances(problem, thermal)
-    digest = config_digest(cfg, ("geometry", "warp", "weft", "material", "projectile", "contact", "field", "mesh",
-                                 "relaxation", "time", "newton"))
-    wall = {"integration": 0.0, "balances": 0.0, "thermal_post": 0.0, "contact_rebuild": 0.0, "checkpoint": 0.0}
-    counters = {"steps": 0, "rejected": 0, "chunks": 0, "extra_rebuilds": 0, "factorizations": 0,
-                "linear_solves": 0, "since_store": 0, "since_checkpoint": 0}
-    series = {"t": [], "v_com": [], "v_bottom": [], "v_top": [], "omega": [], "com": [], "yarn_currents": [],
-              "max_T": [], "mean_T": [], "sphere_pairs_active": [], "contact_active_pairs": []}
-    bal: dict = {}
-    stored = {"t": [], "x": [], "w": [], "T": []}
-    stage_its: list = []
-    T = np.full(mesh.n_nodes, float(cfg.end_temperature))
-    t = 0.0
-    resumed = None
-    if checkpoint is not None and Path(checkpoint).exists():
-        d = np.load(checkpoint, allow_pickle=True)
-        if str(d["digest"]) == digest and float(d["t_end"]) == t_end and int(d["steps"]) == steps:
-            st = d["state"].item()
-            x, w, T, t = st["x"], st["w"], st["T"], float(st["t"])
-            series, bal, stored = st["series"], st["bal"], st["stored"]
-            counters.update(st["counters"])
-            stage_its = st["stage_iterations"]
-            resumed = t
-            log.info("resumed from %s at t = %.6g ms", checkpoint, t)
-        else:
-            log.warning("checkpoint %s is for another run: starting afresh", checkpoint)
-    if resumed is None:
-        w, _ = _initial_w(sysm, x, scale, nopts, 0.0, w)
-
-    def record_state(t_, x_, w_):
-        tb = time.perf_counter()
-        b = balances(x_, w_, t_, T)
-        c, r = sysm.positions(x_)
-        b["contact_active_pairs"] = float(fab.active_pairs(sysm.split(x_)[0]).size)
-        for k_, v in b.items():
-            bal.setdefault(k_, []).append(v)
-        bal.setdefault("t", []).append(t_)
-        pr = _probe(problem, x_, w_, X0p, L, b)
-        series["t"].append(t_)
-        for k_ in ("v_com", "v_bottom", "v_top", "omega", "com", "yarn_currents"):
-            series[k_].append(pr[k_])
-        series["max_T"].append(float(T.max()))
-        series["mean_T"].append(float(T.mean()))
-        series["sphere_pairs_active"].append(int(sysm.sphere.active_pairs(c, r).size))
-        series["contact_active_pairs"].append(b["contact_active_pairs"])
-        wall["balances"] += time.perf_counter() - tb
-
-    def store(t_, x_, w_):
-        stored["t"].append(t_)
-        stored["x"].append(fab.nodal(sysm.split(x_)[0])[:, :9].copy())
-        stored["w"].append(np.array(sysm.split(w_)[0], copy=True))
-        stored["T"].append(T.copy())
-        stored.setdefault("xp", []).append(proj.nodal(sysm.split(x_)[1])[:, :9].copy())
-
-    if resumed is None:
-        record_state(0.0, x, w)
-        store(0.0, x, w)
-
-    def on_step(t_, x_, w_, info):
-        nonlocal T
-        counters["steps"] += 1
-        counters["rejected"] += info.rejected_attempts
-        counters["factorizations"] += info.factorizations
-        counters["linear_solves"] += info.linear_solves
-        stage_its.append(list(info.stage_iterations))
-        tp = time.perf_counter()
-        T = post.step(T, info.stage_states, info.t, info.h)
-        wall["thermal_post"] += time.perf_counter() - tp
-        record_state(t_, x_, w_)
-        counters["since_store"] += 1
-        counters["since_checkpoint"] += 1
-        if record and (counters["since_store"] >= cfg.time.store_every or t_ >= t_end * (1 - 1e-12)):
-            counters["since_store"] = 0
-            store(t_, x_, w_)
-
-    def save_checkpoint(t_, x_, w_):
-        from ..io.atomic import atomic_path
-
-        tc = time.perf_counter()
-        st = {"x": x_, "w": w_, "T": T, "t": t_, "series": series, "bal": bal, "stored": stored,
-              "counters": dict(counters, chunks=hook.rebuilds, extra_rebuilds=hook.early),
-              "stage_iterations": stage_its}
-        with atomic_path(Path(checkpoint)) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, digest=np.array(digest), t_end=np.array(t_end), steps=np.array(steps),
-                         state=np.array(st, dtype=object))
-        wall["checkpoint"] += time.perf_counter() - tc
-
-    def at_boundary(t_, x_, w_):
-        if progress:
-            log.info("impact t = %.5g ms, steps %d, rejected %d, v_z = %.5g mm/ms", t_, counters["steps"],
-                     counters["rejected"], series["v_com"][-1][2])
-        if checkpoint is not None and counters["since_checkpoint"] >= cfg.time.checkpoint_every:
-            counters["since_checkpoint"] = 0
-            save_checkpoint(t_, x_, w_)
-        if stop_after_steps is not None and counters["steps"] >= stop_after_steps and t_ < t_end * (1 - 1e-12):
-            if checkpoint is not None:
-                save_checkpoint(t_, x_, w_)
-            raise SceneFailure("impact", f"stopped after {counters['steps']} steps (stop_after_steps)",
-                               phase="impact", time=t_, state={"x": x_, "w": w_, "T": T}, model=sysm)
-
-    hook = ChunkedRebuild(sysm, t_end, steps, cfg.contact.rebuild_every, 0.5 * float(cfg.contact.margin),
-                          at_boundary)
-    hook.rebuilds, hook.early = counters["chunks"], counters["extra_rebuilds"]
+    iopts = {**_integrator_options(cfg, sysm), **(integrator_options or {})}
+    rec, ck, scale, (t, x, w, resumed, rebuilds, early) = _impact_start(cfg, problem, x_start, t_end, steps, tab,
+                                                                        nopts, checkpoint, record)
+    boundary = _Boundary(rec, ck, cfg.time.checkpoint_every, stop_after_steps, t_end, progress)
+    hook = boundary.hook = ChunkedRebuild(sysm, t_end, steps, cfg.contact.rebuild_every,
+                                          0.5 * float(cfg.contact.margin), boundary)
+    hook.rebuilds, hook.early = rebuilds, early
     ti = time.perf_counter()
     try:
         if t < t_end * (1 - 1e-12):
             hook.rebuild(x)
             res = integrate(RowScaledSystem(sysm, scale), x, w, t, t_end, steps, stages=tab.stages,
-                            newton_opts=nopts, max_cuts=cfg.time.max_cuts, on_step=on_step,
+                            newton_opts=nopts, max_cuts=cfg.time.max_cuts, on_step=rec.on_step,
                             fixed_step=not cfg.time.step_control, consistent=False, rebuild=hook, **iopts)
             x, w, t = res.x, res.w, res.t
-            at_boundary(t, x, w)
+            boundary(t, x, w)
     except IntegrationFailure as exc:
         raise SceneFailure("impact", f"time integration failed with step size h = {exc.h:.6g} ms: {exc}",
                            phase="impact", time=exc.t, step=f"h = {exc.h:.6g} ms",
-                           state={"x": exc.x, "w": exc.w, "T": T}, model=sysm) from exc
+                           state={"x": exc.x, "w": exc.w, "T": rec.T}, model=sysm) from exc
     finally:
-        wall["integration"] += time.perf_counter() - ti
-    counters["chunks"], counters["extra_rebuilds"] = hook.rebuilds, hook.early
-    wall["contact_rebuild"] = hook.wall
-    # ------------------------------------------------------------------ summary
-    errs = impact_balance_errors({k_: np.asarray(v) for k_, v in bal.items()})
-    stats = fab.stats
-    wall["assembly_fabric"] = stats.get("base_s", 0.0)
-    wall["contact_fabric"] = stats.get("contact_s", 0.0)
-    wall["contact_sphere"] = sysm.stats["sphere_s"]
-    wall["compose"] = sysm.stats["compose_s"]
-    wall["contact_search"] = wall["contact_rebuild"]
-    evaluation = stats.get("base_s", 0.0) + stats.get("contact_s", 0.0) + sysm.stats["sphere_s"] \
-        + sysm.stats["compose_s"]
-    wall["linear_solve_and_newton"] = wall["integration"] - evaluation - wall["thermal_post"] - wall["balances"] \
-        - wall["contact_rebuild"]
-    wall["temperature"] = wall["thermal_post"]
-    wall["total"] = time.perf_counter() - wall0
-    peak = None
-    if measure_memory:
-        peak = tracemalloc.get_traced_memory()[1] / 2**20
-        tracemalloc.stop()
-    n_st = max(1, len(stage_its) * tab.stages)
-    newton_acc = int(sum(sum(s_) for s_ in stage_its))
-    yc = np.asarray(series["yarn_currents"][-1])
-    summary = {
-        "t_end_ms": t_end, "h_nominal_ms": h0, "dt_rule_ms": time_step_rule(cfg), "stages": tab.stages,
-        "steps_accepted": counters["steps"], "steps_rejected": counters["rejected"],
-        "newton_iterations": newton_acc, "newton_iterations_per_stage": newton_acc / n_st,
-        "factorizations": counters["factorizations"], "factorizations_per_stage": counters["factorizations"] / n_st,
-        "linear_solves": counters["linear_solves"],
-        "contact_rebuilds": counters["chunks"], "extra_rebuilds": counters["extra_rebuilds"],
-        "dofs": {**fab.base.dof_counts(), "projectile": int(proj.n), "total": int(sysm.n),
-                 "thermal_post_solve": int(mesh.n_nodes)},
-        "contact_pairs_max": int(max(series["contact_active_pairs"])),
-        "sphere_pairs_active_max": int(max(series["sphere_pairs_active"])),
-        "projectile_velocity_mm_per_ms": [float(v) for v in series["v_com"][-1]],
-        "projectile_angular_velocity_x_rad_per_ms": float(series["omega"][-1][0]),
-        "projectile_angular_velocity_x_extreme_rad_per_ms": float(
-            np.asarray(series["omega"])[:, 0][np.argmax(np.abs(np.asarray(series["omega"])[:, 0]))]),
-        "yarn_current_A": {"minus_y": float(yc[0]), "plus_y": float(yc[1]), "edge": float(yc[2])},
-        "max_temperature_K": float(np.max(T)),
-        "momentum_balance_error": max(errs["momentum_projectile"], errs["momentum_total"]),
-        "energy_balance_error": errs["total"],
-        "balance_errors": {k_: errs[k_] for k_ in ("momentum_projectile", "momentum_total", "charge", "electrical",
-                                                   "mechanical", "thermal", "total")},
-        "impulses_Nms": {k_: errs[k_] for k_ in ("impulse_sphere_on_projectile_Nms", "impulse_clamp_Nms",
-                                                 "impulse_lorentz_Nms")},
-        "energies_mJ": {k_: errs[k_] for k_ in ("work_lorentz_mJ", "work_circuit_mJ", "joule_heat_mJ",
-                                                "damping_mJ", "delta_mechanical_energy_mJ")},
-        "geometry": problem.info, "sampled_yarns": problem.sampled, "relaxation": relax_info,
-        "resumed_from_ms": resumed, "wall_time_s": wall,
-    }
+        wall = {"integration": time.perf_counter() - ti, **rec.wall, "contact_rebuild": hook.wall,
+                "checkpoint": 0.0 if ck is None else ck.wall}
+    summary, errs = impact_summary(problem, rec, tab, t_end, t_end / steps, time_step_rule(cfg), hook,
+                                   wall_split(sysm, wall, wall0), relax_info, resumed)
+    _add_memory(summary, measure_memory)
+    if record:
+        summary["history"] = {"stored": {k: np.asarray(v) for k, v in rec.stored.items()},
+                              "series": {k: np.asarray(v) for k, v in rec.series.items()},
+                              "balances": {k: np.asarray(v) for k, v in rec.bal.items()},
+                              "balance_series": errs["series"]}
+    return SceneResult(state={"x": x, "w": w, "T": rec.T}, model=sysm, summary=summary)
+
+
+def _add_memory(summary: dict, measure_memory: bool) -> None:
+    """Peak RSS of the process and, when traced, the peak of Python's allocations (MiB)."""
     import resource
 
     summary["peak_rss_MiB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    if peak is not None:
-        summary["peak_memory_MiB"] = peak
-    if record:
-        summary["history"] = {"stored": {k_: np.asarray(v) for k_, v in stored.items()},
-                              "series": {k_: np.asarray(v) for k_, v in series.items()},
-                              "balances": {k_: np.asarray(v) for k_, v in bal.items()},
-                              "balance_series": errs["series"]}
-    return SceneResult(state={"x": x, "w": w, "T": T}, model=sysm, summary=summary)
+    if measure_memory:
+        summary["peak_memory_MiB"] = tracemalloc.get_traced_memory()[1] / 2**20
+        tracemalloc.stop()
 
 
 def run(cfg, out_dir: Path) -> dict:

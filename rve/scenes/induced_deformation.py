@@ -37,7 +37,6 @@ insulated at the y+ end. T = 0 at every end. B = |B| * orientation (B1, B2, B3 o
 from __future__ import annotations
 
 import logging
-import math
 import time
 import tracemalloc
 from dataclasses import dataclass, field
@@ -51,7 +50,8 @@ from ..fabrics.setup import contact_params
 from ..model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
 from ..model import RowScaledSystem
 from ..solvers.dirk import IntegrationFailure, integrate, sdirk
-from .induced_balances import StateBalances, ThermalOperators, ThermalPostSolver, balance_errors
+from .induced_balances import StateBalances, ThermalOperators, ThermalPostSolver
+from .induced_record import InducedRecorder, induced_summary
 from .induced_fabric import slack_weave
 from .protocol import SceneFailure, SceneResult
 
@@ -175,6 +175,26 @@ def _initial_w(problem, system, x0, t0, nopts):
     return consistent_initialization(system, x0, w0, t0, nopts)
 
 
+def _induced_start(cfg, problem, h0, tab, nopts, record, progress, t_end, post_reuse):
+    """The row-scaled system, the consistent start ``w`` and the recorder of ``solve``."""
+    sysm, base = problem.system, problem.model
+    x = problem.x0.copy()
+    rs = RowScaledSystem(sysm, base.row_scales(h0, x, np.zeros(base.n)))
+    thermal = ThermalOperators(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes)
+    post = None
+    if problem.mode == "post":
+        post = ThermalPostSolver(thermal, tab, cfg.end_temperature, reuse=post_reuse)
+    balances = StateBalances(sysm, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
+    w, _ = _initial_w(problem, rs, x, 0.0, nopts)
+    T0 = None
+    if post is not None:  # the clamped ends at the end temperature, the rest at the reference
+        T0 = np.zeros(base.mesh.n_nodes)
+        T0[problem.fixed_T_nodes] = cfg.end_temperature
+    rec = InducedRecorder(problem, rs, balances, thermal, post, T0, x, w, cfg.time.store_every, t_end, record,
+                          progress)
+    return rs, x, w, rec
+
+
 def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | None = None,
           steps: int | None = None, progress: bool = False, integrator_options: dict | None = None,
           measure_memory: bool = False, post_reuse: bool = True) -> SceneResult:
@@ -186,157 +206,39 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     if measure_memory:
         tracemalloc.start()
     problem = setup(cfg, mode)
-    mode = problem.mode
     sysm, base = problem.system, problem.model
-    mesh = base.mesh
     t_end = float(cfg.time.t_end if t_end is None else t_end)
     steps = int(cfg.time.steps if steps is None else steps)
-    h0 = t_end / steps
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
     iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
-             "linear_backend": None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend}
-    iopts.update(integrator_options or {})
-    x = problem.x0.copy()
-    scale = base.row_scales(h0, x, np.zeros(base.n))
-    thermal = ThermalOperators(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes)
-    post = ThermalPostSolver(thermal, tab, cfg.end_temperature, reuse=post_reuse) if mode == "post" else None
-    balances = StateBalances(sysm, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
-    w, init = _initial_w(problem, RowScaledSystem(sysm, scale), x, 0.0, nopts)
-    T = np.full(mesh.n_nodes, cfg.end_temperature) if mode == "post" else None
-
-    def T_of(w_):
-        return T if mode == "post" else base.nodal(w_)[:, base.oT].copy()
-
-    if mode == "post":
-        T = np.zeros(mesh.n_nodes) + 0.0
-        T[problem.fixed_T_nodes] = cfg.end_temperature
-    bal_t = [0.0]
-    b0 = balances(x, w, 0.0, T_of(w))
-    b0["contact_active_pairs"] = float(sysm.term.active_pairs(x).size)
-    bal = {k: [v] for k, v in b0.items()}
-    stored = {"t": [0.0], "x": [base.nodal(x)[:, :9].copy()], "w": [w.copy()], "T": [T_of(w)]}
-    guard = 0.5 * float(sysm.params.margin)
-    wall = {"integration": 0.0, "balances": 0.0, "thermal_post": 0.0, "rebuild": 0.0}
-    counters = {"steps": 0, "linear_solves": 0, "residual_reused": 0, "factorizations": 0, "jacobians": 0,
-                "stage_iterations": [], "since_store": 0}
-    rs = RowScaledSystem(sysm, scale)
-
-    def on_step(t, x_, w_, info):
-        nonlocal T
-        counters["steps"] += 1
-        counters["stage_iterations"].append(list(info.stage_iterations))
-        counters["linear_solves"] += info.linear_solves
-        counters["factorizations"] += info.factorizations
-        counters["jacobians"] += info.jacobians
-        if post is not None:
-            T = post.step(T, info.stage_states, info.t, info.h)
-        F_end = rs.residual_at(x_, w_, t)
-        counters["residual_reused"] += int(F_end is not None)
-        tb = time.perf_counter()
-        b = balances(x_, w_, t, T_of(w_), F_end)
-        b["contact_active_pairs"] = float(thermal.active_pairs(x_).size)  # memoised by the post-solve / balances
-        for k_, v in b.items():
-            bal[k_].append(v)
-        bal_t.append(t)
-        wall["balances"] += time.perf_counter() - tb
-        counters["since_store"] += 1
-        if record and (counters["since_store"] >= cfg.time.store_every or t >= t_end * (1 - 1e-12)):
-            counters["since_store"] = 0
-            stored["t"].append(t)
-            stored["x"].append(base.nodal(x_)[:, :9].copy())
-            stored["w"].append(np.array(w_, copy=True))
-            stored["T"].append(T_of(w_))
-        if progress and counters["steps"] % 100 == 0:
-            log.info("t = %.5g / %.5g ms: %d steps accepted, %d Newton iterations, max T %.3g K, %.1f s",
-                     t, t_end, counters["steps"], sum(map(sum, counters["stage_iterations"])),
-                     float(np.max(T_of(w_))), time.perf_counter() - wall0)
-
+             "linear_backend": None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend,
+             **(integrator_options or {})}
+    rs, x, w, rec = _induced_start(cfg, problem, t_end / steps, tab, nopts, record, progress, t_end, post_reuse)
     hook = MapRebuild(sysm, t_end, cfg.contact.rebuild_every, 0.5 * float(sysm.params.margin))
     sysm.rebuild(x)
     ti = time.perf_counter()
     try:
         res = integrate(rs, x, w, 0.0, t_end, steps, stages=tab.stages, newton_opts=nopts,
-                        max_cuts=cfg.time.max_cuts, on_step=on_step, fixed_step=not cfg.time.step_control,
+                        max_cuts=cfg.time.max_cuts, on_step=rec.on_step, fixed_step=not cfg.time.step_control,
                         consistent=False, rebuild=hook, **iopts)
         x, w = res.x, res.w
     except IntegrationFailure as exc:
         raise SceneFailure(
             "induced_deformation", f"time integration failed with step size h = {exc.h:.6g} ms: {exc}",
             phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
-            state={"x": exc.x, "w": exc.w, "T": T_of(exc.w)}, model=base,
+            state={"x": exc.x, "w": exc.w, "T": rec.T_of(exc.w)}, model=base,
             details={"h": exc.h, "residuals": [float(r) for r in exc.residuals],
-                     "history": {"stored": stored, "balances": {"t": bal_t, **bal}}}) from exc
-    finally:
-        wall["integration"] += time.perf_counter() - ti
-    wall["rebuild"] = hook.wall
-
-    # newton iterations: count from the stage iterations of the accepted steps (+ rejected attempts)
-    stage_its = counters["stage_iterations"]
-    newton_acc = int(sum(sum(s) for s in stage_its))
-    hist_bal = {"t": np.asarray(bal_t), **{k_: np.asarray(v) for k_, v in bal.items()}}
-    errs = balance_errors(hist_bal)
-    wall_post = post.wall if post is not None else 0.0
-    wall["thermal_post"] = wall_post
-    stats = sysm.stats
-    wall["assembly"] = stats.get("base_s", 0.0)
-    wall["contact"] = stats.get("contact_s", 0.0) + wall["rebuild"]
-    wall["linear_solves_and_other"] = wall["integration"] - stats.get("base_s", 0.0) - stats.get("contact_s", 0.0) \
-        - wall_post - wall["balances"]
-    wall["total"] = time.perf_counter() - wall0
-    peak = None
+                     "history": {"stored": rec.stored, "balances": {"t": rec.bal_t, **rec.bal}}}) from exc
+    wall = {"integration": time.perf_counter() - ti, **rec.wall, "rebuild": hook.wall}
+    summary, errs = induced_summary(cfg, problem, rec, tab, t_end, t_end / steps, res, hook, wall, wall0, x, w)
     if measure_memory:
-        peak = tracemalloc.get_traced_memory()[1] / 2**20
+        summary["peak_memory_MiB"] = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
-    xn = base.nodal(x)[:, :3]
-    warp_nodes = np.concatenate([mesh.fibril_nodes(f) for f in problem.weave.warp])
-    disp = (xn[warp_nodes] - problem.x0.reshape(mesh.n_nodes, -1)[warp_nodes, :3]).mean(axis=0)
-    T_final = T_of(w)
-    n_stages = max(1, len(stage_its) * tab.stages)
-    summary = {
-        "orientation": cfg.field.orientation if isinstance(cfg.field.orientation, str)
-        else [float(v) for v in cfg.field.orientation],
-        "B_kT": problem.info["B_kT"],
-        "temperature_mode": mode,
-        "t_end_ms": t_end,
-        "h_nominal_ms": h0,
-        "stages": tab.stages,
-        "steps_accepted": counters["steps"],
-        "steps_rejected": res.rejected,
-        "newton_iterations": newton_acc,
-        "newton_iterations_per_stage": newton_acc / n_stages,
-        "linear_solves": counters["linear_solves"],
-        "factorizations": counters["factorizations"],
-        "jacobian_evaluations": counters["jacobians"],
-        "contact_structure_changes": hook.changes,
-        "integrator_restarts": res.restarts,
-        "balance_residuals_reused": counters["residual_reused"],
-        "contact_rebuilds": int(stats.get("rebuilds", 0)),
-        "extra_rebuilds": hook.early,
-        "dofs": {**base.dof_counts(), **({"thermal_post_solve": int(mesh.n_nodes)} if mode == "post" else {})},
-        "mean_displacement_mm": [float(v) for v in disp],
-        "max_temperature_K": float(np.max(T_final)),
-        "terminal_current_A": float(hist_bal["current_in"][-1]),
-        "terminal_currents_A": [float(v) for v in hist_bal["terminal_currents"][-1]],
-        "leak_current_A": float(hist_bal["current_leak"][-1]),
-        "charge_balance_error": errs["charge"],
-        "energy_balance_error": errs["total"],
-        "balance_errors": {k_: errs[k_] for k_ in ("charge", "electrical", "mechanical", "thermal", "total")},
-        "energies_mJ": {k_: errs[k_] for k_ in ("work_lorentz_mJ", "work_circuit_mJ", "joule_heat_mJ",
-                                                "damping_mJ", "delta_mechanical_energy_mJ")},
-        "contact_active_pairs_max": int(max(bal["contact_active_pairs"])),
-        "thermal_post_solves": post.solves if post is not None else 0,
-        "thermal_post_refinements": getattr(post, "refinements", 0),
-        "thermal_post_fallbacks": getattr(post, "fallbacks", 0),
-        "geometry": problem.info,
-        "wall_time_s": wall,
-    }
-    if peak is not None:
-        summary["peak_memory_MiB"] = peak
     if record:
-        summary["history"] = {"stored": {k_: np.asarray(v) for k_, v in stored.items()}, "balances": hist_bal,
-                              "balance_series": errs["series"]}
-    return SceneResult(state={"x": x, "w": w, "T": T_final}, model=base, summary=summary)
+        summary["history"] = {"stored": {k: np.asarray(v) for k, v in rec.stored.items()},
+                              "balances": rec.history(), "balance_series": errs["series"]}
+    return SceneResult(state={"x": x, "w": w, "T": rec.T_of(w)}, model=base, summary=summary)
 
 
 def run(cfg, out_dir: Path) -> dict:
