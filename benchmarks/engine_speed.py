@@ -280,10 +280,9 @@ def worker_unsym(path: str, variant: str, repeats: int) -> dict:
         elif variant == "superlu_symm":   # the 'superlu' backend (induced scene's default)
             fac = lambda: spla.splu(A, **SUPERLU_SYMMETRIC)  # noqa: E731
         else:                             # the impact scene's backend, projectile border by Schur complement
-            from rve.scenes.impact_solver import PrunedSuperLU
+            from rve.solvers.backends.pruned import PrunedSuperLU
 
-            PrunedSuperLU.border = int(meta.get("border", 0))
-            be = PrunedSuperLU(symmetric=False)
+            be = PrunedSuperLU(symmetric=False, border=int(meta.get("border", 0)))
             fac = lambda: be.factorize(A)  # noqa: E731
         tf, lu = _median_time(fac, repeats)
         ts, x = _median_time(lambda: lu.solve(b), max(repeats, 5))
@@ -392,7 +391,7 @@ class _Timers:
     """Calls and wall time of the factorisation backends' phases (wrapped methods), reset per run."""
 
     def __init__(self):
-        from rve.scenes.impact_solver import PrunedSuperLU
+        from rve.solvers.backends.pruned import PrunedSuperLU
         from rve.solvers import linear
         from rve.solvers.backends import pardiso
 
@@ -463,6 +462,7 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
         from engine_matrices import _hook_stage_matrices, _save
 
         from rve.scenes import impact
+        from rve.scenes.impact.scene import schur_border
 
         if reduced:
             ov += ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=16",
@@ -493,8 +493,7 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
             _save(d, f"{deep}_{k}", A, {"source": f"impact scene {'reduced' if reduced else 'full size'}, the "
                                                   f"{seq}-th of {seen['count']} stage factorisations of the first "
                                                   f"{start} steps of 0.5 us (row-scaled, restricted)",
-                                        "border": int(__import__("rve.scenes.impact_solver", fromlist=["x"]
-                                                                 ).PrunedSuperLU.border),
+                                        "border": schur_border(impact.setup(cfg).system),
                                         "note": f"factorisation {seq}/{seen['count']}"})
 
         def one(backend):
@@ -503,7 +502,7 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
             return impact.solve(cfg, x_start=x0, record=False, t_end=t_end, steps=total, checkpoint=c,
                                 integrator_options={"linear_backend": backend})
     else:
-        from rve.scenes.induced_deformation import solve as induced_solve
+        from rve.scenes.induced import solve as induced_solve
 
         cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml", ov + ["field.orientation=B3"])
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from rve.config.induced_deformation import InducedDeformationConfig
-from rve.scenes.induced_deformation import setup, solve
-from rve.scenes.induced_fabric import crimp_amplitude, slack_weave
+from rve.scenes.induced import setup, solve
+from rve.fabrics.slack import crimp_amplitude, slack_weave
 
 T_SHORT, N_SHORT = 0.2, 20   # ms, steps (h = 10 us)
 
@@ -190,7 +190,7 @@ def test_contact_heat_block_and_joule_match_the_monolithic_terms():
     scalar_jump's Ju, and the (compiled) Joule heat equals the numpy reference and minus the
     monolithic Joule rows' T-independent part."""
     from rve.physics.contact_forms import scalar_jump
-    from rve.scenes.induced_balances import ThermalOperators, heat_transfer_block
+    from rve.model.thermal_post import ThermalOperators, heat_transfer_block
 
     p, x, w = _pressed_state()
     sysm, b = p.system, p.model
@@ -232,8 +232,8 @@ def test_post_temperature_equals_monolithic_with_contact(monkeypatch):
     plain reference (a fresh direct solve per stage, numpy Joule, scalar_jump) to round-off.
     (Two runs of the mechanics are not bitwise equal: ~1e-11 mm between repeated runs in one
     process, so the reuse is checked on shared stage states, not across runs.)"""
-    import rve.scenes.induced_deformation as scene
-    from rve.scenes.induced_balances import ThermalPostSolver
+    import rve.scenes.induced.scene as scene
+    from rve.model.thermal_post import ThermalPostSolver
 
     twins = []
 
@@ -300,7 +300,7 @@ def test_post_step_refinement_and_fallback(h_C):
     iterative refinement (h_C = 0.1, the scene's value) and its direct fallback (h_C = 1e4,
     a contact far stiffer than the capacity: the refinement does not contract) against the
     plain reference and a dense solve of the stage equations, to round-off."""
-    from rve.scenes.induced_balances import ThermalOperators, ThermalPostSolver
+    from rve.model.thermal_post import ThermalOperators, ThermalPostSolver
     from rve.solvers.dirk import sdirk
 
     p, x, w = _pressed_state()

@@ -165,7 +165,7 @@ class ImpactNewton(Section):
     linear_backend: Literal["superlu_pruned", "superlu", "auto", "auto_pruned"] = Field(
         "auto_pruned", description="stage-matrix factorisation: auto_pruned (PARDISO unsymmetric, mtype 11, where MKL "
                                    "is available, else superlu_pruned), superlu_pruned (SuperLU on the nonzero pattern, "
-                                   "rve.scenes.impact_solver), or a backend of rve.solvers.linear")
+                                   "rve.solvers.backends.pruned), or a backend of rve.solvers.linear")
 
 
 class ImpactOutput(Section):

@@ -1,7 +1,7 @@
 """Config model of the induced-deformation scene (thesis §8.3, Table 8.1, Appendix A).
 
 Contract: :class:`InducedDeformationConfig` and its sections. Named in
-``rve.scenes.registry.SCENES``; the scene is ``rve.scenes.induced_deformation``. The
+``rve.scenes.registry.SCENES``; the scene is ``rve.scenes.induced``. The
 readings of Table 8.1 and the choices where the thesis is silent: docs/induced_deformation.md.
 """
 from __future__ import annotations

@@ -163,7 +163,8 @@ class JacobianReuse:
     factorisation is kept (default 0.5). ``cost_aware``: also drop it when the measured
     cost of the modified iterations still needed at the observed rate exceeds that of a
     fresh Jacobian + factorisation (running means of the wall times measured here).
-    ``backend``: name for ``rve.solvers.linear.get_backend`` (None: its default).
+    ``backend``: name for ``rve.solvers.linear.get_backend`` (None: its default) or a
+    factory ``() -> backend`` (a backend with constructor arguments, e.g. a Schur border).
 
     The owner (``rve.solvers.dirk.DirkStepper``) ``invalidate(reason)``s the factorisation
     when the stage matrix changes for a reason the contraction cannot see first (h·a_ii,
@@ -204,7 +205,8 @@ class JacobianReuse:
 
     def factorize(self, J) -> None:
         if self._backend is None:
-            self._backend = get_backend(self.backend_name)
+            name = self.backend_name
+            self._backend = name() if callable(name) else get_backend(name)
         t0 = time.perf_counter()
         self.factor = None
         self.factor = StageFactorisation(J, self._backend)

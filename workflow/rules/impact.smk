@@ -11,8 +11,6 @@
 
 import os
 
-from rve.scenes import impact as impact_scene
-
 IMPACT = {"scene_config": "configs/scenes/impact.yaml", "overrides": [],
           "sweep_overrides": ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=20",
                               "projectile.radius=4.5 mm", "time.t_end=0.125 ms", "time.steps=250",
@@ -43,8 +41,10 @@ rule impact_relax:
         out=lambda wc: f"{IMPACT_DIR}/{wc.case}",
     threads: 1
     run:
-        impact_scene.impact_job(input.scene, params.out, output.record, log[0], params.overrides,
-                                relaxed=output.state, relax_only=True)
+        from rve.scenes.impact.jobs import impact_job
+
+        impact_job(input.scene, params.out, output.record, log[0], params.overrides,
+                   relaxed=output.state, relax_only=True)
 
 
 rule impact_full:
@@ -66,8 +66,10 @@ rule impact_full:
     resources:
         mem_mb=4000,
     run:
-        impact_scene.impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
-                                relaxed=input.relaxed)
+        from rve.scenes.impact.jobs import impact_job
+
+        impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
+                   relaxed=input.relaxed)
 
 
 rule impact_sweep_point:
@@ -86,8 +88,10 @@ rule impact_sweep_point:
         out=lambda wc: f"{IMPACT_DIR}/sweep/J{wc.current}",
     threads: 1
     run:
-        impact_scene.impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
-                                relaxed=input.relaxed)
+        from rve.scenes.impact.jobs import impact_job
+
+        impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
+                   relaxed=input.relaxed)
 
 
 rule impact_sweep:
@@ -103,4 +107,6 @@ rule impact_sweep:
         currents=IMPACT["currents"],
     threads: 1
     run:
-        impact_scene.sweep_curve(input, params.currents, output.png, output.json)
+        from rve.scenes.impact.jobs import sweep_curve
+
+        sweep_curve(input, params.currents, output.png, output.json)

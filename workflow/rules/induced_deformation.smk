@@ -4,9 +4,6 @@
 # (`snakemake -j2 induced_deformation` runs two at once), then the combined figures.
 # Optional pipeline config key induced_deformation: {scene_config, overrides: [...]}.
 
-from rve.scenes import induced_deformation as induced_scene
-from rve.scenes import induced_output as induced_out
-
 INDUCED = {"scene_config": "configs/scenes/induced_deformation.yaml", "overrides": [],
            **config.get("induced_deformation", {})}
 INDUCED_DIR = "results/induced_deformation"
@@ -43,8 +40,10 @@ rule induced_deformation_orientation:
     resources:
         mem_mb=1000,
     run:
-        induced_scene.orientation_job(input.scene, wildcards.induced_orientation, params.out, output.summary,
-                                      log[0], params.overrides)
+        from rve.scenes.induced.jobs import orientation_job
+
+        orientation_job(input.scene, wildcards.induced_orientation, params.out, output.summary,
+                        log[0], params.overrides)
 
 
 rule induced_deformation_figures:
@@ -62,4 +61,6 @@ rule induced_deformation_figures:
         dirs=[f"{INDUCED_DIR}/{o}" for o in INDUCED_ORIENTATIONS],
     threads: 1
     run:
-        induced_out.combine_orientations(params.dirs, output.frames, output.temperature)
+        from rve.scenes.induced.outputs import combine_orientations
+
+        combine_orientations(params.dirs, output.frames, output.temperature)

@@ -24,6 +24,7 @@ from typing import Callable, Dict, Optional
 from ...threads import solver_threads
 from .banded import BandedBackend
 from .base import LinearBackend
+from .pruned import PardisoOrPruned, PrunedSuperLU
 from .superlu import SuperLUBackend
 
 __all__ = ["BACKENDS", "DEFAULT_BACKEND", "BACKEND_ENV", "register_backend", "resolve_backend", "get_backend",
@@ -57,7 +58,8 @@ def PardisoUnsymBackend(symmetric: bool = False, **options):
 
 #: backend classes by name
 BACKENDS: Dict[str, Callable[..., LinearBackend]] = {"superlu": SuperLUBackend, "banded": BandedBackend,
-                                                     "pardiso": PardisoBackend, "pardiso_unsym": PardisoUnsymBackend}
+                                                     "pardiso": PardisoBackend, "pardiso_unsym": PardisoUnsymBackend,
+                                                     "superlu_pruned": PrunedSuperLU, "auto_pruned": PardisoOrPruned}
 
 #: the backend used when neither a ``backend=`` argument nor ``RVE_LINEAR_BACKEND`` names one
 DEFAULT_BACKEND = "auto"

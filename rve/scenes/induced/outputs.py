@@ -8,7 +8,7 @@ Contract
   fibril), ``xyz``: ``position`` (mm), ``current`` (A, node average of the section current
   of the adjacent elements, along the fibril's reference direction), ``potential`` (V),
   ``temperature`` (K); dim ``step_time`` (every accepted step): terminal currents, the
-  charge, power and energy terms of ``rve.scenes.induced_balances`` and the balance
+  charge, power and energy terms of ``rve.model.balances`` and the balance
   residuals; attributes: orientation, B, balance errors;
 * ``tubes/induced.pvd`` + ``tubes/induced_NNNN.vtp``: tube meshes with point data
   ``current`` and ``temperature`` (every ``output.vtk_every``-th stored state);
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
+from ...io.atomic import atomic_path
 
 __all__ = ["write_outputs", "nodal_fields", "render_strip", "combine_orientations"]
 
@@ -129,14 +129,14 @@ def render_strip(path, rows, titles=None, scalars="current", clim=None, window=(
 
 
 def _surfaces(model, stored, cur, k, n_theta):
-    from ..io.vtk import tube_surface
+    from ...io.vtk import tube_surface
 
     return tube_surface(model.mesh, stored["x"][k], n_theta,
                         point_data={"current": cur[k], "temperature": np.asarray(stored["T"][k])})
 
 
 def write_outputs(cfg, result, history, out_dir) -> dict:
-    from ..io.vtk import write_pvd, write_tubes
+    from ...io.vtk import write_pvd, write_tubes
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -179,7 +179,7 @@ def combine_orientations(run_dirs, out_png, out_temperature_png, frames: int = 4
     import pyvista as pv  # noqa: F401
     import xarray as xr
 
-    from ..fem.mesh import FibrilMesh  # noqa: F401
+    from ...fem.mesh import FibrilMesh  # noqa: F401
 
     cols, tcols, titles, ttitles = [], [], [], []
     clim_c, clim_t = [np.inf, -np.inf], [0.0, 0.0]

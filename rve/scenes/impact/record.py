@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .impact_balances import impact_balance_errors
+from ...model.balances import impact_balance_errors
 
 __all__ = ["ImpactRecorder", "ImpactCheckpoint", "impact_summary", "wall_split", "angular_velocity", "probe"]
 
@@ -140,7 +140,7 @@ class ImpactCheckpoint:
         self.wall = 0.0
 
     def save(self, rec: ImpactRecorder, t, x, w, rebuilds: int, early: int) -> None:
-        from ..io.atomic import atomic_path
+        from ...io.atomic import atomic_path
 
         tc = time.perf_counter()
         arrays = {"digest": np.array(self.digest), "t_end": np.array(self.t_end), "steps": np.array(self.steps),

@@ -27,7 +27,7 @@ max_temperature_K, terminal_current_A, charge_balance_error, energy_balance_erro
 wall_time_s). A failed integration raises ``SceneFailure`` (last good state; ``run`` saves
 it to ``induced_deformation_last_good_state.npz``).
 
-Set-up: ``rve.scenes.induced_fabric.slack_weave`` (single-fibril yarns, L0 = 12.5 mm natural
+Set-up: ``rve.fabrics.slack.slack_weave`` (single-fibril yarns, L0 = 12.5 mm natural
 length between ends 10 mm apart, crimped so that the fibrils start unstretched and apart).
 Every fibril end's centroid pinned (directors free). Warp: V = 0 at the x+ end, the mixed
 condition J_n = r_bar V + J_bar at the x- end (J_bar < 0: current along +x). Weft: the
@@ -44,25 +44,26 @@ from pathlib import Path
 
 import numpy as np
 
-from .dynamic_wire import field_ramp  # the one C2 switch-on of B
-from ..fem.assembly import DofLayout
-from ..fabrics.setup import contact_params
-from ..model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
-from ..model import RowScaledSystem
-from ..solvers.dirk import IntegrationFailure, integrate, sdirk
-from .induced_balances import StateBalances, ThermalOperators, ThermalPostSolver
-from .induced_record import InducedRecorder, induced_summary
-from .induced_fabric import slack_weave
-from .protocol import SceneFailure, SceneResult
+from ..dynamic_wire import field_ramp  # the one C2 switch-on of B
+from ...fem.assembly import DofLayout
+from ...fabrics.setup import contact_params
+from ...model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
+from ...model import RowScaledSystem
+from ...solvers.dirk import IntegrationFailure, integrate, sdirk
+from ...model.balances import StateBalances
+from ...model.thermal_post import ThermalOperators, ThermalPostSolver
+from .record import InducedRecorder, induced_summary
+from ...fabrics.slack import slack_weave
+from ..protocol import SceneFailure, SceneResult
 
 __all__ = ["InducedProblem", "setup", "solve", "run", "field_vector", "field_ramp", "warp_circuit"]
 
-log = logging.getLogger("rve.scenes.induced_deformation")
+log = logging.getLogger("rve.scenes.induced")
 
 
 def field_vector(cfg) -> np.ndarray:
     """B (kT) of the config: |B| times the normalised orientation."""
-    from ..config.induced_deformation import ORIENTATIONS
+    from ...config.induced_deformation import ORIENTATIONS
 
     o = cfg.field.orientation
     d = np.asarray(ORIENTATIONS[o] if isinstance(o, str) else o, float)
@@ -169,7 +170,7 @@ class MapRebuild:
 
 
 def _initial_w(problem, system, x0, t0, nopts):
-    from ..solvers.dirk import consistent_initialization
+    from ...solvers.dirk import consistent_initialization
 
     w0 = np.zeros(system.n)
     return consistent_initialization(system, x0, w0, t0, nopts)
@@ -242,7 +243,7 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
 
 
 def run(cfg, out_dir: Path) -> dict:
-    from .induced_output import write_outputs
+    from .outputs import write_outputs
 
     out_dir = Path(out_dir)
     try:
@@ -256,28 +257,3 @@ def run(cfg, out_dir: Path) -> dict:
     files = write_outputs(cfg, res, hist, out_dir)
     summary["files"] = files
     return summary
-
-
-def orientation_job(config_path, orientation: str, out_dir, summary_path, log_path, overrides=()) -> dict:
-    """One Snakemake job (workflow/rules/induced_deformation.smk): the scene of ``config_path``
-    with ``field.orientation = orientation`` (+ ``overrides``), outputs under ``out_dir``,
-    the summary written (atomically) to ``summary_path``, the log to ``log_path``."""
-    import json
-
-    from ..config.loader import load_config
-    from ..io.atomic import atomic_write_text
-    from .registry import run_scene
-
-    handler = logging.FileHandler(log_path, mode="w")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
-    root = logging.getLogger("rve")
-    root.addHandler(handler)
-    root.setLevel(logging.INFO)
-    try:
-        cfg = load_config(config_path, [f"field.orientation={orientation}", *overrides])
-        summary = run_scene(cfg, out_dir)
-        atomic_write_text(Path(summary_path), json.dumps(summary, indent=2, default=str))
-        return summary
-    finally:
-        root.removeHandler(handler)
-        handler.close()

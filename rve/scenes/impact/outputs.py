@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
-from .induced_output import nodal_fields
+from ...io.atomic import atomic_path
+from ..induced.outputs import nodal_fields
 
 __all__ = ["write_outputs", "capsule"]
 
@@ -162,7 +162,7 @@ def _render(path, panels, titles, scalars, clim, view, window=(700, 520), zoom=1
 
 
 def write_outputs(cfg, result, history, out_dir) -> dict:
-    from ..io.vtk import tube_surface, write_pvd, write_tubes
+    from ...io.vtk import tube_surface, write_pvd, write_tubes
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,7 @@ and early when a centroid or an end node moved half the margin); the temperature
 post-solved on the fabric after every accepted step (S = alpha_mu = 0); balances every
 accepted step; ``checkpoint`` (path) written every ``time.checkpoint_every`` steps at a
 chunk boundary and resumed from when present (same config digest).
-``run(cfg, out_dir) -> dict``: load_or_relax + solve + outputs (``rve.scenes.impact_output``)
+``run(cfg, out_dir) -> dict``: load_or_relax + solve + outputs (``rve.scenes.impact.outputs``)
 + the summary (docs/impact.md).
 
 Sampled yarns: the warp yarns nearest y = -R_p/2 (``minus_y``) and +R_p/2 (``plus_y``) of the
@@ -27,6 +27,7 @@ projectile axis, and the warp yarn j = 0 (``edge``, the -y edge).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -38,23 +39,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fem.assembly import DofLayout
-from ..fabrics.setup import contact_params
-from ..model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
-from ..model import RowScaledSystem
-from ..model.projectile import ImpactSystem, projectile_mesh
-from ..model.terms.projectile_contact import SphereContactTerm
-from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate, sdirk
-from .impact_balances import ImpactBalances
-from .impact_record import (ImpactCheckpoint, ImpactRecorder, angular_velocity, impact_summary,
+from ...fem.assembly import DofLayout
+from ...fabrics.setup import contact_params
+from ...model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
+from ...model import RowScaledSystem
+from ...model.projectile import ImpactSystem, projectile_mesh
+from ...model.terms.projectile_contact import SphereContactTerm
+from ...solvers.backends.pruned import NAME, NAME_AUTO, PardisoOrPruned, PrunedSuperLU
+from ...solvers.dirk import IntegrationFailure, consistent_initialization, integrate, sdirk
+from ...model.balances import ImpactBalances
+from .record import (ImpactCheckpoint, ImpactRecorder, angular_velocity, impact_summary,
                             wall_split)
-from .impact_thermal import ImpactThermal
-from .induced_balances import ThermalPostSolver
-from .induced_deformation import warp_circuit
-from .impact_fabric import chord_clearance, taut_weave, weave_with_chord_clearance
-from .protocol import SceneFailure, SceneResult
+from .thermal import ImpactThermal
+from ...model.thermal_post import ThermalPostSolver
+from ..induced.scene import warp_circuit
+from ...fabrics.taut import chord_clearance, taut_weave, weave_with_chord_clearance
+from ..protocol import SceneFailure, SceneResult
 
-__all__ = ["ImpactProblem", "setup", "relax", "load_or_relax", "solve", "run", "time_step_rule",
+__all__ = ["ImpactProblem", "setup", "relax", "load_or_relax", "solve", "run", "time_step_rule", "schur_border",
            "angular_velocity", "config_digest"]
 
 log = logging.getLogger("rve.scenes.impact")
@@ -221,19 +223,23 @@ class ChunkedRebuild:
         return True
 
 
-def _integrator_options(cfg, sysm=None) -> dict:
-    """Integrator options; the linear backend eliminates the projectile's free dofs (the last
-    ones of the restricted stage matrix: its dofs come last and ``FreeDofs`` keeps the order)
-    by a Schur complement (rve.scenes.impact_solver)."""
-    from .impact_solver import register
+def _integrator_options(cfg, sysm=None, extra: dict | None = None) -> dict:
+    """Integrator options (``extra`` over the config's). The pruned backends eliminate the
+    projectile's free dofs (the last ones of the restricted stage matrix: its dofs come last
+    and ``FreeDofs`` keeps the order) by a Schur complement (rve.solvers.backends.pruned):
+    their names become factories with that border."""
+    opts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
+            "linear_backend": cfg.newton.linear_backend, **(extra or {})}
+    pruned = {NAME: PrunedSuperLU, NAME_AUTO: PardisoOrPruned}.get(opts["linear_backend"])
+    if pruned is not None:
+        opts["linear_backend"] = functools.partial(pruned, border=0 if sysm is None else schur_border(sysm))
+    return opts
 
-    border = 0
-    if sysm is not None:
-        idx, _ = sysm.constraints(0.0)
-        border = int(sysm.n - sysm.nf - np.count_nonzero(np.asarray(idx) >= sysm.nf))
-    register(border)
-    return {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
-            "linear_backend": cfg.newton.linear_backend}
+
+def schur_border(sysm) -> int:
+    """The projectile's free dofs: the last unknowns of the restricted stage matrix."""
+    idx, _ = sysm.constraints(0.0)
+    return int(sysm.n - sysm.nf - np.count_nonzero(np.asarray(idx) >= sysm.nf))
 
 
 def _initial_w(sysm, x, scale, nopts, t=0.0, w=None):
@@ -280,7 +286,7 @@ def relax(cfg, progress: bool = False):
 
 def load_or_relax(cfg, path: Path | None):
     """The relaxed state of ``path`` when its digest matches the config, else relax (and save)."""
-    from ..io.atomic import atomic_path
+    from ...io.atomic import atomic_path
 
     digest = config_digest(cfg)
     if path is not None and Path(path).exists():
@@ -370,7 +376,7 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     steps = int(nominal_steps(cfg) if steps is None else steps)
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = {**_integrator_options(cfg, sysm), **(integrator_options or {})}
+    iopts = _integrator_options(cfg, sysm, integrator_options)
     rec, ck, scale, (t, x, w, resumed, rebuilds, early) = _impact_start(cfg, problem, x_start, t_end, steps, tab,
                                                                         nopts, checkpoint, record)
     boundary = _Boundary(rec, ck, cfg.time.checkpoint_every, stop_after_steps, t_end, progress)
@@ -415,7 +421,7 @@ def _add_memory(summary: dict, measure_memory: bool) -> None:
 
 
 def run(cfg, out_dir: Path) -> dict:
-    from .impact_output import write_outputs
+    from .outputs import write_outputs
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -435,67 +441,3 @@ def run(cfg, out_dir: Path) -> dict:
     hist = summary.pop("history")
     summary["files"] = write_outputs(cfg, res, hist, out_dir)
     return summary
-
-
-def impact_job(config_path, out_dir, summary_path, log_path, overrides=(), relaxed=None, relax_only=False) -> dict:
-    """One Snakemake job (workflow/rules/impact.smk): the scene of ``config_path`` (+
-    ``overrides``), outputs under ``out_dir``, the summary written atomically to
-    ``summary_path``, the log to ``log_path``; ``relaxed`` the relaxed-state file to use
-    (made if missing); ``relax_only``: only the relaxation (the summary is its record)."""
-    from ..config.loader import load_config
-    from ..io.atomic import atomic_write_text
-    from ..io.provenance import to_jsonable
-
-    handler = logging.FileHandler(log_path, mode="w")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
-    root = logging.getLogger("rve")
-    root.addHandler(handler)
-    root.setLevel(logging.INFO)
-    try:
-        ov = list(overrides)
-        if relaxed is not None:
-            ov.append(f"relaxation.state_file={relaxed}")
-        cfg = load_config(config_path, ov)
-        if relax_only:
-            _, info = load_or_relax(cfg, Path(relaxed) if relaxed else Path(out_dir) / "relaxed_state.npz")
-            summary = {"relaxation": info, "digest": config_digest(cfg)}
-        else:
-            summary = run(cfg, Path(out_dir))
-        atomic_write_text(Path(summary_path), json.dumps(to_jsonable(summary), indent=2, default=str))
-        return summary
-    finally:
-        root.removeHandler(handler)
-        handler.close()
-
-
-def sweep_curve(summary_paths, currents, out_png, out_json) -> dict:
-    """The designer's curve of a current-density sweep: final projectile speed, tilt rate and
-    peak temperature against |J_bar| (one summary.json per current)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..io.atomic import atomic_path, atomic_write_text
-
-    rows = []
-    for p, J in zip(summary_paths, currents):
-        s = json.loads(Path(p).read_text())
-        rows.append({"J_A_per_mm2": float(J), "speed_mm_per_ms": -float(s["projectile_velocity_mm_per_ms"][2]),
-                     "omega_x_rad_per_ms": float(s["projectile_angular_velocity_x_rad_per_ms"]),
-                     "max_temperature_K": float(s["max_temperature_K"])})
-    J = [r["J_A_per_mm2"] for r in rows]
-    fig, ax = plt.subplots(1, 3, figsize=(12, 3.6), dpi=110)
-    for a, key, lab in zip(ax, ("speed_mm_per_ms", "omega_x_rad_per_ms", "max_temperature_K"),
-                           ("final speed (m/s)", "omega_x at t_end (rad/ms)", "max T (K)")):
-        a.plot(J, [r[key] for r in rows], "o-")
-        a.set_xlabel("|J_bar| warp (A/mm^2)")
-        a.set_ylabel(lab)
-        a.grid(alpha=0.3)
-    fig.suptitle("Impact: current-density sweep", fontsize=10)
-    fig.tight_layout()
-    with atomic_path(Path(out_png)) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    atomic_write_text(Path(out_json), json.dumps(rows, indent=2))
-    return {"rows": rows}

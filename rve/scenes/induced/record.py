@@ -11,7 +11,7 @@ Contract
   ``system.residual_at`` has it) and, every ``store_every`` steps and at ``t_end``, the
   stored state. ``history()`` gives the balance series as arrays.
 * ``induced_summary(cfg, problem, rec, tab, t_end, h0, res, hook, wall, x, w) -> (summary,
-  errors)``: the summary of ``rve.scenes.induced_deformation.solve`` (its module docstring).
+  errors)``: the summary of ``rve.scenes.induced.solve`` (its module docstring).
 """
 from __future__ import annotations
 
@@ -20,11 +20,11 @@ import time
 
 import numpy as np
 
-from .induced_balances import balance_errors
+from ...model.balances import balance_errors
 
 __all__ = ["InducedRecorder", "induced_summary"]
 
-log = logging.getLogger("rve.scenes.induced_deformation")
+log = logging.getLogger("rve.scenes.induced")
 
 
 class InducedRecorder:
