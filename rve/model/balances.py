@@ -55,6 +55,7 @@ class StateBalances:
         self.circuit_leak = list(circuit_leak)    # CircuitBC pull-downs of the weft
         self.dirichlet_out = np.asarray(dirichlet_out, np.int64)  # V dofs held at 0
         self.em = base.assembler.term("electromagnetic")
+        self.last_F = None   # the residual of the last call
 
     def _circuit_current(self, circ, wn):
         """Current leaving through each circuit end, A, and the power into the fibril (W)."""
@@ -63,14 +64,15 @@ class StateBalances:
         return I, -(I * V)
 
     def __call__(self, x, w, t, T, F=None) -> dict:
-        """``F``: the system residual F(x, w, t) if the caller has it (else evaluated here)."""
+        """``F``: the system residual F(x, w, t) if the caller has it (else evaluated here);
+        kept as ``last_F`` (the impact's clamp forces read it: no second evaluation)."""
         base, sysm = self.base, self.system
         wn = base.nodal(w)
         I_in_out, P_in = self._circuit_current(self.circuit_in, wn)
         I_leak, P_leak = self._circuit_current(self.circuit_leak, wn) if self.circuit_leak else (np.zeros(0),) * 2
         if F is None:
             F = sysm.evaluate(x, w, t, jacobian=False)[0]
-        F = np.asarray(F, float)
+        F = self.last_F = np.asarray(F, float)
         I_out = -F[self.dirichlet_out]
         # Lorentz force on the nodes (minus the electromagnetic term's mech residual)
         state = ElementState(base.basis, base.layout, x, w, t)
@@ -168,31 +170,13 @@ def _em_force_and_power(model, x, w, t):
     return f, P, joule
 
 
-class _Remembering:
-    """The fabric system for ``StateBalances``, remembering its last residual (so the clamp
-    forces need no second evaluation of the fabric)."""
-
-    def __init__(self, system):
-        self._system = system
-        self.last_F = None
-
-    def evaluate(self, x, w, t, jacobian=True):
-        out = self._system.evaluate(x, w, t, jacobian)
-        self.last_F = out[0]
-        return out
-
-    def __getattr__(self, name):
-        return getattr(self._system, name)
-
-
 class ImpactBalances:
     def __init__(self, problem, thermal):
         self.p = problem
         sysm = problem.system
         self.sysm = sysm
         self.thermal = thermal
-        self._fabric = _Remembering(sysm.fabric)
-        self.fab = StateBalances(self._fabric, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
+        self.fab = StateBalances(sysm.fabric, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
         proj = sysm.projectile
         self.proj = proj
         self.Mf = sp.csr_matrix(sysm.fabric.base.assembler.mass())
@@ -239,7 +223,7 @@ class ImpactBalances:
         fS = sysm.sphere_forces(x).sum(axis=0)
         fL_f, _, _ = _em_force_and_power(sysm.fabric.base, xf, wf, t)
         Fs, _, _ = sysm.sphere_terms(x, jacobian=False)
-        F = np.asarray(self._fabric.last_F, float) + Fs[: sysm.nf]  # fabric rows of the whole residual
+        F = self.fab.last_F + Fs[: sysm.nf]  # fabric rows of the whole residual
         b.update({
             "momentum_projectile": P_p, "momentum_total": P_f + P_p, "momentum_pinned": Mw_f[self.pinned].sum(axis=0),
             "force_sphere_on_projectile": fS, "force_lorentz_projectile": fL_p, "force_lorentz": fL_f + fL_p,
