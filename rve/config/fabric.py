@@ -13,13 +13,13 @@ from pydantic import Field, field_validator
 
 from .fields import (
     ContactConductance, DampingCoefficient, Density, Dimensionless, HeatTransferCoefficient, Integer, Length,
-    Quantity, SceneConfig, Section, Stress, Time,
+    Penalty, SceneConfig, Section, Stress, Time
 )
+from .sections import BeamMesh
 
 __all__ = ["FabricRelaxConfig"]
 
 #: line load per unit overlap of the contact penalty (N/mm per mm)
-Penalty = Quantity("N/mm^2")
 
 
 class FabricSpec(Section):
@@ -64,11 +64,8 @@ class FabricContact(Section):
                                "the law of the relaxed state")
 
 
-class FabricMesh(Section):
-    order: Integer = Field(1, ge=1, le=4, description="Lagrange order p")
-    elements: Integer = Field(30, ge=1, description="elements per fibril")
-    disk_points: Literal[4, 8, 16] = Field(4, description="unit-disk rule across the section")
-    axial_points: Optional[Integer] = Field(None, ge=1, description="Gauss points per element; null = order + 1")
+class FabricMesh(BeamMesh):
+    """Mesh of the fabric's fibrils (the shared defaults: linear elements, 30 per fibril)."""
 
 
 class FabricRelaxation(Section):

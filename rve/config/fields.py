@@ -42,6 +42,10 @@ from .units import UnitConversionError, convert, dimension_name
 
 __all__ = [
     "Quantity",
+    "SeebeckCoefficient",
+    "SofteningRate",
+    "CircuitConductance",
+    "Penalty",
     "UnitSpec",
     "Integer",
     "Length",
@@ -194,6 +198,13 @@ DampingCoefficient = Quantity("g/(mm^3*ms)")
 Angle = Annotated[Quantity("rad"), BeforeValidator(_bare_angle)]
 #: dimensionless number; also accepts "1 %", "1e-3"
 Dimensionless = Quantity("dimensionless")
+SeebeckCoefficient = Quantity("V/K")
+#: d mu / d T of the temperature-dependent shear modulus mu(T) = mu0 + alpha_mu T
+SofteningRate = Quantity("MPa/K")
+#: r_bar of the mixed condition J_n = r_bar V + J_bar (current density per volt)
+CircuitConductance = Quantity("A/(mm^2*V)")
+#: contact penalty stiffness per area
+Penalty = Quantity("N/mm^2")
 
 
 def field_unit(model: type[BaseModel], name: str) -> Optional[str]:
