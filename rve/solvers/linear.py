@@ -89,7 +89,7 @@ from __future__ import annotations
 
 import copy
 import os
-from typing import Callable, Dict, Optional, Union
+from typing import Dict, Union
 
 import numpy as np
 import scipy.linalg
