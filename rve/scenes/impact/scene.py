@@ -51,6 +51,7 @@ from ...model.balances import ImpactBalances
 from .record import (ImpactCheckpoint, ImpactRecorder, angular_velocity, impact_summary,
                             wall_split)
 from .thermal import ImpactThermal
+from ..rebuild import ChunkedRebuild
 from ...model.thermal_post import ThermalPostSolver
 from ..induced.scene import warp_circuit
 from ...fabrics.taut import chord_clearance, taut_weave, weave_with_chord_clearance
@@ -182,45 +183,6 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
                 {k_: float(ywarp[v]) for k_, v in sampled.items()}}
     return ImpactProblem(system, weave, x0, circuit_in, circuit_leak, pcirc, dirichlet_V, ends.ravel(), ends, sampled,
                          info)
-
-
-class ChunkedRebuild:
-    """The impact's ``StructureHook`` (rve.solvers.dirk): both contact maps are rebuilt on
-    segments of ``contact.rebuild_every`` nominal steps of the grid ``k h0`` from t = 0, and
-    early when a centroid or an end node moved half the margin since the last rebuild;
-    every rebuild restarts the step control. ``at_boundary(t, x, w)`` runs at every segment
-    boundary before the rebuild (progress, checkpoints)."""
-
-    def __init__(self, sysm, t_end: float, steps: int, every: int, guard: float, at_boundary=None):
-        self.sysm, self.t_end, self.steps = sysm, float(t_end), int(steps)
-        self.h0 = (self.t_end - 0.0) / self.steps
-        self.every, self.guard, self.at_boundary = max(1, int(every)), float(guard), at_boundary
-        self.t_stop = None
-        self.rebuilds, self.early, self.wall = 0, 0, 0.0
-
-    def horizon(self, t: float):
-        k_cur = int(math.floor(t / self.h0 + 1e-9))
-        k_b = min(self.steps, k_cur + self.every)
-        self.t_stop = self.t_end if k_b >= self.steps else k_b * self.h0
-        return self.t_stop, max(1, k_b - k_cur)
-
-    def rebuild(self, x) -> None:
-        t0 = time.perf_counter()
-        self.sysm.rebuild(x)
-        self.wall += time.perf_counter() - t0
-        self.rebuilds += 1
-
-    def __call__(self, t, x, w) -> bool:
-        if t >= self.t_end * (1 - 1e-12):
-            return False
-        early = self.guard > 0 and self.sysm.max_displacement_since_rebuild(x) > self.guard
-        if not (early or t >= self.t_stop):
-            return False
-        self.early += int(early)
-        if self.at_boundary is not None:
-            self.at_boundary(t, x, w)
-        self.rebuild(x)
-        return True
 
 
 def _integrator_options(cfg, sysm=None, extra: dict | None = None) -> dict:

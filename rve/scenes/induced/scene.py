@@ -53,6 +53,7 @@ from ...solvers.dirk import IntegrationFailure, integrate, sdirk
 from ...model.balances import StateBalances
 from ...model.thermal_post import ThermalOperators, ThermalPostSolver
 from .record import InducedRecorder, induced_summary
+from ..rebuild import MapRebuild
 from ...fabrics.slack import slack_weave
 from ..protocol import SceneFailure, SceneResult
 
@@ -139,34 +140,6 @@ def setup(cfg, mode: str | None = None) -> InducedProblem:
     info = {"amplitude_warp_mm": weave.amplitude_warp, "amplitude_weft_mm": weave.amplitude_weft,
             "initial_clearance_mm": weave.clearance, "B_kT": [float(v) for v in B]}
     return InducedProblem(system, weave, mode, x0, circuit_in, circuit_leak, dirichlet_V, ends.ravel(), ends, info)
-
-
-class MapRebuild:
-    """The scene's ``StructureHook`` (rve.solvers.dirk): the contact map is rebuilt every
-    ``rebuild_every`` accepted steps (Appendix A) and at once when a centroid has moved
-    ``guard`` (half the search margin) since the last rebuild; the step control restarts
-    only when the rebuild changed the union sparsity pattern."""
-
-    def __init__(self, sysm, t_end: float, every: int, guard: float):
-        self.sysm, self.t_end, self.every, self.guard = sysm, float(t_end), max(1, int(every)), float(guard)
-        self.since, self.early, self.changes, self.wall = 0, 0, 0, 0.0
-
-    def __call__(self, t, x, w) -> bool:
-        self.since += 1
-        if t >= self.t_end * (1 - 1e-12):
-            return False
-        early = self.guard > 0 and self.sysm.max_displacement_since_rebuild(x) > self.guard
-        if not (early or self.since >= self.every):
-            return False
-        t0 = time.perf_counter()
-        kept = self.sysm.assembler.reused
-        self.sysm.rebuild(x)
-        changed = self.sysm.assembler.reused == kept
-        self.changes += int(changed)
-        self.early += int(early and self.since < self.every)
-        self.since = 0
-        self.wall += time.perf_counter() - t0
-        return changed
 
 
 def _initial_w(problem, system, x0, t0, nopts):
