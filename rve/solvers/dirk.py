@@ -387,67 +387,16 @@ class DirkStepper:
             fd = self.free_dofs(idx)
             wi = self._predict(pts, ti, w_prev, xhat, haii)
             wi[idx] = vals
-            free = fd.free
-            cache = {}
-
-            def state(u, wi=wi, free=free, xhat=xhat, haii=haii):
-                w = wi.copy()
-                w[free] = u
-                return xhat + haii * mechf * w, w
-
-            def stage_residual(u, jacobian, ti=ti, haii=haii, rhs=rhs, fd=fd, state=state, cache=cache):
-                """G(u) = M w + h a_ii F(x, w) - rhs on the free dofs, and with ``jacobian``
-                J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech) restricted to them."""
-                x, w = state(u)
-                F, Fx, Fw = sysm.evaluate(x, w, ti, jacobian=jacobian)
-                F = np.asarray(F, float)
-                cache["u"], cache["F"] = u.copy(), F
-                G = (M @ w + haii * F - rhs)[fd.free]
-                if not jacobian:
-                    return G
-                return G, fd.combine([(self.M, 1.0, None), (Fw, haii, None), (Fx, haii * haii, mechf)])
-
-            def adm(u, state=state):
-                return bool(sysm.admissible(state(u)[0]))
-
+            state, fun, resid, adm, cache = self._stage_functions(ti, haii, xhat, rhs, fd, wi)
             label = f"dirk s{s} stage {i + 1} t={ti:.6g}"
-            fun = functools.partial(stage_residual, jacobian=True)
-            resid = functools.partial(stage_residual, jacobian=False) if self.lazy_jacobian else None
-            reuse = self.reuse
-            if reuse is None:
-                res = newton(fun, wi[free], admissible=adm, label=label, residual=resid, **self.newton_opts)
-                stage_results = [res]
-            else:
-                key = self._check_reuse(haii, fd.key)
-                res = newton(fun, wi[free], admissible=adm, label=label, residual=resid, reuse=reuse,
-                             **self.newton_opts)
-                if res.factorizations:
-                    reuse.key = key
-                stage_results = [res]
-                if not res.converged and (res.reuses or res.rejected_reuses):
-                    # the modified Newton failed: full Newton from the same start before a cut
-                    reuse.invalidate("failed stage")
-                    retries += 1
-                    log.info("%s: modified Newton failed (%s); full Newton retry", label, res.reason)
-                    res = newton(fun, wi[free], admissible=adm, label=label + " retry", residual=resid,
-                                 **self.newton_opts)
-                    stage_results.append(res)
-                log.info("%s: its=%d jacobians=%d factorisations=%d reused=%d rejected=%d contraction=%s", label,
-                         sum(r.iterations for r in stage_results), sum(r.jacobians for r in stage_results),
-                         sum(r.factorizations for r in stage_results), sum(r.reuses for r in stage_results),
-                         sum(r.rejected_reuses for r in stage_results),
-                         "[" + ", ".join(f"{q:.1e}" for r in stage_results for q in r.contractions) + "]")
+            stage_results = self._solve_stage(fun, wi[fd.free], adm, label, resid, haii, fd.key)
+            retries += len(stage_results) - 1
+            res = stage_results[-1]
             results.extend(stage_results)
             its.append(int(sum(r.iterations for r in stage_results)))
             ress.append(list(res.residuals))
-            reason = None
-            if not res.converged:
-                reason = res.reason or "Newton did not converge"
-            elif not np.all(np.isfinite(res.u)):
-                reason = "non-finite stage solution"
             xi, wsol = state(res.u)
-            if reason is None and not sysm.admissible(xi):
-                reason = "inadmissible stage state (det F <= 0)"
+            reason = _stage_failure(res, sysm, xi)
             if reason is not None:
                 if self.reuse is not None:
                     self.reuse.invalidate("failed step")
@@ -475,6 +424,60 @@ class DirkStepper:
             info.stage_contractions.append(list(r.contractions))
         info.rejected_reuses = counts["rejected_reuses"]
         return xi, W[-1], info
+
+    def _stage_functions(self, ti, haii, xhat, rhs, fd, wi):
+        """``(state, fun, residual, admissible, cache)`` of one stage: the state of the free
+        unknowns u, the stage residual G(u) = M w + h a_ii F(x, w) - rhs on the free dofs with
+        its Jacobian J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech) restricted to them (``fun``)
+        or alone (``residual``, None without ``lazy_jacobian``), and the last F in ``cache``."""
+        sysm, M, mechf, free = self.system, self.M, self.mechf, fd.free
+        cache: dict = {}
+
+        def state(u):
+            w = wi.copy()
+            w[free] = u
+            return xhat + haii * mechf * w, w
+
+        def stage_residual(u, jacobian):
+            x, w = state(u)
+            F, Fx, Fw = sysm.evaluate(x, w, ti, jacobian=jacobian)
+            F = np.asarray(F, float)
+            cache["u"], cache["F"] = u.copy(), F
+            G = (M @ w + haii * F - rhs)[free]
+            if not jacobian:
+                return G
+            return G, fd.combine([(self.M, 1.0, None), (Fw, haii, None), (Fx, haii * haii, mechf)])
+
+        def adm(u):
+            return bool(sysm.admissible(state(u)[0]))
+
+        fun = functools.partial(stage_residual, jacobian=True)
+        resid = functools.partial(stage_residual, jacobian=False) if self.lazy_jacobian else None
+        return state, fun, resid, adm, cache
+
+    def _solve_stage(self, fun, start, adm, label, resid, haii, constraint_key) -> list:
+        """The stage's Newton results: one, or (a failed modified Newton) the failed one and
+        the full-Newton retry from the same start, the last being the stage's."""
+        reuse = self.reuse
+        if reuse is None:
+            return [newton(fun, start, admissible=adm, label=label, residual=resid, **self.newton_opts)]
+        key = self._check_reuse(haii, constraint_key)
+        res = newton(fun, start, admissible=adm, label=label, residual=resid, reuse=reuse, **self.newton_opts)
+        if res.factorizations:
+            reuse.key = key
+        stage_results = [res]
+        if not res.converged and (res.reuses or res.rejected_reuses):
+            # the modified Newton failed: full Newton from the same start before a cut
+            reuse.invalidate("failed stage")
+            log.info("%s: modified Newton failed (%s); full Newton retry", label, res.reason)
+            stage_results.append(newton(fun, start, admissible=adm, label=label + " retry", residual=resid,
+                                        **self.newton_opts))
+        log.info("%s: its=%d jacobians=%d factorisations=%d reused=%d rejected=%d contraction=%s", label,
+                 sum(r.iterations for r in stage_results), sum(r.jacobians for r in stage_results),
+                 sum(r.factorizations for r in stage_results), sum(r.reuses for r in stage_results),
+                 sum(r.rejected_reuses for r in stage_results),
+                 "[" + ", ".join(f"{q:.1e}" for r in stage_results for q in r.contractions) + "]")
+        return stage_results
 
     def _check_reuse(self, haii: float, constraint_key) -> tuple:
         """Drop the held factorisation if the stage matrix changed in a way the contraction
@@ -508,6 +511,17 @@ class DirkStepper:
         if not (np.all(np.isfinite(w)) and self.system.admissible(xhat + haii * self.mechf * w)):
             return np.array(w_prev, dtype=float, copy=True)
         return w
+
+
+def _stage_failure(res, system, xi):
+    """Why a stage solution is not accepted (None when it is)."""
+    if not res.converged:
+        return res.reason or "Newton did not converge"
+    if not np.all(np.isfinite(res.u)):
+        return "non-finite stage solution"
+    if not system.admissible(xi):
+        return "inadmissible stage state (det F <= 0)"
+    return None
 
 
 def dirk_step(system, tableau, x0, w0, t0: float, h: float, newton_opts: Optional[dict] = None, **options):
