@@ -113,7 +113,7 @@ class ThermalPostSystem:
         self._zero = sp.csr_matrix((self.n, self.n))
 
     def mass(self):
-        return self._scaled(sp.csr_matrix(self.system.mass()))
+        return self._M
 
     def constraints(self, t):
         return self._fixed, self._vals
