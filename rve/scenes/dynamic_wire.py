@@ -47,6 +47,7 @@ from ..model import (
     feedback_from_temperature,
 )
 from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate
+from ..solvers.dirk import integrator_options as integrator_options_of
 from .protocol import SceneFailure, SceneResult
 
 __all__ = ["setup", "initial_state", "probes", "solve", "run", "PROBES", "newton_options", "temperature_mode",
@@ -205,7 +206,8 @@ class _History:
     residuals and, for the temperature post-solve, the Joule heat of every accepted step."""
 
     def __init__(self, model, probe, mode, every: int, t_max: float, record: bool, x0, w0):
-        self.model, self.probe, self.mode, self.every, self.t_max, self.record = model, probe, mode, every, t_max, record
+        self.model, self.probe, self.mode = model, probe, mode
+        self.every, self.t_max, self.record = every, t_max, record
         self.p0 = p0 = probe(x0, w0)
         if mode == "post":
             p0["T_half"] = 0.0
@@ -256,7 +258,8 @@ def _post_temperature(model, cfg, joule_t, joule_Q, steps, stages, nopts, fixed,
     Tsc = RowScaledSystem(tsys, 1.0 / np.asarray(abs(tsys.mass()).sum(axis=1)).ravel())
     T0 = np.zeros(tsys.n)
     tres = integrate(Tsc, np.zeros(tsys.n), T0, 0.0, cfg.time.t_max, steps, stages=stages, newton_opts=nopts,
-                     max_cuts=cfg.time.max_cuts, fixed_step=fixed, consistent=False, **iopts)
+                     consistent=False,
+                     **integrator_options_of(max_cuts=cfg.time.max_cuts, fixed_step=fixed, **iopts))
     return {"steps": tres.steps, "newton_iterations": tres.newton_iterations, "T": tres.w}
 
 
@@ -284,9 +287,9 @@ def solve(cfg, *, stages: int | None = None, steps: int | None = None, fixed_ste
     p0, hist, joule_t, joule_Q, stage_res = rec.p0, rec.hist, rec.joule_t, rec.joule_Q, rec.stage_res
     t1 = time.perf_counter()
     try:
-        res = integrate(system, x0, w0, 0.0, t_max, steps, stages=stages, newton_opts=nopts,
-                        max_cuts=cfg.time.max_cuts, on_step=rec.on_step, progress=progress, fixed_step=fixed,
-                        consistent=False, **iopts)
+        res = integrate(system, x0, w0, 0.0, t_max, steps, stages=stages, newton_opts=nopts, on_step=rec.on_step,
+                        progress=progress, consistent=False,
+                        **integrator_options_of(max_cuts=cfg.time.max_cuts, fixed_step=fixed, **iopts))
     except IntegrationFailure as exc:
         raise _failure(exc, model, hist, mode) from exc
     t2 = time.perf_counter()

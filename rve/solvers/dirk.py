@@ -12,7 +12,7 @@ Thesis §6.2 and Appendix C; see ``docs/time_integration.md``.
   landing exactly on ``t_end``; or ``fixed_step=True`` (failure raises at once).
 * ``consistent_initialization`` -- solves ``F = 0`` for the massless (algebraic) dofs at
   t0 so that e.g. the potential V(0) is consistent with x(0), w(0).
-* Factorisation reuse (``integrate(jacobian_reuse=...)``, default off: one factorisation
+* Factorisation reuse (``integrate(reuse=ReusePolicy(mode=...))``, default off: one factorisation
   per Newton iteration as before, bit for bit): the stepper keeps one
   ``rve.solvers.newton.JacobianReuse`` for the run, so a factorisation serves Newton
   iterations, stages and steps while the observed contraction stays below
@@ -42,6 +42,7 @@ __all__ = [
     "order_conditions", "stability_function",
     "StepInfo", "StepFailure", "IntegrationFailure", "IntegrationResult",
     "dirk_step", "integrate", "consistent_initialization", "DirkStepper", "structure_token", "StructureHook",
+    "StepControl", "Budgets", "ReusePolicy", "integrator_options",
 ]
 
 log = logging.getLogger("rve.dirk")
@@ -595,35 +596,84 @@ def _horizon(rebuild, t: float, t_end: float, h0: float) -> tuple:
     return float(t_end), max(1, int(math.ceil((t_end - t) / h0 - 1e-6)))
 
 
-@dataclass
-class _Limits:
-    """The loop's budgets (``integrate`` docstring)."""
+@dataclass(frozen=True)
+class StepControl:
+    """How ``integrate`` steps (its docstring): ``fixed_step`` (every step h0, the first
+    failure ends the run) or halve-and-retry, at most ``max_cuts`` consecutive cuts, the
+    step doubled again after ``grow_after`` successes, never below
+    ``max(min_step_rel h0, min_step_t_rel |t|)``."""
 
-    max_cuts: int
-    fixed_step: bool
-    grow_after: int
-    min_step_rel: float
-    min_step_t_rel: float
-    max_rejections: Optional[int]
-    wall_budget_s: Optional[float]
+    fixed_step: bool = False
+    max_cuts: int = 8
+    grow_after: int = 2
+    min_step_rel: float = 1e-6
+    min_step_t_rel: float = 1e-12
 
 
-def _give_up(fail: StepFailure, lim: _Limits, t: float, h_try: float, h0: float, cuts: int, rejected: int,
-             budget: int, wall0: float):
+@dataclass(frozen=True)
+class Budgets:
+    """What ends a run that still makes progress: ``max_rejections`` rejected attempts in a
+    segment (None: ``max(64, 2 n)`` for a segment of n nominal steps) and the wall time
+    ``wall_budget_s`` (None: off, so results depend on the input only)."""
+
+    max_rejections: Optional[int] = None
+    wall_budget_s: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class ReusePolicy:
+    """Factorisation reuse of the stage Newton solves (modified Newton,
+    ``rve.solvers.newton.JacobianReuse``; docs/time_integration.md): ``mode`` False (one
+    factorisation per Newton iteration), True (keep one while the contraction stays <=
+    ``contraction``) or "auto" (also weigh the measured costs); ``h_rtol``: the relative
+    change of h a_ii that drops it; ``backend``: a ``rve.solvers.linear.get_backend`` name or
+    a factory ``() -> backend``."""
+
+    mode: object = False
+    contraction: float = 0.5
+    h_rtol: float = 0.1
+    backend: object = None
+
+
+_GROUPS = {StepControl: ("fixed_step", "max_cuts", "grow_after", "min_step_rel", "min_step_t_rel"),
+           Budgets: ("max_rejections", "wall_budget_s")}
+_REUSE_KEYS = {"jacobian_reuse": "mode", "reuse_contraction": "contraction", "reuse_h_rtol": "h_rtol",
+               "linear_backend": "backend"}
+
+
+def integrator_options(**flat) -> dict:
+    """``integrate`` keywords from a flat mapping of option names (a scene's or a study's
+    ``integrator_options``): the ``StepControl`` fields (``fixed_step``, ``max_cuts``, ...),
+    the ``Budgets`` fields and ``jacobian_reuse``, ``reuse_contraction``, ``reuse_h_rtol``,
+    ``linear_backend`` become ``control``, ``budgets`` and ``reuse`` objects; every other
+    key (``predictor_degree``, ``lazy_jacobian``, ...) is passed through."""
+    out = {}
+    for cls, keys in _GROUPS.items():
+        given = {k: flat.pop(k) for k in keys if k in flat}
+        if given:
+            out["control" if cls is StepControl else "budgets"] = cls(**given)
+    reuse = {_REUSE_KEYS[k]: flat.pop(k) for k in list(_REUSE_KEYS) if k in flat}
+    if reuse:
+        out["reuse"] = ReusePolicy(**reuse)
+    return {**out, **flat}
+
+
+def _give_up(fail: StepFailure, ctl: StepControl, bud: Budgets, t: float, h_try: float, h0: float, cuts: int,
+             rejected: int, budget: int, wall0: float):
     """(cause, why) when a rejected step ends the run, else None."""
-    h_floor = max(float(lim.min_step_rel) * h0, float(lim.min_step_t_rel) * abs(t))
-    if lim.fixed_step:
+    h_floor = max(float(ctl.min_step_rel) * h0, float(ctl.min_step_t_rel) * abs(t))
+    if ctl.fixed_step:
         return "fixed_step", "fixed-step mode"
-    if cuts >= lim.max_cuts:
-        return "max_cuts", f"{cuts} consecutive step cuts (max_cuts = {lim.max_cuts})"
+    if cuts >= ctl.max_cuts:
+        return "max_cuts", f"{cuts} consecutive step cuts (max_cuts = {ctl.max_cuts})"
     if h_try / 2.0 < h_floor:
         return "min_step", (f"the next step h/2 = {h_try / 2.0:.3g} would be below the minimum step {h_floor:.3g} "
-                            f"(max(min_step_rel {lim.min_step_rel:g} x h0 {h0:.3g}, min_step_t_rel "
-                            f"{lim.min_step_t_rel:g} x t))")
+                            f"(max(min_step_rel {ctl.min_step_rel:g} x h0 {h0:.3g}, min_step_t_rel "
+                            f"{ctl.min_step_t_rel:g} x t))")
     if rejected >= budget:
         return "rejections", f"{rejected} rejected steps in total (max_rejections = {budget})"
-    if lim.wall_budget_s is not None and time.perf_counter() - wall0 > lim.wall_budget_s:
-        return "wall_time", f"the wall-time budget of {lim.wall_budget_s:g} s"
+    if bud.wall_budget_s is not None and time.perf_counter() - wall0 > bud.wall_budget_s:
+        return "wall_time", f"the wall-time budget of {bud.wall_budget_s:g} s"
     return None
 
 
@@ -644,12 +694,13 @@ def _accept(out: IntegrationResult, info: StepInfo, t: float, h_try: float, bar,
         bar.refresh()
 
 
-def _segment(stepper, out, x, w, t, t_stop, n, lim: _Limits, on_step, rebuild, final: bool, bar, t0):
+def _segment(stepper, out, x, w, t, t_stop, n, ctl: StepControl, bud: Budgets, on_step, rebuild, final: bool, bar,
+             t0):
     """Step from ``t`` to ``t_stop`` on ``n`` nominal steps with one stepper; returns
     ``(x, w, t)`` where the segment ended: at ``t_stop`` or where ``rebuild`` restarted."""
     h0 = (float(t_stop) - float(t)) / int(n)
     t_start, h = float(t), h0
-    budget = max(64, 2 * int(n)) if lim.max_rejections is None else int(lim.max_rejections)
+    budget = max(64, 2 * int(n)) if bud.max_rejections is None else int(bud.max_rejections)
     rejected0, wall0 = out.rejected, time.perf_counter()
     k_next, cuts, successes = 1, 0, 0   # next grid point, consecutive cuts, successes since the last cut
     pending = 0                         # rejected attempts since the last accepted step
@@ -666,7 +717,7 @@ def _segment(stepper, out, x, w, t, t_stop, n, lim: _Limits, on_step, rebuild, f
             out.add(fail.counts)
             log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)", out.steps + 1, t, h_try, fail.stage,
                      fail.reason)
-            stop = _give_up(fail, lim, t, h_try, h0, cuts, out.rejected - rejected0, budget, wall0)
+            stop = _give_up(fail, ctl, bud, t, h_try, h0, cuts, out.rejected - rejected0, budget, wall0)
             if stop is not None:
                 raise IntegrationFailure(
                     f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
@@ -689,13 +740,13 @@ def _segment(stepper, out, x, w, t, t_stop, n, lim: _Limits, on_step, rebuild, f
             on_step(t, x, w, info)
         if rebuild is not None and not (final and k_next > n) and rebuild(t, x, w):
             return x, w, t
-        if not lim.fixed_step and h < h0 and successes >= lim.grow_after:
+        if not ctl.fixed_step and h < h0 and successes >= ctl.grow_after:
             h = min(2.0 * h, h0)
             successes = 0
-        if lim.wall_budget_s is not None and k_next <= n and time.perf_counter() - wall0 > lim.wall_budget_s:
+        if bud.wall_budget_s is not None and k_next <= n and time.perf_counter() - wall0 > bud.wall_budget_s:
             raise IntegrationFailure(
                 f"time integration stopped at t = {t:.9g} (step size h = {h_try:.6g}) after the wall-time "
-                f"budget of {lim.wall_budget_s:g} s; {out.steps} steps accepted, {out.rejected} rejected; "
+                f"budget of {bud.wall_budget_s:g} s; {out.steps} steps accepted, {out.rejected} rejected; "
                 f"last good state at t = {t:.9g}", x.copy(), w.copy(), t, h_try, info.stage_residuals[-1],
                 None, out, cause="wall_time")
     return x, w, t
@@ -710,29 +761,23 @@ def integrate(
     n_steps: int,
     stages: int = 1,
     newton_opts: Optional[dict] = None,
-    max_cuts: int = 8,
+    *,
+    control: StepControl = StepControl(),
+    reuse: ReusePolicy = ReusePolicy(),
+    budgets: Budgets = Budgets(),
     on_step: Optional[Callable] = None,
-    progress: bool = False,
-    fixed_step: bool = False,
-    grow_after: int = 2,
+    rebuild: Optional[StructureHook] = None,
     consistent: bool = True,
+    progress: bool = False,
     tableau: Optional[Tableau] = None,
     predictor_degree: int = 2,
     lazy_jacobian: bool = True,
-    jacobian_reuse=False,
-    reuse_contraction: float = 0.5,
-    reuse_h_rtol: float = 0.1,
-    linear_backend: Optional[str] = None,
-    min_step_rel: float = 1e-6,
-    min_step_t_rel: float = 1e-12,
-    max_rejections: Optional[int] = None,
-    wall_budget_s: Optional[float] = None,
-    rebuild: Optional[StructureHook] = None,
 ) -> IntegrationResult:
     """Integrate from ``t0`` to ``t_end`` with nominal step ``h0 = (t_end − t0)/n_steps``.
 
-    Step control (``fixed_step=False``): a failed step (``StepFailure``) is discarded and
-    retried from the last good state with half the step; after ``grow_after`` consecutive
+    Step control (``control``, a ``StepControl``; ``fixed_step=False``): a failed step
+    (``StepFailure``) is discarded and retried from the last good state with half the
+    step; after ``grow_after`` consecutive
     successes the step doubles again, never beyond ``h0``. Steps are clipped to the
     nominal grid ``t0 + k h0`` so a run always lands exactly on ``t_end`` (and on every
     grid point). After ``max_cuts`` consecutive cuts the next failure raises
@@ -740,8 +785,9 @@ def integrate(
     good ``x, w, t``). With ``fixed_step=True`` every step is ``h0`` and the first failure
     raises ``IntegrationFailure`` at once.
 
-    Every loop ends (docs/fault_tolerance.md): besides ``max_cuts`` (consecutive cuts,
-    reset by every accepted step, however small), the run raises the same
+    Every loop ends (docs/fault_tolerance.md; ``budgets``, a ``Budgets``): besides
+    ``max_cuts`` (consecutive cuts, reset by every accepted step, however small), the run
+    raises the same
     ``IntegrationFailure`` (``cause`` names which budget) when a cut would take the step
     below ``h_min = max(min_step_rel * h0, min_step_t_rel * |t|)`` (``"min_step"``: the
     step no longer advances t in any useful way; with ``min_step_t_rel`` >= 1e-12, t + h
@@ -761,20 +807,20 @@ def integrate(
     (``DirkStepper``; 0 = previous stage value) and ``lazy_jacobian`` skips the Jacobian at
     converged points (``DirkStepper``).
 
-    Factorisation reuse (modified Newton; docs/time_integration.md): ``jacobian_reuse``
-    False (default: one factorisation per Newton iteration), True (keep a factorisation
-    across iterations, stages and steps while the contraction stays <=
-    ``reuse_contraction``) or "auto" (also weigh the measured cost of the extra iterations
-    against a fresh factorisation); ``reuse_h_rtol``: relative change of h·a_ii that drops
-    the factorisation; ``linear_backend``: its ``rve.solvers.linear.get_backend`` name. The
-    result counts Jacobian evaluations, factorisations, reused iterations, rejected modified
+    Factorisation reuse (modified Newton; docs/time_integration.md; ``reuse``, a
+    ``ReusePolicy``): ``mode`` False (default: one factorisation per Newton iteration), True
+    (keep a factorisation across iterations, stages and steps while the contraction stays
+    <= ``contraction``) or "auto" (also weigh the measured cost of the extra iterations
+    against a fresh factorisation); ``h_rtol``: relative change of h·a_ii that drops the
+    factorisation; ``backend``: its ``rve.solvers.linear.get_backend`` name or factory.
+    ``integrator_options(**flat)`` makes these objects from flat option names. The result
+    counts Jacobian evaluations, factorisations, reused iterations, rejected modified
     steps, full-Newton stage retries and why factorisations were dropped
     (``refactor_reasons``).
     """
     tab = tableau if tableau is not None else sdirk(stages)
     if n_steps < 1 or not t_end > t0:
         raise ValueError("need n_steps >= 1 and t_end > t0")
-    lim = _Limits(max_cuts, fixed_step, grow_after, min_step_rel, min_step_t_rel, max_rejections, wall_budget_s)
     x = np.array(x0, dtype=float, copy=True)
     w = np.array(w0, dtype=float, copy=True)
     t = float(t0)
@@ -793,11 +839,12 @@ def integrate(
     try:
         t_stop, n = (float(t_end), int(n_steps)) if rebuild is None else _horizon(rebuild, t, t_end, h0)
         while True:
-            stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian, jacobian_reuse,
-                                  reuse_contraction, reuse_h_rtol, linear_backend, watch_structure=rebuild is None)
+            stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian, reuse.mode,
+                                  reuse.contraction, reuse.h_rtol, reuse.backend, watch_structure=rebuild is None)
             final = t_stop >= float(t_end)
             try:
-                x, w, t = _segment(stepper, out, x, w, t, t_stop, n, lim, on_step, rebuild, final, bar, t0)
+                x, w, t = _segment(stepper, out, x, w, t, t_stop, n, control, budgets, on_step, rebuild, final, bar,
+                                   t0)
             finally:
                 if stepper.reuse is not None:
                     for k, v in stepper.reuse.refactor_reasons.items():
@@ -810,6 +857,6 @@ def integrate(
         if bar is not None:
             bar.close()
     out.x, out.w, out.t = x, w, t
-    if jacobian_reuse:
+    if reuse.mode:
         out.refactor_reasons = reasons
     return out

@@ -46,7 +46,7 @@ from ...model import RowScaledSystem
 from ...model.projectile import ImpactSystem, projectile_mesh
 from ...model.terms.projectile_contact import SphereContactTerm
 from ...solvers.backends.pruned import NAME, NAME_AUTO, PardisoOrPruned, PrunedSuperLU
-from ...solvers.dirk import IntegrationFailure, consistent_initialization, integrate, sdirk
+from ...solvers.dirk import IntegrationFailure, consistent_initialization, integrate, integrator_options, sdirk
 from ...model.balances import ImpactBalances
 from .record import (ImpactCheckpoint, ImpactRecorder, angular_velocity, impact_summary,
                             wall_split)
@@ -186,16 +186,17 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
 
 
 def _integrator_options(cfg, sysm=None, extra: dict | None = None) -> dict:
-    """Integrator options (``extra`` over the config's). The pruned backends eliminate the
-    projectile's free dofs (the last ones of the restricted stage matrix: its dofs come last
-    and ``FreeDofs`` keeps the order) by a Schur complement (rve.solvers.backends.pruned):
-    their names become factories with that border."""
-    opts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
+    """``integrate`` keywords (``extra``, flat option names, over the config's). The pruned
+    backends eliminate the projectile's free dofs (the last ones of the restricted stage
+    matrix: its dofs come last and ``FreeDofs`` keeps the order) by a Schur complement
+    (rve.solvers.backends.pruned): their names become factories with that border."""
+    opts = {"max_cuts": cfg.time.max_cuts, "fixed_step": not cfg.time.step_control,
+            "jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
             "linear_backend": cfg.newton.linear_backend, **(extra or {})}
     pruned = {NAME: PrunedSuperLU, NAME_AUTO: PardisoOrPruned}.get(opts["linear_backend"])
     if pruned is not None:
         opts["linear_backend"] = functools.partial(pruned, border=0 if sysm is None else schur_border(sysm))
-    return opts
+    return integrator_options(**opts)
 
 
 def schur_border(sysm) -> int:
@@ -230,8 +231,7 @@ def relax(cfg, progress: bool = False):
     try:
         hook.rebuild(x)
         res = integrate(RowScaledSystem(sysm, scale), x, w, 0.0, r.t_end, r.steps, stages=tab.stages,
-                        newton_opts=nopts, max_cuts=cfg.time.max_cuts,
-                        fixed_step=not cfg.time.step_control, consistent=False, rebuild=hook, **iopts)
+                        newton_opts=nopts, consistent=False, rebuild=hook, **iopts)
         x, w = res.x, res.w
         at_boundary(res.t, x, w)
     except IntegrationFailure as exc:
@@ -279,8 +279,8 @@ def _impact_start(cfg, problem, x_start, t_end, steps, tab, nopts, checkpoint, r
     w[sysm._r_end[:, 2]] = -cfg.projectile.speed
     thermal = ImpactThermal(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes,
                             sink=cfg.contact.projectile_heat_sink)
-    rec = ImpactRecorder(problem, ImpactBalances(problem, thermal), ThermalPostSolver(thermal, tab, cfg.end_temperature),
-                         np.full(sysm.fabric.mesh.n_nodes, float(cfg.end_temperature)), X0p,
+    balances, post = ImpactBalances(problem, thermal), ThermalPostSolver(thermal, tab, cfg.end_temperature)
+    rec = ImpactRecorder(problem, balances, post, np.full(sysm.fabric.mesh.n_nodes, float(cfg.end_temperature)), X0p,
                          float(problem.info["projectile_length_mm"]), cfg.time.store_every, t_end, record)
     digest = config_digest(cfg, ("geometry", "warp", "weft", "material", "projectile", "contact", "field", "mesh",
                                  "relaxation", "time", "newton"))
@@ -350,8 +350,7 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
         if t < t_end * (1 - 1e-12):
             hook.rebuild(x)
             res = integrate(RowScaledSystem(sysm, scale), x, w, t, t_end, steps, stages=tab.stages,
-                            newton_opts=nopts, max_cuts=cfg.time.max_cuts, on_step=rec.on_step,
-                            fixed_step=not cfg.time.step_control, consistent=False, rebuild=hook, **iopts)
+                            newton_opts=nopts, on_step=rec.on_step, consistent=False, rebuild=hook, **iopts)
             x, w, t = res.x, res.w, res.t
             boundary(t, x, w)
     except IntegrationFailure as exc:

@@ -50,6 +50,7 @@ from ...fabrics.setup import contact_params
 from ...model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
 from ...model import RowScaledSystem
 from ...solvers.dirk import IntegrationFailure, integrate, sdirk
+from ...solvers.dirk import integrator_options as integrator_options_of
 from ...model.balances import StateBalances
 from ...model.thermal_post import ThermalOperators, ThermalPostSolver
 from .record import InducedRecorder, induced_summary
@@ -185,16 +186,17 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     steps = int(cfg.time.steps if steps is None else steps)
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = {"jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
-             "linear_backend": None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend,
-             **(integrator_options or {})}
+    iopts = integrator_options_of(
+        max_cuts=cfg.time.max_cuts, fixed_step=not cfg.time.step_control, jacobian_reuse=cfg.newton.jacobian_reuse,
+        reuse_contraction=cfg.newton.reuse_contraction,
+        linear_backend=None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend,
+        **(integrator_options or {}))
     rs, x, w, rec = _induced_start(cfg, problem, t_end / steps, tab, nopts, record, progress, t_end, post_reuse)
     hook = MapRebuild(sysm, t_end, cfg.contact.rebuild_every, 0.5 * float(sysm.params.margin))
     sysm.rebuild(x)
     ti = time.perf_counter()
     try:
-        res = integrate(rs, x, w, 0.0, t_end, steps, stages=tab.stages, newton_opts=nopts,
-                        max_cuts=cfg.time.max_cuts, on_step=rec.on_step, fixed_step=not cfg.time.step_control,
+        res = integrate(rs, x, w, 0.0, t_end, steps, stages=tab.stages, newton_opts=nopts, on_step=rec.on_step,
                         consistent=False, rebuild=hook, **iopts)
         x, w = res.x, res.w
     except IntegrationFailure as exc:
