@@ -5,24 +5,26 @@ scene. Every function takes plain strings, so a rule passes wildcards as ``"{cas
 
 Contract
 --------
-* impact: ``impact_dir(case)`` (``results/impact/<case>``), ``impact_relaxed(case)``,
-  ``impact_relax_record(case)``, ``impact_summary(case)``, ``impact_nc(case)``,
-  ``impact_sweep_dir(current)``, ``impact_sweep_summary(current)``, ``IMPACT_SWEEP_PNG``,
-  ``IMPACT_SWEEP_JSON``;
-* induced deformation: ``induced_dir(orientation)``, ``induced_summary(orientation)``,
-  ``induced_nc(orientation)``, ``INDUCED_FRAMES_PNG``, ``INDUCED_TEMPERATURE_PNG``;
+* ``impact_dir(case)`` (``results/impact/<case>``) and ``impact_file(case, kind)``, ``kind``
+  one of ``IMPACT_FILES`` (relaxed state, relaxation record, summary, netCDF); the current
+  sweep: ``impact_sweep_dir(current)``, ``impact_file(f"sweep/J{current}", "summary")``,
+  ``IMPACT_SWEEP_PNG``, ``IMPACT_SWEEP_JSON``;
+* ``induced_dir(orientation)`` and ``induced_file(orientation, kind)``, ``kind`` one of
+  ``INDUCED_FILES``; ``INDUCED_FRAMES_PNG``, ``INDUCED_TEMPERATURE_PNG``;
 * ``log_path(scene, name)`` (``results/logs/<scene>/<name>.log``) and
   ``benchmark_path(scene, name)`` (``results/benchmarks/<scene>/<name>.tsv``).
 """
 from __future__ import annotations
 
-__all__ = ["IMPACT_DIR", "impact_dir", "impact_relaxed", "impact_relax_record", "impact_summary", "impact_nc",
-           "impact_sweep_dir", "impact_sweep_summary", "IMPACT_SWEEP_PNG", "IMPACT_SWEEP_JSON", "INDUCED_DIR",
-           "induced_dir", "induced_summary", "induced_nc", "INDUCED_FRAMES_PNG", "INDUCED_TEMPERATURE_PNG",
-           "log_path", "benchmark_path"]
+__all__ = ["IMPACT_DIR", "IMPACT_FILES", "impact_dir", "impact_file", "impact_sweep_dir", "IMPACT_SWEEP_PNG",
+           "IMPACT_SWEEP_JSON", "INDUCED_DIR", "INDUCED_FILES", "induced_dir", "induced_file", "INDUCED_FRAMES_PNG",
+           "INDUCED_TEMPERATURE_PNG", "log_path", "benchmark_path"]
 
 IMPACT_DIR = "results/impact"
 INDUCED_DIR = "results/induced_deformation"
+IMPACT_FILES = {"relaxed": "relaxed_state.npz", "relaxation": "relaxation.json", "summary": "summary.json",
+                "netcdf": "impact.nc"}
+INDUCED_FILES = {"summary": "summary.json", "netcdf": "induced_deformation.nc"}
 IMPACT_SWEEP_PNG = f"{IMPACT_DIR}/sweep/current_sweep.png"
 IMPACT_SWEEP_JSON = f"{IMPACT_DIR}/sweep/current_sweep.json"
 INDUCED_FRAMES_PNG = f"{INDUCED_DIR}/fig_8_3_1_frames.png"
@@ -33,40 +35,20 @@ def impact_dir(case: str) -> str:
     return f"{IMPACT_DIR}/{case}"
 
 
-def impact_relaxed(case: str) -> str:
-    return f"{impact_dir(case)}/relaxed_state.npz"
-
-
-def impact_relax_record(case: str) -> str:
-    return f"{impact_dir(case)}/relaxation.json"
-
-
-def impact_summary(case: str) -> str:
-    return f"{impact_dir(case)}/summary.json"
-
-
-def impact_nc(case: str) -> str:
-    return f"{impact_dir(case)}/impact.nc"
+def impact_file(case: str, kind: str) -> str:
+    return f"{impact_dir(case)}/{IMPACT_FILES[kind]}"
 
 
 def impact_sweep_dir(current: str) -> str:
-    return f"{IMPACT_DIR}/sweep/J{current}"
-
-
-def impact_sweep_summary(current: str) -> str:
-    return f"{impact_sweep_dir(current)}/summary.json"
+    return impact_dir(f"sweep/J{current}")
 
 
 def induced_dir(orientation: str) -> str:
     return f"{INDUCED_DIR}/{orientation}"
 
 
-def induced_summary(orientation: str) -> str:
-    return f"{induced_dir(orientation)}/summary.json"
-
-
-def induced_nc(orientation: str) -> str:
-    return f"{induced_dir(orientation)}/induced_deformation.nc"
+def induced_file(orientation: str, kind: str) -> str:
+    return f"{induced_dir(orientation)}/{INDUCED_FILES[kind]}"
 
 
 def log_path(scene: str, name: str) -> str:

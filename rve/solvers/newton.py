@@ -284,6 +284,13 @@ def newton(
         return NewtonResult(u, converged, iterations, res, reason, jacobians=nj, factorizations=nf,
                             linear_solves=nf)
 
+    def evaluate(v):  # (r, J) of a trial point; the residual alone when there is a function for it
+        nonlocal nj
+        if residual is not None:
+            return residual(v), None
+        nj += 1
+        return fun(v)
+
     if not np.isfinite(rn):
         return result(False, 0, "non-finite residual at the initial state")
     for it in range(1, max_iter + 1):
@@ -299,26 +306,10 @@ def newton(
             return result(False, it - 1, f"linear solve failed: {exc}")
         if not np.all(np.isfinite(du)):
             return result(False, it - 1, "non-finite Newton update (singular Jacobian?)")
-        step = 1.0
-        for _ in range(max_halvings + 1):
-            trial = u + step * du
-            if admissible is not None and not admissible(trial):
-                step *= 0.5
-                continue
-            if residual is not None:
-                rt, Jt = residual(trial), None
-            else:
-                rt, Jt = fun(trial)
-                nj += 1
-            rtn = float(np.linalg.norm(rt))
-            if not line_search or (np.isfinite(rtn) and rtn < rn) or step < 2.0 ** -max_halvings:
-                break
-            step *= 0.5
-        else:
+        found = _line_search(u, du, rn, evaluate, admissible, line_search, max_halvings)
+        if found is None:
             return result(False, it - 1, "no admissible step (det F <= 0 for every trial)")
-        if admissible is not None and not admissible(trial):
-            return result(False, it - 1, "no admissible step (det F <= 0 for every trial)")
-        u, r, J, rn = trial, rt, Jt, rtn
+        u, r, J, rn, step = found
         res.append(rn)
         rates = convergence_rates(res)
         log.info(

@@ -25,7 +25,7 @@ def impact_overrides(case):
 rule impact:
     """Relaxation + the full thesis impact and its outputs."""
     input:
-        scene_layout.impact_summary("full"),
+        scene_layout.impact_file("full", "summary"),
 
 
 rule impact_relax:
@@ -33,8 +33,8 @@ rule impact_relax:
     input:
         scene=IMPACT["scene_config"],
     output:
-        state=scene_layout.impact_relaxed("{case}"),
-        record=scene_layout.impact_relax_record("{case}"),
+        state=scene_layout.impact_file("{case}", "relaxed"),
+        record=scene_layout.impact_file("{case}", "relaxation"),
     log:
         scene_layout.log_path("impact", "{case}_relax"),
     benchmark:
@@ -54,10 +54,10 @@ rule impact_full:
     """The thesis impact from the saved relaxed state (outputs under results/impact/full)."""
     input:
         scene=IMPACT["scene_config"],
-        relaxed=scene_layout.impact_relaxed("full"),
+        relaxed=scene_layout.impact_file("full", "relaxed"),
     output:
-        summary=scene_layout.impact_summary("full"),
-        nc=scene_layout.impact_nc("full"),
+        summary=scene_layout.impact_file("full", "summary"),
+        nc=scene_layout.impact_file("full", "netcdf"),
     log:
         scene_layout.log_path("impact", "full"),
     benchmark:
@@ -79,9 +79,9 @@ rule impact_sweep_point:
     """One current density of the sweep (reduced case)."""
     input:
         scene=IMPACT["scene_config"],
-        relaxed=scene_layout.impact_relaxed("sweep"),
+        relaxed=scene_layout.impact_file("sweep", "relaxed"),
     output:
-        summary=scene_layout.impact_sweep_summary("{current}"),
+        summary=scene_layout.impact_file("sweep/J{current}", "summary"),
     log:
         scene_layout.log_path("impact", "sweep_J{current}"),
     benchmark:
@@ -100,7 +100,7 @@ rule impact_sweep_point:
 rule impact_sweep:
     """Final speed, tilt rate and peak temperature against the warp current density."""
     input:
-        [scene_layout.impact_sweep_summary(c) for c in IMPACT["currents"]],
+        [scene_layout.impact_file(f"sweep/J{c}", "summary") for c in IMPACT["currents"]],
     output:
         png=scene_layout.IMPACT_SWEEP_PNG,
         json=scene_layout.IMPACT_SWEEP_JSON,

@@ -11,7 +11,7 @@ from rve.scenes import layout as scene_layout
 INDUCED = config["induced_deformation"]
 INDUCED_ORIENTATIONS = ["B1", "B2", "B3"]
 INDUCED_OUTPUTS = [scene_layout.INDUCED_FRAMES_PNG, scene_layout.INDUCED_TEMPERATURE_PNG] + [
-    scene_layout.induced_summary(o) for o in INDUCED_ORIENTATIONS]
+    scene_layout.induced_file(o, "summary") for o in INDUCED_ORIENTATIONS]
 
 
 wildcard_constraints:
@@ -29,8 +29,8 @@ rule induced_deformation_orientation:
     input:
         scene=INDUCED["scene_config"],
     output:
-        summary=scene_layout.induced_summary("{induced_orientation}"),
-        nc=scene_layout.induced_nc("{induced_orientation}"),
+        summary=scene_layout.induced_file("{induced_orientation}", "summary"),
+        nc=scene_layout.induced_file("{induced_orientation}", "netcdf"),
     log:
         scene_layout.log_path("induced_deformation", "{induced_orientation}"),
     benchmark:
@@ -51,7 +51,7 @@ rule induced_deformation_orientation:
 rule induced_deformation_figures:
     """Figs. 8.3.1 (time frames x orientations, coloured by current) and 8.3.2 (temperature)."""
     input:
-        nc=[scene_layout.induced_nc(o) for o in INDUCED_ORIENTATIONS],
+        nc=[scene_layout.induced_file(o, "netcdf") for o in INDUCED_ORIENTATIONS],
     output:
         frames=scene_layout.INDUCED_FRAMES_PNG,
         temperature=scene_layout.INDUCED_TEMPERATURE_PNG,
