@@ -1,89 +1,25 @@
-"""Linear solves of the sparse tangents: the one home of the solver choices (docs/engine.md).
+"""Linear solves of the sparse tangents, on the factorisation backends of
+``rve.solvers.backends`` (names, the default choice and the backends' own contracts are
+there; the full text and the measurements: docs/engine.md, "The linear-solver layer in
+full").
 
 Contract
 --------
-* Backend choice: ``resolve_backend(name=None, symmetric=True) -> str``. ``name`` (the
-  ``backend=`` argument of the functions below) wins; else the environment variable
-  ``RVE_LINEAR_BACKEND``; else ``DEFAULT_BACKEND = "auto"``. ``"auto"`` is ``"pardiso"``
-  when ``rve.solvers.backends.pardiso.available()`` (and the matrix is symmetric), else
-  ``"superlu"``. A name outside ``BACKENDS`` / ``"auto"`` raises ``ValueError`` listing the
-  allowed ones; ``"pardiso"`` named explicitly where it is unavailable raises
-  ``RuntimeError`` with the reason. ``RVE_LINEAR_BACKEND=superlu`` forces the pure-scipy
-  fallback everywhere (docs/engine.md, "Backend choice").
-* Threads of the energy minimiser's PARDISO factorisations (defined in ``rve.threads``,
-  re-exported here; the compiled kernels use the same count): ``solver_threads() -> int``
-  (``linear_threads(n)`` in effect, else ``$RVE_PARDISO_THREADS``, else
-  ``min(DEFAULT_THREADS, cores)``), in MKL's reproducible mode (``rve.solvers.backends.
-  registry.CNR_THREADS``: 1 and 2 threads give the same bits; docs/engine.md "Two threads").
-* ``sparse_solve(J, r, backend=None) -> du``: one direct solve ``J du = r`` (Newton, the
-  static and pseudo-transient solvers, the capped Newton): LAPACK's banded LU when ``J``
-  is narrowly banded (single fibrils); else the chosen backend — PARDISO (only when ``J``
-  is symmetric to rounding: a two-vector bilinear test) or SuperLU in symmetric mode
-  (``SUPERLU_SYMMETRIC``) — checked by its residual ``|J du - r| <= 1e-8 |r|``; a failed
-  check or a breakdown (PARDISO's perturbed pivots show up here) falls back to SuperLU
-  symmetric mode and then to COLAMD + partial pivoting (``SUPERLU_FALLBACK_PERMC``).
-  Raises ``RuntimeError`` only if the last fallback does. ``backend`` may be a backend
-  *instance* (``get_backend(...)``): keeping one across calls reuses PARDISO's analysis
-  while the pattern is unchanged; by default (a name or None) one shared instance per
-  backend name is kept by this module (``release_shared()`` frees it).
-* ``factorize(A, symmetric=True, inertia=False, backend=None) -> backend instance``: a
-  factorisation of ``A`` with ``.solve(b)`` and ``.negative_pivots`` (the number of
-  negative pivots of a symmetric factorisation; by Sylvester's law of inertia the number
-  of negative eigenvalues of a symmetric ``A``). With ``inertia=True`` the pivots are
-  checked at once and a factorisation with a zero or non-finite pivot raises
-  ``SingularFactorError``. ``backend`` is a name or an instance (reused, analysis kept).
-* ``factor_inertia(A, backend=None) -> (factorisation, n_negative)``: the energy
-  minimiser's inertia check (docs/relaxation.md); ``(None, -1)`` for a zero or non-finite
-  pivot. With PARDISO a factorisation that perturbed a pivot (its count of that pivot's
-  sign is then not SuperLU's) or failed is redone by SuperLU, so the count always equals
-  SuperLU's on the same matrix; a backend without inertia (``pardiso_unsym``) leaves it to
-  SuperLU.
-* ``factor_positive_definite(A, backend=None) -> factorisation or None``: the energy
-  minimiser's definiteness test of ``K + sigma M``: a factorisation to solve with when
-  ``A`` is positive definite, None when it is not. With PARDISO the instance's Cholesky
-  companion (mtype 2, ``PardisoFactorization.cholesky``), which stops at the first pivot
-  <= 0 (a tenth of a factorisation or less on the minimiser's indefinite matrices:
-  docs/engine.md "Cholesky as the definiteness test"); otherwise ``factor_inertia`` and
-  its count (with SuperLU, the LU pivots' signs).
-* ``negative_eigenvalue_count(A, backend=None) -> int``: the stability check of a
-  relaxed state (its static tangent's negative eigenvalues): 0 when the Cholesky companion
-  of a PARDISO instance succeeds, otherwise ``factor_inertia``'s count (-1 for a zero or
-  non-finite pivot). The same number as ``factor_inertia`` (a Cholesky succeeds exactly on
-  positive definite matrices); it saves the LDL^T's analysis with weighted matching where
-  the answer is 0, which it is for every stable state.
-* ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (the minimiser's and
-  the pseudo-transient solver's regularised tangent). ``keep_pattern=False`` is scipy's
-  sum (explicit zeros dropped); ``True`` keeps ``J``'s stored pattern
-  (explicit zeros of inactive contact pairs included) when ``M``'s pattern lies in it.
-
-Backends. A backend instance is stateful and used as ``analyse(pattern)`` (fill-reducing
-ordering / symbolic factorisation; ``factorize`` calls it itself when the pattern
-changes), ``factorize(A)`` (numeric factorisation; returns the instance), ``solve(b)`` and
-``negative_pivots``. Keeping one instance across calls with the same pattern reuses the
-analysis.
-
-* ``"pardiso"`` (``PardisoBackend``, ``rve/solvers/backends/pardiso.py``): MKL PARDISO LDL^T,
-  symmetric indefinite, one MKL thread, explicit zeros dropped, the analysis (METIS +
-  matching) reused while the nonzero pattern lies in the analysed one (a new analysis on
-  the union when small). The energy minimiser hands it the contact map's stored pattern
-  and analyses that (``analyse_stored``; ``rve.solvers.backends.run_backend``): measured
-  the best of four choices, docs/engine.md "Backend choice". ``symmetric=True`` reads one
-  triangle (symmetric matrices only); ``symmetric=False`` is PARDISO's LU of a real
-  unsymmetric matrix (mtype 11: full pattern, nonsymmetric matching and scaling, pivot
-  perturbation 1e-13, the same analysis reuse; no inertia). ``"auto"`` with
-  ``symmetric=False`` stays ``"superlu"``; ``rve.solvers.newton.StageFactorisation`` routes
-  an unsymmetric stage matrix handed to a symmetric ``"pardiso"`` instance to its mtype-11
-  companion (docs/engine.md "Unsymmetric stage matrices").
-* ``"pardiso_unsym"`` (``PardisoUnsymBackend``): mtype 11 whatever ``symmetric`` says.
-* ``"superlu"`` (``SuperLUBackend``): scipy's SuperLU. ``symmetric=True``: minimum degree
-  on A^T + A with diagonal pivots only (``SUPERLU_SYMMETRIC``), so the diagonal of U is
-  the D of A = L D L^T (up to rounding) and gives the inertia; ``symmetric=False``:
-  COLAMD with partial pivoting (no inertia). SuperLU orders every factorisation afresh,
-  so ``analyse`` only records the pattern.
-* ``"banded"`` (``BandedBackend``): LAPACK ``gbsv`` on the band of ``A`` (LU with partial
-  pivoting, no inertia); ``factorize`` raises ``NotBandedError`` when the bandwidth
-  exceeds ``BANDED_MAX_BANDWIDTH``. The band is factorised in each ``solve``.
-  ``sparse_solve`` takes this path itself for narrow bands, whatever the backend.
+* ``sparse_solve(J, r, backend=None) -> du``: one direct solve ``J du = r``: LAPACK's banded
+  LU for narrow bands, else the backend (PARDISO only for a matrix symmetric to rounding)
+  checked by its residual ``|J du - r| <= 1e-8 |r|``, falling back to SuperLU's symmetric
+  mode and then COLAMD with partial pivoting; one shared instance per backend name
+  (``release_shared()`` frees them).
+* ``factorize(A, symmetric=True, inertia=False, backend=None) -> backend instance``.
+* ``factor_inertia(A, backend=None) -> (factorisation, n_negative)`` (``(None, -1)`` for a
+  zero or non-finite pivot; always SuperLU's count), ``factor_positive_definite(A,
+  backend=None, cholesky=True) -> factorisation or None`` (PARDISO's Cholesky where it
+  is there), ``negative_eigenvalue_count(A, backend=None) -> int``.
+* ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (scipy's sum, or on J's
+  stored pattern); ``is_symmetric(J, rtol=1e-10)``.
+* Re-exported for callers: the backends, their registry (``resolve_backend``,
+  ``get_backend``, ``register_backend``, ``BACKENDS``), the errors and the thread helpers
+  of ``rve.threads`` (``solver_threads``, ``linear_threads``).
 """
 from __future__ import annotations
 
