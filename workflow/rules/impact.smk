@@ -13,13 +13,11 @@
 # every path from rve.scenes.layout; the job bodies (rve.scenes.impact.jobs) are imported in
 # the rule bodies.
 
+import os
+
 from rve.scenes import layout as scene_layout
 
 IMPACT = config["impact"]
-
-
-def impact_overrides(case):
-    return IMPACT["overrides"] if case == "full" else IMPACT["overrides"] + IMPACT["sweep_overrides"]
 
 
 rule impact:
@@ -40,7 +38,7 @@ rule impact_relax:
     benchmark:
         scene_layout.benchmark_path("impact", "{case}_relax")
     params:
-        overrides=lambda wc: impact_overrides(wc.case),
+        overrides=lambda wc: IMPACT["overrides"] if wc.case == "full" else IMPACT["overrides"] + IMPACT["sweep_overrides"],
         out=lambda wc: scene_layout.impact_dir(wc.case),
     threads: 1
     run:
@@ -64,7 +62,7 @@ rule impact_full:
         scene_layout.benchmark_path("impact", "full")
     params:
         overrides=IMPACT["overrides"],
-        out=scene_layout.impact_dir("full"),
+        out=lambda w, output: os.path.dirname(output.summary),
     threads: 1
     resources:
         mem_mb=config["resources"]["impact_mem_mb"],
@@ -87,7 +85,7 @@ rule impact_sweep_point:
     benchmark:
         scene_layout.benchmark_path("impact", "sweep_J{current}")
     params:
-        overrides=lambda wc: impact_overrides("sweep") + [f"warp.J_bar=-{wc.current} A/mm^2"],
+        overrides=lambda wc: IMPACT["overrides"] + IMPACT["sweep_overrides"] + [f"warp.J_bar=-{wc.current} A/mm^2"],
         out=lambda wc: scene_layout.impact_sweep_dir(wc.current),
     threads: 1
     run:
