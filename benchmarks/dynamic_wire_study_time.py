@@ -82,7 +82,7 @@ REUSE = {"off": False, "on": True, "auto": "auto"}
 
 def compare(plan, args) -> None:
     import rve.scenes.dynamic_wire as scene
-    from rve.solvers.dirk import integrate
+    from rve.solvers.dirk import ReusePolicy, integrate
 
     names = [v for v in args.variants.split(",") if v]
     load0 = os.getloadavg()
@@ -90,7 +90,7 @@ def compare(plan, args) -> None:
     data = {}
     for rep in range(args.repeats):
         for v in names:
-            scene.integrate = functools.partial(integrate, jacobian_reuse=REUSE[v])
+            scene.integrate = functools.partial(integrate, reuse=ReusePolicy(mode=REUSE[v]))
             try:
                 t0 = time.perf_counter()
                 ds, timing = run_study(plan, workers=args.workers)

@@ -48,12 +48,6 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
         prof.start()
     from rve.config import load_config
 
-    opts = os.environ.get("RVE_AB_PARDISO")  # a variant of the minimiser's PARDISO options (JSON)
-    if opts:
-        from rve.solvers import minimize
-
-        minimize.PARDISO_OPTIONS.clear()
-        minimize.PARDISO_OPTIONS.update(json.loads(opts))
     eps = float(os.environ.get("RVE_AB_PERTURB", "0") or 0)  # perturb the coarse minimum (mm), path test
     if eps:
         from rve.fabrics import relaxation as _rx

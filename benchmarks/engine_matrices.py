@@ -210,7 +210,7 @@ def impact_scene_matrices(out: Path, steps: int = 20, keep: int = 2, reduced: bo
     ``impact_scene[_reduced]_<k>``; the relaxed state is kept in ``out`` for the A/B runs."""
     from rve.config.loader import load_config
     from rve.scenes import impact
-    from rve.scenes.impact_solver import PrunedSuperLU
+    from rve.scenes.impact.scene import schur_border
 
     ov = ["output.vtk=false", "output.png=false"]
     if reduced:
@@ -238,10 +238,10 @@ def impact_scene_matrices(out: Path, steps: int = 20, keep: int = 2, reduced: bo
         _save(out, f"{tag}_{k}", A, {"source": f"impact scene {'reduced' if reduced else 'full size'}, the "
                                                f"{seq}-th of {seen['count']} stage factorisations of {steps} steps "
                                                "of 0.5 us from the relaxed state (row-scaled, restricted)",
-                                     "border": int(PrunedSuperLU.border), "steps": steps,
+                                     "border": schur_border(res.model), "steps": steps,
                                      "sphere_pairs_active_max": s.get("sphere_pairs_active_max"),
                                      "contact_pairs_max": s.get("contact_pairs_max"),
-                                     "note": f"factorisation {seq}/{seen['count']}, border {PrunedSuperLU.border}"})
+                                     "note": f"factorisation {seq}/{seen['count']}, border {schur_border(res.model)}"})
 
 
 def induced_scene_matrices(out: Path, t_end: float = 0.35, steps: int = 70, keep: int = 2,
@@ -250,7 +250,7 @@ def induced_scene_matrices(out: Path, t_end: float = 0.35, steps: int = 70, keep
     full size) in its contact phase: ``steps`` steps to ``t_end`` ms (B3: contact from about
     0.3 ms), the last ``keep`` factorised saved as ``induced_<orientation>_<k>``."""
     from rve.config.loader import load_config
-    from rve.scenes.induced_deformation import solve
+    from rve.scenes.induced import solve
 
     cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml",
                       ["output.vtk=false", "output.png=false", f"field.orientation={orientation}"])

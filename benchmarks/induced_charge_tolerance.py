@@ -12,7 +12,7 @@ import sys
 import time
 
 from rve.config import load_config
-from rve.scenes.induced_deformation import solve
+from rve.scenes.induced import solve
 
 
 def main(argv):

@@ -36,7 +36,7 @@ import time
 import numpy as np
 
 from rve.config.loader import load_config
-from rve.scenes.induced_deformation import solve
+from rve.scenes.induced import solve
 
 AB_PATHS = {"post": dict(mode="post"), "post-former": dict(mode="post", post_reuse=False),
             "monolithic": dict(mode="monolithic")}
@@ -64,7 +64,7 @@ def _solve_path(cfg, name, t_end, steps, original=None, **kw):
     """``solve`` on path ``name``; ``post-original`` swaps in the original module's classes."""
     if name != "post-original":
         return solve(cfg, t_end=t_end, steps=steps, record=False, **AB_PATHS[name], **kw)
-    import rve.scenes.induced_deformation as scene
+    import rve.scenes.induced.scene as scene
 
     keep = scene.ThermalOperators, scene.ThermalPostSolver
     scene.ThermalOperators = original.ThermalOperators
@@ -80,8 +80,8 @@ def contact_check(a, ov):
     case with two extra T chains on the same stage states, by dense solves of the stage
     equations: K_c per stage (the exact stage equations) and K_c frozen at the step's end
     state for both stages. Prints max |T_post - T_chain| / max T over the run and at t_end."""
-    import rve.scenes.induced_deformation as scene
-    from rve.scenes.induced_balances import ThermalPostSolver
+    import rve.scenes.induced.scene as scene
+    from rve.model.thermal_post import ThermalPostSolver
 
     def dense_step(ops, tab, T0, stages, t0, h, x_ref=None):
         M, K = ops.M.toarray(), ops.K.toarray()

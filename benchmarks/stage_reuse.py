@@ -96,7 +96,7 @@ def _register_pardiso() -> None:
 
     if "pardiso" in linear.BACKENDS:
         return
-    from rve.solvers.pardiso import PardisoFactorization, available
+    from rve.solvers.backends.pardiso import PardisoFactorization, available
 
     if not available():
         raise SystemExit("pardiso is not available here")
@@ -104,12 +104,12 @@ def _register_pardiso() -> None:
 
 
 def run(system, x0, w0, steps, h, newton_opts=None, **opts):
-    from rve.solvers.dirk import integrate
+    from rve.solvers.dirk import integrate, integrator_options
 
     system.rebuild(x0)  # the same contact map at the start of every run
     t0 = time.perf_counter()
-    res = integrate(system, x0, w0, 0.0, steps * h, steps, stages=2, fixed_step=True, consistent=False,
-                    newton_opts=newton_opts, **opts)
+    res = integrate(system, x0, w0, 0.0, steps * h, steps, stages=2, consistent=False, newton_opts=newton_opts,
+                    **integrator_options(fixed_step=True, **opts))
     return res, time.perf_counter() - t0
 
 
@@ -135,7 +135,7 @@ def strain_phases(cfg, fab, mesh, x_rel, integrate_opts):
     real = relaxation.integrate
 
     def patched(*args, **kw):
-        res = dirk.integrate(*args, **kw, **integrate_opts)
+        res = dirk.integrate(*args, **integrator_options(**kw, **integrate_opts))
         calls.append(res)
         return res
 

@@ -111,7 +111,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(scene.module.snakemake_command(args.config, args.overrides))
         return EXIT_OK
     out_dir = Path(args.out) if args.out else Path("results") / "runs" / Path(args.config).stem
-    from .io.atomic import unwritable_reason   # issue 15: before the run, not after it
+    from .io.atomic import unwritable_reason   # before the run: an unwritable folder is found now, not at its end
 
     if unwritable_reason(out_dir):
         print(f"rve: output folder {out_dir}: cannot be written ({unwritable_reason(out_dir)})", file=sys.stderr)
@@ -349,7 +349,7 @@ def _add_table(sub) -> None:
     p.set_defaults(func=_cmd_table)
 
 
-# --------------------------------------------------------------------------- check (issue 15)
+# --------------------------------------------------------------------------- check
 def _check_one(path: Path, residual: bool, quarantine: bool = False) -> str:
     """One line of ``rve check`` for ``path``; raises on a failed check."""
     from .io.checksum import CorruptFileError, open_netcdf, verify

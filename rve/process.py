@@ -8,7 +8,7 @@ code) the objects still alive are frozen out of the cyclic garbage collector (``
 Python's finalisation then skips its full collections over them: with numba's type
 system, pint's registry and the model objects (~1.6e5 tracked objects) those passes took
 0.4-0.5 s at the end of every process, a tenth of a 12-element relaxation and of many
-short Snakemake jobs (docs/engine.md "Round 9"). What is not collected at exit is
+short Snakemake jobs (docs/engine.md, "the fixed costs of a process"). What is not collected at exit is
 reference-cycle garbage, whose finalisers Python does not promise to run at exit anyway;
 files are closed and flushed by the code that writes them (``rve.io.atomic``), logging
 by its own ``atexit`` handler. ``RVE_FAST_EXIT=0`` turns it off.

@@ -31,7 +31,7 @@ __all__ = ["THREADS_ENV", "DEFAULT_THREADS", "solver_threads", "linear_threads",
 THREADS_ENV = "RVE_PARDISO_THREADS"
 #: threads when neither ``linear_threads`` nor ``RVE_PARDISO_THREADS`` says: the two cores
 #: the minimiser's results are reproducible on (MKL's CNR mode for up to 2 threads,
-#: ``rve.solvers.minimize.CNR_THREADS``: 1 and 2 threads give the same bits)
+#: ``rve.solvers.backends.registry.CNR_THREADS``: 1 and 2 threads give the same bits)
 DEFAULT_THREADS = 2
 _THREADS = contextvars.ContextVar("rve_linear_threads", default=None)
 

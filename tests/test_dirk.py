@@ -6,6 +6,7 @@ import pytest
 import scipy.sparse as sp
 
 from rve.solvers.dirk import (
+    StepControl,
     BACKWARD_EULER, SDIRK2, SDIRK3, SDIRK3_ALPHA, IntegrationFailure, StepFailure,
     consistent_initialization, dirk_step, integrate, order_conditions, sdirk, stability_function,
 )
@@ -314,8 +315,9 @@ class Rigged:
 
 def test_step_is_cut_and_run_finishes_exactly_at_t_end():
     calls = []
-    out = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=3, progress=True, predictor_degree=0,
-                    on_step=lambda t, x, w, info: calls.append((t, w[0], info.h)))
+    out = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, progress=True, predictor_degree=0,
+                    on_step=lambda t, x, w, info: calls.append((t, w[0], info.h)),
+                    control=StepControl(max_cuts=3))
     assert out.t == 1.0 and calls[-1][0] == 1.0
     assert out.rejected >= 2 and out.steps > 10
     assert out.h_min == pytest.approx(0.025)
@@ -332,8 +334,8 @@ def test_step_is_cut_and_run_finishes_exactly_at_t_end():
 
 def test_fixed_step_raises_immediately():
     with pytest.raises(IntegrationFailure) as ei:
-        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, fixed_step=True,
-                  predictor_degree=0)
+        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, predictor_degree=0,
+                  control=StepControl(fixed_step=True))
     e = ei.value
     assert e.t == pytest.approx(0.5) and e.h == pytest.approx(0.1)
     assert e.result.rejected == 1 and e.result.steps == 5
@@ -342,7 +344,8 @@ def test_fixed_step_raises_immediately():
 
 def test_integration_failure_after_max_cuts_reports_time_step_and_state():
     with pytest.raises(IntegrationFailure) as ei:
-        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=1, predictor_degree=0)
+        integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, predictor_degree=0,
+                  control=StepControl(max_cuts=1))
     e = ei.value
     msg = str(e)
     assert "t = 0.5" in msg and "h = 0.05" in msg and "residuals [" in msg and "nan" in msg

@@ -1,4 +1,4 @@
-"""Ensembles over perturbed packings (issue 14, thesis §7.5): the perturbed packing
+"""Ensembles over perturbed packings (thesis §7.5): the perturbed packing
 (rve.fabrics.perturb), the `packing` config block, the `realization` sweep alias, the
 ensemble statistics of rve.tables.ensemble against numpy on known data, their CF-clean
 round trip, and (slow) the CI ensemble through Snakemake."""

@@ -1,4 +1,4 @@
-"""Fault injection, files (issue 15): checksummed states and tables. Byte flips and
+"""Fault injection, files: checksummed states and tables. Byte flips and
 truncations of a real CI state and a table are each a named error (the file and what
 failed) or identical data; an open that hangs is bounded; a state with one node moved by
 2.6 % of R and a *valid* checksum is refused by the probe job because its recomputed

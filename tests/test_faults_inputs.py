@@ -1,4 +1,4 @@
-"""Fault injection, bad input (issue 15): every class of bad input the QA pass found is one
+"""Fault injection, bad input: every class of bad input the QA pass found is one
 clear line naming the key or the file and what is allowed, before anything is computed,
 and no traceback on the command line."""
 from __future__ import annotations

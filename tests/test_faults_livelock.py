@@ -1,4 +1,4 @@
-"""Fault injection, livelocks of issue 15: the dynamic wire at +-200 V and at
+"""Fault injection, livelocks: the dynamic wire at +-200 V and at
 alpha_mu = -100 MPa/K used to cut the step to ~1e-27 ms with t no longer advancing and
 nothing written. Now each stops within 60 s with the named failure (the minimum step of
 rve.solvers.dirk.integrate) and the last good state saved by the scene's ``run``."""

@@ -1,4 +1,4 @@
-"""Fault injection, pipeline (issue 15): kills at every stage of the Snakemake DAG resume
+"""Fault injection, pipeline: kills at every stage of the Snakemake DAG resume
 bit-identically, and a damaged or truncated state is rebuilt by the next ``snakemake``
 call (not "Nothing to be done"). On the CI config plus a tiny run (2 x 2 weave, one strain
 step, 6 jobs) so each stage can be hit in a few minutes; the full CI DAG's resume test is

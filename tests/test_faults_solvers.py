@@ -1,4 +1,4 @@
-"""Fault injection, solvers (issue 15): every time loop ends. Toy systems with a known
+"""Fault injection, solvers: every time loop ends. Toy systems with a known
 exact solution whose stage solves fail in a controlled way: a Zeno system whose admissible
 step shrinks to zero (the livelock of the dynamic wire: tiny accepted steps reset the cut
 counter), the rejection and wall-time budgets, and the minimiser's budgets. The real
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from rve.solvers.dirk import IntegrationFailure, integrate
+from rve.solvers.dirk import Budgets, IntegrationFailure, StepControl, integrate
 from rve.solvers.minimize import minimize_energy
 
 pytestmark = pytest.mark.faults
@@ -51,7 +51,8 @@ class Zeno:
 def test_zeno_livelock_stops_at_the_minimum_step_with_the_last_good_state():
     t0 = time.perf_counter()
     with pytest.raises(IntegrationFailure) as ei:
-        integrate(Zeno(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=8, predictor_degree=0)
+        integrate(Zeno(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, predictor_degree=0,
+                  control=StepControl(max_cuts=8))
     wall = time.perf_counter() - t0
     e = ei.value
     assert e.cause in ("min_step", "rejections"), str(e)
@@ -67,7 +68,7 @@ def test_zeno_livelock_stops_at_the_minimum_step_with_the_last_good_state():
 
 def test_without_the_new_budgets_the_zeno_system_livelocks():
     """The same run with the minimum step and the rejection budget switched off does not end
-    within 2000 attempts: what the budgets are for (the failure mode of today's main)."""
+    within 2000 attempts: what the budgets are for (the failure mode without them)."""
     attempts, accepted = [], []
 
     class Counting(Zeno):
@@ -78,9 +79,10 @@ def test_without_the_new_budgets_the_zeno_system_livelocks():
             return super().evaluate(x, w, t, jacobian)
 
     with pytest.raises((KeyboardInterrupt, IntegrationFailure)) as ei:
-        integrate(Counting(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=8, predictor_degree=0,
-                  min_step_rel=0.0, min_step_t_rel=0.0, max_rejections=10**9,
-                  on_step=lambda t, x, w, info: accepted.append(t))
+        integrate(Counting(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, predictor_degree=0,
+                  on_step=lambda t, x, w, info: accepted.append(t),
+                  control=StepControl(max_cuts=8, min_step_rel=0.0, min_step_t_rel=0.0),
+                  budgets=Budgets(max_rejections=10**9))
     assert ei.type is KeyboardInterrupt or ei.value.cause != "min_step"
     assert len(attempts) > 2000
     assert 0.5 < max(accepted) < 0.55
@@ -96,8 +98,8 @@ class AlwaysFails(Zeno):
 
 def test_total_rejection_budget():
     with pytest.raises(IntegrationFailure) as ei:
-        integrate(Zeno(t_star=0.9), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, max_cuts=100,
-                  predictor_degree=0, max_rejections=3)
+        integrate(Zeno(t_star=0.9), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, predictor_degree=0,
+                  control=StepControl(max_cuts=100), budgets=Budgets(max_rejections=3))
     e = ei.value
     assert e.cause == "rejections" and e.result.rejected == 3
     assert "max_rejections = 3" in str(e)
@@ -105,7 +107,8 @@ def test_total_rejection_budget():
 
 def test_wall_time_budget_stops_after_an_accepted_step():
     with pytest.raises(IntegrationFailure) as ei:
-        integrate(Zeno(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, wall_budget_s=0.0, predictor_degree=0)
+        integrate(Zeno(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=1, predictor_degree=0,
+                  budgets=Budgets(wall_budget_s=0.0))
     e = ei.value
     assert e.cause == "wall_time" and e.t == pytest.approx(0.1)
     assert e.w[0] == pytest.approx(0.1, abs=1e-12)
@@ -114,8 +117,9 @@ def test_wall_time_budget_stops_after_an_accepted_step():
 def test_defaults_leave_a_healthy_run_unchanged():
     """A run that never hits a budget gives the same bits with and without them."""
     a = integrate(Zeno(t_on=2.0), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=3)
-    b = integrate(Zeno(t_on=2.0), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=3, min_step_rel=0.0,
-                  min_step_t_rel=0.0, max_rejections=10**9)
+    b = integrate(Zeno(t_on=2.0), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, stages=3,
+                  control=StepControl(min_step_rel=0.0, min_step_t_rel=0.0),
+                  budgets=Budgets(max_rejections=10**9))
     assert a.t == b.t == 1.0
     np.testing.assert_array_equal(a.w, b.w)
 

@@ -158,8 +158,8 @@ def test_static_problem_state_round_trip_and_prescribed_values():
 
 def test_plan_is_keyed_on_the_whole_structure():
     """Two structures with the same size, the same first row entries and the same trailing
-    row pointers (the fields of the former digest key) but one entry moved in a middle
-    row: each gets its own plan and its own, correct restriction (the former key handed the
+    row pointers (the fields a digest key of size and end rows would see) but one entry moved in a middle
+    row: each gets its own plan and its own, correct restriction (such a key would hand the
     first one's plan to the second: a silently wrong matrix)."""
     n = 200
     rows = np.arange(n)

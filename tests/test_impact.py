@@ -126,14 +126,16 @@ def test_checkpoint_resume_gives_the_same_result(tmp_path):
 
 def test_relaxed_state_is_saved_and_reused(tmp_path, monkeypatch):
     cfg = load_config("configs/scenes/impact.yaml", TINY)
+    from rve.scenes.impact import scene
+
     calls = []
-    real = impact.relax
+    real = scene.relax
 
     def counting(c, progress=False):
         calls.append(1)
         return real(c, progress)
 
-    monkeypatch.setattr(impact, "relax", counting)
+    monkeypatch.setattr(scene, "relax", counting)
     f = tmp_path / "relaxed.npz"
     x1, _ = impact.load_or_relax(cfg, f)
     x2, info2 = impact.load_or_relax(cfg, f)
@@ -150,7 +152,7 @@ def test_projectile_heat_sink_matrix():
     is G beta beta^T per pair and the heat into the projectile is sum G T(closest point)."""
     from rve.physics.contact_forms import effective_radius, hertz_kappa, hertz_width
     from rve.physics.sphere_contact_forms import sphere_segment_geometry
-    from rve.scenes.impact_thermal import ImpactThermal
+    from rve.scenes.impact.thermal import ImpactThermal
 
     cfg = load_config("configs/scenes/impact.yaml", TINY)
     p = impact.setup(cfg)
@@ -188,7 +190,7 @@ def test_bordered_backend_solves_like_a_direct_solve():
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    from rve.scenes.impact_solver import PrunedSuperLU
+    from rve.solvers.backends.pruned import PrunedSuperLU
     from rve.solvers.system import FreeDofs
 
     cfg = load_config("configs/scenes/impact.yaml", TINY)
@@ -207,8 +209,7 @@ def test_bordered_backend_solves_like_a_direct_solve():
     b = np.random.default_rng(2).normal(size=J.shape[0])
     ref = spla.spsolve(sp.csc_matrix(J), b)
     for border in (0, 20):
-        be = PrunedSuperLU(symmetric=False)
-        be.border = border
+        be = PrunedSuperLU(symmetric=False, border=border)
         be.factorize(J)
         u = be.solve(b)
         # backward error at round-off (the unscaled stage matrix is ill-conditioned: the

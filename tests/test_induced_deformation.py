@@ -1,6 +1,6 @@
 """Induced deformation (thesis §8.3) on a reduced case: 2 x 2 single-fibril yarns (span 5 mm,
 natural length 6.25 mm: the slack ratio of Table 8.1), 10 elements per fibril, a short
-horizon. Checks the physics directions of issue 11 against each other (B2 lifts, B3 lifts
+horizon. Checks the physics directions (docs/induced_deformation.md) against each other (B2 lifts, B3 lifts
 and pushes to -y, B1 coils, reversing the current reverses the force, B = 0 is the slack
 relaxation alone), the weft potential at the weakened reference until contact, the charge
 and electrical balances to solver tolerance, the thermal post-solve against the monolithic
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from rve.config.induced_deformation import InducedDeformationConfig
-from rve.scenes.induced_deformation import setup, solve
-from rve.scenes.induced_fabric import crimp_amplitude, slack_weave
+from rve.scenes.induced import setup, solve
+from rve.fabrics.slack import crimp_amplitude, slack_weave
 
 T_SHORT, N_SHORT = 0.2, 20   # ms, steps (h = 10 us)
 
@@ -190,7 +190,7 @@ def test_contact_heat_block_and_joule_match_the_monolithic_terms():
     scalar_jump's Ju, and the (compiled) Joule heat equals the numpy reference and minus the
     monolithic Joule rows' T-independent part."""
     from rve.physics.contact_forms import scalar_jump
-    from rve.scenes.induced_balances import ThermalOperators, heat_transfer_block
+    from rve.model.thermal_post import ThermalOperators, heat_transfer_block
 
     p, x, w = _pressed_state()
     sysm, b = p.system, p.model
@@ -227,13 +227,13 @@ T_CONTACT, N_CONTACT = 0.3, 30   # ms, steps: reduced B3, contact from ~0.11 ms
 
 def test_post_temperature_equals_monolithic_with_contact(monkeypatch):
     """Through the contact phase (the post-solve's refinement path): post vs monolithic to
-    1e-6 relative (issue 11); and, on the same stage states of that run, the post-solve with
+    1e-6 relative; and, on the same stage states of that run, the post-solve with
     its reuse (kept factor, iterative refinement, compiled Joule, memoised operators) vs the
-    former path (a fresh direct solve per stage, numpy Joule, scalar_jump) to round-off.
+    plain reference (a fresh direct solve per stage, numpy Joule, scalar_jump) to round-off.
     (Two runs of the mechanics are not bitwise equal: ~1e-11 mm between repeated runs in one
     process, so the reuse is checked on shared stage states, not across runs.)"""
-    import rve.scenes.induced_deformation as scene
-    from rve.scenes.induced_balances import ThermalPostSolver
+    import rve.scenes.induced.scene as scene
+    from rve.model.thermal_post import ThermalPostSolver
 
     twins = []
 
@@ -299,8 +299,8 @@ def test_post_step_refinement_and_fallback(h_C):
     """One post-solve step with active contact pairs at two stage states: the kept factor +
     iterative refinement (h_C = 0.1, the scene's value) and its direct fallback (h_C = 1e4,
     a contact far stiffer than the capacity: the refinement does not contract) against the
-    former path and a dense solve of the stage equations, to round-off."""
-    from rve.scenes.induced_balances import ThermalOperators, ThermalPostSolver
+    plain reference and a dense solve of the stage equations, to round-off."""
+    from rve.model.thermal_post import ThermalOperators, ThermalPostSolver
     from rve.solvers.dirk import sdirk
 
     p, x, w = _pressed_state()

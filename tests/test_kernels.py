@@ -389,7 +389,7 @@ def test_sorted_positions_is_the_clipped_searchsorted():
 
 @needs_numba
 def test_upper_entries_kernel_equals_numpy(monkeypatch):
-    from rve.solvers.pardiso import _upper_entries
+    from rve.solvers.backends.pardiso import _upper_entries
 
     A = sp.random(300, 300, density=0.05, random_state=np.random.default_rng(12), format="csr")
     A = (A + A.T + sp.eye(300)).tocsr()

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from rve.solvers import linear, pardiso
+from rve.solvers import linear
+from rve.solvers.backends import pardiso
 from rve.solvers.linear import (BandedBackend, NotBandedError, SingularFactorError, SuperLUBackend, band_of,
                                 factor_inertia, factorize, resolve_backend, shifted, sparse_solve)
 
@@ -94,7 +95,7 @@ def test_wide_band_goes_to_the_sparse_backend(monkeypatch):
         BandedBackend().factorize(A)
     b = np.ones(n)
     ref = SuperLUBackend().factorize(A).solve(b)
-    monkeypatch.setenv(linear.BACKEND_ENV, "superlu")  # the fallback forced: today's SuperLU exactly
+    monkeypatch.setenv(linear.BACKEND_ENV, "superlu")  # the fallback forced: plain SuperLU exactly
     np.testing.assert_array_equal(sparse_solve(A, b), ref)
     monkeypatch.setenv(linear.BACKEND_ENV, "auto")  # PARDISO where available: the same to round-off
     np.testing.assert_allclose(sparse_solve(A, b), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
@@ -285,9 +286,9 @@ def test_stage_factorisation_sends_unsymmetric_matrices_past_pardiso():
     """A kept stage factorisation (modified Newton) with the PARDISO backend must still
     solve an unsymmetric stage matrix exactly: the symmetric PARDISO is an LDL^T of the
     upper triangle, so the unsymmetric coupled matrices go past it, to its mtype-11 LU
-    companion since round 4 (SuperLU before; regression: the induced-deformation scene's
-    Newton converged only linearly)."""
-    from rve.solvers import pardiso
+    companion (a regression guard: with SuperLU's symmetric mode the induced-deformation
+    scene's Newton converged only linearly)."""
+    from rve.solvers.backends import pardiso
     from rve.solvers.newton import StageFactorisation
 
     if not pardiso.available():

@@ -1,5 +1,5 @@
 """Loading one scene config imports only that scene's config module (rve.config.loader
-``_scene_model``: the others cost ~0.17 s of every process, docs/engine.md "Round 9"),
+``_scene_model``: the others cost ~0.17 s of every process, docs/engine.md, "the fixed costs of a process"),
 while every error still lists all registered scenes."""
 import subprocess
 import sys

@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from rve.solvers.dirk import integrate
+from rve.solvers.dirk import ReusePolicy, integrate, integrator_options
 from rve.solvers.newton import JacobianReuse, newton
 from rve.solvers.system import DynamicSystem
 from test_dirk import (MF_STEPS, PR_STEPS, TIGHT, Manufactured, ProtheroRobinson, Rigged, X, dX, fd_check,
                        manufactured_initial, observed_order)
 
 ROOT = Path(__file__).resolve().parents[1]
-#: the code before factorisation reuse (issue 10): default-off must reproduce it bit for bit
+#: the commit before factorisation reuse: default-off must reproduce it bit for bit
 BEFORE_REUSE = "9569e2a"
 
 
@@ -113,7 +113,7 @@ class SwitchingPR(ProtheroRobinson):
 
 def _load_before_reuse():
     """newton.py and dirk.py of commit BEFORE_REUSE as modules (linear.py and system.py are
-    today's: only the files reuse touched are swapped)."""
+    the current ones: only the files reuse touched are swapped)."""
     mods = {}
     for name in ("newton", "dirk"):
         try:
@@ -158,7 +158,7 @@ def test_default_off_is_bit_identical_to_the_code_before_reuse(s):
             kw.update(stages=1, predictor_degree=0, newton_opts=None)
         a = old.integrate(make(), *init(), 0.0, 1.0, n, **kw)
         for opts in ({}, {"jacobian_reuse": False}):
-            b = integrate(make(), *init(), 0.0, 1.0, n, **kw, **opts)
+            b = integrate(make(), *init(), 0.0, 1.0, n, **integrator_options(**kw, **opts))
             assert np.array_equal(a.x, b.x) and np.array_equal(a.w, b.w)
             assert (a.steps, a.rejected, a.newton_iterations, a.linear_solves, a.history) == \
                 (b.steps, b.rejected, b.newton_iterations, b.linear_solves, b.history)
@@ -184,7 +184,7 @@ def _runs(make, init, n, s, reuse, **kw):
     out = {}
     for mode in (False, reuse):
         out[mode] = integrate(make(), *init(), 0.0, 1.0, n, stages=s, newton_opts=dict(atol=1e-12, rtol=1e-14),
-                              jacobian_reuse=mode, **kw)
+                              **integrator_options(jacobian_reuse=mode, **kw))
     return out[False], out[reuse]
 
 
@@ -220,7 +220,8 @@ def test_linear_stage_matrix_is_factorised_once_and_the_jacobian_assembled_once(
     assert full.factorizations == full.newton_iterations > 40
     # without the lazy Jacobian the trial points are evaluated with it: more evaluations, same answer
     eager = integrate(ProtheroRobinson(-5.0), np.zeros(1), np.zeros(1), 0.0, 1.0, 40, stages=2,
-                      newton_opts=dict(atol=1e-12, rtol=1e-14), jacobian_reuse=True, lazy_jacobian=False)
+                      newton_opts=dict(atol=1e-12, rtol=1e-14), lazy_jacobian=False,
+                      reuse=ReusePolicy(mode=True))
     assert eager.factorizations == 1 and eager.jacobian_evaluations > 1
     np.testing.assert_allclose(eager.w, mod.w, atol=1e-12)
 
@@ -241,7 +242,7 @@ def test_orders_unchanged_with_reuse(s):
     errs = {"x": [], "w": [], "T": [], "V": []}
     for n in MF_STEPS[s]:
         x0, w0 = manufactured_initial()
-        out = integrate(sysm, x0, w0, 0.0, 1.0, n, stages=s, newton_opts=TIGHT, jacobian_reuse=True)
+        out = integrate(sysm, x0, w0, 0.0, 1.0, n, stages=s, newton_opts=TIGHT, reuse=ReusePolicy(mode=True))
         assert out.reuses > 0
         errs["x"].append(np.abs(out.x[:2] - X(1.0)[:2]).max())
         errs["w"].append(np.abs(out.w[:2] - dX(1.0)[:2]).max())
@@ -253,7 +254,7 @@ def test_orders_unchanged_with_reuse(s):
     e_pr = []
     for n in PR_STEPS[s]:
         out = integrate(ProtheroRobinson(-5.0), np.zeros(1), np.zeros(1), 0.0, 1.0, n, stages=s, newton_opts=TIGHT,
-                        jacobian_reuse=True)
+                        reuse=ReusePolicy(mode=True))
         e_pr.append(abs(out.w[0] - math.sin(1.0)))
     assert abs(observed_order(e_pr, PR_STEPS[s]) - s) < 0.3, e_pr
 
@@ -298,8 +299,10 @@ def test_pattern_and_constraint_changes_force_a_refactorisation():
     for mode in (False, True):
         sysm = make()
         box = [sysm]
-        res[mode] = integrate(sysm, *sysm.initial(), 0.0, 1.0, 40, stages=2, newton_opts=dict(atol=1e-12, rtol=1e-14),
-                              jacobian_reuse=mode, on_step=lambda t, x, w, info, box=box: on_step(t, x, w, info, box))
+        res[mode] = integrate(sysm, *sysm.initial(), 0.0, 1.0, 40, stages=2,
+                              newton_opts=dict(atol=1e-12, rtol=1e-14),
+                              on_step=lambda t, x, w, info, box=box: on_step(t, x, w, info, box),
+                              reuse=ReusePolicy(mode=mode))
     full, mod = res[False], res[True]
     np.testing.assert_allclose(mod.w, full.w, atol=1e-10)
     np.testing.assert_allclose(mod.x, full.x, atol=1e-10)
@@ -312,8 +315,9 @@ def test_failed_step_and_step_size_change_drop_the_factorisation():
     """Rigged (test_dirk): stages fail for h > δ in (0.5, 0.7]; the cut step (and the new
     h·a) must not run on the old factorisation; the run is the full-Newton run."""
     kw = dict(stages=1, max_cuts=3, predictor_degree=0)
-    full = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, **kw)
-    mod = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, jacobian_reuse=True, **kw)
+    full = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10, **integrator_options(**kw))
+    mod = integrate(Rigged(), np.zeros(1), np.zeros(1), 0.0, 1.0, 10,
+                    **integrator_options(jacobian_reuse=True, **kw))
     assert (mod.steps, mod.rejected, mod.h_min) == (full.steps, full.rejected, full.h_min)
     assert [h for _, h, _ in mod.history] == pytest.approx([h for _, h, _ in full.history])
     np.testing.assert_allclose(mod.w, full.w, atol=1e-12)
@@ -365,6 +369,6 @@ def test_slow_contraction_is_refactorised_before_the_iteration_limit():
 
 def test_option_validation():
     with pytest.raises(ValueError):
-        integrate(ProtheroRobinson(), np.zeros(1), np.zeros(1), 0.0, 1.0, 4, jacobian_reuse="always")
+        integrate(ProtheroRobinson(), np.zeros(1), np.zeros(1), 0.0, 1.0, 4, reuse=ReusePolicy(mode="always"))
     with pytest.raises(ValueError):
         JacobianReuse(1.5)

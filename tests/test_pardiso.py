@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from rve.solvers import pardiso
+from rve.solvers.backends import pardiso
 
 pytestmark = pytest.mark.skipif(not pardiso.available(),
                                 reason=f"PARDISO unavailable: {pardiso.unavailable_reason()}")
@@ -346,20 +346,21 @@ def test_cnr_mode_gives_the_same_bits_on_one_and_two_threads():
 
 
 def test_minimiser_backend_threads_from_context_and_environment(monkeypatch):
-    from rve.solvers import linear, minimize
+    from rve.solvers import linear
+    from rve.solvers.backends import registry
 
     monkeypatch.delenv(linear.THREADS_ENV, raising=False)
     monkeypatch.setenv("RVE_LINEAR_BACKEND", "pardiso")
-    solver, owned = minimize.run_backend()
+    solver, owned = registry.run_instance()
     assert owned and solver.threads == min(linear.DEFAULT_THREADS, os.cpu_count())
-    assert solver.iparm[33] == minimize.CNR_THREADS
+    assert solver.iparm[33] == registry.CNR_THREADS
     solver.release()
     monkeypatch.setenv(linear.THREADS_ENV, "1")
-    solver, _ = minimize.run_backend()
+    solver, _ = registry.run_instance()
     assert solver.threads == 1 and solver.iparm[33] == 2
     solver.release()
     with linear.linear_threads(2):
-        solver, _ = minimize.run_backend()
+        solver, _ = registry.run_instance()
         assert solver.threads == 2
         solver.release()
     assert linear.solver_threads() == 1

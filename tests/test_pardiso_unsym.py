@@ -1,13 +1,14 @@
 """PARDISO's LU of real unsymmetric matrices (mtype 11, ``PardisoFactorization(symmetric=False)``,
 registry name ``pardiso_unsym``) and its use for the dynamic scenes' stage matrices
 (``rve.solvers.newton.StageFactorisation``); docs/engine.md "Unsymmetric stage matrices
-(round 4)". References: numpy's dense LU (``np.linalg.solve``) and scipy's SuperLU."""
+". References: numpy's dense LU (``np.linalg.solve``) and scipy's SuperLU."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from rve.solvers import linear, pardiso
+from rve.solvers import linear
+from rve.solvers.backends import pardiso
 from rve.solvers.newton import JacobianReuse, StageFactorisation
 
 needs_mkl = pytest.mark.skipif(not pardiso.available(), reason=f"PARDISO unavailable: {pardiso.unavailable_reason()}")
@@ -301,17 +302,16 @@ def test_reduced_impact_run_with_pardiso_unsym_equals_superlu(impact_stage_matri
 # ----------------------------------------------------------------------------- the impact scene's backend
 @pytest.mark.parametrize("mkl", [True, False])
 def test_auto_pruned_is_pardiso_with_mkl_else_superlu_pruned(mkl, monkeypatch):
-    from rve.scenes.impact_solver import NAME_AUTO, PardisoOrPruned, PrunedSuperLU, register
+    from rve.solvers.backends.pruned import NAME, NAME_AUTO, PardisoOrPruned, PrunedSuperLU
 
     if mkl and not pardiso.available():
         pytest.skip(f"PARDISO unavailable: {pardiso.unavailable_reason()}")
     if not mkl:
         monkeypatch.setattr(pardiso, "available", lambda: False)
-    monkeypatch.setattr(PrunedSuperLU, "border", 5)  # the last 5 unknowns by a Schur complement
     A = _stage_like(300, 12)
     b = np.random.default_rng(12).standard_normal(300)
     ref = np.linalg.solve(A.toarray(), b)
-    be = PardisoOrPruned()
+    be = PardisoOrPruned(border=5)  # the last 5 unknowns by a Schur complement
     f = StageFactorisation(A, be)
     assert be.kind == ("pardiso_unsym" if mkl else "superlu_pruned")
     x = f.solve(b)
@@ -319,15 +319,13 @@ def test_auto_pruned_is_pardiso_with_mkl_else_superlu_pruned(mkl, monkeypatch):
     assert np.abs(x - ref).max() <= 1e-10 * np.abs(ref).max()
     with pytest.raises(ValueError, match="inertia"):
         be.negative_pivots
-    register(5)
-    assert NAME_AUTO in linear.BACKENDS
+    assert linear.BACKENDS[NAME_AUTO] is PardisoOrPruned and linear.BACKENDS[NAME] is PrunedSuperLU
 
 
 @needs_mkl
 def test_auto_pruned_falls_back_to_superlu_pruned_when_pardiso_fails(monkeypatch):
-    from rve.scenes.impact_solver import PardisoOrPruned, PrunedSuperLU
+    from rve.solvers.backends.pruned import PardisoOrPruned
 
-    monkeypatch.setattr(PrunedSuperLU, "border", 0)
     A = _stage_like(200, 13)
     b = np.random.default_rng(13).standard_normal(200)
     be = PardisoOrPruned()

@@ -1,4 +1,4 @@
-"""Pictures of every stored RVE state (issue 14, rve.homogenisation.pictures): the nodal
+"""Pictures of every stored RVE state (rve.homogenisation.pictures): the nodal
 fields against closed-form values, the tube meshes and .pvd series read back with
 pyvista (frame count = stored states, the named point arrays present), the PNG renders,
 and the Snakemake DAG (the picture rules are default targets when ``output.pictures``)."""

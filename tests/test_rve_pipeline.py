@@ -292,7 +292,7 @@ def test_configs_validate_and_default_target_is_the_plain_weave_table():
     assert default.contact.heat_transfer == pytest.approx(0.1) and default.contact.conductance == pytest.approx(1.0)
     assert default.strain.modes == ["uniaxial", "shear"]
     assert (default.strain.total, default.strain.steps) == (0.25, 10)
-    assert [p.name for p in default.probes] == ["probe1", "probe2", "probe3", "probe4"]  # + a weft yarn end to end (issue 13)
+    assert [p.name for p in default.probes] == ["probe1", "probe2", "probe3", "probe4"]  # + a weft yarn end to end
     assert len(L.state_names(default)) == 21
     knit = S.load_run_config(cfg["rve"]["runs"]["knit"])
     assert knit.fabric.kind == "knit" and knit.probes[0].terminals[0].yarn == "loop"

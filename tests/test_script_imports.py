@@ -1,21 +1,26 @@
-"""Every ``rve`` name the benchmark and workflow scripts import exists in the package.
+"""Every ``rve`` name the benchmark scripts and the Snakemake rule files import exists in
+the package.
 
-The scripts are not imported by the suite (they run long studies), so a module moved by a
-redesign can leave them broken unnoticed: ``benchmarks/engine_matrices.py`` imported
-``rve.contact.system`` and ``rve.homogenisation.strain.build_fabric`` for two rounds after
-both had moved. Imports in an ``except ImportError`` branch are fallbacks for an older tree
-(``benchmarks/engine_ab.py`` runs today's main too) and are not checked.
+Neither is imported by the suite (the scripts run long studies, the rules run under
+Snakemake), so a module moved by a redesign can leave them broken unnoticed. The
+benchmarks are parsed with ``ast``; the rule files are not Python, so their ``from rve...
+import`` lines are read by a regular expression. Imports in an ``except ImportError``
+branch are fallbacks for an older tree (``benchmarks/engine_ab.py`` also runs another
+commit) and are not checked.
 """
 from __future__ import annotations
 
 import ast
 import importlib
+import re
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = sorted([*ROOT.glob("benchmarks/*.py"), *ROOT.glob("workflow/scripts/*.py")])
+SCRIPTS = sorted(ROOT.glob("benchmarks/*.py"))
+RULES = sorted([ROOT / "Snakefile", *ROOT.glob("workflow/rules/*.smk")])
+_RULE_IMPORT = re.compile(r"^\s*from\s+(rve[\w.]*)\s+import\s+([\w, ]+?)(?:\s+as\s+\w+)?\s*(?:#.*)?$", re.M)
 
 
 def _fallback_nodes(tree) -> set[int]:
@@ -46,13 +51,22 @@ def _rve_imports(path: Path):
 
 
 def test_there_are_scripts_to_check():
-    assert len(SCRIPTS) > 10
+    assert len(SCRIPTS) > 10 and len(RULES) > 5
 
 
-@pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def _rule_imports(path: Path):
+    text = path.read_text()
+    for m in _RULE_IMPORT.finditer(text):
+        line = text.count("\n", 0, m.start()) + 1
+        for name in m.group(2).split(","):
+            yield line, m.group(1), name.split(" as ")[0].strip()
+
+
+@pytest.mark.parametrize("path", SCRIPTS + RULES, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_script_imports_resolve(path):
     missing = []
-    for line, module, name in _rve_imports(path):
+    found = _rve_imports(path) if path.suffix == ".py" else _rule_imports(path)
+    for line, module, name in found:
         try:
             mod = importlib.import_module(module)
         except ImportError as exc:

@@ -1,4 +1,4 @@
-"""The stated accuracy of a table (issue 14): a convergence study's accuracy.json, named by
+"""The stated accuracy of a table: a convergence study's accuracy.json, named by
 the run spec's `accuracy` key, ends up in the gathered table's attributes — only for the
 configuration the study assessed."""
 import json

@@ -1,4 +1,4 @@
-"""Table convergence study (issue 14, rve.studies.table_convergence): the errors, rates and
+"""Table convergence study (rve.studies.table_convergence): the errors, rates and
 work figures on a synthetic refinement series with a known order, and (slow) the CI study
 through Snakemake."""
 from __future__ import annotations

@@ -693,7 +693,7 @@ NETWORK_FIT = ("yarn_resistance", "contact_resistance", "network_fit_residual", 
 
 
 def test_gather_reproduces_the_v1_table_bit_for_bit(tmp_path):
-    """The stored records of the v1 fixture's CI run, gathered by today's code: every
+    """The stored records of the v1 fixture's CI run, gathered by the current code: every
     version-1 variable is identical (the new quantities are additions); the network-fit
     parameters to their fit's own tolerance (where an iterative fit stops depends on
     the library build)."""
@@ -730,7 +730,7 @@ def _all_units(ds):
 
 @pytest.fixture(scope="module")
 def ci_table_file(tmp_path_factory):
-    """The CI run's table, gathered by today's code from the stored records."""
+    """The CI run's table, gathered by the current code from the stored records."""
     import yaml
 
     from rve.tables.jobs import gather_job

@@ -12,13 +12,13 @@ from pydantic import Field, model_validator
 
 from .fields import (
     Angle, DampingCoefficient, Density, Dimensionless, ElectricConductivity, Integer, Length, MagneticField,
-    Quantity, SceneConfig, Section, SpecificHeat, Stress, Temperature, ThermalConductivity, Time, Voltage,
+    Quantity, SceneConfig, Section, SeebeckCoefficient, SofteningRate, SpecificHeat, Stress, Temperature,
+    ThermalConductivity, Time, Voltage
 )
+from .sections import BeamMesh, Newton
 
 __all__ = ["DynamicWireConfig"]
 
-SeebeckCoefficient = Quantity("V/K")
-SofteningRate = Quantity("MPa/K")
 Resistance = Quantity("V/A")
 
 
@@ -74,11 +74,8 @@ class DynamicWireCouplings(Section):
                             "'auto' picks 'post' when alpha_mu and S are off")
 
 
-class DynamicWireMesh(Section):
-    order: Integer = Field(1, ge=1, le=4, description="Lagrange order p (all fields)")
+class DynamicWireMesh(BeamMesh):
     elements: Integer = Field(40, ge=1, description="elements along the wire")
-    disk_points: Literal[4, 8, 16] = Field(4, description="unit-disk rule across the section")
-    axial_points: Optional[Integer] = Field(None, ge=1, description="Gauss points per element; null = order + 1")
 
 
 class DynamicWireTime(Section):
@@ -90,11 +87,10 @@ class DynamicWireTime(Section):
     history_every: Integer = Field(1, ge=1, description="store the probe history every k accepted steps")
 
 
-class DynamicWireNewton(Section):
+class DynamicWireNewton(Newton):
     atol: Dimensionless = Field(
         1e-8, gt=0, description="absolute tolerance on the row-scaled stage residual (natural units of w: "
                                 "mm/ms, 1/ms, K, V; the velocities are ~100 mm/ms)")
-    rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance on the stage residual")
     max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
 
 
@@ -113,7 +109,7 @@ class DynamicWireConfig(SceneConfig):
 
     @model_validator(mode="after")
     def _feasible(self):
-        # issue 15: radius vs length, mesh vs memory (rve.config.limits)
+        # radius vs length, mesh vs memory (rve.config.limits)
         from .limits import wire_feasibility
 
         return wire_feasibility(self, 11)

@@ -13,13 +13,13 @@ from pydantic import Field, field_validator, model_validator
 
 from .fields import (
     ContactConductance, DampingCoefficient, Density, Dimensionless, HeatTransferCoefficient, Integer, Length,
-    Quantity, SceneConfig, Section, Stress, Time,
+    Penalty, SceneConfig, Section, Stress, Time
 )
+from .sections import BeamMesh
 
 __all__ = ["FabricRelaxConfig"]
 
 #: line load per unit overlap of the contact penalty (N/mm per mm)
-Penalty = Quantity("N/mm^2")
 
 
 class FabricSpec(Section):
@@ -37,7 +37,7 @@ class FabricSpec(Section):
     @field_validator("rows")
     @classmethod
     def _rows_hold_fibrils(cls, v):
-        # issue 15: an empty stack row used to fail only in the fabric generator
+        # here rather than in the fabric generator: the error then names the key
         if any(n < 1 for n in v):
             raise ValueError(f"every stack row must hold >= 1 fibril (got {list(v)})")
         return v
@@ -85,11 +85,8 @@ class FabricContact(Section):
         return self
 
 
-class FabricMesh(Section):
-    order: Integer = Field(1, ge=1, le=4, description="Lagrange order p")
-    elements: Integer = Field(30, ge=1, description="elements per fibril")
-    disk_points: Literal[4, 8, 16] = Field(4, description="unit-disk rule across the section")
-    axial_points: Optional[Integer] = Field(None, ge=1, description="Gauss points per element; null = order + 1")
+class FabricMesh(BeamMesh):
+    """Mesh of the fabric's fibrils (the shared defaults: linear elements, 30 per fibril)."""
 
 
 class FabricRelaxation(Section):

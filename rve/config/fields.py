@@ -42,6 +42,10 @@ from .units import UnitConversionError, convert, dimension_name
 
 __all__ = [
     "Quantity",
+    "SeebeckCoefficient",
+    "SofteningRate",
+    "CircuitConductance",
+    "Penalty",
     "UnitSpec",
     "Integer",
     "Length",
@@ -119,7 +123,7 @@ def Quantity(unit: str):
     return Annotated[float, BeforeValidator(_convert), UnitSpec(unit)]
 
 
-# issue 15: every Temperature of rve is a difference (T = 0 is the reference or boundary
+# every Temperature of rve is a difference (T = 0 is the reference or boundary
 # temperature); an offset unit ("20 degC" = 293.15 K) there is always a mistake
 _ABSOLUTE_T = re.compile(r"(?<![A-Za-z_])(degC|degF|degree_Celsius|degree_Fahrenheit|celsius|fahrenheit)\b|°[CF]",
                          re.IGNORECASE)
@@ -194,6 +198,13 @@ DampingCoefficient = Quantity("g/(mm^3*ms)")
 Angle = Annotated[Quantity("rad"), BeforeValidator(_bare_angle)]
 #: dimensionless number; also accepts "1 %", "1e-3"
 Dimensionless = Quantity("dimensionless")
+SeebeckCoefficient = Quantity("V/K")
+#: d mu / d T of the temperature-dependent shear modulus mu(T) = mu0 + alpha_mu T
+SofteningRate = Quantity("MPa/K")
+#: r_bar of the mixed condition J_n = r_bar V + J_bar (current density per volt)
+CircuitConductance = Quantity("A/(mm^2*V)")
+#: contact penalty stiffness per area
+Penalty = Quantity("N/mm^2")
 
 
 def field_unit(model: type[BaseModel], name: str) -> Optional[str]:

@@ -11,17 +11,14 @@ from typing import Literal, Optional, Union
 from pydantic import Field, field_validator, model_validator
 
 from .fields import (
-    CurrentDensity, DampingCoefficient, Density, Dimensionless, ElectricConductivity, HeatTransferCoefficient,
-    ContactConductance, Integer, Length, MagneticField, Quantity, SceneConfig, Section, SpecificHeat, Stress,
-    Temperature, ThermalConductivity, Time, Velocity, cross_field_error,
+    CircuitConductance, ContactConductance, CurrentDensity, DampingCoefficient, Density, Dimensionless,
+    ElectricConductivity, HeatTransferCoefficient, Integer, Length, MagneticField, Penalty, SceneConfig, Section,
+    Stress, Temperature, Time, Velocity, cross_field_error
 )
+from .sections import LinearMesh, SceneOutput, StageNewton, WeaveMaterial
 
 __all__ = ["ImpactConfig"]
 
-SeebeckCoefficient = Quantity("V/K")
-SofteningRate = Quantity("MPa/K")
-CircuitConductance = Quantity("A/(mm^2*V)")
-Penalty = Quantity("N/mm^2")
 
 
 class ImpactGeometry(Section):
@@ -62,14 +59,8 @@ def _weft():
     return ImpactYarn(radius="0.4 mm", r_bar="0.001 A/(mm^2*V)", J_bar="0 A/mm^2")
 
 
-class ImpactMaterial(Section):
-    youngs_modulus: Stress = Field("1.26 MPa", gt=0, description="E")
-    poisson_ratio: Dimensionless = Field(0.0, ge=0, lt=0.5, description="nu")
-    density: Density = Field("0.00144 g/mm^3", gt=0, description="rho")
+class ImpactMaterial(WeaveMaterial):
     electrical_conductivity: ElectricConductivity = Field("1e5 S/mm", gt=0, description="sigma (Table 8.2: 10^5)")
-    thermal_conductivity: ThermalConductivity = Field("1.0 W/(mm*K)", gt=0, description="k")
-    heat_capacity: SpecificHeat = Field("1000 J/(kg*K)", gt=0, description="c_p: not in Table 8.2 (as §8.3)")
-    damping: DampingCoefficient = Field("0.1 N*s/m^4", ge=0, description="gamma (Table 8.2 '0.1 N s/m', per volume)")
 
 
 class ImpactProjectile(Section):
@@ -123,9 +114,8 @@ class ImpactField(Section):
         return v
 
 
-class ImpactMesh(Section):
+class ImpactMesh(LinearMesh):
     elements: Integer = Field(80, ge=1, description="linear elements per yarn")
-    disk_points: Literal[4, 8, 16] = Field(4, description="unit-disk rule across the section")
 
 
 class ImpactRelaxation(Section):
@@ -155,25 +145,11 @@ class ImpactTime(Section):
         return v
 
 
-class ImpactNewton(Section):
-    atol: Dimensionless = Field(1e-9, gt=0, description="absolute tolerance of the row-scaled stage residual")
-    rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance")
-    max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
-    jacobian_reuse: Literal[False, True, "auto"] = Field("auto", description="factorisation reuse (modified "
-                                                                             "Newton)")
-    reuse_contraction: Dimensionless = Field(0.5, gt=0, lt=1, description="refactorise above this contraction")
+class ImpactNewton(StageNewton):
     linear_backend: Literal["superlu_pruned", "superlu", "auto", "auto_pruned"] = Field(
         "auto_pruned", description="stage-matrix factorisation: auto_pruned (PARDISO unsymmetric, mtype 11, where MKL "
                                    "is available, else superlu_pruned), superlu_pruned (SuperLU on the nonzero pattern, "
-                                   "rve.scenes.impact_solver), or a backend of rve.solvers.linear")
-
-
-class ImpactOutput(Section):
-    vtk: bool = Field(True, description="write the .pvd series of tube meshes")
-    vtk_every: Integer = Field(1, ge=1, description="every k-th stored state goes to the .pvd series")
-    png: bool = Field(True, description="render PNG plots and snapshots (headless)")
-    frames: Integer = Field(4, ge=1, description="snapshots in the PNG strip")
-    n_theta: Integer = Field(12, ge=3, description="points around a tube section")
+                                   "rve.solvers.backends.pruned), or a backend of rve.solvers.linear")
 
 
 class ImpactConfig(SceneConfig):
@@ -191,6 +167,6 @@ class ImpactConfig(SceneConfig):
     relaxation: ImpactRelaxation = Field(default_factory=ImpactRelaxation)
     time: ImpactTime = Field(default_factory=ImpactTime)
     newton: ImpactNewton = Field(default_factory=ImpactNewton)
-    output: ImpactOutput = Field(default_factory=ImpactOutput)
+    output: SceneOutput = Field(default_factory=SceneOutput)
     end_temperature: Temperature = Field("0 K", description="T held at every fibril end (T-bar)")
     label: Optional[str] = Field(None, description="free text for the outputs")

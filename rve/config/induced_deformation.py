@@ -1,7 +1,7 @@
 """Config model of the induced-deformation scene (thesis §8.3, Table 8.1, Appendix A).
 
 Contract: :class:`InducedDeformationConfig` and its sections. Named in
-``rve.scenes.registry.SCENES``; the scene is ``rve.scenes.induced_deformation``. The
+``rve.scenes.registry.SCENES``; the scene is ``rve.scenes.induced``. The
 readings of Table 8.1 and the choices where the thesis is silent: docs/induced_deformation.md.
 """
 from __future__ import annotations
@@ -11,18 +11,14 @@ from typing import Literal, Optional, Union
 from pydantic import Field, field_validator, model_validator
 
 from .fields import (
-    ContactConductance, CurrentDensity, DampingCoefficient, Density, Dimensionless, ElectricConductivity,
-    HeatTransferCoefficient, Integer, Length, MagneticField, Quantity, SceneConfig, Section, SpecificHeat, Stress,
-    Temperature, ThermalConductivity, Time, cross_field_error,
+    CircuitConductance, ContactConductance, CurrentDensity, Dimensionless, HeatTransferCoefficient, Integer, Length,
+    MagneticField, Penalty, SceneConfig, Section, SeebeckCoefficient, SofteningRate, Temperature, Time,
+    cross_field_error,
 )
+from .sections import LinearMesh, SceneOutput, StageNewton, WeaveMaterial
 
 __all__ = ["InducedDeformationConfig", "ORIENTATIONS"]
 
-SeebeckCoefficient = Quantity("V/K")
-SofteningRate = Quantity("MPa/K")
-#: r_bar of the mixed condition J_n = r_bar V + J_bar (current density per volt)
-CircuitConductance = Quantity("A/(mm^2*V)")
-Penalty = Quantity("N/mm^2")
 
 #: the three field orientations of §8.3 (unit vectors; B = |B| * orientation)
 ORIENTATIONS = {
@@ -63,17 +59,7 @@ def _weft():
     return InducedYarn(radius="0.6 mm", r_bar="0.001 A/(mm^2*V)", J_bar="0 A/mm^2")
 
 
-class InducedMaterial(Section):
-    youngs_modulus: Stress = Field("1.26 MPa", gt=0, description="E")
-    poisson_ratio: Dimensionless = Field(0.0, ge=0, lt=0.5, description="nu")
-    density: Density = Field("0.00144 g/mm^3", gt=0, description="rho")
-    electrical_conductivity: ElectricConductivity = Field("10 S/mm", gt=0, description="sigma")
-    thermal_conductivity: ThermalConductivity = Field("1.0 W/(mm*K)", gt=0, description="k")
-    heat_capacity: SpecificHeat = Field("1000 J/(kg*K)", gt=0,
-                                        description="c_p: not in Table 8.1 (chosen, docs/induced_deformation.md)")
-    damping: DampingCoefficient = Field(
-        "0.1 N*s/m^4", ge=0, description="volumetric gamma; Table 8.1's '0.1 N s/m' read per volume as for the "
-                                         "dynamic wire (docs/coupled_fields.md); Appendix A's script has 0.01")
+class InducedMaterial(WeaveMaterial):
     seebeck: SeebeckCoefficient = Field("0 V/K", description="S (0: T does not feed back)")
     alpha_mu: SofteningRate = Field("0 MPa/K", description="d mu / d T (0: T does not feed back)")
 
@@ -111,11 +97,6 @@ class InducedCoupling(Section):
     back_emf: bool = Field(True, description="motional EMF")
 
 
-class InducedMesh(Section):
-    elements: Integer = Field(30, ge=1, description="linear elements per fibril")
-    disk_points: Literal[4, 8, 16] = Field(4, description="unit-disk rule across the section")
-
-
 class InducedTime(Section):
     t_end: Time = Field("15 ms", gt=0, description="horizon (Appendix A: 15 ms)")
     steps: Integer = Field(3000, ge=1, description="nominal steps (Appendix A: 3000)")
@@ -126,29 +107,13 @@ class InducedTime(Section):
                                                        "(Appendix A outputs every 10 steps)")
 
 
-class InducedNewton(Section):
-    atol: Dimensionless = Field(1e-9, gt=0, description="absolute tolerance of the row-scaled stage residual")
-    rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance")
-    max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
-    jacobian_reuse: Literal[False, True, "auto"] = Field(
-        "auto", description="factorisation reuse across stage iterations, stages and steps (modified Newton, "
-                            "docs/time_integration.md section 7): false, true or auto (by measured costs)")
-    reuse_contraction: Dimensionless = Field(0.5, gt=0, lt=1, description="refactorise when the observed "
-                                             "contraction |r_k+1|/|r_k| of a reused factorisation exceeds this")
+class InducedNewton(StageNewton):
     linear_backend: Optional[Literal["auto", "superlu", "pardiso"]] = Field(
         "superlu", description="backend of the kept stage factorisations (rve.solvers.linear.get_backend): "
                                "superlu = SuperLU in symmetric mode (MMD on A^T + A, diagonal pivots; the stage "
                                "matrices are structurally symmetric and mass-dominated: half the fill of COLAMD, "
                                "docs/induced_deformation.md); auto = the engine's choice (unsymmetric stage "
                                "matrices go to SuperLU COLAMD with partial pivoting)")
-
-
-class InducedOutput(Section):
-    vtk: bool = Field(True, description="write the .pvd series of tube meshes")
-    vtk_every: Integer = Field(1, ge=1, description="every k-th stored state goes to the .pvd series")
-    png: bool = Field(True, description="render PNG frames (headless)")
-    frames: Integer = Field(4, ge=1, description="time frames in the PNG strip")
-    n_theta: Integer = Field(12, ge=3, description="points around a tube section")
 
 
 class InducedDeformationConfig(SceneConfig):
@@ -162,9 +127,9 @@ class InducedDeformationConfig(SceneConfig):
     contact: InducedContact = Field(default_factory=InducedContact)
     field: InducedField = Field(default_factory=InducedField)
     coupling: InducedCoupling = Field(default_factory=InducedCoupling)
-    mesh: InducedMesh = Field(default_factory=InducedMesh)
+    mesh: LinearMesh = Field(default_factory=LinearMesh)
     time: InducedTime = Field(default_factory=InducedTime)
     newton: InducedNewton = Field(default_factory=InducedNewton)
-    output: InducedOutput = Field(default_factory=InducedOutput)
+    output: SceneOutput = Field(default_factory=SceneOutput)
     end_temperature: Temperature = Field("0 K", description="T held at every fibril end")
     label: Optional[str] = Field(None, description="free text for the outputs")

@@ -1,4 +1,4 @@
-"""Resource limits checked at validation time (issue 15, docs/fault_tolerance.md): the
+"""Resource limits checked at validation time (docs/fault_tolerance.md): the
 machine's available memory and a rough peak-memory model of a solve, so a mesh that cannot
 fit is refused with the estimate before anything is allocated.
 

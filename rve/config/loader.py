@@ -57,8 +57,8 @@ class DuplicateKeyError(yaml.YAMLError):
 
 
 class StrictLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (issue 15: a
-    repeated section silently dropped the keys of the first one)."""
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (PyYAML
+    keeps the last one: a repeated section would silently drop the keys of the first)."""
 
     def construct_mapping(self, node, deep=False):
         seen = {}

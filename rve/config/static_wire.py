@@ -15,6 +15,7 @@ from .fields import (
     Angle, CurrentDensity, DampingCoefficient, Density, Dimensionless, Integer, Length, MagneticField, SceneConfig,
     Section, Stress, Time, cross_field_error,
 )
+from .sections import BeamMesh, Newton
 
 __all__ = ["StaticWireConfig", "Geometry", "Fibril", "Material", "WireLoad", "Mesh", "Relaxation", "NewtonSettings",
            "StaticWireSolver"]
@@ -50,17 +51,9 @@ class WireLoad(Section):
         "45 deg", description="angle phi between B and the line through the supports (rad)")
 
 
-class Mesh(Section):
+class Mesh(BeamMesh):
     order: Integer = Field(2, ge=1, le=4, description="Lagrange element order p along the fibril")
     elements: Integer = Field(40, ge=1, description="number of elements along the fibril")
-    disk_points: Literal[4, 8, 16] = Field(4, description="points of the unit-disk rule across the section")
-    axial_points: Optional[Integer] = Field(
-        None, ge=1, description="Gauss-Legendre points per element along the axis; null = order + 1")
-
-    @property
-    def resolved_axial_points(self) -> int:
-        """``axial_points``, or ``order + 1`` when it is null."""
-        return self.order + 1 if self.axial_points is None else self.axial_points
 
 
 class Relaxation(Section):
@@ -76,18 +69,12 @@ class Relaxation(Section):
         8, ge=1, description="elements of the coarse relaxation mesh (null: relax on the target mesh)")
 
 
-class NewtonSettings(Section):
-    atol: Dimensionless = Field(1e-10, gt=0, description="absolute tolerance on the residual norm")
-    rtol: Dimensionless = Field(1e-12, gt=0, description="relative tolerance on the residual norm")
-    max_iter: Integer = Field(50, ge=1, description="maximum Newton iterations")
-
-
 class StaticWireSolver(Section):
     path: Literal["dynamic_relaxation", "continuation"] = Field(
         "dynamic_relaxation",
         description="how the static solution is reached: dynamic relaxation then static Newton, or load continuation")
     relaxation: Relaxation = Field(default_factory=Relaxation)
-    newton: NewtonSettings = Field(default_factory=NewtonSettings)
+    newton: Newton = Field(default_factory=Newton)
 
 
 class StaticWireConfig(SceneConfig):
@@ -103,7 +90,7 @@ class StaticWireConfig(SceneConfig):
 
     @model_validator(mode="after")
     def _feasible(self):
-        # issue 15: radius vs length, mesh vs memory (rve.config.limits)
+        # radius vs length, mesh vs memory (rve.config.limits)
         from .limits import wire_feasibility
 
         return wire_feasibility(self, 9)

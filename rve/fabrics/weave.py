@@ -41,6 +41,8 @@ perpendicular to the displaced centroid tangent.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from rve.fem.mesh import straight_fibril
@@ -113,6 +115,51 @@ def _end_parameter(target, v, heights, first, spacing):
     return float(c[0])
 
 
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
+def _yarn_centre(s, base, heights, half, first, spacing):
+    """The crimped centre line of a yarn at arc parameter ``s`` in [0, 2 half]."""
+    c = np.asarray(s, float) - half
+    z = _crimp(c, heights, first, spacing)[0]
+    return base(c) + z[:, None] * _EZ
+
+
+class _YarnLine:
+    """One yarn's crimp line (``base(c)``: the straight line, ``heights``: the crimp heights
+    at the crossings); ``designed(l, v, g1_ref, g2_ref)`` is the designed frame of the
+    fibril at stack offset (l, v): ``s -> (r, g1, g2)``."""
+
+    def __init__(self, base, heights, half, first, spacing, t_ref, lat):
+        self.base, self.heights, self.half, self.first, self.sp = base, heights, half, first, spacing
+        self.t_ref, self.lat = t_ref, lat
+
+    def designed(self, l, v, g1_ref, g2_ref):
+        # the normal offset v n(c) moves x by -v z'/q: pick the end parameters so
+        # that the ends land on the box faces, and map s linearly onto [c0, c1]
+        half, t_ref, lat, ez = self.half, self.t_ref, self.lat, _EZ
+        c0, c1 = (_end_parameter(t, v, self.heights, self.first, self.sp) for t in (-half, half))
+
+        def frame(s):
+            s = np.asarray(s, float)
+            ds = (c1 - c0) / (2.0 * half)
+            c = c0 + s * ds
+            z, dz, ddz = _crimp(c, self.heights, self.first, self.sp)
+            q = np.sqrt(1.0 + dz * dz)
+            dq = dz * ddz / q
+            # crimp-plane normal n = (-z' t_ref + e_z) / q and its derivative
+            nrm = (-dz[:, None] * t_ref + ez) / q[:, None]
+            dn = (-ddz[:, None] * t_ref) / q[:, None] - nrm * (dq / q)[:, None]
+            r = self.base(c) + z[:, None] * ez + l * lat + v * nrm
+            dr = t_ref + dz[:, None] * ez + v * dn  # d r / d c (same direction)
+            t = dr / np.linalg.norm(dr, axis=1, keepdims=True)
+            tr = np.broadcast_to(t_ref, t.shape)
+            g1 = minimal_rotation(tr, t, np.broadcast_to(g1_ref, t.shape))
+            g2 = minimal_rotation(tr, t, np.broadcast_to(g2_ref, t.shape))
+            return r, g1, g2
+        return frame
+
+
 def weave(
     pattern="plain",
     n_warp: int = 4,
@@ -157,37 +204,8 @@ def weave(
             heights = lambda k: -A * (2 * P[k % m, index % n] - 1.0)
             sides = ("y-", "y+")
         lat = np.cross(ez, t_ref)
-
-        def centre(s, base=base, heights=heights, half=half, first=first):
-            c = np.asarray(s, float) - half
-            z = _crimp(c, heights, first, sp)[0]
-            return base(c) + z[:, None] * ez
-
-        def make_designed(l, v, g1_ref, g2_ref, base=base, heights=heights, half=half,
-                          first=first, t_ref=t_ref, lat=lat):
-            # the normal offset v n(c) moves x by -v z'/q: pick the end parameters so
-            # that the ends land on the box faces, and map s linearly onto [c0, c1]
-            c0, c1 = (_end_parameter(t, v, heights, first, sp) for t in (-half, half))
-
-            def frame(s):
-                s = np.asarray(s, float)
-                ds = (c1 - c0) / (2.0 * half)
-                c = c0 + s * ds
-                z, dz, ddz = _crimp(c, heights, first, sp)
-                q = np.sqrt(1.0 + dz * dz)
-                dq = dz * ddz / q
-                # crimp-plane normal n = (-z' t_ref + e_z) / q and its derivative
-                nrm = (-dz[:, None] * t_ref + ez) / q[:, None]
-                dn = (-ddz[:, None] * t_ref) / q[:, None] - nrm * (dq / q)[:, None]
-                r = base(c) + z[:, None] * ez + l * lat + v * nrm
-                dr = t_ref + dz[:, None] * ez + v * dn  # d r / d c (same direction)
-                t = dr / np.linalg.norm(dr, axis=1, keepdims=True)
-                tr = np.broadcast_to(t_ref, t.shape)
-                g1 = minimal_rotation(tr, t, np.broadcast_to(g1_ref, t.shape))
-                g2 = minimal_rotation(tr, t, np.broadcast_to(g2_ref, t.shape))
-                return r, g1, g2
-            return frame
-
+        centre = functools.partial(_yarn_centre, base=base, heights=heights, half=half, first=first, spacing=sp)
+        yarn_line = _YarnLine(base, heights, half, first, sp, t_ref, lat)
         members = []
         for k, (l, v) in enumerate(offsets):
             f = len(fibrils)
@@ -200,7 +218,7 @@ def weave(
             g1_ref, g2_ref = fib.frame(np.zeros(1))[1:]
             fibrils.append(fib)
             fib_yarn.append(y_id)
-            designed.append(make_designed(l, v, g1_ref[0], g2_ref[0]))
+            designed.append(yarn_line.designed(l, v, g1_ref[0], g2_ref[0]))
             tags.append(EndTag(f, "start", y_id, sides[0]))
             tags.append(EndTag(f, "end", y_id, sides[1]))
             members.append(f)

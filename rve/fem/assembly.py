@@ -157,6 +157,40 @@ class ElementPattern:
         return self._node_keys
 
 
+def _base_map(pattern, bkeys, base_rowstart, isc, offc, offo, mpos, indptr) -> np.ndarray:
+    """Union positions of the base pattern's entries: per base node pair (I, J), entries (c, c')."""
+    b, Nn = pattern.block, pattern.n_nodes
+    bI = bkeys // Nn
+    kpos = np.arange(bkeys.size) - base_rowstart[bI]  # J's rank among I's base neighbours
+    rows_b = bI[:, None] * b + np.arange(b)[None, :]  # (B, b)
+    off_b = np.where(isc[None, :], offc[mpos][:, None], offo[mpos][:, None])  # (B, b)
+    src_pos = (pattern.indptr[rows_b][:, :, None] + (kpos * b)[:, None, None]
+               + np.arange(b)[None, None, :])
+    dst_pos = indptr[rows_b][:, :, None] + off_b[:, :, None] + np.arange(b)[None, None, :]
+    base_map = np.empty(pattern.nnz, dtype=np.int64)
+    base_map[src_pos.ravel()] = dst_pos.ravel()
+    return base_map
+
+
+def _local_slots(local, ci, indptr, offc, mp, isbase, b: int, total: int, ix) -> np.ndarray:
+    """The union positions of every pair element's local (m nC) x (m nC) matrix, (P, (m nC)^2):
+    indptr[I b + c_i] + offset of block (I, J) + column."""
+    P, m = local.shape
+    nC = ci.size
+    rowstart = indptr[local[:, :, None].astype(np.int64) * b + ci[None, None, :]]  # (P, m, nC)
+    # column of (J, c') within row (I, c): offset of block (I, J) + c' (pair-only block)
+    # or + comps[c'] (base block); one broadcast sum into the (P, m, nC, m, nC) slots
+    idx = np.int32 if total < 2**31 - 1 else np.int64
+    slots = np.empty((P, m, nC, m, nC), idx)
+    if ix is not None:
+        ix.union_slots(rowstart, offc, mp, isbase, ci, slots)
+    else:
+        shift = np.stack([np.arange(nC), ci]).astype(idx)  # [isbase, c']
+        colpos = offc.astype(idx)[mp][..., None] + shift[isbase.astype(np.int8)[mp]]  # (P, m, m, nC)
+        np.add(rowstart.astype(idx)[:, :, :, None, None], colpos[:, :, None, :, :], out=slots)
+    return slots.reshape(P, m * nC * m * nC)
+
+
 class UnionPattern:
     """Union CSR structure of an ``ElementPattern`` and pair elements (module docstring)."""
 
@@ -181,32 +215,7 @@ class UnionPattern:
         isc = np.zeros(b, bool)
         isc[ci] = True
         nkey = (local[:, :, None].astype(np.int64) * Nn + local[:, None, :]).ravel()  # (P m m)
-        dense = Nn * Nn <= self.dense_limit  # node-pair tables instead of searching sorted keys
-        if dense:
-            # O(P) de-duplication on lazily zeroed node-pair tables (no O(Nn^2) scan): the
-            # pair-only keys are those not in the base pattern, first occurrences kept
-            mark, first, lookup = self._tables(pattern, Nn)
-            mark[bkeys] = 1
-            extra = nkey[mark[nkey] == 0]
-            mark[bkeys] = 0  # all zero again for the next union on these tables
-            rank = np.arange(extra.size, dtype=np.int32)
-            first[extra] = rank  # one of the repeated writes wins: exactly one copy matches
-            extra = np.sort(extra[first[extra] == rank])
-            keys = np.concatenate([bkeys, extra])
-            order = np.argsort(keys, kind="stable")
-            keys = keys[order]
-            isbase = order < bkeys.size
-            lookup[keys] = np.arange(keys.size, dtype=np.int32)  # only entries written here are read
-            locate = lambda k: lookup[k]  # noqa: E731
-        else:
-            ukey = np.unique(nkey)
-            pos = np.minimum(np.searchsorted(bkeys, ukey), bkeys.size - 1)
-            ckeys = ukey[bkeys[pos] != ukey]
-            keys = np.concatenate([bkeys, ckeys])
-            order = np.argsort(keys, kind="stable")
-            keys = keys[order]
-            isbase = order < bkeys.size
-            locate = lambda k: np.searchsorted(keys, k)  # noqa: E731
+        keys, isbase, locate = self._union_keys(pattern, bkeys, nkey, Nn)
         nodeI = keys // Nn
         wc = np.where(isbase, b, nC).astype(np.int64)  # columns in a pair-component row
         wo = np.where(isbase, b, 0).astype(np.int64)  # columns in another row
@@ -243,35 +252,37 @@ class UnionPattern:
             self.indices = Q[np.arange(total, dtype=np.int64) + rep].astype(np.int32)
         self.indptr = indptr.astype(np.int32) if total < 2**31 - 1 else indptr
         self.nnz = total
-        # base entries -> union positions: per base node pair (I, J), entries (c, c')
-        bI = bkeys // Nn
-        kpos = np.arange(bkeys.size) - base_rowstart[bI]  # J's rank among I's base neighbours
-        mpos = locate(bkeys)
-        rows_b = bI[:, None] * b + np.arange(b)[None, :]  # (B, b)
-        off_b = np.where(isc[None, :], offc[mpos][:, None], offo[mpos][:, None])  # (B, b)
-        src_pos = (pattern.indptr[rows_b][:, :, None] + (kpos * b)[:, None, None]
-                   + np.arange(b)[None, None, :])
-        dst_pos = indptr[rows_b][:, :, None] + off_b[:, :, None] + np.arange(b)[None, None, :]
-        base_map = np.empty(pattern.nnz, dtype=np.int64)
-        base_map[src_pos.ravel()] = dst_pos.ravel()
-        self.base_map = base_map
-        # local slot layout (P, m, nC, m, nC): indptr[I b + c_i] + offset of block (I, J) + column
-        mp = locate(nkey).reshape(P, m, m)
-        rowstart = indptr[local[:, :, None].astype(np.int64) * b + ci[None, None, :]]  # (P, m, nC)
-        # column of (J, c') within row (I, c): offset of block (I, J) + c' (pair-only block)
-        # or + comps[c'] (base block); one broadcast sum into the (P, m, nC, m, nC) slots
-        idx = np.int32 if total < 2**31 - 1 else np.int64
-        slots = np.empty((P, m, nC, m, nC), idx)
-        if ix is not None:
-            ix.union_slots(rowstart, offc, mp, isbase, ci, slots)
-        else:
-            shift = np.stack([np.arange(nC), ci]).astype(idx)  # [isbase, c']
-            colpos = offc.astype(idx)[mp][..., None] + shift[isbase.astype(np.int8)[mp]]  # (P, m, m, nC)
-            np.add(rowstart.astype(idx)[:, :, :, None, None], colpos[:, :, None, :, :], out=slots)
-        self.slots = slots.reshape(P, m * nC * m * nC)
+        self.base_map = _base_map(pattern, bkeys, base_rowstart, isc, offc, offo, locate(bkeys), indptr)
+        self.slots = _local_slots(local, ci, indptr, offc, locate(nkey).reshape(P, m, m), isbase, b, total, ix)
         self._matcache: dict = {}
         self._keys = None
         self._template = None
+
+    def _union_keys(self, pattern, bkeys, nkey, Nn: int):
+        """``(keys, isbase, locate)``: the sorted node-pair keys of the union (the base
+        pattern's and the pair-only ones), which of them are base keys, and the position of
+        a key among them."""
+        if Nn * Nn <= self.dense_limit:  # node-pair tables instead of searching sorted keys
+            # O(P) de-duplication on lazily zeroed node-pair tables (no O(Nn^2) scan): the
+            # pair-only keys are those not in the base pattern, first occurrences kept
+            mark, first, lookup = self._tables(pattern, Nn)
+            mark[bkeys] = 1
+            extra = nkey[mark[nkey] == 0]
+            mark[bkeys] = 0  # all zero again for the next union on these tables
+            rank = np.arange(extra.size, dtype=np.int32)
+            first[extra] = rank  # one of the repeated writes wins: exactly one copy matches
+            extra = np.sort(extra[first[extra] == rank])
+            keys = np.concatenate([bkeys, extra])
+            order = np.argsort(keys, kind="stable")
+            keys = keys[order]
+            lookup[keys] = np.arange(keys.size, dtype=np.int32)  # only entries written here are read
+            return keys, order < bkeys.size, lambda k: lookup[k]
+        ukey = np.unique(nkey)
+        pos = np.minimum(np.searchsorted(bkeys, ukey), bkeys.size - 1)
+        keys = np.concatenate([bkeys, ukey[bkeys[pos] != ukey]])
+        order = np.argsort(keys, kind="stable")
+        keys = keys[order]
+        return keys, order < bkeys.size, lambda k: np.searchsorted(keys, k)
 
     #: the node-pair tables are kept on the element pattern (reused by every rebuild of the
     #: union: their pages are touched once, not at every rebuild; a line profile at 30

@@ -93,14 +93,6 @@ class State:
     solver: dict = field(default_factory=dict)
     reference: Optional[np.ndarray] = None
 
-    @property
-    def x_flat(self) -> np.ndarray:
-        return np.ascontiguousarray(self.x).reshape(-1)
-
-    @property
-    def w_flat(self) -> np.ndarray:
-        return np.ascontiguousarray(self.w).reshape(-1)
-
 
 def write_state(path, state: State, fabric, mesh, contact=None, version: Optional[str] = None) -> Path:
     """Write ``state`` of ``fabric``/``mesh`` atomically as netCDF (module docstring).

@@ -172,7 +172,7 @@ def default_probes() -> list[dict]:
                                          {"yarn": "weft", "position": -1.0, "end": "y-"}]}]
 
 
-# ---------------------------------------------------------------- issue 15: fault checks (one block)
+# ---------------------------------------------------------------- fault checks (one block)
 class FaultChecks(Section):
     """What the jobs check before and after they compute (docs/fault_tolerance.md)."""
 
@@ -192,7 +192,7 @@ class FaultChecks(Section):
                                 "available memory")
 
 
-# --- issue 14 (pictures, perturbed packings): the `output` and `packing` sections --------------
+# --- pictures and perturbed packings: the `output` and `packing` sections --------------
 class RVEOutput(Section):
     """Pictures of every stored state (``rve.homogenisation.pictures``): a tube mesh per
     state (.vtp, written by its probe job), a .pvd series per mode and PNG renders."""
@@ -241,7 +241,7 @@ class RVEConfig(SceneConfig):
                                     min_length=1, description="probes (thesis Fig. 7.2.2 and a weft yarn end to "
                                                               "end by default)")
     probe_solver: ProbeSolver = Field(default_factory=ProbeSolver)
-    checks: FaultChecks = Field(default_factory=FaultChecks, description="fault checks (issue 15)")
+    checks: FaultChecks = Field(default_factory=FaultChecks, description="fault checks (docs/fault_tolerance.md)")
     output: RVEOutput = Field(default_factory=RVEOutput)
     packing: Packing = Field(default_factory=Packing)
     boundary: Literal["pinned", "periodic"] = Field(

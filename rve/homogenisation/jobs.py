@@ -13,7 +13,7 @@ and the run spec (``rve.homogenisation.sweeps``), logs to the rule's log file
 
 ``probe_record`` is the probe job without the file: the record ``rve.tables`` builds from.
 
-Fault checks (issue 15, docs/fault_tolerance.md): every job reads its input state with
+Fault checks (docs/fault_tolerance.md): every job reads its input state with
 ``load_state(..., quarantine=True)`` (a file that fails its checksum is a
 ``CorruptFileError`` naming it and is moved to ``<name>.corrupt``, so the next snakemake
 call reruns the job that wrote it); ``fabric_job`` runs ``rve.homogenisation.preflight``

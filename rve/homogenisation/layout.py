@@ -131,7 +131,7 @@ def report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
             "temperature_rise": f"{pre}_temperature_rise.png"}
 
 
-# ============================================================================ pictures (issue 14)
+# ============================================================================ pictures
 def tubes_path(run: str, combo: str, name: str, root: PathLike = RVE_DIR) -> str:
     """Tube mesh (.vtp) of state ``name``, written by its probe job (``output.pictures``)."""
     return f"{root}/{run}/{combo}/tubes/{name}.vtp"

@@ -1,5 +1,5 @@
 """Input checked before compute: what a validated RVEConfig can still get wrong, found before
-the first job computes anything (issue 15, docs/fault_tolerance.md "Input checks").
+the first job computes anything (docs/fault_tolerance.md "Input checks").
 
 ``preflight(cfg, outputs=()) -> (fabric, mesh)`` raises one ``rve.config.ConfigError`` with
 one line per problem, each naming the key and the allowed range:

@@ -126,7 +126,7 @@ def combos(spec: Mapping) -> list[Combo]:
         for v in (values if isinstance(values, (list, tuple)) else [values]):
             try:
                 vals.append(_sweep_value(v, path))
-            except ValueError as exc:   # issue 15: name the sweep key (UnitConversionError is a ValueError)
+            except ValueError as exc:   # name the sweep key (UnitConversionError is a ValueError)
                 from ..config import ConfigError
 
                 raise ConfigError(f"sweep.{key} = {v!r}: {getattr(exc, 'message', exc)} (sweep parameter {key} "

@@ -114,7 +114,7 @@ def atomic_netcdf(ds, path: PathLike, encoding: Optional[dict] = None) -> Path:
 def unwritable_reason(folder: PathLike) -> Optional[str]:
     """None if files can be created in ``folder`` (created on demand: its nearest existing
     ancestor must be a writable folder), else why not (one phrase). Checked before a
-    computation so an unwritable output folder is not found only at the end (issue 15)."""
+    computation so an unwritable output folder is not found only at the end."""
     probe = Path(folder).resolve()
     while not probe.exists():
         probe = probe.parent

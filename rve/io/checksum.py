@@ -9,8 +9,8 @@ Contract
   called by the writers on the temporary file, before the atomic rename.
 * ``verify(path) -> Seal``: reads the file, checks the trailer; raises
   :class:`CorruptFileError` (a ``ValueError`` naming the file and what failed) on a
-  mismatch; returns ``Seal(sealed=False)`` for a file without a trailer (written before
-  issue 15 or by another tool).
+  mismatch; returns ``Seal(sealed=False)`` for a file without a trailer (written by an
+  older rve or by another tool).
 * ``open_netcdf(path, ..., timeout=OPEN_TIMEOUT_S)``: the dataset loaded into memory. A
   sealed file whose digest matches is opened in-process (its bytes are exactly the ones
   written, which HDF5 read back when they were written). A file without a valid trailer

@@ -27,6 +27,61 @@ MIN_CHUNK = 256
 
 
 @njit(cache=True, fastmath=False, nogil=True)
+def _gradient(D, U, e, q, naf, F, Fi):
+    """F[i, J] = sum_a D[J, a] U[a, i] and its inverse Fi at quadrature point q of element e
+    (cofactors over the determinant); returns det F."""
+    for i in range(3):
+        for J in range(3):
+            s = 0.0
+            for a in range(naf):
+                s += D[e, q, J, a] * U[e, a, i]
+            F[i, J] = s
+    fa, fb, fc = F[0, 0], F[0, 1], F[0, 2]
+    fd, fe, ff = F[1, 0], F[1, 1], F[1, 2]
+    fg, fh, fi = F[2, 0], F[2, 1], F[2, 2]
+    cA, cB, cC = fe * fi - ff * fh, ff * fg - fd * fi, fd * fh - fe * fg
+    det = fa * cA + fb * cB + fc * cC
+    Fi[0, 0] = cA / det
+    Fi[0, 1] = (fc * fh - fb * fi) / det
+    Fi[0, 2] = (fb * ff - fc * fe) / det
+    Fi[1, 0] = cB / det
+    Fi[1, 1] = (fa * fi - fc * fg) / det
+    Fi[1, 2] = (fc * fd - fa * ff) / det
+    Fi[2, 0] = cC / det
+    Fi[2, 1] = (fb * fg - fa * fh) / det
+    Fi[2, 2] = (fa * fe - fb * fd) / det
+    return det
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _tangent_point(D, e, q, naf, G, wmu, wl, wc1, DD, Ke):
+    """Quadrature point q's share of the element tangent: wmu D^T D into DD, the lam and
+    (mu - lam ln J) G G terms into the upper triangle of Ke."""
+    for a in range(naf):
+        for b in range(naf):
+            s = 0.0
+            for J in range(3):
+                s += D[e, q, J, a] * D[e, q, J, b]
+            DD[a, b] += wmu * s
+    for a in range(naf):
+        for i in range(3):
+            A = 3 * a + i
+            ga0, ga1, ga2 = wc1 * G[a, 0], wc1 * G[a, 1], wc1 * G[a, 2]
+            gai = wl * G[a, i]
+            for b in range(a, naf):
+                gbi = G[b, i]
+                k0 = i if b == a else 0  # upper triangle: B = 3 b + k >= A
+                if wl != 0.0:
+                    for k in range(k0, 3):
+                        gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
+                        Ke[A, 3 * b + k] += gak * gbi + gai * G[b, k]
+                else:  # lam = 0 (nu = 0): the reference skips the lam term too
+                    for k in range(k0, 3):
+                        gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
+                        Ke[A, 3 * b + k] += gak * gbi
+
+
+@njit(cache=True, fastmath=False, nogil=True)
 def _kernel(D, W, U, mu, lam, want_tangent, want_dmu, R, K, dR):
     E, nq, _, naf = D.shape
     nA = naf * 3
@@ -45,27 +100,7 @@ def _kernel(D, W, U, mu, lam, want_tangent, want_dmu, R, K, dR):
                 for B in range(nA):
                     Ke[A, B] = 0.0
         for q in range(nq):
-            # F[i, J] = sum_a D[J, a] U[a, i]
-            for i in range(3):
-                for J in range(3):
-                    s = 0.0
-                    for a in range(naf):
-                        s += D[e, q, J, a] * U[e, a, i]
-                    F[i, J] = s
-            fa, fb, fc = F[0, 0], F[0, 1], F[0, 2]
-            fd, fe, ff = F[1, 0], F[1, 1], F[1, 2]
-            fg, fh, fi = F[2, 0], F[2, 1], F[2, 2]
-            cA, cB, cC = fe * fi - ff * fh, ff * fg - fd * fi, fd * fh - fe * fg
-            det = fa * cA + fb * cB + fc * cC
-            Fi[0, 0] = cA / det
-            Fi[0, 1] = (fc * fh - fb * fi) / det
-            Fi[0, 2] = (fb * ff - fc * fe) / det
-            Fi[1, 0] = cB / det
-            Fi[1, 1] = (fa * fi - fc * fg) / det
-            Fi[1, 2] = (fc * fd - fa * ff) / det
-            Fi[2, 0] = cC / det
-            Fi[2, 1] = (fb * fg - fa * fh) / det
-            Fi[2, 2] = (fa * fe - fb * fd) / det
+            det = _gradient(D, U, e, q, naf, F, Fi)
             lnJ = np.log(det)
             w = W[e, q]
             wmu = w * mu[e, q]
@@ -84,28 +119,7 @@ def _kernel(D, W, U, mu, lam, want_tangent, want_dmu, R, K, dR):
                     if want_dmu:
                         dR[e, q, a, k] = (sh - sg) * w
             if want_tangent:
-                for a in range(naf):
-                    for b in range(naf):
-                        s = 0.0
-                        for J in range(3):
-                            s += D[e, q, J, a] * D[e, q, J, b]
-                        DD[a, b] += wmu * s
-                for a in range(naf):
-                    for i in range(3):
-                        A = 3 * a + i
-                        ga0, ga1, ga2 = wc1 * G[a, 0], wc1 * G[a, 1], wc1 * G[a, 2]
-                        gai = wl * G[a, i]
-                        for b in range(a, naf):
-                            gbi = G[b, i]
-                            k0 = i if b == a else 0  # upper triangle: B = 3 b + k >= A
-                            if wl != 0.0:
-                                for k in range(k0, 3):
-                                    gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
-                                    Ke[A, 3 * b + k] += gak * gbi + gai * G[b, k]
-                            else:  # lam = 0 (nu = 0): the reference skips the lam term too
-                                for k in range(k0, 3):
-                                    gak = ga0 if k == 0 else (ga1 if k == 1 else ga2)
-                                    Ke[A, 3 * b + k] += gak * gbi
+                _tangent_point(D, e, q, naf, G, wmu, wl, wc1, DD, Ke)
         if want_tangent:
             for a in range(naf):
                 for b in range(a, naf):

@@ -20,6 +20,45 @@ __all__ = ["coupled_forms"]
 
 
 @njit(cache=True, nogil=True)
+def _tangent_point(el, q, nn, naf, r, Nx, Dx3, dNq, rho, rhoM, c, bxa, L, C, e, X, Y, back_emf, lorentz,
+                   SV, Sx, Sv, LV, Lx, Lv):
+    """Quadrature point q's share of the V, x and v columns of the current, Joule and Lorentz
+    rows (rho, rhoM, c, bxa, L and e of the point from ``_kernel``)."""
+    # V columns: d e / d V_b = -dN_b
+    for k in range(r):
+        for n in range(nn):
+            SV[el, k, n] += rho[k] * (-dNq[el, q, n])
+    if back_emf:
+        for k in range(r):
+            for A in range(naf):
+                pd = rho[k] * Dx3[el, q, A]
+                pn = rho[k] * Nx[el, q, A]
+                for m in range(3):
+                    Sx[el, k, A, m] += pd * c[m]
+                    Sv[el, k, A, m] += pn * bxa[m]
+    if lorentz:
+        for A in range(naf):
+            for i in range(3):
+                for n in range(nn):
+                    LV[el, A, i, n] += rhoM[A] * (-L[i] * dNq[el, q, n])
+        for i in range(3):
+            for m in range(3):
+                X[i, m] = e * C[i, m]
+                if back_emf:
+                    X[i, m] = X[i, m] + L[i] * c[m]
+                    Y[i, m] = L[i] * bxa[m]
+        for A in range(naf):
+            for Bb in range(naf):
+                pd = rhoM[A] * Dx3[el, q, Bb]
+                pn = rhoM[A] * Nx[el, q, Bb]
+                for i in range(3):
+                    for m in range(3):
+                        Lx[el, A, i, Bb, m] += pd * X[i, m]
+                        if back_emf:
+                            Lv[el, A, i, Bb, m] += pn * Y[i, m]
+
+
+@njit(cache=True, nogil=True)
 def _kernel(Nq, dNq, Nx, Dx3, W, U, Uv, Te, Ve, B, sig, S, back_emf, lorentz, joule, tangent,
             RV, RT, RL, SV, Sx, Sv, LV, Lx, Lv):
     E, nq, nn = dNq.shape
@@ -77,38 +116,8 @@ def _kernel(Nq, dNq, Nx, Dx3, W, U, Uv, Te, Ve, B, sig, S, back_emf, lorentz, jo
                         RL[el, A, i] += rhoM[A] * (e * L[i])
             if not tangent:
                 continue
-            # V columns: d e / d V_b = -dN_b
-            for k in range(r):
-                for n in range(nn):
-                    SV[el, k, n] += rho[k] * (-dNq[el, q, n])
-            if back_emf:
-                for k in range(r):
-                    for A in range(naf):
-                        pd = rho[k] * Dx3[el, q, A]
-                        pn = rho[k] * Nx[el, q, A]
-                        for m in range(3):
-                            Sx[el, k, A, m] += pd * c[m]
-                            Sv[el, k, A, m] += pn * bxa[m]
-            if lorentz:
-                for A in range(naf):
-                    for i in range(3):
-                        for n in range(nn):
-                            LV[el, A, i, n] += rhoM[A] * (-L[i] * dNq[el, q, n])
-                for i in range(3):
-                    for m in range(3):
-                        X[i, m] = e * C[i, m]
-                        if back_emf:
-                            X[i, m] = X[i, m] + L[i] * c[m]
-                            Y[i, m] = L[i] * bxa[m]
-                for A in range(naf):
-                    for Bb in range(naf):
-                        pd = rhoM[A] * Dx3[el, q, Bb]
-                        pn = rhoM[A] * Nx[el, q, Bb]
-                        for i in range(3):
-                            for m in range(3):
-                                Lx[el, A, i, Bb, m] += pd * X[i, m]
-                                if back_emf:
-                                    Lv[el, A, i, Bb, m] += pn * Y[i, m]
+            _tangent_point(el, q, nn, naf, r, Nx, Dx3, dNq, rho, rhoM, c, bxa, L, C, e, X, Y, back_emf, lorentz,
+                           SV, Sx, Sv, LV, Lx, Lv)
 
 
 def coupled_forms(ops, U, Uv, Te, Ve, B, sigma0, seebeck: float = 0.0, back_emf: bool = True,

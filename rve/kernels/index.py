@@ -8,7 +8,7 @@ Every function returns exactly the integers (and, for the scatter, exactly the f
 point sums, added in the same order) of the numpy expression named in its docstring:
 they are pure speed-ups, never a change of arithmetic (tests/test_kernels.py compares
 them with ``==``). Integer arrays are int64 unless stated; the callers
-(``rve.fem.assembly``, ``rve.solvers.pardiso``) take them only when
+(``rve.fem.assembly``, ``rve.solvers.backends.pardiso``) take them only when
 ``rve.kernels.use_numba()`` and keep the numpy expressions as the reference path.
 
 * ``sorted_positions(ref, keys)`` -> ``(pos, ok)``: ``ref`` sorted ascending (non-empty),
@@ -17,7 +17,7 @@ them with ``==``). Integer arrays are int64 unless stated; the callers
   otherwise ``ok`` is False and ``pos`` is not to be used.
 * ``upper_entries(indptr, indices, n)`` -> ``(keys, keep)``: the upper-triangle entries
   (col >= row) of a CSR structure: ``keys = row * n + col`` and their positions in the
-  data array (``rve.solvers.pardiso._upper_entries``).
+  data array (``rve.solvers.backends.pardiso._upper_entries``).
 * ``scatter_sum(nnz, slots, act, w, base_map, fx)`` -> ``out`` (nnz,) float64:
   ``out = np.bincount(slots[act].ravel(), weights=w.ravel(), minlength=nnz)`` followed by
   ``out[base_map] += fx`` (``base_map`` without repeats): the contact pairs' tangent and

@@ -47,6 +47,7 @@ from ..model import (
     feedback_from_temperature,
 )
 from ..solvers.dirk import IntegrationFailure, consistent_initialization, integrate
+from ..solvers.dirk import integrator_options as integrator_options_of
 from .protocol import SceneFailure, SceneResult
 
 __all__ = ["setup", "initial_state", "probes", "solve", "run", "PROBES", "newton_options", "temperature_mode",
@@ -200,6 +201,68 @@ def _rates_summary(stage_residuals: list, floor: float = 1e-9) -> dict:
     }
 
 
+class _History:
+    """The probe history of a run (every ``every`` accepted steps and at t_max), the stage
+    residuals and, for the temperature post-solve, the Joule heat of every accepted step."""
+
+    def __init__(self, model, probe, mode, every: int, t_max: float, record: bool, x0, w0):
+        self.model, self.probe, self.mode = model, probe, mode
+        self.every, self.t_max, self.record = every, t_max, record
+        self.p0 = p0 = probe(x0, w0)
+        if mode == "post":
+            p0["T_half"] = 0.0
+        self.hist = {"t": [0.0], **{k: [p0[k]] for k in p0}, "current_mid": [], "h": [0.0], "newton_iterations": [0]}
+        self.joule_t, self.joule_Q = [0.0], [model.joule_power(x0, w0, 0.0)] if mode == "post" else []
+        self.mid_elem = model.mesh.n_elements // 2
+        self.hist["current_mid"].append(float(model.axial_current(x0, w0, 0.0)[self.mid_elem - 1, -1]))
+        self.stage_res: list = []
+        self.count = 0
+
+    def on_step(self, t, x, w, info) -> None:
+        model, hist = self.model, self.hist
+        self.stage_res.extend(info.stage_residuals)
+        if self.mode == "post":
+            self.joule_t.append(t)
+            self.joule_Q.append(model.joule_power(x, w, t))
+        self.count += 1
+        if self.record and (self.count % self.every == 0 or t >= self.t_max * (1 - 1e-12)):
+            for k, v in self.probe(x, w).items():
+                hist[k].append(v)
+            hist["t"].append(t)
+            if self.mode == "post":
+                hist["T_half"].append(np.nan)
+            hist["current_mid"].append(float(model.axial_current(x, w, t)[self.mid_elem - 1, -1]))
+            hist["h"].append(info.h)
+            hist["newton_iterations"].append(info.newton_iterations)
+
+
+def _failure(exc, model, hist, mode) -> SceneFailure:
+    """The scene's failure for a failed integration (the last good state, the history)."""
+    res = ", ".join(f"{r:.3e}" for r in exc.residuals)
+    return SceneFailure(
+        "dynamic_wire",
+        f"time integration failed with step size h = {exc.h:.6g} ms; Newton residual history [{res}]. "
+        f"Cause: {exc}",
+        phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
+        state={"x": exc.x, "w": exc.w}, model=model,
+        details={"h": exc.h, "residuals": [float(r) for r in exc.residuals], "history": hist,
+                 "temperature_mode": mode,
+                 "reason": exc.step_failure.reason if exc.step_failure is not None else str(exc)})
+
+
+def _post_temperature(model, cfg, joule_t, joule_Q, steps, stages, nopts, fixed, iopts) -> dict:
+    """T afterwards: the heat equation alone over the stored Joule history, same scheme and
+    steps (``steps``, ``newton_iterations``, the final nodal ``T``)."""
+    n0, n1 = model.mesh.end_nodes(0)
+    tsys = ThermalPostSystem(model, np.asarray(joule_t), np.asarray(joule_Q), [n0, n1], cfg.load.end_temperature)
+    Tsc = RowScaledSystem(tsys, 1.0 / np.asarray(abs(tsys.mass()).sum(axis=1)).ravel())
+    T0 = np.zeros(tsys.n)
+    tres = integrate(Tsc, np.zeros(tsys.n), T0, 0.0, cfg.time.t_max, steps, stages=stages, newton_opts=nopts,
+                     consistent=False,
+                     **integrator_options_of(max_cuts=cfg.time.max_cuts, fixed_step=fixed, **iopts))
+    return {"steps": tres.steps, "newton_iterations": tres.newton_iterations, "T": tres.w}
+
+
 def solve(cfg, *, stages: int | None = None, steps: int | None = None, fixed_step: bool | None = None,
           record: bool = True, progress: bool = False, integrator_options: dict | None = None) -> SceneResult:
     """Run the scene in memory. Raises ``SceneFailure`` (carrying the last good state).
@@ -220,67 +283,24 @@ def solve(cfg, *, stages: int | None = None, steps: int | None = None, fixed_ste
     x0, w0 = initial_state(model)
     system = model.with_row_scale(model.row_scales(h0, x0, w0))
     w0, init_res = consistent_initialization(system, x0, w0, 0.0, nopts)
-    p0 = probe(x0, w0)
-    if mode == "post":
-        p0["T_half"] = 0.0
-    every = cfg.time.history_every
-    hist = {"t": [0.0], **{k: [p0[k]] for k in p0}, "current_mid": [], "h": [0.0], "newton_iterations": [0]}
-    joule_t, joule_Q = [0.0], [model.joule_power(x0, w0, 0.0)] if mode == "post" else []
-    mid_elem = model.mesh.n_elements // 2
-    hist["current_mid"].append(float(model.axial_current(x0, w0, 0.0)[mid_elem - 1, -1]))
-    stage_res = []
-    count = [0]
-
-    def on_step(t, x, w, info):
-        stage_res.extend(info.stage_residuals)
-        if mode == "post":
-            joule_t.append(t)
-            joule_Q.append(model.joule_power(x, w, t))
-        count[0] += 1
-        if record and (count[0] % every == 0 or t >= t_max * (1 - 1e-12)):
-            p = probe(x, w)
-            hist["t"].append(t)
-            for k, v in p.items():
-                hist[k].append(v)
-            if mode == "post":
-                hist["T_half"].append(np.nan)
-            hist["current_mid"].append(float(model.axial_current(x, w, t)[mid_elem - 1, -1]))
-            hist["h"].append(info.h)
-            hist["newton_iterations"].append(info.newton_iterations)
-
+    rec = _History(model, probe, mode, cfg.time.history_every, t_max, record, x0, w0)
+    p0, hist, joule_t, joule_Q, stage_res = rec.p0, rec.hist, rec.joule_t, rec.joule_Q, rec.stage_res
     t1 = time.perf_counter()
     try:
-        res = integrate(system, x0, w0, 0.0, t_max, steps, stages=stages, newton_opts=nopts,
-                        max_cuts=cfg.time.max_cuts, on_step=on_step, progress=progress, fixed_step=fixed,
-                        consistent=False, **iopts)
+        res = integrate(system, x0, w0, 0.0, t_max, steps, stages=stages, newton_opts=nopts, on_step=rec.on_step,
+                        progress=progress, consistent=False,
+                        **integrator_options_of(max_cuts=cfg.time.max_cuts, fixed_step=fixed, **iopts))
     except IntegrationFailure as exc:
-        res = ", ".join(f"{r:.3e}" for r in exc.residuals)
-        raise SceneFailure(
-            "dynamic_wire",
-            f"time integration failed with step size h = {exc.h:.6g} ms; Newton residual history [{res}]. "
-            f"Cause: {exc}",
-            phase="time integration", time=exc.t, step=f"h = {exc.h:.6g} ms",
-            state={"x": exc.x, "w": exc.w}, model=model,
-            details={"h": exc.h, "residuals": [float(r) for r in exc.residuals], "history": hist,
-                     "temperature_mode": mode,
-                     "reason": exc.step_failure.reason if exc.step_failure is not None else str(exc)}) from exc
+        raise _failure(exc, model, hist, mode) from exc
     t2 = time.perf_counter()
     x, w = res.x, res.w
     out_probes = probe(x, w)
     dofs = {"coupled_solve": model.dof_counts()}
     post = None
     if mode == "post":
-        # T afterwards: the heat equation alone over the stored Joule history, same scheme and steps
-        n0, n1 = model.mesh.end_nodes(0)
-        tsys = ThermalPostSystem(model, np.asarray(joule_t), np.asarray(joule_Q), [n0, n1],
-                                 cfg.load.end_temperature)
-        Tsc = RowScaledSystem(tsys, 1.0 / np.asarray(abs(tsys.mass()).sum(axis=1)).ravel())
-        T0 = np.zeros(tsys.n)
-        tres = integrate(Tsc, np.zeros(tsys.n), T0, 0.0, t_max, steps, stages=stages, newton_opts=nopts,
-                         max_cuts=cfg.time.max_cuts, fixed_step=fixed, consistent=False, **iopts)
-        out_probes["T_half"] = float(probe.q_w @ tres.w[probe.q_nodes])
-        dofs["thermal_post_solve"] = {"T": int(tsys.n), "total": int(tsys.n)}
-        post = {"steps": tres.steps, "newton_iterations": tres.newton_iterations, "T": tres.w}
+        post = _post_temperature(model, cfg, joule_t, joule_Q, steps, stages, nopts, fixed, iopts)
+        out_probes["T_half"] = float(probe.q_w @ post["T"][probe.q_nodes])
+        dofs["thermal_post_solve"] = {"T": int(post["T"].size), "total": int(post["T"].size)}
     t3 = time.perf_counter()
     ends = model.end_currents(x, w, t_max)[0]
     out = {

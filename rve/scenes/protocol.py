@@ -15,16 +15,21 @@ A scene that cannot finish raises :class:`SceneFailure`: it says where (``phase`
 ``time``, ``step``) and why, and carries the last good state (``state``, ``model``);
 ``run`` writes that state to ``out_dir`` first and records the file in ``saved``. ``rve
 run`` turns it into one message and exit code 1 (docs/configuration.md).
+
+``job_log(path)``: a context manager that sends the ``rve`` loggers (INFO) to ``path``
+for the length of one Snakemake job body (``rve.scenes.*.jobs``).
 """
 from __future__ import annotations
 
+import contextlib
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["SceneResult", "SceneFailure"]
+__all__ = ["SceneResult", "SceneFailure", "job_log"]
 
 
 @dataclass
@@ -112,3 +117,18 @@ def _numeric(v) -> bool:
     except Exception:  # noqa: BLE001 - anything that is not array-like is skipped
         return False
     return a.dtype.kind in "biuf"
+
+
+@contextlib.contextmanager
+def job_log(log_path):
+    """The ``rve`` loggers at INFO into ``log_path`` (overwritten) while the block runs."""
+    handler = logging.FileHandler(log_path, mode="w")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    root = logging.getLogger("rve")
+    root.addHandler(handler)
+    root.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        handler.close()

@@ -72,7 +72,7 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
     Scene("fabric_relax", "rve.config.fabric:FabricRelaxConfig", "rve.scenes.fabric_relax"),
     Scene("rve", "rve.homogenisation.config:RVEConfig", "rve.scenes.rve_pipeline", kind="pipeline"),
     Scene("induced_deformation", "rve.config.induced_deformation:InducedDeformationConfig",
-          "rve.scenes.induced_deformation"),
+          "rve.scenes.induced"),
     Scene("impact", "rve.config.impact:ImpactConfig", "rve.scenes.impact"),
 )}
 

@@ -12,7 +12,7 @@ Thesis §6.2 and Appendix C; see ``docs/time_integration.md``.
   landing exactly on ``t_end``; or ``fixed_step=True`` (failure raises at once).
 * ``consistent_initialization`` -- solves ``F = 0`` for the massless (algebraic) dofs at
   t0 so that e.g. the potential V(0) is consistent with x(0), w(0).
-* Factorisation reuse (``integrate(jacobian_reuse=...)``, default off: one factorisation
+* Factorisation reuse (``integrate(reuse=ReusePolicy(mode=...))``, default off: one factorisation
   per Newton iteration as before, bit for bit): the stepper keeps one
   ``rve.solvers.newton.JacobianReuse`` for the run, so a factorisation serves Newton
   iterations, stages and steps while the observed contraction stays below
@@ -29,7 +29,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Callable, Optional, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -41,7 +41,8 @@ __all__ = [
     "Tableau", "sdirk", "BACKWARD_EULER", "SDIRK2", "SDIRK3", "SDIRK3_ALPHA",
     "order_conditions", "stability_function",
     "StepInfo", "StepFailure", "IntegrationFailure", "IntegrationResult",
-    "dirk_step", "integrate", "consistent_initialization", "DirkStepper", "structure_token",
+    "dirk_step", "integrate", "consistent_initialization", "DirkStepper", "structure_token", "StructureHook",
+    "StepControl", "Budgets", "ReusePolicy", "integrator_options",
 ]
 
 log = logging.getLogger("rve.dirk")
@@ -166,6 +167,10 @@ class StepInfo:
     stage_contractions: list = field(default_factory=list)    # |r_k|/|r_k-1| per stage (reuse on)
     stage_retries: int = 0       # stages re-solved by full Newton after the modified Newton failed
     rejected_reuses: int = 0     # modified steps discarded (redone with a fresh Jacobian)
+    #: the converged stage states [(x_i, w_i)], in stage order; stiffly accurate, so the
+    #: last one is the step's result (a post-solve driven by the stages reads them here)
+    stage_states: list = field(default_factory=list)
+    rejected_attempts: int = 0   # attempts rejected (step cut) since the previous accepted step
 
     @property
     def jacobians(self) -> int:
@@ -239,6 +244,7 @@ class IntegrationResult:
     stage_retries: int = 0               # stages re-solved by full Newton after a failed modified Newton
     refactor_reasons: dict = field(default_factory=dict)  # why reused factorisations were dropped
     contractions: list = field(default_factory=list)      # all |r_k|/|r_k-1| of accepted steps (reuse on)
+    restarts: int = 0                    # step-control restarts after a structure change (``rebuild``)
 
     def add(self, counts: dict) -> None:
         """Add the counts of one step attempt (``StepInfo`` / ``StepFailure`` counts)."""
@@ -319,12 +325,17 @@ class DirkStepper:
     cost rule (``JacobianReuse(cost_aware=True)``). ``reuse_contraction`` is its
     threshold, ``reuse_h_rtol`` the relative change of h·a_ii that drops the
     factorisation, ``linear_backend`` the ``get_backend`` name (module docstring).
+    ``watch_structure`` False: the system's ``structure_token`` does not drop the held
+    factorisation (``integrate`` with a ``rebuild`` hook: the hook reports structure
+    changes and the step control restarts on a fresh stepper).
     """
 
     def __init__(self, system, tableau: Tableau, newton_opts: Optional[dict] = None,
                  predictor_degree: int = 2, lazy_jacobian: bool = True, jacobian_reuse=False,
-                 reuse_contraction: float = 0.5, reuse_h_rtol: float = 0.1, linear_backend: Optional[str] = None):
+                 reuse_contraction: float = 0.5, reuse_h_rtol: float = 0.1, linear_backend: Optional[str] = None,
+                 watch_structure: bool = True):
         self.system = system
+        self.watch_structure = bool(watch_structure)
         if jacobian_reuse not in (False, True, "auto"):
             raise ValueError(f"jacobian_reuse must be False, True or 'auto', not {jacobian_reuse!r}")
         self.reuse = (JacobianReuse(reuse_contraction, cost_aware=(jacobian_reuse == "auto"), backend=linear_backend)
@@ -343,21 +354,10 @@ class DirkStepper:
         if self.M.shape != (self.n, self.n):
             raise ValueError(f"mass matrix has shape {self.M.shape}, expected ({self.n}, {self.n})")
         self.newton_opts = _newton_kwargs(newton_opts)
-        self._Mcoo = self.M.tocoo()
         self._free_cache: dict = {}
-        self._mass_cache: dict = {}
 
     def free_dofs(self, idx) -> FreeDofs:
         return FreeDofs.cached(self._free_cache, self.n, idx)
-
-    def mass_triplets(self, fd: FreeDofs):
-        """M restricted to the free dofs of ``fd`` (cached per constraint set)."""
-        trip = self._mass_cache.get(fd.key)
-        if trip is None:
-            if len(self._mass_cache) > 16:
-                self._mass_cache.clear()
-            trip = self._mass_cache[fd.key] = fd.triplets(self._Mcoo)
-        return trip
 
     def step(self, x0, w0, t0: float, h: float):
         """One step from (x0, w0, t0) of size h -> (x1, w1, StepInfo); raises StepFailure."""
@@ -366,7 +366,7 @@ class DirkStepper:
         w0 = np.asarray(w0, float)
         s = tab.stages
         Mw0 = M @ w0
-        W, Fs = [], []
+        W, Fs, states = [], [], []
         its, ress = [], []
         results = []
         retries = 0
@@ -388,67 +388,16 @@ class DirkStepper:
             fd = self.free_dofs(idx)
             wi = self._predict(pts, ti, w_prev, xhat, haii)
             wi[idx] = vals
-            free = fd.free
-            cache = {}
-
-            def state(u, wi=wi, free=free, xhat=xhat, haii=haii):
-                w = wi.copy()
-                w[free] = u
-                return xhat + haii * mechf * w, w
-
-            def stage_residual(u, jacobian, ti=ti, haii=haii, rhs=rhs, fd=fd, state=state, cache=cache):
-                """G(u) = M w + h a_ii F(x, w) - rhs on the free dofs, and with ``jacobian``
-                J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech) restricted to them."""
-                x, w = state(u)
-                F, Fx, Fw = sysm.evaluate(x, w, ti, jacobian=jacobian)
-                F = np.asarray(F, float)
-                cache["u"], cache["F"] = u.copy(), F
-                G = (M @ w + haii * F - rhs)[fd.free]
-                if not jacobian:
-                    return G
-                return G, fd.combine([(self.M, 1.0, None), (Fw, haii, None), (Fx, haii * haii, mechf)])
-
-            def adm(u, state=state):
-                return bool(sysm.admissible(state(u)[0]))
-
+            state, fun, resid, adm, cache = self._stage_functions(ti, haii, xhat, rhs, fd, wi)
             label = f"dirk s{s} stage {i + 1} t={ti:.6g}"
-            fun = functools.partial(stage_residual, jacobian=True)
-            resid = functools.partial(stage_residual, jacobian=False) if self.lazy_jacobian else None
-            reuse = self.reuse
-            if reuse is None:
-                res = newton(fun, wi[free], admissible=adm, label=label, residual=resid, **self.newton_opts)
-                stage_results = [res]
-            else:
-                key = self._check_reuse(haii, fd.key)
-                res = newton(fun, wi[free], admissible=adm, label=label, residual=resid, reuse=reuse,
-                             **self.newton_opts)
-                if res.factorizations:
-                    reuse.key = key
-                stage_results = [res]
-                if not res.converged and (res.reuses or res.rejected_reuses):
-                    # the modified Newton failed: full Newton from the same start before a cut
-                    reuse.invalidate("failed stage")
-                    retries += 1
-                    log.info("%s: modified Newton failed (%s); full Newton retry", label, res.reason)
-                    res = newton(fun, wi[free], admissible=adm, label=label + " retry", residual=resid,
-                                 **self.newton_opts)
-                    stage_results.append(res)
-                log.info("%s: its=%d jacobians=%d factorisations=%d reused=%d rejected=%d contraction=%s", label,
-                         sum(r.iterations for r in stage_results), sum(r.jacobians for r in stage_results),
-                         sum(r.factorizations for r in stage_results), sum(r.reuses for r in stage_results),
-                         sum(r.rejected_reuses for r in stage_results),
-                         "[" + ", ".join(f"{q:.1e}" for r in stage_results for q in r.contractions) + "]")
+            stage_results = self._solve_stage(fun, wi[fd.free], adm, label, resid, haii, fd.key)
+            retries += len(stage_results) - 1
+            res = stage_results[-1]
             results.extend(stage_results)
             its.append(int(sum(r.iterations for r in stage_results)))
             ress.append(list(res.residuals))
-            reason = None
-            if not res.converged:
-                reason = res.reason or "Newton did not converge"
-            elif not np.all(np.isfinite(res.u)):
-                reason = "non-finite stage solution"
             xi, wsol = state(res.u)
-            if reason is None and not sysm.admissible(xi):
-                reason = "inadmissible stage state (det F <= 0)"
+            reason = _stage_failure(res, sysm, xi)
             if reason is not None:
                 if self.reuse is not None:
                     self.reuse.invalidate("failed step")
@@ -456,6 +405,7 @@ class DirkStepper:
                 counts["stage_retries"] = retries
                 raise StepFailure(i + 1, t0, h, res.residuals, reason, int(sum(its)), counts["linear_solves"], counts)
             W.append(wsol)
+            states.append((xi, wsol))
             if i < s - 1:  # the last stage's F is not needed (stiffly accurate)
                 if "u" in cache and np.array_equal(cache["u"], res.u):
                     Fi = cache["F"]
@@ -467,7 +417,7 @@ class DirkStepper:
         # stiffly accurate (A[s-1] = b, c_s = 1): the step result is the last stage
         self._points = pts[-(self.predictor_degree + 1):]
         counts = _counts(results)
-        info = StepInfo(t0, h, its, ress, counts["linear_solves"], stage_retries=retries)
+        info = StepInfo(t0, h, its, ress, counts["linear_solves"], stage_retries=retries, stage_states=states)
         for r in results:   # per stage (a retried stage: both attempts, in order)
             info.stage_jacobians.append(r.jacobians)
             info.stage_factorizations.append(r.factorizations)
@@ -476,11 +426,65 @@ class DirkStepper:
         info.rejected_reuses = counts["rejected_reuses"]
         return xi, W[-1], info
 
+    def _stage_functions(self, ti, haii, xhat, rhs, fd, wi):
+        """``(state, fun, residual, admissible, cache)`` of one stage: the state of the free
+        unknowns u, the stage residual G(u) = M w + h a_ii F(x, w) - rhs on the free dofs with
+        its Jacobian J = M + h a_ii Fw + (h a_ii)^2 Fx diag(mech) restricted to them (``fun``)
+        or alone (``residual``, None without ``lazy_jacobian``), and the last F in ``cache``."""
+        sysm, M, mechf, free = self.system, self.M, self.mechf, fd.free
+        cache: dict = {}
+
+        def state(u):
+            w = wi.copy()
+            w[free] = u
+            return xhat + haii * mechf * w, w
+
+        def stage_residual(u, jacobian):
+            x, w = state(u)
+            F, Fx, Fw = sysm.evaluate(x, w, ti, jacobian=jacobian)
+            F = np.asarray(F, float)
+            cache["u"], cache["F"] = u.copy(), F
+            G = (M @ w + haii * F - rhs)[free]
+            if not jacobian:
+                return G
+            return G, fd.combine([(self.M, 1.0, None), (Fw, haii, None), (Fx, haii * haii, mechf)])
+
+        def adm(u):
+            return bool(sysm.admissible(state(u)[0]))
+
+        fun = functools.partial(stage_residual, jacobian=True)
+        resid = functools.partial(stage_residual, jacobian=False) if self.lazy_jacobian else None
+        return state, fun, resid, adm, cache
+
+    def _solve_stage(self, fun, start, adm, label, resid, haii, constraint_key) -> list:
+        """The stage's Newton results: one, or (a failed modified Newton) the failed one and
+        the full-Newton retry from the same start, the last being the stage's."""
+        reuse = self.reuse
+        if reuse is None:
+            return [newton(fun, start, admissible=adm, label=label, residual=resid, **self.newton_opts)]
+        key = self._check_reuse(haii, constraint_key)
+        res = newton(fun, start, admissible=adm, label=label, residual=resid, reuse=reuse, **self.newton_opts)
+        if res.factorizations:
+            reuse.key = key
+        stage_results = [res]
+        if not res.converged and (res.reuses or res.rejected_reuses):
+            # the modified Newton failed: full Newton from the same start before a cut
+            reuse.invalidate("failed stage")
+            log.info("%s: modified Newton failed (%s); full Newton retry", label, res.reason)
+            stage_results.append(newton(fun, start, admissible=adm, label=label + " retry", residual=resid,
+                                        **self.newton_opts))
+        log.info("%s: its=%d jacobians=%d factorisations=%d reused=%d rejected=%d contraction=%s", label,
+                 sum(r.iterations for r in stage_results), sum(r.jacobians for r in stage_results),
+                 sum(r.factorizations for r in stage_results), sum(r.reuses for r in stage_results),
+                 sum(r.rejected_reuses for r in stage_results),
+                 "[" + ", ".join(f"{q:.1e}" for r in stage_results for q in r.contractions) + "]")
+        return stage_results
+
     def _check_reuse(self, haii: float, constraint_key) -> tuple:
         """Drop the held factorisation if the stage matrix changed in a way the contraction
         cannot see first; returns the key of the stage about to be solved."""
         reuse = self.reuse
-        key = (haii, constraint_key, structure_token(self.system))
+        key = (haii, constraint_key, structure_token(self.system) if self.watch_structure else None)
         if reuse.usable and reuse.key is not None:
             h_old, c_old, s_old = reuse.key
             if c_old != constraint_key:
@@ -508,6 +512,17 @@ class DirkStepper:
         if not (np.all(np.isfinite(w)) and self.system.admissible(xhat + haii * self.mechf * w)):
             return np.array(w_prev, dtype=float, copy=True)
         return w
+
+
+def _stage_failure(res, system, xi):
+    """Why a stage solution is not accepted (None when it is)."""
+    if not res.converged:
+        return res.reason or "Newton did not converge"
+    if not np.all(np.isfinite(res.u)):
+        return "non-finite stage solution"
+    if not system.admissible(xi):
+        return "inadmissible stage state (det F <= 0)"
+    return None
 
 
 def dirk_step(system, tableau, x0, w0, t0: float, h: float, newton_opts: Optional[dict] = None, **options):
@@ -559,6 +574,184 @@ def consistent_initialization(system, x0, w0, t0: float, newton_opts: Optional[d
 
 
 # ----------------------------------------------------------------------------- driver
+class StructureHook(Protocol):
+    """What ``integrate(rebuild=...)`` calls after every accepted step before ``t_end``.
+
+    ``hook(t, x, w) -> bool``: rebuild whatever depends on the state (a contact map) if it
+    is due, and say whether the system's structure changed so that the step control must
+    restart at ``t``: a fresh stepper (no held factorisation, no stage history), the
+    nominal step again. The optional ``hook.horizon(t) -> (t_stop, n_steps)`` gives the
+    segment that the restarted step control runs on (grid ``t + k (t_stop - t)/n_steps``,
+    landing on ``t_stop``); without it a segment runs to ``t_end`` on
+    ``max(1, ceil((t_end - t)/h0 - 1e-6))`` steps of about the run's nominal step h0.
+    """
+
+    def __call__(self, t: float, x: np.ndarray, w: np.ndarray) -> bool: ...
+
+
+def _horizon(rebuild, t: float, t_end: float, h0: float) -> tuple:
+    if rebuild is not None and hasattr(rebuild, "horizon"):
+        t_stop, n = rebuild.horizon(t)
+        return float(t_stop), int(n)
+    return float(t_end), max(1, int(math.ceil((t_end - t) / h0 - 1e-6)))
+
+
+@dataclass(frozen=True)
+class StepControl:
+    """How ``integrate`` steps (its docstring): ``fixed_step`` (every step h0, the first
+    failure ends the run) or halve-and-retry, at most ``max_cuts`` consecutive cuts, the
+    step doubled again after ``grow_after`` successes, never below
+    ``max(min_step_rel h0, min_step_t_rel |t|)``."""
+
+    fixed_step: bool = False
+    max_cuts: int = 8
+    grow_after: int = 2
+    min_step_rel: float = 1e-6
+    min_step_t_rel: float = 1e-12
+
+
+@dataclass(frozen=True)
+class Budgets:
+    """What ends a run that still makes progress: ``max_rejections`` rejected attempts in a
+    segment (None: ``max(64, 2 n)`` for a segment of n nominal steps) and the wall time
+    ``wall_budget_s`` (None: off, so results depend on the input only)."""
+
+    max_rejections: Optional[int] = None
+    wall_budget_s: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class ReusePolicy:
+    """Factorisation reuse of the stage Newton solves (modified Newton,
+    ``rve.solvers.newton.JacobianReuse``; docs/time_integration.md): ``mode`` False (one
+    factorisation per Newton iteration), True (keep one while the contraction stays <=
+    ``contraction``) or "auto" (also weigh the measured costs); ``h_rtol``: the relative
+    change of h a_ii that drops it; ``backend``: a ``rve.solvers.linear.get_backend`` name or
+    a factory ``() -> backend``."""
+
+    mode: object = False
+    contraction: float = 0.5
+    h_rtol: float = 0.1
+    backend: object = None
+
+
+_GROUPS = {StepControl: ("fixed_step", "max_cuts", "grow_after", "min_step_rel", "min_step_t_rel"),
+           Budgets: ("max_rejections", "wall_budget_s")}
+_REUSE_KEYS = {"jacobian_reuse": "mode", "reuse_contraction": "contraction", "reuse_h_rtol": "h_rtol",
+               "linear_backend": "backend"}
+
+
+def integrator_options(**flat) -> dict:
+    """``integrate`` keywords from a flat mapping of option names (a scene's or a study's
+    ``integrator_options``): the ``StepControl`` fields (``fixed_step``, ``max_cuts``, ...),
+    the ``Budgets`` fields and ``jacobian_reuse``, ``reuse_contraction``, ``reuse_h_rtol``,
+    ``linear_backend`` become ``control``, ``budgets`` and ``reuse`` objects; every other
+    key (``predictor_degree``, ``lazy_jacobian``, ...) is passed through."""
+    out = {}
+    for cls, keys in _GROUPS.items():
+        given = {k: flat.pop(k) for k in keys if k in flat}
+        if given:
+            out["control" if cls is StepControl else "budgets"] = cls(**given)
+    reuse = {_REUSE_KEYS[k]: flat.pop(k) for k in list(_REUSE_KEYS) if k in flat}
+    if reuse:
+        out["reuse"] = ReusePolicy(**reuse)
+    return {**out, **flat}
+
+
+def _give_up(fail: StepFailure, ctl: StepControl, bud: Budgets, t: float, h_try: float, h0: float, cuts: int,
+             rejected: int, budget: int, wall0: float):
+    """(cause, why) when a rejected step ends the run, else None."""
+    h_floor = max(float(ctl.min_step_rel) * h0, float(ctl.min_step_t_rel) * abs(t))
+    if ctl.fixed_step:
+        return "fixed_step", "fixed-step mode"
+    if cuts >= ctl.max_cuts:
+        return "max_cuts", f"{cuts} consecutive step cuts (max_cuts = {ctl.max_cuts})"
+    if h_try / 2.0 < h_floor:
+        return "min_step", (f"the next step h/2 = {h_try / 2.0:.3g} would be below the minimum step {h_floor:.3g} "
+                            f"(max(min_step_rel {ctl.min_step_rel:g} x h0 {h0:.3g}, min_step_t_rel "
+                            f"{ctl.min_step_t_rel:g} x t))")
+    if rejected >= budget:
+        return "rejections", f"{rejected} rejected steps in total (max_rejections = {budget})"
+    if bud.wall_budget_s is not None and time.perf_counter() - wall0 > bud.wall_budget_s:
+        return "wall_time", f"the wall-time budget of {bud.wall_budget_s:g} s"
+    return None
+
+
+def _accept(out: IntegrationResult, info: StepInfo, t: float, h_try: float, bar, t0: float) -> None:
+    out.steps += 1
+    out.add({"newton_iterations": info.newton_iterations, "linear_solves": info.linear_solves,
+             "jacobians": info.jacobians, "factorizations": info.factorizations,
+             "reuses": sum(info.stage_reuses), "rejected_reuses": info.rejected_reuses,
+             "stage_retries": info.stage_retries})
+    for c in info.stage_contractions:
+        out.contractions.extend(c)
+    out.h_min = min(out.h_min, h_try)
+    out.history.append((t, h_try, info.newton_iterations))
+    log.info("step %d t=%.6g h=%.3e newton its=%s", out.steps, t, h_try, info.stage_iterations)
+    if bar is not None:
+        bar.n = t - float(t0)
+        bar.set_postfix(h=f"{h_try:.2e}", its=info.newton_iterations, refresh=False)
+        bar.refresh()
+
+
+def _segment(stepper, out, x, w, t, t_stop, n, ctl: StepControl, bud: Budgets, on_step, rebuild, final: bool, bar,
+             t0):
+    """Step from ``t`` to ``t_stop`` on ``n`` nominal steps with one stepper; returns
+    ``(x, w, t)`` where the segment ended: at ``t_stop`` or where ``rebuild`` restarted."""
+    h0 = (float(t_stop) - float(t)) / int(n)
+    t_start, h = float(t), h0
+    budget = max(64, 2 * int(n)) if bud.max_rejections is None else int(bud.max_rejections)
+    rejected0, wall0 = out.rejected, time.perf_counter()
+    k_next, cuts, successes = 1, 0, 0   # next grid point, consecutive cuts, successes since the last cut
+    pending = 0                         # rejected attempts since the last accepted step
+    while k_next <= n:
+        t_target = float(t_stop) if k_next >= n else t_start + k_next * h0
+        h_try = min(h, t_target - t)
+        lands = h_try >= (t_target - t) * (1 - 1e-9) or (t_target - t - h_try) < 1e-9 * h0
+        if lands:
+            h_try = t_target - t
+        try:
+            x1, w1, info = stepper.step(x, w, t, h_try)
+        except StepFailure as fail:
+            out.rejected += 1
+            out.add(fail.counts)
+            log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)", out.steps + 1, t, h_try, fail.stage,
+                     fail.reason)
+            stop = _give_up(fail, ctl, bud, t, h_try, h0, cuts, out.rejected - rejected0, budget, wall0)
+            if stop is not None:
+                raise IntegrationFailure(
+                    f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
+                    f"after {stop[1]}: stage {fail.stage}: {fail.reason}; Newton residuals "
+                    f"{_fmt_res(fail.residuals)}; {out.steps} steps accepted, {out.rejected} rejected; "
+                    f"last good state at t = {t:.9g}",
+                    x.copy(), w.copy(), t, h_try, fail.residuals, fail, out, cause=stop[0]) from fail
+            cuts, successes, h = cuts + 1, 0, h_try / 2.0
+            pending += 1
+            continue
+        t = t_target if lands else t + h_try
+        if lands:
+            k_next += 1
+        x, w = x1, w1
+        info.rejected_attempts, pending = pending, 0
+        cuts = 0
+        successes += 1
+        _accept(out, info, t, h_try, bar, t0)
+        if on_step is not None:
+            on_step(t, x, w, info)
+        if rebuild is not None and not (final and k_next > n) and rebuild(t, x, w):
+            return x, w, t
+        if not ctl.fixed_step and h < h0 and successes >= ctl.grow_after:
+            h = min(2.0 * h, h0)
+            successes = 0
+        if bud.wall_budget_s is not None and k_next <= n and time.perf_counter() - wall0 > bud.wall_budget_s:
+            raise IntegrationFailure(
+                f"time integration stopped at t = {t:.9g} (step size h = {h_try:.6g}) after the wall-time "
+                f"budget of {bud.wall_budget_s:g} s; {out.steps} steps accepted, {out.rejected} rejected; "
+                f"last good state at t = {t:.9g}", x.copy(), w.copy(), t, h_try, info.stage_residuals[-1],
+                None, out, cause="wall_time")
+    return x, w, t
+
+
 def integrate(
     system,
     x0,
@@ -568,28 +761,23 @@ def integrate(
     n_steps: int,
     stages: int = 1,
     newton_opts: Optional[dict] = None,
-    max_cuts: int = 8,
+    *,
+    control: StepControl = StepControl(),
+    reuse: ReusePolicy = ReusePolicy(),
+    budgets: Budgets = Budgets(),
     on_step: Optional[Callable] = None,
-    progress: bool = False,
-    fixed_step: bool = False,
-    grow_after: int = 2,
+    rebuild: Optional[StructureHook] = None,
     consistent: bool = True,
+    progress: bool = False,
     tableau: Optional[Tableau] = None,
     predictor_degree: int = 2,
     lazy_jacobian: bool = True,
-    jacobian_reuse=False,
-    reuse_contraction: float = 0.5,
-    reuse_h_rtol: float = 0.1,
-    linear_backend: Optional[str] = None,
-    min_step_rel: float = 1e-6,
-    min_step_t_rel: float = 1e-12,
-    max_rejections: Optional[int] = None,
-    wall_budget_s: Optional[float] = None,
 ) -> IntegrationResult:
     """Integrate from ``t0`` to ``t_end`` with nominal step ``h0 = (t_end − t0)/n_steps``.
 
-    Step control (``fixed_step=False``): a failed step (``StepFailure``) is discarded and
-    retried from the last good state with half the step; after ``grow_after`` consecutive
+    Step control (``control``, a ``StepControl``; ``fixed_step=False``): a failed step
+    (``StepFailure``) is discarded and retried from the last good state with half the
+    step; after ``grow_after`` consecutive
     successes the step doubles again, never beyond ``h0``. Steps are clipped to the
     nominal grid ``t0 + k h0`` so a run always lands exactly on ``t_end`` (and on every
     grid point). After ``max_cuts`` consecutive cuts the next failure raises
@@ -597,35 +785,42 @@ def integrate(
     good ``x, w, t``). With ``fixed_step=True`` every step is ``h0`` and the first failure
     raises ``IntegrationFailure`` at once.
 
-    Every loop ends (issue 15, docs/fault_tolerance.md): besides ``max_cuts`` (consecutive
-    cuts, reset by every accepted step, however small), the run raises the same
+    Every loop ends (docs/fault_tolerance.md; ``budgets``, a ``Budgets``): besides
+    ``max_cuts`` (consecutive cuts, reset by every accepted step, however small), the run
+    raises the same
     ``IntegrationFailure`` (``cause`` names which budget) when a cut would take the step
     below ``h_min = max(min_step_rel * h0, min_step_t_rel * |t|)`` (``"min_step"``: the
     step no longer advances t in any useful way; with ``min_step_t_rel`` >= 1e-12, t + h
-    is always > t), after ``max_rejections`` rejected attempts in total (``"rejections"``;
-    default ``max(64, 2 n_steps)``) and, if ``wall_budget_s`` is set, when the loop has run
-    that long (``"wall_time"``; off by default so results depend on the input only).
+    is always > t), after ``max_rejections`` rejected attempts in a segment
+    (``"rejections"``; default ``max(64, 2 n)`` for a segment of n nominal steps) and, if
+    ``wall_budget_s`` is set, when a segment has run that long (``"wall_time"``; off by
+    default so results depend on the input only).
 
-    ``on_step(t, x, w, info)`` is called after every accepted step. With ``consistent``
-    the massless dofs are first solved for at t0 (``consistent_initialization``).
-    ``predictor_degree`` sets the stage predictor (``DirkStepper``; 0 = previous stage value)
-    and ``lazy_jacobian`` skips the Jacobian at converged points (``DirkStepper``).
+    ``on_step(t, x, w, info)`` is called after every accepted step (``info.stage_states``:
+    the converged stage states). ``rebuild`` (a ``StructureHook``) is called next, except
+    after the last step; when it reports a changed structure the step control restarts at
+    that t on a new segment (``StructureHook``; ``IntegrationResult.restarts`` counts them);
+    a rebuild the hook reports as unchanged keeps the held factorisation (the contraction
+    test of the modified Newton sees the changed values).
+    With ``consistent`` the massless dofs are first solved for at t0
+    (``consistent_initialization``). ``predictor_degree`` sets the stage predictor
+    (``DirkStepper``; 0 = previous stage value) and ``lazy_jacobian`` skips the Jacobian at
+    converged points (``DirkStepper``).
 
-    Factorisation reuse (modified Newton; docs/time_integration.md): ``jacobian_reuse``
-    False (default: one factorisation per Newton iteration, today's results bit for bit),
-    True (keep a factorisation across iterations, stages and steps while the contraction
-    stays <= ``reuse_contraction``) or "auto" (also weigh the measured cost of the extra
-    iterations against a fresh factorisation); ``reuse_h_rtol``: relative change of
-    h·a_ii that drops the factorisation; ``linear_backend``: its
-    ``rve.solvers.linear.get_backend`` name. The result counts Jacobian evaluations,
-    factorisations, reused iterations, rejected modified steps, full-Newton stage retries
-    and why factorisations were dropped (``refactor_reasons``).
+    Factorisation reuse (modified Newton; docs/time_integration.md; ``reuse``, a
+    ``ReusePolicy``): ``mode`` False (default: one factorisation per Newton iteration), True
+    (keep a factorisation across iterations, stages and steps while the contraction stays
+    <= ``contraction``) or "auto" (also weigh the measured cost of the extra iterations
+    against a fresh factorisation); ``h_rtol``: relative change of h·a_ii that drops the
+    factorisation; ``backend``: its ``rve.solvers.linear.get_backend`` name or factory.
+    ``integrator_options(**flat)`` makes these objects from flat option names. The result
+    counts Jacobian evaluations, factorisations, reused iterations, rejected modified
+    steps, full-Newton stage retries and why factorisations were dropped
+    (``refactor_reasons``).
     """
     tab = tableau if tableau is not None else sdirk(stages)
     if n_steps < 1 or not t_end > t0:
         raise ValueError("need n_steps >= 1 and t_end > t0")
-    stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian, jacobian_reuse,
-                          reuse_contraction, reuse_h_rtol, linear_backend)
     x = np.array(x0, dtype=float, copy=True)
     w = np.array(w0, dtype=float, copy=True)
     t = float(t0)
@@ -635,97 +830,33 @@ def integrate(
         if res0 is not None:
             out.add(_counts([res0]))
     h0 = (float(t_end) - float(t0)) / int(n_steps)
-    h = h0
-    budget_rejections = max(64, 2 * int(n_steps)) if max_rejections is None else int(max_rejections)
-    wall0 = time.perf_counter()
-    k_next = 1                   # index of the next nominal grid point
-    cuts = 0                     # consecutive cuts
-    successes = 0                # consecutive successes since the last cut
     bar = None
     if progress:
         from tqdm.auto import tqdm
         bar = tqdm(total=float(t_end) - float(t0), desc=f"SDIRK{tab.stages}",
                    bar_format="{l_bar}{bar}| t-t0 = {n:.6g}/{total:.6g} [{elapsed}<{remaining}{postfix}]")
-
-    def grid(k):
-        return float(t_end) if k >= n_steps else float(t0) + k * h0
-
+    reasons: dict = {}
     try:
-        while k_next <= n_steps:
-            t_target = grid(k_next)
-            h_try = min(h, t_target - t)
-            lands = h_try >= (t_target - t) * (1 - 1e-9) or (t_target - t - h_try) < 1e-9 * h0
-            if lands:
-                h_try = t_target - t
+        t_stop, n = (float(t_end), int(n_steps)) if rebuild is None else _horizon(rebuild, t, t_end, h0)
+        while True:
+            stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian, reuse.mode,
+                                  reuse.contraction, reuse.h_rtol, reuse.backend, watch_structure=rebuild is None)
+            final = t_stop >= float(t_end)
             try:
-                x1, w1, info = stepper.step(x, w, t, h_try)
-            except StepFailure as fail:
-                out.rejected += 1
-                out.add(fail.counts)
-                log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)",
-                         out.steps + 1, t, h_try, fail.stage, fail.reason)
-                h_floor = max(float(min_step_rel) * h0, float(min_step_t_rel) * abs(t))
-                cause = None
-                if fixed_step:
-                    cause, why = "fixed_step", "fixed-step mode"
-                elif cuts >= max_cuts:
-                    cause, why = "max_cuts", f"{cuts} consecutive step cuts (max_cuts = {max_cuts})"
-                elif h_try / 2.0 < h_floor:
-                    cause, why = "min_step", (f"the next step h/2 = {h_try / 2.0:.3g} would be below the minimum "
-                                              f"step {h_floor:.3g} (max(min_step_rel {min_step_rel:g} x h0 "
-                                              f"{h0:.3g}, min_step_t_rel {min_step_t_rel:g} x t))")
-                elif out.rejected >= budget_rejections:
-                    cause, why = "rejections", (f"{out.rejected} rejected steps in total (max_rejections = "
-                                                f"{budget_rejections})")
-                elif wall_budget_s is not None and time.perf_counter() - wall0 > wall_budget_s:
-                    cause, why = "wall_time", f"the wall-time budget of {wall_budget_s:g} s"
-                if cause is not None:
-                    raise IntegrationFailure(
-                        f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
-                        f"after {why}: stage {fail.stage}: {fail.reason}; Newton residuals "
-                        f"{_fmt_res(fail.residuals)}; {out.steps} steps accepted, {out.rejected} rejected; "
-                        f"last good state at t = {t:.9g}",
-                        x.copy(), w.copy(), t, h_try, fail.residuals, fail, out, cause=cause) from fail
-                cuts += 1
-                successes = 0
-                h = h_try / 2.0
-                continue
-            # accepted
-            t = t_target if lands else t + h_try
-            if lands:
-                k_next += 1
-            x, w = x1, w1
-            cuts = 0
-            successes += 1
-            out.steps += 1
-            out.add({"newton_iterations": info.newton_iterations, "linear_solves": info.linear_solves,
-                     "jacobians": info.jacobians, "factorizations": info.factorizations,
-                     "reuses": sum(info.stage_reuses), "rejected_reuses": info.rejected_reuses,
-                     "stage_retries": info.stage_retries})
-            for c in info.stage_contractions:
-                out.contractions.extend(c)
-            out.h_min = min(out.h_min, h_try)
-            out.history.append((t, h_try, info.newton_iterations))
-            log.info("step %d t=%.6g h=%.3e newton its=%s", out.steps, t, h_try, info.stage_iterations)
-            if bar is not None:
-                bar.n = t - float(t0)
-                bar.set_postfix(h=f"{h_try:.2e}", its=info.newton_iterations, refresh=False)
-                bar.refresh()
-            if on_step is not None:
-                on_step(t, x, w, info)
-            if not fixed_step and h < h0 and successes >= grow_after:
-                h = min(2.0 * h, h0)
-                successes = 0
-            if wall_budget_s is not None and k_next <= n_steps and time.perf_counter() - wall0 > wall_budget_s:
-                raise IntegrationFailure(
-                    f"time integration stopped at t = {t:.9g} (step size h = {h_try:.6g}) after the wall-time "
-                    f"budget of {wall_budget_s:g} s; {out.steps} steps accepted, {out.rejected} rejected; "
-                    f"last good state at t = {t:.9g}", x.copy(), w.copy(), t, h_try, info.stage_residuals[-1],
-                    None, out, cause="wall_time")
+                x, w, t = _segment(stepper, out, x, w, t, t_stop, n, control, budgets, on_step, rebuild, final, bar,
+                                   t0)
+            finally:
+                if stepper.reuse is not None:
+                    for k, v in stepper.reuse.refactor_reasons.items():
+                        reasons[k] = reasons.get(k, 0) + v
+            if t >= float(t_end):
+                break
+            out.restarts += 1
+            t_stop, n = _horizon(rebuild, t, t_end, h0)
     finally:
         if bar is not None:
             bar.close()
     out.x, out.w, out.t = x, w, t
-    if stepper.reuse is not None:
-        out.refactor_reasons = dict(stepper.reuse.refactor_reasons)
+    if reuse.mode:
+        out.refactor_reasons = reasons
     return out

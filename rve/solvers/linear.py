@@ -1,95 +1,31 @@
-"""Linear solves of the sparse tangents: the one home of the solver choices (docs/engine.md).
+"""Linear solves of the sparse tangents, on the factorisation backends of
+``rve.solvers.backends`` (names, the default choice and the backends' own contracts are
+there; the full text and the measurements: docs/engine.md, "The linear-solver layer in
+full").
 
 Contract
 --------
-* Backend choice: ``resolve_backend(name=None, symmetric=True) -> str``. ``name`` (the
-  ``backend=`` argument of the functions below) wins; else the environment variable
-  ``RVE_LINEAR_BACKEND``; else ``DEFAULT_BACKEND = "auto"``. ``"auto"`` is ``"pardiso"``
-  when ``rve.solvers.pardiso.available()`` (and the matrix is symmetric), else
-  ``"superlu"``. A name outside ``BACKENDS`` / ``"auto"`` raises ``ValueError`` listing the
-  allowed ones; ``"pardiso"`` named explicitly where it is unavailable raises
-  ``RuntimeError`` with the reason. ``RVE_LINEAR_BACKEND=superlu`` forces the pure-scipy
-  fallback everywhere (docs/engine.md, "Backend choice").
-* Threads of the energy minimiser's PARDISO factorisations (defined in ``rve.threads``,
-  re-exported here; the compiled kernels use the same count): ``solver_threads() -> int``
-  (``linear_threads(n)`` in effect, else ``$RVE_PARDISO_THREADS``, else
-  ``min(DEFAULT_THREADS, cores)``), in MKL's reproducible mode (``rve.solvers.minimize.
-  CNR_THREADS``: 1 and 2 threads give the same bits; docs/engine.md "Two threads").
-* ``sparse_solve(J, r, backend=None) -> du``: one direct solve ``J du = r`` (Newton, the
-  static and pseudo-transient solvers, the capped Newton): LAPACK's banded LU when ``J``
-  is narrowly banded (single fibrils); else the chosen backend — PARDISO (only when ``J``
-  is symmetric to rounding: a two-vector bilinear test) or SuperLU in symmetric mode
-  (``SUPERLU_SYMMETRIC``) — checked by its residual ``|J du - r| <= 1e-8 |r|``; a failed
-  check or a breakdown (PARDISO's perturbed pivots show up here) falls back to SuperLU
-  symmetric mode and then to COLAMD + partial pivoting (``SUPERLU_FALLBACK_PERMC``).
-  Raises ``RuntimeError`` only if the last fallback does. ``backend`` may be a backend
-  *instance* (``get_backend(...)``): keeping one across calls reuses PARDISO's analysis
-  while the pattern is unchanged; by default (a name or None) one shared instance per
-  backend name is kept by this module (``release_shared()`` frees it).
-* ``factorize(A, symmetric=True, inertia=False, backend=None) -> backend instance``: a
-  factorisation of ``A`` with ``.solve(b)`` and ``.negative_pivots`` (the number of
-  negative pivots of a symmetric factorisation; by Sylvester's law of inertia the number
-  of negative eigenvalues of a symmetric ``A``). With ``inertia=True`` the pivots are
-  checked at once and a factorisation with a zero or non-finite pivot raises
-  ``SingularFactorError``. ``backend`` is a name or an instance (reused, analysis kept).
-* ``factor_inertia(A, backend=None) -> (factorisation, n_negative)``: the energy
-  minimiser's inertia check (docs/relaxation.md); ``(None, -1)`` for a zero or non-finite
-  pivot. With PARDISO a factorisation that perturbed a pivot (its count of that pivot's
-  sign is then not SuperLU's) or failed is redone by SuperLU, so the count always equals
-  SuperLU's on the same matrix; a backend without inertia (``pardiso_unsym``) leaves it to
-  SuperLU.
-* ``factor_positive_definite(A, backend=None) -> factorisation or None``: the energy
-  minimiser's definiteness test of ``K + sigma M``: a factorisation to solve with when
-  ``A`` is positive definite, None when it is not. With PARDISO the instance's Cholesky
-  companion (mtype 2, ``PardisoFactorization.cholesky``), which stops at the first pivot
-  <= 0 (a tenth of a factorisation or less on the minimiser's indefinite matrices:
-  docs/engine.md "Cholesky as the definiteness test"); otherwise ``factor_inertia`` and
-  its count (SuperLU: today's arithmetic).
-* ``negative_eigenvalue_count(A, backend=None) -> int``: the stability check of a
-  relaxed state (its static tangent's negative eigenvalues): 0 when the Cholesky companion
-  of a PARDISO instance succeeds, otherwise ``factor_inertia``'s count (-1 for a zero or
-  non-finite pivot). The same number as ``factor_inertia`` (a Cholesky succeeds exactly on
-  positive definite matrices); it saves the LDL^T's analysis with weighted matching where
-  the answer is 0, which it is for every stable state.
-* ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (the minimiser's and
-  the pseudo-transient solver's regularised tangent). ``keep_pattern=False`` is scipy's
-  sum (explicit zeros dropped: today's arithmetic); ``True`` keeps ``J``'s stored pattern
-  (explicit zeros of inactive contact pairs included) when ``M``'s pattern lies in it.
-
-Backends. A backend instance is stateful and used as ``analyse(pattern)`` (fill-reducing
-ordering / symbolic factorisation; ``factorize`` calls it itself when the pattern
-changes), ``factorize(A)`` (numeric factorisation; returns the instance), ``solve(b)`` and
-``negative_pivots``. Keeping one instance across calls with the same pattern reuses the
-analysis.
-
-* ``"pardiso"`` (``PardisoBackend``, ``rve/solvers/pardiso.py``): MKL PARDISO LDL^T,
-  symmetric indefinite, one MKL thread, explicit zeros dropped, the analysis (METIS +
-  matching) reused while the nonzero pattern lies in the analysed one (a new analysis on
-  the union when small). The energy minimiser hands it the contact map's stored pattern
-  and analyses that (``analyse_stored``; ``rve.solvers.minimize.run_backend``): measured
-  the best of four choices, docs/engine.md "Backend choice". ``symmetric=True`` reads one
-  triangle (symmetric matrices only); ``symmetric=False`` is PARDISO's LU of a real
-  unsymmetric matrix (mtype 11: full pattern, nonsymmetric matching and scaling, pivot
-  perturbation 1e-13, the same analysis reuse; no inertia). ``"auto"`` with
-  ``symmetric=False`` stays ``"superlu"``; ``rve.solvers.newton.StageFactorisation`` routes
-  an unsymmetric stage matrix handed to a symmetric ``"pardiso"`` instance to its mtype-11
-  companion (docs/engine.md "Unsymmetric stage matrices (round 4)").
-* ``"pardiso_unsym"`` (``PardisoUnsymBackend``): mtype 11 whatever ``symmetric`` says.
-* ``"superlu"`` (``SuperLUBackend``): scipy's SuperLU. ``symmetric=True``: minimum degree
-  on A^T + A with diagonal pivots only (``SUPERLU_SYMMETRIC``), so the diagonal of U is
-  the D of A = L D L^T (up to rounding) and gives the inertia; ``symmetric=False``:
-  COLAMD with partial pivoting (no inertia). SuperLU orders every factorisation afresh,
-  so ``analyse`` only records the pattern.
-* ``"banded"`` (``BandedBackend``): LAPACK ``gbsv`` on the band of ``A`` (LU with partial
-  pivoting, no inertia); ``factorize`` raises ``NotBandedError`` when the bandwidth
-  exceeds ``BANDED_MAX_BANDWIDTH``. The band is factorised in each ``solve``.
-  ``sparse_solve`` takes this path itself for narrow bands, whatever the backend.
+* ``sparse_solve(J, r, backend=None) -> du``: one direct solve ``J du = r``: LAPACK's banded
+  LU for narrow bands, else the backend (PARDISO only for a matrix symmetric to rounding)
+  checked by its residual ``|J du - r| <= 1e-8 |r|``, falling back to SuperLU's symmetric
+  mode and then COLAMD with partial pivoting; one shared instance per backend name
+  (``release_shared()`` frees them).
+* ``factorize(A, symmetric=True, inertia=False, backend=None) -> backend instance``.
+* ``factor_inertia(A, backend=None) -> (factorisation, n_negative)`` (``(None, -1)`` for a
+  zero or non-finite pivot; always SuperLU's count), ``factor_positive_definite(A,
+  backend=None, cholesky=True) -> factorisation or None`` (PARDISO's Cholesky where it
+  is there), ``negative_eigenvalue_count(A, backend=None) -> int``.
+* ``shifted(J, M, sigma, keep_pattern=False)``: ``J + sigma M`` (scipy's sum, or on J's
+  stored pattern); ``is_symmetric(J, rtol=1e-10)``.
+* Re-exported for callers: the backends, their registry (``resolve_backend``,
+  ``get_backend``, ``register_backend``, ``BACKENDS``), the errors and the thread helpers
+  of ``rve.threads`` (``solver_threads``, ``linear_threads``).
 """
 from __future__ import annotations
 
 import copy
 import os
-from typing import Callable, Dict, Optional, Union
+from typing import Dict, Union
 
 import numpy as np
 import scipy.linalg
@@ -97,6 +33,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..threads import DEFAULT_THREADS, THREADS_ENV, linear_threads, solver_threads
+from .backends.banded import BANDED_MAX_BANDWIDTH, BandedBackend, NotBandedError, band_of
+from .backends.base import LinearBackend, NotPositiveDefiniteError, SingularFactorError
+from .backends.base import same_buffer as _same_buffer
+from .backends.registry import (BACKEND_ENV, BACKENDS, DEFAULT_BACKEND, PardisoBackend, PardisoUnsymBackend,
+                                get_backend, register_backend, resolve_backend)
+from .backends.superlu import SUPERLU_FALLBACK_PERMC, SUPERLU_SYMMETRIC, SuperLUBackend
 
 __all__ = ["sparse_solve", "factorize", "factor_inertia", "factor_positive_definite", "negative_eigenvalue_count", "shifted", "LinearBackend", "SuperLUBackend", "BandedBackend",
            "solver_threads", "linear_threads", "THREADS_ENV", "DEFAULT_THREADS",
@@ -105,244 +47,9 @@ __all__ = ["sparse_solve", "factorize", "factor_inertia", "factor_positive_defin
            "SUPERLU_FALLBACK_PERMC", "BANDED_MAX_BANDWIDTH", "band_of", "is_symmetric"]
 
 
-#: Our Jacobians are structurally symmetric with dominant diagonals (beam stiffness, mass,
-#: conduction, contact penalties). SuperLU in symmetric mode (minimum degree on A^T + A,
-#: diagonal pivots) fills about half as much as COLAMD with partial pivoting: measured on
-#: the 80-fibril weave (21,760 free dofs) 0.77 s vs 1.65 s per factorisation, 4.2 M vs
-#: 9.1 M factor entries (docs/engine.md). With diagonal pivots only, the diagonal of U of a
-#: symmetric matrix is the D of A = L D L^T: its signs give the inertia (Sylvester).
-SUPERLU_SYMMETRIC = dict(permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
-
-#: Column ordering of the unsymmetric fallback (partial pivoting).
-SUPERLU_FALLBACK_PERMC = "COLAMD"
-
 #: A symmetric-mode solution is accepted when ``|J du - r| <= _FALLBACK_RTOL |r|``; else
 #: (or if a diagonal pivot breaks down) the fallback solves.
 _FALLBACK_RTOL = 1e-8
-
-#: Single fibrils (and anything else whose node-interleaved matrix is narrowly banded) go
-#: to LAPACK's banded LU: for the 451-dof dynamic wire ~10x cheaper than SuperLU.
-BANDED_MAX_BANDWIDTH = 48
-
-
-class SingularFactorError(RuntimeError):
-    """A factorisation met an exactly zero (or non-finite) pivot."""
-
-
-class NotPositiveDefiniteError(RuntimeError):
-    """A Cholesky factorisation met a pivot <= 0: the matrix is not positive definite."""
-
-
-class NotBandedError(ValueError):
-    """The matrix is too widely banded for the banded backend."""
-
-
-# ----------------------------------------------------------------------------- backends
-class LinearBackend:
-    """Interface of a factorisation backend (see the module docstring).
-
-    Subclasses implement ``_analyse(A)`` (optional), ``_factorize(A, inertia)``,
-    ``solve(b)`` and ``_pivots()`` (the diagonal pivots, for ``negative_pivots``)."""
-
-    #: registry name
-    name = "abstract"
-    #: whether the backend can count negative pivots (inertia)
-    provides_inertia = False
-
-    def __init__(self, symmetric: bool = True):
-        self.symmetric = bool(symmetric)
-        self.pattern_key = None
-        self._negative = None
-
-    # -- analysis --------------------------------------------------------------
-    @staticmethod
-    def pattern_of(A) -> tuple:
-        """A key of the sparsity pattern of the CSC matrix ``A`` (shape, indptr, indices)."""
-        return (A.shape, A.indptr.tobytes(), A.indices.tobytes())
-
-    def analyse(self, pattern) -> "LinearBackend":
-        """Symbolic analysis of the sparsity pattern of ``pattern`` (a sparse matrix)."""
-        P = sp.csc_matrix(pattern)
-        self._analyse(P)
-        self.pattern_key = self.pattern_of(P) if self.reuses_analysis else None
-        return self
-
-    #: True when ``analyse`` does work worth reusing (then ``factorize`` compares patterns)
-    reuses_analysis = False
-
-    def _analyse(self, A) -> None:
-        pass
-
-    # -- numeric factorisation ---------------------------------------------------
-    def factorize(self, A, inertia: bool = False) -> "LinearBackend":
-        """Numeric factorisation of ``A`` (re-analysing if its pattern changed).
-        ``inertia=True`` computes ``negative_pivots`` now and raises
-        ``SingularFactorError`` on a zero or non-finite pivot."""
-        if inertia and not (self.provides_inertia and self.symmetric):
-            raise ValueError(f"backend {self.name!r} (symmetric={self.symmetric}) does not give the inertia")
-        if self.reuses_analysis:
-            A = sp.csc_matrix(A)
-            if self.pattern_key != self.pattern_of(A):
-                self.analyse(A)
-        self._negative = None
-        self._factorize(A)
-        if inertia:
-            d = self._pivots()
-            if not np.all(np.isfinite(d)):
-                raise SingularFactorError("non-finite pivot")
-            self._negative = int(np.count_nonzero(d < 0.0))
-        return self
-
-    def _factorize(self, A) -> None:
-        raise NotImplementedError
-
-    def solve(self, b) -> np.ndarray:
-        raise NotImplementedError
-
-    def _pivots(self) -> np.ndarray:
-        raise NotImplementedError
-
-    @property
-    def negative_pivots(self) -> int:
-        """Number of negative pivots of the last factorisation (= negative eigenvalues of a
-        symmetric matrix factorised with diagonal pivots)."""
-        if self._negative is None:
-            if not (self.provides_inertia and self.symmetric):
-                raise ValueError(f"backend {self.name!r} (symmetric={self.symmetric}) does not give the inertia")
-            self._negative = int(np.count_nonzero(self._pivots() < 0.0))
-        return self._negative
-
-
-class SuperLUBackend(LinearBackend):
-    """scipy's SuperLU: symmetric mode with diagonal pivots (``SUPERLU_SYMMETRIC``), or
-    COLAMD with partial pivoting when ``symmetric=False``."""
-
-    name = "superlu"
-    provides_inertia = True
-
-    def _factorize(self, A) -> None:
-        try:
-            if self.symmetric:
-                self.lu = spla.splu(sp.csc_matrix(A), **SUPERLU_SYMMETRIC)
-            else:
-                self.lu = spla.splu(sp.csc_matrix(A), permc_spec=SUPERLU_FALLBACK_PERMC)
-        except RuntimeError as exc:  # exactly singular pivot
-            self.lu = None
-            raise SingularFactorError(str(exc)) from exc
-
-    def solve(self, b) -> np.ndarray:
-        return self.lu.solve(b)
-
-    def _pivots(self) -> np.ndarray:
-        return self.lu.U.diagonal()
-
-
-def band_of(J):
-    """``(lo, up, ab)``: lower and upper bandwidth and LAPACK band storage of the CSC
-    matrix ``J`` (no duplicate entries); ``None`` if ``J`` is empty, smaller than 8 or
-    banded wider than ``BANDED_MAX_BANDWIDTH``."""
-    n = J.shape[0]
-    if J.nnz == 0 or n < 8:
-        return None
-    # J is CSC without duplicate entries: columns from indptr, rows in indices
-    cols = np.repeat(np.arange(n), np.diff(J.indptr))
-    d = cols - J.indices
-    lo, up = int(max(0, -d.min())), int(max(0, d.max()))
-    if max(lo, up) > BANDED_MAX_BANDWIDTH:
-        return None
-    ab = np.zeros((lo + up + 1, n))
-    ab[up - d, cols] = J.data
-    return lo, up, ab
-
-
-class BandedBackend(LinearBackend):
-    """LAPACK's banded LU (``scipy.linalg.solve_banded``) on a narrowly banded matrix."""
-
-    name = "banded"
-    provides_inertia = False
-
-    def _factorize(self, A) -> None:
-        J = sp.csc_matrix(A)
-        J.sum_duplicates()
-        band = band_of(J)
-        if band is None:
-            raise NotBandedError(f"bandwidth above {BANDED_MAX_BANDWIDTH} (or an empty / tiny matrix)")
-        self.band = band
-
-    def solve(self, b) -> np.ndarray:
-        """Raises ``numpy.linalg.LinAlgError`` for a singular band."""
-        lo, up, ab = self.band
-        return scipy.linalg.solve_banded((lo, up), ab, b, check_finite=False)
-
-
-def PardisoBackend(symmetric: bool = True, **options):
-    """The ``"pardiso"`` backend: a fresh ``rve.solvers.pardiso.PardisoFactorization``
-    (one MKL thread, weighted matching, explicit zeros dropped; ``options`` go to it):
-    LDLᵀ of a symmetric matrix (mtype -2) or, ``symmetric=False``, LU of an unsymmetric one
-    (mtype 11, no inertia). A symmetric instance's ``unsymmetric()`` is its mtype-11
-    companion (``StageFactorisation`` sends the unsymmetric stage matrices there).
-    ``RuntimeError`` with the reason when MKL is unavailable."""
-    from . import pardiso
-
-    if not pardiso.available():
-        raise RuntimeError(f"linear-solver backend 'pardiso' is not available: {pardiso.unavailable_reason()}")
-    return pardiso.PardisoFactorization(symmetric=symmetric, **options)
-
-
-def PardisoUnsymBackend(symmetric: bool = False, **options):
-    """The ``"pardiso_unsym"`` backend: PARDISO's LU (mtype 11) whatever ``symmetric`` says
-    (an explicit choice for matrices known to be unsymmetric: the dynamic scenes' stage
-    matrices). ``RuntimeError`` with the reason when MKL is unavailable."""
-    from . import pardiso
-
-    if not pardiso.available():
-        raise RuntimeError(f"linear-solver backend 'pardiso_unsym' is not available: {pardiso.unavailable_reason()}")
-    return pardiso.PardisoFactorization(symmetric=False, **options)
-
-
-#: backend classes by name
-BACKENDS: Dict[str, Callable[..., LinearBackend]] = {"superlu": SuperLUBackend, "banded": BandedBackend,
-                                                     "pardiso": PardisoBackend, "pardiso_unsym": PardisoUnsymBackend}
-
-#: the backend used when neither a ``backend=`` argument nor ``RVE_LINEAR_BACKEND`` names one
-DEFAULT_BACKEND = "auto"
-
-#: environment variable overriding the default backend (superlu | pardiso | pardiso_unsym | auto)
-BACKEND_ENV = "RVE_LINEAR_BACKEND"
-
-
-def register_backend(name: str, cls: Callable[..., LinearBackend]) -> None:
-    """Make ``cls`` (a ``LinearBackend`` subclass) available as ``factorize(..., backend=name)``."""
-    BACKENDS[str(name)] = cls
-
-
-def _allowed() -> str:
-    return ", ".join(["auto", *sorted(BACKENDS)])
-
-
-def resolve_backend(name: Optional[str] = None, symmetric: bool = True) -> str:
-    """The registry name that ``name`` (else ``$RVE_LINEAR_BACKEND``, else
-    ``DEFAULT_BACKEND``) stands for; ``"auto"``: pardiso when available and ``symmetric``,
-    else superlu. Raises ``ValueError`` for an unknown name."""
-    source = "backend argument"
-    if name is None:
-        env = os.environ.get(BACKEND_ENV, "").strip()
-        name, source = (env, f"environment variable {BACKEND_ENV}") if env else (DEFAULT_BACKEND, "default")
-    key = str(name).strip().lower()
-    if key == "auto":
-        from . import pardiso
-
-        return "pardiso" if symmetric and pardiso.available() else "superlu"
-    if key not in BACKENDS:
-        raise ValueError(f"unknown linear-solver backend {name!r} (from the {source}; allowed: {_allowed()})")
-    return key
-
-
-def get_backend(name: Optional[str] = None, symmetric: bool = True) -> LinearBackend:
-    """A fresh instance of the backend ``name`` (``resolve_backend``: argument, else
-    ``$RVE_LINEAR_BACKEND``, else ``"auto"``)."""
-    return BACKENDS[resolve_backend(name, symmetric)](symmetric=symmetric)
-
 
 BackendSpec = Union[None, str, LinearBackend, object]
 
@@ -397,13 +104,6 @@ def shifted(J, M, sigma: float, keep_pattern: bool = False):
 
 
 _SLOT_CACHE: dict = {}
-
-
-def _same_buffer(a, b) -> bool:
-    """``a`` and ``b`` are the same array or views of the very same memory with the same
-    layout (scipy's constructors wrap index arrays in new views: identity alone misses)."""
-    return a is b or (a.shape == b.shape and a.dtype == b.dtype and a.strides == b.strides
-                      and a.ctypes.data == b.ctypes.data)
 
 
 def _same_arrays(key, X) -> bool:
@@ -568,7 +268,7 @@ def factor_positive_definite(A, backend: BackendSpec = None, cholesky: bool = Tr
     energy minimiser's test of ``K + sigma M``). ``backend``: a name or an instance (kept).
     A PARDISO instance tries its Cholesky companion (``cholesky()``), which stops at the
     first pivot <= 0; any other PARDISO failure, every other backend, and ``cholesky=False``
-    (the LDL^T test of round 7, for A/B benchmarks) go through ``factor_inertia`` (positive
+    (the LDL^T inertia test, for A/B benchmarks) go through ``factor_inertia`` (positive
     definite = no negative and no zero pivot)."""
     solver = _instance(backend, symmetric=True)
     verdict = _cholesky_verdict(A, solver) if cholesky else None

@@ -24,7 +24,7 @@ themselves (their one side effect on the system).
   PARDISO's symbolic analysis is reused while the pattern is unchanged (docs/engine.md).
 
 Neither solver raises for non-convergence: the result says ``converged`` and why not
-(``reason``). Moved here from ``rve/contact/relax.py`` (issue 9), arithmetic unchanged.
+(``reason``).
 """
 from __future__ import annotations
 
@@ -33,67 +33,45 @@ import gc
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
-from .linear import (factor_inertia, factor_positive_definite, get_backend, resolve_backend, shifted, solver_threads,
-                     sparse_solve)
+from .backends.registry import run_backend
+from .linear import factor_inertia, factor_positive_definite, shifted, sparse_solve
 from .newton import NewtonResult, convergence_rates
 from .static import StaticProblem
 
-__all__ = ["minimize_energy", "MinimizeResult", "capped_newton", "active_pair_keys", "run_backend",
-           "KEEP_STORED_PATTERN"]
+__all__ = ["minimize_energy", "MinimizeResult", "MinimizeOptions", "capped_newton", "active_pair_keys"]
 
 log = logging.getLogger("rve.solvers.minimize")
 
-#: Pattern the minimiser hands to PARDISO: True (default) K + sigma M on the contact map's
-#: stored pattern (explicit zeros of inactive candidate pairs kept, ``shifted(...,
-#: keep_pattern=True)``), which PARDISO (``PARDISO_OPTIONS``: ``analyse_stored``) analyses
-#: when the nonzero pattern leaves the analysed one and otherwise factorises on the analysed
-#: pattern; False: the nonzero pattern of scipy's sum. Measured on the 80-fibril weave
-#: (docs/engine.md, "Backend choice"): 30 analyses instead of 283 at 30 el/fibril, 153 vs
-#: 169 s of CPU; 4 instead of 50 at 12.
-KEEP_STORED_PATTERN = True
+@dataclass(frozen=True)
+class MinimizeOptions:
+    """The linear-algebra policy of one minimiser run (``minimize_energy``, ``capped_newton``).
 
-#: options of the PARDISO instance a run keeps (``PardisoFactorization``'s keywords;
-#: benchmarks/engine_speed.py measures variants through it)
-PARDISO_OPTIONS: dict = {"drop_zeros": True, "analyse_stored": True}
+    ``keep_stored_pattern``: True (default) factorises K + sigma M on the contact map's
+    stored pattern (explicit zeros of inactive candidate pairs kept, ``shifted(...,
+    keep_pattern=True)``), which PARDISO analyses when the nonzero pattern leaves the
+    analysed one (docs/engine.md, "Backend choice": 30 analyses instead of 283 on the
+    30-element weave); False: the nonzero pattern of scipy's sum. ``pardiso_options``:
+    ``PardisoFactorization`` keywords of the run's instance (None:
+    ``rve.solvers.backends.registry.PARDISO_RUN_OPTIONS``). ``cholesky_test``: the
+    definiteness test of K + sigma M is PARDISO's Cholesky (True; it stops at the first
+    pivot <= 0) or the LDL^T inertia count (False); the same verdicts and sigma ladder
+    (tests/test_pardiso.py; docs/engine.md "Cholesky as the definiteness test").
+    """
 
-#: the definiteness test of K + sigma M: PARDISO's Cholesky (True; it stops at the first pivot
-#: <= 0, a fraction of a factorisation on an indefinite matrix) or the LDL^T inertia count
-#: (False, round 7; benchmarks/engine_speed.py's ``pardiso_t2_ldlt``). Same verdicts, same
-#: sigma ladder (tests/test_pardiso.py); docs/engine.md "Cholesky as the definiteness test".
-CHOLESKY_TEST = True
+    keep_stored_pattern: bool = True
+    pardiso_options: Optional[dict] = None
+    cholesky_test: bool = True
 
-#: MKL's conditional numerical reproducibility for up to this many threads (iparm(34)):
-#: the minimiser's factorisations give the same bits on 1 and 2 threads, so a Snakemake job
-#: scaled down from 2 threads to 1 (``-j1``) computes the same table (docs/engine.md "Two
-#: threads"). More threads than this (``RVE_PARDISO_THREADS`` > 2) set CNR for that many:
-#: reproducible run to run, but other rounding than on 1-2 threads.
-CNR_THREADS = 2
+    def run_backend(self, backend=None):
+        """The run's backend instance (``rve.solvers.backends.run_backend``)."""
+        return run_backend(backend, keep_pattern=self.keep_stored_pattern, pardiso_options=self.pardiso_options)
 
 
-def run_backend(backend=None, keep_pattern: bool = None):
-    """``(instance, owned)``: the linear-solver backend one solver run keeps for all its
-    factorisations (``backend``: an instance, used as is, or a name / None:
-    ``rve.solvers.linear.resolve_backend``), so PARDISO's analysis is reused while the
-    pattern is unchanged; ``owned`` says whether the run must release it."""
-    if backend is not None and not isinstance(backend, str):
-        return backend, False
-    keep = KEEP_STORED_PATTERN if keep_pattern is None else bool(keep_pattern)
-    name = resolve_backend(backend, symmetric=True)
-    if name == "pardiso":
-        from .pardiso import PardisoFactorization
-
-        threads = solver_threads()
-        opts = {"drop_zeros": not keep, "threads": threads, "cnr": max(CNR_THREADS, threads), **PARDISO_OPTIONS}
-        return PardisoFactorization(**opts), True
-    return get_backend(name, symmetric=True), True
-
-
-def _release(solver, owned: bool) -> None:
-    if owned and hasattr(solver, "release"):
-        solver.release()
+DEFAULT_OPTIONS = MinimizeOptions()
 
 
 def _analyses(solver) -> int:
@@ -109,21 +87,19 @@ def _free_centroids(prob, layout) -> np.ndarray:
 
 
 def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20,
-                  max_rejections=12, backend=None):
+                  max_rejections=12, backend=None, options: MinimizeOptions = DEFAULT_OPTIONS):
     """Static Newton on ``F(x, 0, t) = 0`` with the centroid motion per iteration capped
     at ``step_cap``, the contact map rebuilt after ``step_cap`` of motion, and a
     Levenberg-Marquardt safeguard: a step that increases |F| is rejected and retried
     with ``(K + sigma M) du = -F`` (sigma raised 8x per rejection, lowered 4x after an
-    accepted step, down to pure Newton). ``backend``: the linear solver (``run_backend``;
-    one instance for the run). Returns ``(x, w, NewtonResult)``."""
-    solver, owned = run_backend(backend)
-    try:
-        return _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver)
-    finally:
-        _release(solver, owned)
+    accepted step, down to pure Newton). ``backend``: the linear solver (one instance for
+    the run, ``options.run_backend``). Returns ``(x, w, NewtonResult)``."""
+    with options.run_backend(backend) as solver:
+        return _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver,
+                              options.keep_stored_pattern)
 
 
-def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver):
+def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver, keep_stored):
     w0 = np.zeros(system.n)
     lay = system.layout
 
@@ -146,7 +122,7 @@ def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, m
             return (*prob.state(u), NewtonResult(u, False, it, res, "non-finite residual"))
         if rn <= atol or rn <= rtol * r0:
             return (*prob.state(u), NewtonResult(u, True, it, res))
-        A = shifted(J, Mff, sigma, keep_pattern=KEEP_STORED_PATTERN and solver.name == "pardiso")
+        A = shifted(J, Mff, sigma, keep_pattern=keep_stored and solver.name == "pardiso")
         try:
             du = -sparse_solve(A, r, backend=solver)
         except RuntimeError as exc:
@@ -227,10 +203,17 @@ class MinimizeResult(NewtonResult):
     backend: str = ""
     analyses: int = 0
 
+    def accepted(self, residual: float, energy: float, sigma: float, alpha: float) -> None:
+        """Record an accepted step."""
+        self.residuals.append(residual)
+        self.energies.append(energy)
+        self.sigmas.append(sigma)
+        self.steps.append(alpha)
+
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
                     label="minimize", time_budget=None, backtrack=0, backend=None, max_rejections=None,
-                    max_sigma_rel=1e16):
+                    max_sigma_rel=1e16, options: MinimizeOptions = DEFAULT_OPTIONS):
     """Static equilibrium of a mechanics-only ``ContactRelaxable`` system (e.g. a
     ``ContactSystem``) as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
@@ -252,11 +235,12 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     step, x4 after a poor or rejected one; below 1e-8 of the stiffest mode's sigma it is 0:
     plain Newton, quadratic convergence. ``sigma0`` is the first sigma (default 1e-6 of the
     stiffest mode's; 0 to start with plain Newton from a near solution). Converged when
-    ``|F_free| <= atol`` or ``<= rtol |F_0|``. ``backend``: the linear solver of the inertia check (``run_backend``:
-    one instance for the whole run, so PARDISO's analysis is reused while the pattern is
-    unchanged; default ``rve.solvers.linear.resolve_backend()``).
+    ``|F_free| <= atol`` or ``<= rtol |F_0|``. ``backend``: the linear solver of the
+    definiteness test (one instance for the whole run, ``options.run_backend``, so PARDISO's
+    analysis is reused while the pattern is unchanged; default
+    ``rve.solvers.linear.resolve_backend()``); ``options``: ``MinimizeOptions``.
 
-    Every loop ends (issue 15, docs/fault_tolerance.md): ``max_iter`` accepted iterations,
+    Every loop ends (docs/fault_tolerance.md): ``max_iter`` accepted iterations,
     ``max_rejections`` rejected trials in total (default ``max(200, 2 max_iter)``), a
     regularisation above ``max_sigma_rel`` x the stiffest mode's sigma (the trial steps
     have shrunk to nothing: the minimum step) and the optional wall-time budget
@@ -266,14 +250,10 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
 
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
     """
-    solver, owned = run_backend(backend)
     budget = max(200, 2 * int(max_iter)) if max_rejections is None else int(max_rejections)
-    try:
-        with _long_lived_objects_frozen():
-            return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
-                                    backtrack, solver, budget, float(max_sigma_rel))
-    finally:
-        _release(solver, owned)
+    with options.run_backend(backend) as solver, _long_lived_objects_frozen():
+        return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
+                                backtrack, solver, budget, float(max_sigma_rel), options)
 
 
 @contextlib.contextmanager
@@ -282,7 +262,7 @@ def _long_lived_objects_frozen():
     thawed after it): the loop makes arrays and sparse matrices, no reference cycles of note,
     but every full collection it triggered traversed the ~10^5 objects of the imported modules
     (numba's type system, pint's registry): 3 collections of ~60 ms in a 12-element relaxation
-    (docs/engine.md "Round 9"). Nothing is frozen when a caller has already frozen objects."""
+    (docs/engine.md, "the fixed costs of a process"). Nothing is frozen when a caller has already frozen objects."""
     if gc.get_freeze_count():
         yield
         return
@@ -293,98 +273,121 @@ def _long_lived_objects_frozen():
         gc.unfreeze()
 
 
+def _budget_spent(out, rn, it, max_iter, time_budget, t0, max_rejections, sigma, sigma_max, max_sigma_rel) -> str:
+    """Why the minimiser stops before its next iteration ('' when it goes on)."""
+    if it >= max_iter:
+        return f"no convergence in {max_iter} iterations (|F| = {rn:.3e})"
+    if time_budget is not None and time.perf_counter() - t0 > time_budget:
+        return f"time budget {time_budget:g} s (wall time) spent after {it} iterations (|F| = {rn:.3e})"
+    if not np.isfinite(rn):
+        return "non-finite residual"
+    if max_rejections is not None and out.rejections >= max_rejections:
+        return (f"{out.rejections} rejected trials in total (max_rejections = {max_rejections}) after "
+                f"{it} iterations (|F| = {rn:.3e})")
+    if sigma > sigma_max:
+        return (f"no descent step: the regularisation sigma = {sigma:.3g} exceeds {max_sigma_rel:g} x the "
+                f"stiffest mode's (the trial steps shrank below the minimum step; |F| = {rn:.3e})")
+    return ""
+
+
+def _definite_factor(J, Mff, sigma, sig_neg, sig_floor, keep, solver, options, out, unregularised):
+    """Factorise K + sigma M, raising sigma until it is positive definite (the test is a
+    Cholesky where PARDISO is there: it stops at the first pivot <= 0, docs/engine.md);
+    ``(factor or None, sigma, the largest sigma found indefinite, the unregularised tangent
+    still to count)``."""
+    for _ in range(60):
+        A = shifted(J, Mff, sigma, keep_pattern=keep)
+        lu = factor_positive_definite(A, backend=solver, cholesky=options.cholesky_test)
+        out.factorizations += 1
+        if sigma == 0.0:
+            # inertia of the unregularised tangent: 0 when definite; otherwise counted
+            # (an LDL^T) only if it is still the last unregularised tangent at the end
+            out.negative_pivots, unregularised = (0, None) if lu is not None else (-1, A)
+        if lu is not None:
+            return lu, sigma, sig_neg, unregularised
+        out.indefinite += 1
+        sig_neg = max(sig_neg, sigma)
+        sigma = max(4.0 * sigma, sig_floor)
+    return None, sigma, sig_neg, unregularised
+
+
+def _rebuild_for(system, x_trial, x_cur, guard: float, out) -> bool:
+    """Rebuild the contact map at ``x_cur`` when the trial carries a centroid more than
+    ``guard`` from where the map was built (the energy at x_cur does not change; the trial
+    is then within the guard of the new map); says whether it did."""
+    if system.max_displacement_since_rebuild(x_trial) <= guard:
+        return False
+    system.rebuild(x_cur)
+    out.rebuilds += 1
+    return True
+
+
+def _trial_energy(system, prob, u, du, alpha, slope, quad, Pi):
+    """``(energy, predicted change, agreement ratio)`` of the step ``alpha du``."""
+    Pt = float(system.energy(prob.state(u + alpha * du)[0]))
+    pred = alpha * slope + 0.5 * alpha * alpha * quad
+    return Pt, pred, (Pt - Pi) / pred if pred < 0 else -1.0
+
+
+def _next_sigma(sigma, backtracked, ratio, alpha, sig_floor, sig_neg, contraction):
+    """The regularisation after an accepted step: lower after a good full step, but not
+    below twice the last sigma at which K + sigma M was indefinite (that memory fades by 4x
+    per iteration): saves the factorisations the inertia check would reject."""
+    sigma_used = sigma
+    if backtracked:
+        return max(2.0 * sigma, sig_floor)
+    if ratio > 0.5 and alpha == 1.0:
+        sigma = max(sigma / (8.0 if ratio > 0.75 else 4.0), 2.0 * sig_neg)
+        if ratio > 0.75:
+            # near the solution sigma also follows |F|^2 (Levenberg-Marquardt with
+            # sigma ~ |F|^2 keeps Newton's quadratic rate while it is still > 0)
+            sigma = min(sigma, sigma_used * contraction ** 2)
+        return 0.0 if sigma <= sig_floor else sigma
+    if ratio < 0.25:
+        return max(4.0 * sigma, sig_floor)
+    if alpha < 1.0:
+        return max(2.0 * sigma, sig_floor)
+    return sigma
+
+
 def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, solver,
-                     max_rejections=None, max_sigma_rel=1e16):
+                     max_rejections, max_sigma_rel, options: MinimizeOptions):
     t0 = time.perf_counter()
-    keep = KEEP_STORED_PATTERN and solver.name == "pardiso"
+    keep = options.keep_stored_pattern and solver.name == "pardiso"
     analyses0 = _analyses(solver)
-    w0 = np.zeros(system.n)
-    lay = system.layout
-    guard = 0.5 * float(system.params.margin)
-    cap = guard if step_cap is None else float(step_cap)
-    if cap > guard:
-        raise ValueError(f"step_cap {cap} exceeds half the search margin {guard}")
-
-    # PARDISO reads CSR as well: the restriction is then a row filter (no transposition)
-    fmt = "csr" if keep else "csc"
-
-    def setup(xc):
-        prob = StaticProblem(system, xc, w0, t, fmt=fmt)
-        cen = _free_centroids(prob, lay)
-        return prob, cen, prob.fd.matrix(system.mass(), fmt=fmt)
-
+    guard, cap = _guard_and_cap(system, step_cap)
+    fmt = "csr" if keep else "csc"  # PARDISO reads CSR as well: the restriction is then a row filter
     x = np.array(x, float, copy=True)
     if system.max_displacement_since_rebuild(x) > 0.0:
         system.rebuild(x)
-    prob, cen, Mff = setup(x)
+    prob, cen, Mff = _restricted(system, x, t, fmt)
     u = prob.u0()
     r, J = prob(u)
-    rn = float(np.linalg.norm(r))
+    r0 = rn = float(np.linalg.norm(r))
     Pi = float(system.energy(x))
     out = MinimizeResult(u, False, 0, [rn], energies=[Pi])
-    r0 = rn
-    dK, dM = np.abs(J.diagonal()).max(), np.abs(Mff.diagonal()).max()
-    scale = float(dK / dM) if dM > 0 else 1.0  # sigma of the stiffest mode
+    scale = _stiffest_sigma(J, Mff)
     sig_floor = 1e-8 * scale
     sigma = 1e-6 * scale if sigma0 is None else float(sigma0)
-    sig_neg = 0.0
+    sig_neg, it = 0.0, 0
     unregularised = None  # the last K (sigma = 0) found indefinite, its count still to take
-    it = 0
     while True:
         if rn <= atol or rn <= rtol * r0:
             out.converged = True
             break
-        if it >= max_iter:
-            out.reason = f"no convergence in {max_iter} iterations (|F| = {rn:.3e})"
+        out.reason = _budget_spent(out, rn, it, max_iter, time_budget, t0, max_rejections, sigma,
+                                   max_sigma_rel * scale, max_sigma_rel)
+        if out.reason:
             break
-        if time_budget is not None and time.perf_counter() - t0 > time_budget:
-            out.reason = f"time budget {time_budget:g} s (wall time) spent after {it} iterations (|F| = {rn:.3e})"
-            break
-        if not np.isfinite(rn):
-            out.reason = "non-finite residual"
-            break
-        if max_rejections is not None and out.rejections >= max_rejections:
-            out.reason = (f"{out.rejections} rejected trials in total (max_rejections = {max_rejections}) after "
-                          f"{it} iterations (|F| = {rn:.3e})")
-            break
-        if sigma > max_sigma_rel * scale:
-            out.reason = (f"no descent step: the regularisation sigma = {sigma:.3g} exceeds {max_sigma_rel:g} x the "
-                          f"stiffest mode's (the trial steps shrank below the minimum step; |F| = {rn:.3e})")
-            break
-        # factorise K + sigma M, raising sigma until it is positive definite (the test is a
-        # Cholesky where PARDISO is there: it stops at the first pivot <= 0, docs/engine.md)
-        for _ in range(60):
-            A = shifted(J, Mff, sigma, keep_pattern=keep)
-            lu = factor_positive_definite(A, backend=solver, cholesky=CHOLESKY_TEST)
-            out.factorizations += 1
-            if sigma == 0.0:
-                # inertia of the unregularised tangent: 0 when definite; otherwise counted
-                # (an LDL^T) only if it is still the last unregularised tangent at the end
-                out.negative_pivots, unregularised = (0, None) if lu is not None else (-1, A)
-            if lu is not None:
-                break
-            out.indefinite += 1
-            sig_neg = max(sig_neg, sigma)
-            sigma = max(4.0 * sigma, sig_floor)
-        else:
+        lu, sigma, sig_neg, unregularised = _definite_factor(J, Mff, sigma, sig_neg, sig_floor, keep, solver,
+                                                             options, out, unregularised)
+        if lu is None:
             out.reason = "no positive definite regularisation found"
             break
-        du = -lu.solve(r)
-        slope = float(r @ du)
-        quad = float(du @ (J @ du))
-        move = float(np.abs(du[cen]).max()) * np.sqrt(3.0) if cen.size else 0.0
-        alpha = min(1.0, cap / move) if move > 0 else 1.0
+        du, slope, quad, alpha = _direction(lu, r, J, cen, cap)
         x_cur = prob.state(u)[0]
-        ut = u + alpha * du
-        xt = prob.state(ut)[0]
-        rebuilt = False
-        if system.max_displacement_since_rebuild(xt) > guard:
-            system.rebuild(x_cur)  # same energy at x_cur; the trial is within the guard of it
-            out.rebuilds += 1
-            rebuilt = True
-        Pt = float(system.energy(xt))
-        pred = alpha * slope + 0.5 * alpha * alpha * quad
-        ratio = (Pt - Pi) / pred if pred < 0 else -1.0
+        rebuilt = _rebuild_for(system, prob.state(u + alpha * du)[0], x_cur, guard, out)
+        Pt, pred, ratio = _trial_energy(system, prob, u, du, alpha, slope, quad, Pi)
         noise = 1e-12 * max(1.0, abs(Pi))
         accept = Pt < Pi - noise
         backtracked = 0
@@ -393,21 +396,16 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
             # shorten it along the same direction, energies only (no new factorisation)
             alpha *= 0.5
             backtracked += 1
-            xt = prob.state(u + alpha * du)[0]
-            Pt = float(system.energy(xt))
-            pred = alpha * slope + 0.5 * alpha * alpha * quad
-            ratio = (Pt - Pi) / pred if pred < 0 else -1.0
+            Pt, pred, ratio = _trial_energy(system, prob, u, du, alpha, slope, quad, Pi)
             accept = Pt < Pi + 1e-4 * alpha * slope
-        ut = u + alpha * du
         if rebuilt:
-            prob, cen, Mff = setup(x_cur)
+            prob, cen, Mff = _restricted(system, x_cur, t, fmt)
             u = prob.u0()
-            ut = u + alpha * du
+        ut = u + alpha * du
         if accept or (np.isfinite(Pt) and Pt <= Pi + noise):
             rt, Jt = prob(ut)
             rtn = float(np.linalg.norm(rt))
-            if not accept:
-                accept = rtn < rn  # energy change lost in rounding: the residual decides
+            accept = accept or rtn < rn  # energy change lost in rounding: the residual decides
         if not accept:
             out.rejections += 1
             sigma = max(4.0 * sigma, sig_floor)
@@ -420,38 +418,50 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
         dPi = Pt - Pi
         rn_prev = rn
         u, r, J, rn, Pi = ut, rt, Jt, rtn, Pt
-        out.residuals.append(rn)
-        out.energies.append(Pi)
-        out.sigmas.append(sigma)
-        out.steps.append(alpha)
-        sigma_used = sigma
-        # lower sigma after a good full step, but not below twice the last sigma at which
-        # K + sigma M was indefinite (that memory fades by 4x per iteration): saves the
-        # factorisations the inertia check would reject
-        if backtracked:
-            sigma = max(2.0 * sigma, sig_floor)
-        elif ratio > 0.5 and alpha == 1.0:
-            sigma = max(sigma / (8.0 if ratio > 0.75 else 4.0), 2.0 * sig_neg)
-            if ratio > 0.75:
-                # near the solution sigma also follows |F|^2 (Levenberg-Marquardt with
-                # sigma ~ |F|^2 keeps Newton's quadratic rate while it is still > 0)
-                sigma = min(sigma, sigma_used * (rn / rn_prev) ** 2)
-            if sigma <= sig_floor:
-                sigma = 0.0
-        elif ratio < 0.25:
-            sigma = max(4.0 * sigma, sig_floor)
-        elif alpha < 1.0:
-            sigma = max(2.0 * sigma, sig_floor)
+        out.accepted(rn, Pi, sigma, alpha)
+        sigma = _next_sigma(sigma, backtracked, ratio, alpha, sig_floor, sig_neg, rn / rn_prev)
         sig_neg *= 0.25
-        rates = convergence_rates(out.residuals)
-        log.info("%s it=%d |F|=%.3e Pi=%.12e dPi=%.2e ratio=%.2f step=%.3g sigma=%.3g pairs=%d rate=%s wall=%.1f",
-                 label, it, rn, Pi, dPi, ratio, alpha, out.sigmas[-1], system.map.n_pairs,
-                 f"{rates[-1]:.2f}" if rates else "-", time.perf_counter() - t0)
+        _log_iteration(label, it, rn, Pi, dPi, ratio, alpha, out, system, t0)
     if unregularised is not None:
         out.negative_pivots = factor_inertia(unregularised, backend=solver)[1]
-    out.u = u
-    out.iterations = it
-    out.backend = solver.name
-    out.analyses = _analyses(solver) - analyses0
+    out.u, out.iterations, out.backend, out.analyses = u, it, solver.name, _analyses(solver) - analyses0
     xs, ws = prob.state(u)
     return xs, ws, out
+
+
+def _restricted(system, xc, t, fmt: str):
+    """The static problem at ``xc``, its free centroid positions and its restricted mass."""
+    prob = StaticProblem(system, xc, np.zeros(system.n), t, fmt=fmt)
+    return prob, _free_centroids(prob, system.layout), prob.fd.matrix(system.mass(), fmt=fmt)
+
+
+def _guard_and_cap(system, step_cap):
+    """Half the search margin (the rebuild guard) and the centroid step cap (default: it)."""
+    guard = 0.5 * float(system.params.margin)
+    cap = guard if step_cap is None else float(step_cap)
+    if cap > guard:
+        raise ValueError(f"step_cap {cap} exceeds half the search margin {guard}")
+    return guard, cap
+
+
+def _stiffest_sigma(J, Mff) -> float:
+    """max|diag K| / max|diag M|: the sigma of the stiffest mode (1 without mass)."""
+    dK, dM = np.abs(J.diagonal()).max(), np.abs(Mff.diagonal()).max()
+    return float(dK / dM) if dM > 0 else 1.0
+
+
+def _direction(lu, r, J, cen, cap):
+    """``(du, slope, curvature, alpha)``: the regularised Newton step, the model's slope
+    and curvature along it, and the step fraction that caps the centroid motion."""
+    du = -lu.solve(r)
+    slope = float(r @ du)
+    quad = float(du @ (J @ du))
+    move = float(np.abs(du[cen]).max()) * np.sqrt(3.0) if cen.size else 0.0
+    return du, slope, quad, min(1.0, cap / move) if move > 0 else 1.0
+
+
+def _log_iteration(label, it, rn, Pi, dPi, ratio, alpha, out, system, t0) -> None:
+    rates = convergence_rates(out.residuals)
+    log.info("%s it=%d |F|=%.3e Pi=%.12e dPi=%.2e ratio=%.2f step=%.3g sigma=%.3g pairs=%d rate=%s wall=%.1f",
+             label, it, rn, Pi, dPi, ratio, alpha, out.sigmas[-1], system.map.n_pairs,
+             f"{rates[-1]:.2f}" if rates else "-", time.perf_counter() - t0)

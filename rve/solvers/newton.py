@@ -163,7 +163,8 @@ class JacobianReuse:
     factorisation is kept (default 0.5). ``cost_aware``: also drop it when the measured
     cost of the modified iterations still needed at the observed rate exceeds that of a
     fresh Jacobian + factorisation (running means of the wall times measured here).
-    ``backend``: name for ``rve.solvers.linear.get_backend`` (None: its default).
+    ``backend``: name for ``rve.solvers.linear.get_backend`` (None: its default) or a
+    factory ``() -> backend`` (a backend with constructor arguments, e.g. a Schur border).
 
     The owner (``rve.solvers.dirk.DirkStepper``) ``invalidate(reason)``s the factorisation
     when the stage matrix changes for a reason the contraction cannot see first (h·a_ii,
@@ -204,7 +205,8 @@ class JacobianReuse:
 
     def factorize(self, J) -> None:
         if self._backend is None:
-            self._backend = get_backend(self.backend_name)
+            name = self.backend_name
+            self._backend = name() if callable(name) else get_backend(name)
         t0 = time.perf_counter()
         self.factor = None
         self.factor = StageFactorisation(J, self._backend)
@@ -282,6 +284,13 @@ def newton(
         return NewtonResult(u, converged, iterations, res, reason, jacobians=nj, factorizations=nf,
                             linear_solves=nf)
 
+    def evaluate(v):  # (r, J) of a trial point; the residual alone when there is a function for it
+        nonlocal nj
+        if residual is not None:
+            return residual(v), None
+        nj += 1
+        return fun(v)
+
     if not np.isfinite(rn):
         return result(False, 0, "non-finite residual at the initial state")
     for it in range(1, max_iter + 1):
@@ -297,26 +306,10 @@ def newton(
             return result(False, it - 1, f"linear solve failed: {exc}")
         if not np.all(np.isfinite(du)):
             return result(False, it - 1, "non-finite Newton update (singular Jacobian?)")
-        step = 1.0
-        for _ in range(max_halvings + 1):
-            trial = u + step * du
-            if admissible is not None and not admissible(trial):
-                step *= 0.5
-                continue
-            if residual is not None:
-                rt, Jt = residual(trial), None
-            else:
-                rt, Jt = fun(trial)
-                nj += 1
-            rtn = float(np.linalg.norm(rt))
-            if not line_search or (np.isfinite(rtn) and rtn < rn) or step < 2.0 ** -max_halvings:
-                break
-            step *= 0.5
-        else:
+        found = _line_search(u, du, rn, evaluate, admissible, line_search, max_halvings)
+        if found is None:
             return result(False, it - 1, "no admissible step (det F <= 0 for every trial)")
-        if admissible is not None and not admissible(trial):
-            return result(False, it - 1, "no admissible step (det F <= 0 for every trial)")
-        u, r, J, rn = trial, rt, Jt, rtn
+        u, r, J, rn, step = found
         res.append(rn)
         rates = convergence_rates(res)
         log.info(
@@ -330,33 +323,71 @@ def newton(
     return result(converged, max_iter, "" if converged else f"no convergence in {max_iter} iterations (|r| = {rn:.3e})")
 
 
+class _Timed:
+    """The Newton functions with the wall times the cost rule of ``JacobianReuse`` weighs:
+    ``fun`` (r, J; counted as a Jacobian), ``residual`` (r alone) and ``evaluate`` (the
+    residual alone when there is a residual-only function, else ``fun``)."""
+
+    def __init__(self, fun, residual, reuse, counts):
+        self._fun, self._residual, self.reuse, self.counts = fun, residual, reuse, counts
+
+    def fun(self, v):
+        t0 = time.perf_counter()
+        out = self._fun(v)
+        dt = time.perf_counter() - t0
+        self.counts["jacobians"] += 1
+        self.reuse.jacobians += 1
+        if self.reuse.cost["residual"] is not None:
+            self.reuse._time("jacobian", max(dt - self.reuse.cost["residual"], 0.0))
+        return out
+
+    def residual(self, v):
+        t0 = time.perf_counter()
+        out = self._residual(v)
+        self.reuse._time("residual", time.perf_counter() - t0)
+        return out
+
+    def evaluate(self, v):
+        return (self.residual(v), None) if self._residual is not None else self.fun(v)
+
+
+def _reject(reuse, counts, why: str) -> None:
+    """A modified step discarded: drop the factorisation and count it."""
+    reuse.invalidate(why)
+    counts["rejected"] += 1
+    reuse.rejected_reuses += 1
+
+
+def _line_search(u, du, rn, evaluate, admissible, line_search: bool, max_halvings: int):
+    """Backtracking from the full Newton step: ``(trial, r, J, |r|, step)``, or None when no
+    admissible trial was found (det F <= 0 for every one)."""
+    step = 1.0
+    for _ in range(max_halvings + 1):
+        trial = u + step * du
+        if admissible is not None and not admissible(trial):
+            step *= 0.5
+            continue
+        rt, Jt = evaluate(trial)
+        rtn = float(np.linalg.norm(rt))
+        if not line_search or (np.isfinite(rtn) and rtn < rn) or step < 2.0 ** -max_halvings:
+            break
+        step *= 0.5
+    else:
+        return None
+    if admissible is not None and not admissible(trial):
+        return None
+    return trial, rt, Jt, rtn, step
+
+
 def _modified_newton(fun, u0, *, atol, rtol, max_iter, admissible, line_search, max_halvings, label,
                      divergence_factor, residual, reuse: JacobianReuse) -> NewtonResult:
     """``newton`` with the factorisation held by ``reuse`` (module docstring)."""
     st = Counter()                     # this call's counts
     thetas: list = []
-
-    def timed_fun(v):
-        t0 = time.perf_counter()
-        out = fun(v)
-        dt = time.perf_counter() - t0
-        st["jacobians"] += 1
-        reuse.jacobians += 1
-        if reuse.cost["residual"] is not None:
-            reuse._time("jacobian", max(dt - reuse.cost["residual"], 0.0))
-        return out
-
-    def timed_residual(v):
-        t0 = time.perf_counter()
-        out = residual(v)
-        reuse._time("residual", time.perf_counter() - t0)
-        return out
-
+    timed = _Timed(fun, residual, reuse, st)
+    timed_fun, evaluate = timed.fun, timed.evaluate
     u = np.array(u0, dtype=float, copy=True)
-    if reuse.usable and residual is not None:
-        r, J = timed_residual(u), None
-    else:
-        r, J = timed_fun(u)
+    r, J = evaluate(u) if reuse.usable else timed_fun(u)
     rn = float(np.linalg.norm(r))
     res = [rn]
     r0 = max(rn, 1e-300)
@@ -392,47 +423,30 @@ def _modified_newton(fun, u0, *, atol, rtol, max_iter, admissible, line_search, 
             if fresh:
                 reuse.invalidate("singular")
                 return result(False, it, "non-finite Newton update (singular Jacobian?)")
-            reuse.invalidate("non-finite update")
-            st["rejected"] += 1
-            reuse.rejected_reuses += 1
+            _reject(reuse, st, "non-finite update")
             continue
         step = 1.0
         if fresh:  # a Newton step: backtracking line search as in ``newton``
-            for _ in range(max_halvings + 1):
-                trial = u + step * du
-                if admissible is not None and not admissible(trial):
-                    step *= 0.5
-                    continue
-                rt, Jt = (timed_residual(trial), None) if residual is not None else timed_fun(trial)
-                rtn = float(np.linalg.norm(rt))
-                if not line_search or (np.isfinite(rtn) and rtn < rn) or step < 2.0 ** -max_halvings:
-                    break
-                step *= 0.5
-            else:
+            found = _line_search(u, du, rn, evaluate, admissible, line_search, max_halvings)
+            if found is None:
                 return result(False, it, "no admissible step (det F <= 0 for every trial)")
-            if admissible is not None and not admissible(trial):
-                return result(False, it, "no admissible step (det F <= 0 for every trial)")
+            trial, rt, Jt, rtn, step = found
         else:  # a modified step: full step, accepted only if it contracts
             trial = u + du
             if admissible is not None and not admissible(trial):
                 rt, Jt, rtn = None, None, math.inf
             else:
-                rt, Jt = (timed_residual(trial), None) if residual is not None else timed_fun(trial)
+                rt, Jt = evaluate(trial)
                 rtn = float(np.linalg.norm(rt))
             if not (np.isfinite(rtn) and rtn < rn):
-                reuse.invalidate("diverged")
-                st["rejected"] += 1
-                reuse.rejected_reuses += 1
+                _reject(reuse, st, "diverged")
                 log.info("%s modified step rejected (|r| %.3e -> %.3e): fresh Jacobian", label, rn, rtn)
                 continue
             st["reuses"] += 1
             reuse.reuses += 1
             reuse.last_theta = rtn / max(rn, 1e-300)
         it += 1
-        if fresh:
-            n_fresh += 1
-        else:
-            n_modified += 1
+        n_fresh, n_modified = (n_fresh + 1, n_modified) if fresh else (n_fresh, n_modified + 1)
         theta = rtn / max(rn, 1e-300)
         thetas.append(theta)
         u, r, J, rn = trial, rt, Jt, rtn

@@ -48,7 +48,6 @@ energies, pairs, active pairs, max overlap / R, wall time), ``timings`` (seconds
 dynamic, static, total), iteration counts, and the last static ``NewtonResult``
 (``MinimizeResult`` for the energy path).
 
-Moved here from ``rve/contact/relax.py`` (issue 9) with unchanged arithmetic.
 """
 from __future__ import annotations
 
@@ -118,6 +117,22 @@ def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Opti
     w = np.array(w, float, copy=True)
     t = float(t0)
     out = RelaxResult(x, w, t)
+    x, w, t = _relax_dynamic(system, x, w, t, s, out, on_rebuild, t_start)
+    out.timings["dynamic"] = time.perf_counter() - t_start
+    t1 = time.perf_counter()
+    w = np.zeros_like(w)
+    if s.static:
+        x, w = _relax_static(system, x, w, t, s, out, t_start)
+    out.timings["static"] = time.perf_counter() - t1
+    out.timings["total"] = time.perf_counter() - t_start
+    out.x, out.w, out.t = x, w, t
+    return out
+
+
+def _relax_dynamic(system, x, w, t, s: RelaxSettings, out: RelaxResult, on_rebuild, t_start: float):
+    """The damped backward-Euler phase in chunks of ``rebuild_every`` steps (the map rebuilt
+    before every chunk and at once when something moved half the margin); returns the
+    ``(x, w, t)`` it ended at (early when the speed is below ``v_tol``)."""
     h = s.duration / max(1, s.steps)
     nopts = {"atol": s.newton_atol, "rtol": s.newton_rtol, "max_iter": s.newton_max_iter}
     k = max(1, int(s.rebuild_every))
@@ -161,46 +176,45 @@ def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Opti
             on_rebuild(chunk, t, x, w)
         if s.v_tol > 0 and vmax < s.v_tol:
             break
-    out.timings["dynamic"] = time.perf_counter() - t_start
-    t1 = time.perf_counter()
-    w = np.zeros_like(w)
-    if s.static:
-        cap = s.step_cap if s.step_cap is not None else 0.5 * float(system.params.margin)
-        for rnd in range(s.static_rounds):
-            system.rebuild(x)
-            xs, ws, nres = capped_newton(system, x, t, atol=s.static_atol, rtol=s.static_rtol,
-                                         max_iter=s.static_max_iter, step_cap=cap, backend=s.linear_backend)
-            how = "capped newton"
-            if not nres.converged:
-                log.warning("static Newton failed (%s); pseudo-transient continuation", nres.reason)
-                system.rebuild(xs)
-                xs2, ws2, pres = pseudo_transient_solve(system, xs, w, t, atol=s.static_atol, rtol=s.static_rtol,
-                                                        max_iter=200, backend=s.linear_backend)
-                how = "pseudo-transient"
-                nres = NewtonResult(pres.u, pres.converged, nres.iterations + pres.iterations,
-                                    nres.residuals + pres.residuals, pres.reason)
-                xs, ws = xs2, ws2
-            out.static_newton_iterations += nres.iterations
-            x, w = xs, ws
-            out.static_result = nres
-            out.static_converged = bool(nres.converged)
-            # a rebuild at the solution: did pairs the map missed come into contact?
-            before = set(zip(*active_pair_keys(system, x)))
-            system.rebuild(x)
-            after = set(zip(*active_pair_keys(system, x)))
-            st = system.contact_state(x)
-            rec = {"phase": "static", "round": rnd + 1, "method": how, "converged": bool(nres.converged),
-                   "newton_iterations": int(nres.iterations), "residuals": [float(r) for r in nres.residuals],
-                   "pairs": st["pairs"], "active_pairs": st["active_pairs"],
-                   "max_overlap_over_R": st["max_overlap_over_R"], "wall_s": time.perf_counter() - t_start}
-            out.history.append(rec)
-            log.info("static round %d: converged=%s its=%d", rnd + 1, nres.converged, nres.iterations)
-            if nres.converged and after <= before:
-                break
-    out.timings["static"] = time.perf_counter() - t1
-    out.timings["total"] = time.perf_counter() - t_start
-    out.x, out.w, out.t = x, w, t
-    return out
+    return x, w, t
+
+
+def _relax_static(system, x, w, t, s: RelaxSettings, out: RelaxResult, t_start: float):
+    """Static rounds: capped Newton (pseudo-transient continuation where it fails), then a
+    map rebuild at the solution, until no new pair came into contact; returns ``(x, w)``."""
+    cap = s.step_cap if s.step_cap is not None else 0.5 * float(system.params.margin)
+    for rnd in range(s.static_rounds):
+        system.rebuild(x)
+        xs, ws, nres = capped_newton(system, x, t, atol=s.static_atol, rtol=s.static_rtol,
+                                     max_iter=s.static_max_iter, step_cap=cap, backend=s.linear_backend)
+        how = "capped newton"
+        if not nres.converged:
+            log.warning("static Newton failed (%s); pseudo-transient continuation", nres.reason)
+            system.rebuild(xs)
+            xs2, ws2, pres = pseudo_transient_solve(system, xs, w, t, atol=s.static_atol, rtol=s.static_rtol,
+                                                    max_iter=200, backend=s.linear_backend)
+            how = "pseudo-transient"
+            nres = NewtonResult(pres.u, pres.converged, nres.iterations + pres.iterations,
+                                nres.residuals + pres.residuals, pres.reason)
+            xs, ws = xs2, ws2
+        out.static_newton_iterations += nres.iterations
+        x, w = xs, ws
+        out.static_result = nres
+        out.static_converged = bool(nres.converged)
+        # a rebuild at the solution: did pairs the map missed come into contact?
+        before = set(zip(*active_pair_keys(system, x)))
+        system.rebuild(x)
+        after = set(zip(*active_pair_keys(system, x)))
+        st = system.contact_state(x)
+        rec = {"phase": "static", "round": rnd + 1, "method": how, "converged": bool(nres.converged),
+               "newton_iterations": int(nres.iterations), "residuals": [float(r) for r in nres.residuals],
+               "pairs": st["pairs"], "active_pairs": st["active_pairs"],
+               "max_overlap_over_R": st["max_overlap_over_R"], "wall_s": time.perf_counter() - t_start}
+        out.history.append(rec)
+        log.info("static round %d: converged=%s its=%d", rnd + 1, nres.converged, nres.iterations)
+        if nres.converged and after <= before:
+            break
+    return x, w
 
 
 def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:

@@ -35,6 +35,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
+from .backends.registry import run_backend
 from .linear import shifted, sparse_solve
 from .newton import NewtonResult, convergence_rates, newton
 from .system import FreeDofs, mech_mask
@@ -133,14 +134,9 @@ def pseudo_transient_solve(
     Returns ``(x, w, NewtonResult)`` (``iterations`` counts accepted steps, each one linear
     solve; rejected trials are logged).
     """
-    from .minimize import _release, run_backend
-
-    solver, owned = run_backend(backend)
-    try:
+    with run_backend(backend) as solver:
         return _pseudo_transient(system, x, w, t, sigma0, atol, rtol, max_iter, reject_factor, sigma_boost,
                                  max_rejections, label, solver)
-    finally:
-        _release(solver, owned)
 
 
 def _pseudo_transient(system, x, w, t, sigma0, atol, rtol, max_iter, reject_factor, sigma_boost, max_rejections,

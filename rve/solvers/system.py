@@ -57,6 +57,8 @@ from typing import Protocol, Tuple, runtime_checkable
 import numpy as np
 import scipy.sparse as sp
 
+from .backends.base import same_structure as _same_structure
+
 __all__ = ["DynamicSystem", "ContactRelaxable", "FreeDofs", "massless_dofs", "mech_mask", "scale_columns"]
 
 
@@ -205,8 +207,8 @@ class FreeDofs:
         conversion per Newton iteration (measured: the conversions cost more than the
         physics on small fibril systems). A term whose column mask is identically zero is
         skipped (it adds exact zeros), a mask of ones is not multiplied, and a single
-        unscaled term is gathered straight from its ``data`` (issue 10: 1.7 s of a 12-element
-        relaxation was this restriction). Otherwise falls back to ``assemble``.
+        unscaled term is gathered straight from its ``data`` (the restriction dominates a
+        small relaxation otherwise: docs/engine.md). Otherwise falls back to ``assemble``.
         """
         mats = [(A, c, m) for A, c, m in terms if A is not None and A.nnz > 0]
         if not mats:
@@ -294,21 +296,6 @@ class FreeDofs:
 
 
 _FORMATS = {"csc": sp.csc_matrix, "csr": sp.csr_matrix}
-
-
-def _same_buffer(a, b) -> bool:
-    """The same array, or views of the very same memory with the same layout."""
-    return a is b or (a.shape == b.shape and a.dtype == b.dtype and a.strides == b.strides
-                      and a.ctypes.data == b.ctypes.data)
-
-
-def _same_structure(A, indptr, indices) -> bool:
-    """True when CSR/CSC ``A`` has exactly the index arrays ``indptr``/``indices``
-    (identity first, then contents)."""
-    if _same_buffer(A.indices, indices) and _same_buffer(A.indptr, indptr):
-        return True
-    return (A.indptr.size == indptr.size and A.indices.size == indices.size
-            and np.array_equal(A.indptr, indptr) and np.array_equal(A.indices, indices))
 
 
 def scale_columns(A, mask: np.ndarray):

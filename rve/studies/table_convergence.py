@@ -1,5 +1,5 @@
-"""Convergence of the RVE lookup table with the mesh and the contact penalty (issue 14;
-docs/table_accuracy.md).
+"""Convergence of the RVE lookup table with the mesh and the contact penalty
+(docs/table_accuracy.md).
 
 A study is two ordinary sweep runs of the pipeline (configs/pipeline.yaml: ``{study}_mesh``
 over ``mesh.elements``, ``{study}_penalty`` over ``contact_penalty``; each combination its
@@ -71,7 +71,7 @@ QUANTITIES = {
     "yarn_resistance": "R_y",
     "contact_resistance": "R_c",
 }
-#: the accuracy asked of the default mesh (relative to the finest run): issue 14's example
+#: the accuracy asked of the default mesh (relative to the finest run): docs/table_accuracy.md
 TARGETS = {"reaction_force": 0.02, "membrane_force": 0.02, "probe_resistance": 0.01, "yarn_resistance": 0.01,
            "contact_resistance": 0.01, "temperature_rise_max": 0.02}
 #: labels smaller than this fraction of the quantity's largest reference value are not assessed

@@ -1,4 +1,4 @@
-"""The stated accuracy of a lookup table, from its convergence study (issue 14;
+"""The stated accuracy of a lookup table, from its convergence study (
 docs/table_accuracy.md).
 
 The convergence study (``rve.studies.table_convergence``, target ``rve_table_convergence``)

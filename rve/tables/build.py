@@ -217,130 +217,11 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
     if not records:
         raise ValueError("build_table: no records")
     fabric_desc, n_warp, n_weft = _fabric_description(fabric)
-
-    # --- swept parameters
-    if swept is None:
-        found: list[str] = []
-        for rec in records:
-            for k in _record_params(rec):
-                if k not in found:
-                    found.append(str(k))
-        swept = found
-    pnames, pmeta = _param_meta(swept)
-    pvalues: dict[str, list] = {}
-    for name in pnames:
-        vals = []
-        for n, rec in enumerate(records):
-            params = _record_params(rec)
-            if name not in params:
-                raise ValueError(f"record {n}: missing swept parameter {name!r}")
-            vals.append(params[name])
-        pvalues[name] = _sorted_unique(vals)
-
-    # --- modes, strains, probes, sides
-    modes, strains, probes, sides = [], [], [], []
-    for n, rec in enumerate(records):
-        mode = rec.get("mode")
-        if mode not in MODES:
-            raise ValueError(f"record {n}: mode must be one of {MODES}, got {mode!r}")
-        modes.append(mode)
-        try:
-            s = round(float(rec["strain"]), STRAIN_DECIMALS)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"record {n}: needs a numeric 'strain'") from exc
-        if not math.isfinite(s):
-            raise ValueError(f"record {n}: strain {s} is not finite")
-        strains.append(s + 0.0)  # -0.0 -> 0.0
-        for p in (rec.get("probes") or {}):
-            if str(p) not in probes:
-                probes.append(str(p))
-        sides.extend(str(s_) for s_ in (rec.get("reaction_force", rec.get("reactions")) or {}))
-    mode_coord = [m for m in MODES if m in modes]
-    strain_coord = sorted(set(strains))
-    sides = _side_order(sides) or list(SIDE_ORDER[:4])
-    if not probes:
-        probes = list(default_probe_terminals(max(n_warp, 2), max(n_weft, 2)))
-
-    shape0 = (len(mode_coord), len(strain_coord)) + tuple(len(pvalues[p]) for p in pnames)
+    pnames, pmeta, pvalues = _swept_parameters(records, swept)
+    mode_coord, strains, strain_coord, probes, sides = _axes(records, n_warp, n_weft)
+    data, filled, pidx = _fill(records, pnames, pvalues, mode_coord, strains, strain_coord, probes, sides)
+    net_probes, usable = _fit_networks(data, filled, pidx, network_probes, n_warp, n_weft)
     lead = ("mode", "strain") + tuple(pnames)
-    sizes = {"probe": len(probes), "side": len(sides), "component": 3, "terminal": 2}
-    data = {name: np.full(shape0 + tuple(sizes[d] for d in dims), np.nan)
-            for name, (dims, *_rest) in VARIABLES.items()}
-    filled = np.zeros(shape0, dtype=bool)
-
-    pidx = {p: i for i, p in enumerate(probes)}
-    sidx = {s: i for i, s in enumerate(sides)}
-    for n, rec in enumerate(records):
-        params = _record_params(rec)
-        idx = (mode_coord.index(rec["mode"]), strain_coord.index(strains[n])) + tuple(
-            pvalues[p].index(float(params[p]) if not isinstance(params[p], str) else params[p])
-            for p in pnames)
-        if filled[idx]:
-            raise ValueError(f"record {n}: state mode={rec['mode']}, strain={strains[n]}"
-                             f"{''.join(f', {p}={params[p]}' for p in pnames)} given twice")
-        filled[idx] = True
-        where = f"record {n} ({rec['mode']}, strain {strains[n]})"
-        for side, vec in (rec.get("reaction_force", rec.get("reactions")) or {}).items():
-            data["reaction_force"][idx + (sidx[str(side)],)] = _vector3(vec, f"{where}, side {side}")
-        if rec.get("contact_count") is not None:
-            data["contact_count"][idx] = float(rec["contact_count"])
-        resid = rec.get("equilibrium_residual", (rec.get("state") or {}).get("residual_N"))
-        if resid is not None:
-            data["equilibrium_residual"][idx] = float(resid)
-        conv = rec.get("converged", (rec.get("state") or {}).get("converged"))
-        if conv is not None:
-            data["converged"][idx] = 1.0 if conv else 0.0
-        for pname, pr in (rec.get("probes") or {}).items():
-            k = idx + (pidx[str(pname)],)
-            pw = f"{where}, probe {pname}"
-            if pr.get("voltage") is not None:
-                data["probe_voltage"][k] = float(pr["voltage"])
-            if pr.get("current") is not None:
-                ip, im = _terminal_currents(pr["current"], pw)
-                data["probe_current"][k] = (ip, im)
-                i_mean = 0.5 * (ip - im)
-                if pr.get("voltage") is not None:
-                    data["probe_resistance"][k] = (float(pr["voltage"]) / i_mean
-                                                   if i_mean != 0 else math.inf)
-            for key in ("max", "mean"):
-                val = pr.get(f"temperature_{key}", pr.get(f"temperature_rise_{key}"))
-                if val is not None:
-                    data[f"temperature_rise_{key}"][k] = float(val)
-
-    # --- network model
-    network = YarnNetwork(n_warp, n_weft)
-    try:
-        net_probes = (dict(network_probes) if network_probes is not None
-                      else default_probe_terminals(n_warp, n_weft))
-    except ValueError:
-        net_probes = {}
-    usable = [p for p in net_probes if p in pidx]
-    cache: dict = {}
-    if len(usable) >= 2:
-        for idx in zip(*np.nonzero(filled)):
-            measured = {p: data["probe_resistance"][idx + (pidx[p],)] for p in usable}
-            ry, rc, res = fit_network(measured, network, {p: net_probes[p] for p in usable},
-                                      _grid_cache=cache)
-            data["yarn_resistance"][idx] = ry
-            data["contact_resistance"][idx] = rc
-            data["network_fit_residual"][idx] = res
-    else:
-        log.warning("build_table: records have fewer than two of the network probes %s; "
-                    "yarn_resistance and contact_resistance are NaN", list(net_probes))
-    # separate warp and weft yarn resistors (format 2): four probes or more
-    probes3 = (dict(network_probes) if network_probes is not None
-               else default_probe_terminals(n_warp, n_weft, weft_probe=True) if min(n_warp, n_weft) >= 2 else {})
-    usable3 = [p for p in probes3 if p in pidx]
-    if len(usable3) >= 4:
-        for idx in zip(*np.nonzero(filled)):
-            measured = {p: data["probe_resistance"][idx + (pidx[p],)] for p in usable3}
-            rw, rf, rc3, res3 = fit_network3(measured, network, {p: probes3[p] for p in usable3})
-            data["yarn_resistance_warp"][idx] = rw
-            data["yarn_resistance_weft"][idx] = rf
-            data["contact_resistance_warp_weft"][idx] = rc3
-            data["network_fit_residual_warp_weft"][idx] = res3
-
-    # --- assemble
     coords: dict[str, Any] = {
         "mode": ("mode", np.array(mode_coord, dtype=object), dict(COORD_ATTRS["mode"])),
         "strain": ("strain", np.array(strain_coord, dtype=float), dict(COORD_ATTRS["strain"])),
@@ -407,3 +288,139 @@ def _branch_attributes(records: Sequence[Mapping]) -> dict:
             "false_alarms": "branch_false_alarms"}
     return {attr: json.dumps({mode: c[k] for mode, c in sorted(per.items())}, sort_keys=True)
             for k, attr in name.items()}
+
+
+def _swept_parameters(records, swept):
+    """``(names, metadata, sorted values)`` of the swept parameters (``build_table``)."""
+    if swept is None:
+        found: list[str] = []
+        for rec in records:
+            for k in _record_params(rec):
+                if k not in found:
+                    found.append(str(k))
+        swept = found
+    pnames, pmeta = _param_meta(swept)
+    pvalues: dict[str, list] = {}
+    for name in pnames:
+        vals = []
+        for n, rec in enumerate(records):
+            params = _record_params(rec)
+            if name not in params:
+                raise ValueError(f"record {n}: missing swept parameter {name!r}")
+            vals.append(params[name])
+        pvalues[name] = _sorted_unique(vals)
+    return pnames, pmeta, pvalues
+
+
+def _axes(records, n_warp: int, n_weft: int):
+    """The mode, strain, probe and side axes of the records (``build_table``)."""
+    modes, strains, probes, sides = [], [], [], []
+    for n, rec in enumerate(records):
+        mode = rec.get("mode")
+        if mode not in MODES:
+            raise ValueError(f"record {n}: mode must be one of {MODES}, got {mode!r}")
+        modes.append(mode)
+        try:
+            s = round(float(rec["strain"]), STRAIN_DECIMALS)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"record {n}: needs a numeric 'strain'") from exc
+        if not math.isfinite(s):
+            raise ValueError(f"record {n}: strain {s} is not finite")
+        strains.append(s + 0.0)  # -0.0 -> 0.0
+        for p in (rec.get("probes") or {}):
+            if str(p) not in probes:
+                probes.append(str(p))
+        sides.extend(str(s_) for s_ in (rec.get("reaction_force", rec.get("reactions")) or {}))
+    mode_coord = [m for m in MODES if m in modes]
+    strain_coord = sorted(set(strains))
+    sides = _side_order(sides) or list(SIDE_ORDER[:4])
+    if not probes:
+        probes = list(default_probe_terminals(max(n_warp, 2), max(n_weft, 2)))
+    return mode_coord, strains, strain_coord, probes, sides
+
+
+def _fill(records, pnames, pvalues, mode_coord, strains, strain_coord, probes, sides):
+    """``(data, filled, probe index)``: every variable of ``VARIABLES`` on the table's grid,
+    NaN where no record is (``build_table``)."""
+    shape0 = (len(mode_coord), len(strain_coord)) + tuple(len(pvalues[p]) for p in pnames)
+    sizes = {"probe": len(probes), "side": len(sides), "component": 3, "terminal": 2}
+    data = {name: np.full(shape0 + tuple(sizes[d] for d in dims), np.nan)
+            for name, (dims, *_rest) in VARIABLES.items()}
+    filled = np.zeros(shape0, dtype=bool)
+
+    pidx = {p: i for i, p in enumerate(probes)}
+    sidx = {s: i for i, s in enumerate(sides)}
+    for n, rec in enumerate(records):
+        params = _record_params(rec)
+        idx = (mode_coord.index(rec["mode"]), strain_coord.index(strains[n])) + tuple(
+            pvalues[p].index(float(params[p]) if not isinstance(params[p], str) else params[p])
+            for p in pnames)
+        if filled[idx]:
+            raise ValueError(f"record {n}: state mode={rec['mode']}, strain={strains[n]}"
+                             f"{''.join(f', {p}={params[p]}' for p in pnames)} given twice")
+        filled[idx] = True
+        where = f"record {n} ({rec['mode']}, strain {strains[n]})"
+        for side, vec in (rec.get("reaction_force", rec.get("reactions")) or {}).items():
+            data["reaction_force"][idx + (sidx[str(side)],)] = _vector3(vec, f"{where}, side {side}")
+        if rec.get("contact_count") is not None:
+            data["contact_count"][idx] = float(rec["contact_count"])
+        resid = rec.get("equilibrium_residual", (rec.get("state") or {}).get("residual_N"))
+        if resid is not None:
+            data["equilibrium_residual"][idx] = float(resid)
+        conv = rec.get("converged", (rec.get("state") or {}).get("converged"))
+        if conv is not None:
+            data["converged"][idx] = 1.0 if conv else 0.0
+        for pname, pr in (rec.get("probes") or {}).items():
+            k = idx + (pidx[str(pname)],)
+            pw = f"{where}, probe {pname}"
+            if pr.get("voltage") is not None:
+                data["probe_voltage"][k] = float(pr["voltage"])
+            if pr.get("current") is not None:
+                ip, im = _terminal_currents(pr["current"], pw)
+                data["probe_current"][k] = (ip, im)
+                i_mean = 0.5 * (ip - im)
+                if pr.get("voltage") is not None:
+                    data["probe_resistance"][k] = (float(pr["voltage"]) / i_mean
+                                                   if i_mean != 0 else math.inf)
+            for key in ("max", "mean"):
+                val = pr.get(f"temperature_{key}", pr.get(f"temperature_rise_{key}"))
+                if val is not None:
+                    data[f"temperature_rise_{key}"][k] = float(val)
+    return data, filled, pidx
+
+
+def _fit_networks(data, filled, pidx, network_probes, n_warp: int, n_weft: int):
+    """The yarn-network fits of every filled state into ``data``; returns ``(the network
+    probes, the usable ones)`` (``build_table``)."""
+    network = YarnNetwork(n_warp, n_weft)
+    try:
+        net_probes = (dict(network_probes) if network_probes is not None
+                      else default_probe_terminals(n_warp, n_weft))
+    except ValueError:
+        net_probes = {}
+    usable = [p for p in net_probes if p in pidx]
+    cache: dict = {}
+    if len(usable) >= 2:
+        for idx in zip(*np.nonzero(filled)):
+            measured = {p: data["probe_resistance"][idx + (pidx[p],)] for p in usable}
+            ry, rc, res = fit_network(measured, network, {p: net_probes[p] for p in usable},
+                                      _grid_cache=cache)
+            data["yarn_resistance"][idx] = ry
+            data["contact_resistance"][idx] = rc
+            data["network_fit_residual"][idx] = res
+    else:
+        log.warning("build_table: records have fewer than two of the network probes %s; "
+                    "yarn_resistance and contact_resistance are NaN", list(net_probes))
+    # separate warp and weft yarn resistors (format 2): four probes or more
+    probes3 = (dict(network_probes) if network_probes is not None
+               else default_probe_terminals(n_warp, n_weft, weft_probe=True) if min(n_warp, n_weft) >= 2 else {})
+    usable3 = [p for p in probes3 if p in pidx]
+    if len(usable3) >= 4:
+        for idx in zip(*np.nonzero(filled)):
+            measured = {p: data["probe_resistance"][idx + (pidx[p],)] for p in usable3}
+            rw, rf, rc3, res3 = fit_network3(measured, network, {p: probes3[p] for p in usable3})
+            data["yarn_resistance_warp"][idx] = rw
+            data["yarn_resistance_weft"][idx] = rf
+            data["contact_resistance_warp_weft"][idx] = rc3
+            data["network_fit_residual_warp_weft"][idx] = res3
+    return net_probes, usable

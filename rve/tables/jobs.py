@@ -92,13 +92,13 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
             log.warning("table %s: %d state(s) are not static equilibria (see equilibrium_residual): %s",
                         out_table, len(unconverged), ", ".join(unconverged))
         ds.attrs["probe_definitions"] = json.dumps([p.model_dump() for p in first.probes])
-        if spec.get("accuracy"):  # the stated accuracy of this run's table, from its convergence study (issue 14)
+        if spec.get("accuracy"):  # the stated accuracy of this run's table, from its convergence study
             from .accuracy import annotate_accuracy, read_accuracy
 
             annotated = annotate_accuracy(ds, read_accuracy(spec["accuracy"]), first.mesh.elements,
                                           first.contact.penalty, source=str(spec["accuracy"]))
             log.info("accuracy %s: estimated_relative_error on %s", spec["accuracy"], ", ".join(annotated) or "nothing")
-        if "realization" in ds.dims:  # a sweep over packing realizations (issue 14): mean, std, 90 % band
+        if "realization" in ds.dims:  # a sweep over packing realizations: mean, std, 90 % band
             from .ensemble import add_ensemble_statistics
 
             ds = add_ensemble_statistics(ds, packing=first.packing.model_dump(exclude={"seed"}))

@@ -202,7 +202,33 @@ def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
     ds.coords["yarn"] = _var(("yarn",), np.array(YARNS, dtype=object), DIMENSIONLESS,
                              "yarn family (warp along x, weft along y)")
 
-    # --- membrane force and the side imbalance
+    strains = np.asarray(ds["strain"].values, float)
+    zero = np.nonzero(strains == 0.0)[0]
+    _add_membrane_force(ds, lead, lx, ly, strains, zero)
+    _add_strain_measures(ds, lead, strains)
+    # --- areal density
+    fab = _fabric(ds)
+    mass = fab.get("fibril_mass_g")
+    rho_a = float(mass) / (lx * ly) if mass is not None else math.nan
+    ds["areal_density"] = _var((), rho_a, "g mm-2",
+                               "areal density: sum of fibril reference length x pi R^2 x rho over the cell area")
+
+    # --- gauge factor
+    if "probe_resistance" in ds:
+        R = ds["probe_resistance"]
+        R0 = (R.isel(strain=int(zero[0])) if zero.size else R.isel(strain=0) * np.nan).drop_vars("strain")
+        eps = xr.DataArray(np.where(strains == 0.0, np.nan, strains), dims=("strain",))
+        gf = ((R - R0) / (R0 * eps)).transpose(*R.dims)
+        ds["gauge_factor"] = _var(R.dims, gf.values, DIMENSIONLESS,
+                                  "gauge factor (R(eps) - R(0)) / (R(0) eps) of the probe, eps the mode's strain "
+                                  "coordinate (NaN at eps = 0)")
+
+    _add_sheet_parameters(ds, pitch)
+    return ds
+
+
+def _add_membrane_force(ds, lead, lx, ly, strains, zero) -> None:
+    """``membrane_force``, its value at zero strain and ``side_force_imbalance``."""
     F = ds["reaction_force"].transpose(*lead, "side", "component").values
     shape = F.shape[:-2]
     N = np.full(shape + (2, 3), np.nan)
@@ -219,9 +245,7 @@ def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
         "membrane force per unit reference width: clamp force on the + side of the edge / the edge's reference "
         "length (first Piola; N_xx = [edge x, component x], N_yy = [y, y], shear resultant N_yx = [x, y])",
         comment="includes the pretension of the relaxed cell (membrane_force_at_zero_strain)")
-    strains = np.asarray(ds["strain"].values, float)
     ax = lead.index("strain")
-    zero = np.nonzero(strains == 0.0)[0]
     N0 = (np.take(N, int(zero[0]), axis=ax) if zero.size else np.full(np.delete(N.shape, ax), np.nan))
     ds["membrane_force_at_zero_strain"] = _var(
         tuple(d for d in lead if d != "strain") + ("edge", "component"), N0, "N mm-1",
@@ -231,7 +255,9 @@ def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
         tuple(lead) + ("edge",), imb, "N",
         "|F(-) + F(+)|: magnitude of the sum of the clamp forces on the two sides of an edge pair (a check, ~0)")
 
-    # --- strain measures of the mode's path
+
+def _add_strain_measures(ds, lead, strains) -> None:
+    """``yarn_strain`` and ``shear_angle`` of the modes' paths, NaN where no state is."""
     modes = [str(m) for m in ds["mode"].values]
     ys = np.full((len(modes), len(strains), 2), np.nan)
     th = np.full((len(modes), len(strains)), np.nan)
@@ -262,25 +288,10 @@ def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
         "shear angle: drop of the angle between the warp and weft directions (shear: atan(gamma); trellis: the "
         "mode's strain)")
 
-    # --- areal density
-    fab = _fabric(ds)
-    mass = fab.get("fibril_mass_g")
-    rho_a = float(mass) / (lx * ly) if mass is not None else math.nan
-    ds["areal_density"] = _var((), rho_a, "g mm-2",
-                               "areal density: sum of fibril reference length x pi R^2 x rho over the cell area")
 
-    # --- gauge factor
-    if "probe_resistance" in ds:
-        R = ds["probe_resistance"]
-        R0 = (R.isel(strain=int(zero[0])) if zero.size else R.isel(strain=0) * np.nan).drop_vars("strain")
-        eps = xr.DataArray(np.where(strains == 0.0, np.nan, strains), dims=("strain",))
-        gf = ((R - R0) / (R0 * eps)).transpose(*R.dims)
-        ds["gauge_factor"] = _var(R.dims, gf.values, DIMENSIONLESS,
-                                  "gauge factor (R(eps) - R(0)) / (R(0) eps) of the probe, eps the mode's strain "
-                                  "coordinate (NaN at eps = 0)")
-
-    # --- two-potential sheet parameters (per yarn family: the warp/weft fit where it has
-    # values, else the two-resistor fit for both; sheet_network_parameters)
+def _add_sheet_parameters(ds, pitch) -> None:
+    """The two-potential sheet parameters per yarn family: the warp/weft fit where it has
+    values, else the two-resistor fit for both (``sheet_network_parameters``)."""
     if "contact_resistance" in ds and "yarn_resistance" in ds:
         net = sheet_network_parameters(ds)
         ry, rc = net["yarn_resistance"].values, net["contact_resistance"].values
@@ -300,4 +311,3 @@ def add_macro_quantities(ds: xr.Dataset) -> xr.Dataset:
                                              "bus-bar sheet resistance 1/g (ohm per reference square) of a yarn layer")
         ds["transfer_length"] = _var(dims, np.sqrt(g / (2.0 * c[..., None])), "mm",
                                      "transfer length sqrt(g / 2c) of the two-potential sheet model")
-    return ds

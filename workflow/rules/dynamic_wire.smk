@@ -40,7 +40,7 @@ rule dynamic_wire_reference:
     threads: 1
     priority: 10  # the longest job: start it first so the series share the other core
     resources:
-        mem_mb=500,
+        mem_mb=config["resources"]["dynamic_wire_mem_mb"],
     run:
         dynamic_wire_study.reference_job(
             output.record, log[0], input.scene, params.overrides, params.stages, params.steps
@@ -62,7 +62,7 @@ rule dynamic_wire_series:
         steps=lambda wc: DYNAMIC_WIRE["series"][int(wc.dw_stages)]["steps"],
     threads: 1
     resources:
-        mem_mb=500,
+        mem_mb=config["resources"]["dynamic_wire_mem_mb"],
     run:
         dynamic_wire_study.series_job(
             output.records, log[0], input.scene, params.overrides, int(wildcards.dw_stages), params.steps
@@ -88,7 +88,7 @@ rule dynamic_wire_study:
         plan=DYNAMIC_WIRE,
     threads: 1
     resources:
-        mem_mb=500,
+        mem_mb=config["resources"]["dynamic_wire_mem_mb"],
     run:
         dynamic_wire_study.gather_job(
             input.series, input.reference, output.nc, output.orders_md, output.errors_png, output.work_png,

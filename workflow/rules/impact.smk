@@ -7,24 +7,23 @@
 # the projectile and the horizon scaled by 1/4 (same yarn spacing, elements of 0.64 mm, the
 # same deflection-to-span ratio at t_end); each point of the full size costs as much as the
 # full run.
-# Optional pipeline config key impact: {scene_config, overrides, sweep_overrides, currents}.
+# Pipeline config key impact: {scene_config, overrides, sweep_overrides, currents}, its
+# defaults in workflow/schemas/pipeline.schema.yaml; the full run's memory from config
+# resources.impact_mem_mb (the others: the profile's default-resources);
+# every path from rve.scenes.layout; the job bodies (rve.scenes.impact.jobs) are imported in
+# the rule bodies.
 
 import os
 
-from rve.scenes import impact as impact_scene
+from rve.scenes import layout as scene_layout
 
-IMPACT = {"scene_config": "configs/scenes/impact.yaml", "overrides": [],
-          "sweep_overrides": ["geometry.n_warp=8", "geometry.n_weft=8", "geometry.span=12.7 mm", "mesh.elements=20",
-                              "projectile.radius=4.5 mm", "time.t_end=0.125 ms", "time.steps=250",
-                              "output.vtk=false"],
-          "currents": [0, 50, 100, 200], **config.get("impact", {})}
-IMPACT_DIR = "results/impact"
+IMPACT = config["impact"]
 
 
 rule impact:
     """Relaxation + the full thesis impact and its outputs."""
     input:
-        f"{IMPACT_DIR}/full/summary.json",
+        scene_layout.impact_file("full", "summary"),
 
 
 rule impact_relax:
@@ -32,75 +31,83 @@ rule impact_relax:
     input:
         scene=IMPACT["scene_config"],
     output:
-        state=f"{IMPACT_DIR}/{{case}}/relaxed_state.npz",
-        record=f"{IMPACT_DIR}/{{case}}/relaxation.json",
+        state=scene_layout.impact_file("{case}", "relaxed"),
+        record=scene_layout.impact_file("{case}", "relaxation"),
     log:
-        "results/logs/impact/{case}_relax.log",
+        scene_layout.log_path("impact", "{case}_relax"),
     benchmark:
-        "results/benchmarks/impact/{case}_relax.tsv"
+        scene_layout.benchmark_path("impact", "{case}_relax")
     params:
         overrides=lambda wc: IMPACT["overrides"] if wc.case == "full" else IMPACT["overrides"] + IMPACT["sweep_overrides"],
-        out=lambda wc: f"{IMPACT_DIR}/{wc.case}",
+        out=lambda wc: scene_layout.impact_dir(wc.case),
     threads: 1
     run:
-        impact_scene.impact_job(input.scene, params.out, output.record, log[0], params.overrides,
-                                relaxed=output.state, relax_only=True)
+        from rve.scenes.impact.jobs import impact_job
+
+        impact_job(input.scene, params.out, output.record, log[0], params.overrides,
+                   relaxed=output.state, relax_only=True)
 
 
 rule impact_full:
     """The thesis impact from the saved relaxed state (outputs under results/impact/full)."""
     input:
         scene=IMPACT["scene_config"],
-        relaxed=f"{IMPACT_DIR}/full/relaxed_state.npz",
+        relaxed=scene_layout.impact_file("full", "relaxed"),
     output:
-        summary=f"{IMPACT_DIR}/full/summary.json",
-        nc=f"{IMPACT_DIR}/full/impact.nc",
+        summary=scene_layout.impact_file("full", "summary"),
+        nc=scene_layout.impact_file("full", "netcdf"),
     log:
-        "results/logs/impact/full.log",
+        scene_layout.log_path("impact", "full"),
     benchmark:
-        "results/benchmarks/impact/full.tsv"
+        scene_layout.benchmark_path("impact", "full")
     params:
         overrides=IMPACT["overrides"],
         out=lambda w, output: os.path.dirname(output.summary),
     threads: 1
     resources:
-        mem_mb=4000,
+        mem_mb=config["resources"]["impact_mem_mb"],
     run:
-        impact_scene.impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
-                                relaxed=input.relaxed)
+        from rve.scenes.impact.jobs import impact_job
+
+        impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
+                   relaxed=input.relaxed)
 
 
 rule impact_sweep_point:
     """One current density of the sweep (reduced case)."""
     input:
         scene=IMPACT["scene_config"],
-        relaxed=f"{IMPACT_DIR}/sweep/relaxed_state.npz",
+        relaxed=scene_layout.impact_file("sweep", "relaxed"),
     output:
-        summary=f"{IMPACT_DIR}/sweep/J{{current}}/summary.json",
+        summary=scene_layout.impact_file("sweep/J{current}", "summary"),
     log:
-        "results/logs/impact/sweep_J{current}.log",
+        scene_layout.log_path("impact", "sweep_J{current}"),
     benchmark:
-        "results/benchmarks/impact/sweep_J{current}.tsv"
+        scene_layout.benchmark_path("impact", "sweep_J{current}")
     params:
         overrides=lambda wc: IMPACT["overrides"] + IMPACT["sweep_overrides"] + [f"warp.J_bar=-{wc.current} A/mm^2"],
-        out=lambda wc: f"{IMPACT_DIR}/sweep/J{wc.current}",
+        out=lambda wc: scene_layout.impact_sweep_dir(wc.current),
     threads: 1
     run:
-        impact_scene.impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
-                                relaxed=input.relaxed)
+        from rve.scenes.impact.jobs import impact_job
+
+        impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
+                   relaxed=input.relaxed)
 
 
 rule impact_sweep:
     """Final speed, tilt rate and peak temperature against the warp current density."""
     input:
-        expand(f"{IMPACT_DIR}/sweep/J{{current}}/summary.json", current=IMPACT["currents"]),
+        [scene_layout.impact_file(f"sweep/J{c}", "summary") for c in IMPACT["currents"]],
     output:
-        png=f"{IMPACT_DIR}/sweep/current_sweep.png",
-        json=f"{IMPACT_DIR}/sweep/current_sweep.json",
+        png=scene_layout.IMPACT_SWEEP_PNG,
+        json=scene_layout.IMPACT_SWEEP_JSON,
     log:
-        "results/logs/impact/sweep_curve.log",
+        scene_layout.log_path("impact", "sweep_curve"),
     params:
         currents=IMPACT["currents"],
     threads: 1
     run:
-        impact_scene.sweep_curve(input, params.currents, output.png, output.json)
+        from rve.scenes.impact.jobs import sweep_curve
+
+        sweep_curve(input, params.currents, output.png, output.json)

@@ -2,17 +2,16 @@
 # Include from the Snakefile after common.smk:   include: "workflow/rules/induced_deformation.smk"
 # Target `induced_deformation`: the three field orientations B1, B2, B3 as independent jobs
 # (`snakemake -j2 induced_deformation` runs two at once), then the combined figures.
-# Optional pipeline config key induced_deformation: {scene_config, overrides: [...]}.
+# Pipeline config key induced_deformation: {scene_config, overrides: [...]}, its defaults in
+# workflow/schemas/pipeline.schema.yaml; memory from config resources.induced_mem_mb; every
+# path from rve.scenes.layout; the job bodies are imported in the rule bodies.
 
-from rve.scenes import induced_deformation as induced_scene
-from rve.scenes import induced_output as induced_out
+from rve.scenes import layout as scene_layout
 
-INDUCED = {"scene_config": "configs/scenes/induced_deformation.yaml", "overrides": [],
-           **config.get("induced_deformation", {})}
-INDUCED_DIR = "results/induced_deformation"
+INDUCED = config["induced_deformation"]
 INDUCED_ORIENTATIONS = ["B1", "B2", "B3"]
-INDUCED_OUTPUTS = [f"{INDUCED_DIR}/fig_8_3_1_frames.png", f"{INDUCED_DIR}/fig_8_3_2_temperature.png"] + [
-    f"{INDUCED_DIR}/{o}/summary.json" for o in INDUCED_ORIENTATIONS]
+INDUCED_OUTPUTS = [scene_layout.INDUCED_FRAMES_PNG, scene_layout.INDUCED_TEMPERATURE_PNG] + [
+    scene_layout.induced_file(o, "summary") for o in INDUCED_ORIENTATIONS]
 
 
 wildcard_constraints:
@@ -30,36 +29,40 @@ rule induced_deformation_orientation:
     input:
         scene=INDUCED["scene_config"],
     output:
-        summary=f"{INDUCED_DIR}/{{induced_orientation}}/summary.json",
-        nc=f"{INDUCED_DIR}/{{induced_orientation}}/induced_deformation.nc",
+        summary=scene_layout.induced_file("{induced_orientation}", "summary"),
+        nc=scene_layout.induced_file("{induced_orientation}", "netcdf"),
     log:
-        "results/logs/induced_deformation/{induced_orientation}.log",
+        scene_layout.log_path("induced_deformation", "{induced_orientation}"),
     benchmark:
-        "results/benchmarks/induced_deformation/{induced_orientation}.tsv"
+        scene_layout.benchmark_path("induced_deformation", "{induced_orientation}")
     params:
         overrides=INDUCED["overrides"],
-        out=lambda wc: f"{INDUCED_DIR}/{wc.induced_orientation}",
+        out=lambda wc: scene_layout.induced_dir(wc.induced_orientation),
     threads: 1
     resources:
-        mem_mb=1000,
+        mem_mb=config["resources"]["induced_mem_mb"],
     run:
-        induced_scene.orientation_job(input.scene, wildcards.induced_orientation, params.out, output.summary,
-                                      log[0], params.overrides)
+        from rve.scenes.induced.jobs import orientation_job
+
+        orientation_job(input.scene, wildcards.induced_orientation, params.out, output.summary,
+                        log[0], params.overrides)
 
 
 rule induced_deformation_figures:
     """Figs. 8.3.1 (time frames x orientations, coloured by current) and 8.3.2 (temperature)."""
     input:
-        nc=expand(f"{INDUCED_DIR}/{{o}}/induced_deformation.nc", o=INDUCED_ORIENTATIONS),
+        nc=[scene_layout.induced_file(o, "netcdf") for o in INDUCED_ORIENTATIONS],
     output:
-        frames=f"{INDUCED_DIR}/fig_8_3_1_frames.png",
-        temperature=f"{INDUCED_DIR}/fig_8_3_2_temperature.png",
+        frames=scene_layout.INDUCED_FRAMES_PNG,
+        temperature=scene_layout.INDUCED_TEMPERATURE_PNG,
     log:
-        "results/logs/induced_deformation/figures.log",
+        scene_layout.log_path("induced_deformation", "figures"),
     benchmark:
-        "results/benchmarks/induced_deformation/figures.tsv"
+        scene_layout.benchmark_path("induced_deformation", "figures")
     params:
-        dirs=[f"{INDUCED_DIR}/{o}" for o in INDUCED_ORIENTATIONS],
+        dirs=[scene_layout.induced_dir(o) for o in INDUCED_ORIENTATIONS],
     threads: 1
     run:
-        induced_out.combine_orientations(params.dirs, output.frames, output.temperature)
+        from rve.scenes.induced.outputs import combine_orientations
+
+        combine_orientations(params.dirs, output.frames, output.temperature)

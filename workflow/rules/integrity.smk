@@ -1,8 +1,8 @@
-# Issue 15 (docs/fault_tolerance.md): before Snakemake builds its DAG, every state and table
+# docs/fault_tolerance.md: before Snakemake builds its DAG, every state and table
 # of the configured runs that fails its SHA-256 trailer (rve.io.checksum; bytes only, no
 # HDF5, ~1 ms a file) is moved to <name>.corrupt, so the jobs that wrote them rerun now
 # instead of "Nothing to be done". States must carry a trailer (load_state refuses them
-# otherwise); tables without one (written before issue 15) are kept. Main process only: the
+# otherwise); tables without one (written by an older rve) are kept. Main process only: the
 # spawned jobs re-parse the workflow and must not touch files.
 
 import glob as _glob
@@ -43,7 +43,7 @@ if workflow.is_main_process:
     _integrity_sweep()
 
 
-# Issue 15: a misspelt top-level key of the pipeline config is an error naming it (the
+# A misspelt top-level key of the pipeline config is an error naming it (the
 # schema's properties are the allowed keys), and a target naming an unknown run says so
 # instead of a bare KeyError.
 import yaml as _yaml

@@ -250,7 +250,7 @@ rule rve_report:
         report_job(input.table, params.prefix, log[0])
 
 
-# --------------------------------------------------------------------------- ensembles (issue 14)
+# --------------------------------------------------------------------------- ensembles
 # A run with `sweep: {realization: [...]}` (packing.seed) and a packing.perturbation is an
 # ensemble of perturbed packings: its table has a `realization` dimension with mean, std and
 # the 90 % band (rve.tables.ensemble, hooked into rve_gather); this rule draws the bands and
@@ -284,7 +284,7 @@ rule rve_ensemble:
         **rve_layout.ensemble_report_outputs(ENSEMBLE_RUN),
 
 
-# --------------------------------------------------------------------------- table convergence (issue 14)
+# --------------------------------------------------------------------------- table convergence
 # A study {study} is two sweep runs: {study}_mesh over mesh.elements and {study}_penalty over
 # contact_penalty (configs/pipeline.yaml: table_convergence_*; the CI config: ci_table_convergence_*).
 # The report compares every table quantity with the finest / stiffest run at every strain, fits the

@@ -6,7 +6,7 @@ with"; docs/impact.md "Temperature").
 Contract
 --------
 ``ImpactThermal(system, h_C, fixed_nodes, sink=True)``: a ``ThermalOperators`` of the fabric
-(``rve.scenes.induced_balances``) whose ``contact(x)`` adds, for every active sphere pair,
+(``rve.model.thermal_post``) whose ``contact(x)`` adds, for every active sphere pair,
 the conductance ``G = h_C a(g) l_e`` to a reservoir at T = 0 (the projectile: 422 g against
 the fabric's 1.3 g, its temperature rise is neglected), distributed to the chord's nodes as
 ``G beta beta^T`` with ``beta = (1 - s, s)`` (T at the closest point); ``a(g)`` the Hertz
@@ -20,9 +20,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..physics.contact_forms import effective_radius, hertz_kappa, hertz_width
-from ..physics.sphere_contact_forms import sphere_segment_geometry
-from .induced_balances import ThermalOperators
+from ...physics.contact_forms import effective_radius, hertz_kappa, hertz_width
+from ...physics.sphere_contact_forms import sphere_segment_geometry
+from ...model.thermal_post import ThermalOperators
 
 __all__ = ["ImpactThermal"]
 
@@ -88,7 +88,7 @@ class ImpactThermal(ThermalOperators):
             return (np.concatenate([r, S.row.astype(np.int64)]), np.concatenate([c, S.col.astype(np.int64)]),
                     np.concatenate([v, S.data]))
         # memoised for the last (fabric state, sphere centres): the post-solve asks once per
-        # refinement iteration (rve.scenes.induced_balances.ThermalPostSolver)
+        # refinement iteration (rve.model.thermal_post.ThermalPostSolver)
         centres = np.zeros(0) if self.centres is None else self.centres
         return self._memoised("contact_sink", (xf, centres), 0.0, compute,
                               (self.system.term.map, self.impact.sphere.centre))

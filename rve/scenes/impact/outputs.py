@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
-from .induced_output import nodal_fields
+from ...io.atomic import atomic_path
+from ..induced.outputs import nodal_fields, tube_series, write_netcdf
 
 __all__ = ["write_outputs", "capsule"]
 
@@ -162,16 +162,13 @@ def _render(path, panels, titles, scalars, clim, view, window=(700, 520), zoom=1
 
 
 def write_outputs(cfg, result, history, out_dir) -> dict:
-    from ..io.vtk import tube_surface, write_pvd, write_tubes
+    from ...io.vtk import tube_surface, write_pvd
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {}
     ds, cur, pot = _dataset(cfg, result, history)
-    nc = out_dir / "impact.nc"
-    with atomic_path(nc) as tmp:
-        ds.to_netcdf(tmp)
-    files["netcdf"] = str(nc)
+    files["netcdf"] = write_netcdf(ds, out_dir / "impact.nc")
     sysm = result.model
     mesh = sysm.fabric.mesh
     st, se = history["stored"], history["series"]
@@ -180,16 +177,9 @@ def write_outputs(cfg, result, history, out_dir) -> dict:
     Rp = cfg.projectile.radius
     if o.vtk:
         tdir = out_dir / "tubes"
-        tdir.mkdir(exist_ok=True)
-        entries = []
+        files["pvd"] = tube_series(tdir, "impact", mesh, st, cur, pot, o)
         for k in range(0, nt, o.vtk_every):
-            f = tdir / f"impact_{k:04d}.vtp"
-            write_tubes(f, mesh, st["x"][k], o.n_theta,
-                        point_data={"current": cur[k], "potential": pot[k], "temperature": np.asarray(st["T"][k])})
-            fp = tdir / f"projectile_{k:04d}.vtp"
-            _save_vtp(capsule(st["xp"][k], Rp), fp)
-            entries.append((float(st["t"][k]), f.name))
-        files["pvd"] = str(write_pvd(tdir / "impact.pvd", entries))
+            _save_vtp(capsule(st["xp"][k], Rp), tdir / f"projectile_{k:04d}.vtp")
         files["pvd_projectile"] = str(write_pvd(tdir / "projectile.pvd", [
             (float(st["t"][k]), f"projectile_{k:04d}.vtp") for k in range(0, nt, o.vtk_every)]))
     if o.png:

@@ -1,118 +1,27 @@
-"""PARDISO (Intel MKL) as a factorisation backend: supernodal LDLᵀ of real symmetric
-indefinite matrices (``mtype = -2``) and, with ``symmetric=False``, LU of real unsymmetric
-ones (``mtype = 11``), the fill-reducing analysis reused per sparsity pattern (issue 10;
-measurements in docs/engine.md, "Supernodal backend (measured)" and "Unsymmetric stage
-matrices (round 4)").
+"""PARDISO (Intel MKL) as a factorisation backend, through ctypes: supernodal LDLᵀ of real
+symmetric indefinite matrices (``mtype = -2``), LU of real unsymmetric ones
+(``symmetric=False``, ``mtype = 11``), and a Cholesky mode (``positive_definite=True``,
+``mtype = 2``), the fill-reducing analysis reused per sparsity pattern. The full contract
+(pattern policy, fast path, pivoting, threads, why not pypardiso's solver) and the
+measurements: docs/engine.md, "The PARDISO backend in full" and "Supernodal backend
+(measured)".
 
 Contract
 --------
-``available() -> bool`` and ``unavailable_reason() -> str``: whether MKL's ``pardiso`` can
-be called (``pypardiso`` installed and its ``mkl_rt`` loadable; never on aarch64, where
-there is no MKL wheel). Nothing is loaded at import of this module: the library is found
-on the first ``available()`` or the first ``PardisoFactorization()``.
-
-``PardisoFactorization(threads=1, matching=True, drop_zeros=True, refinement=0,
-check=False, ..., positive_definite=False)``, a stateful
-backend (registry name ``"pardiso"``) with the interface of the linear-solver layer
-(``rve/solvers/linear.py``: analyse / factorize / solve / negative_pivots):
-
-* ``analyse(A)``: phase 11 (METIS nested dissection, symbolic factorisation; with
-  ``matching`` also the symmetric weighted matching and scaling, which read the values)
-  on the upper triangle of ``A`` (CSR: its upper triangle; CSC: its arrays read as the
-  CSR of Aᵀ, i.e. the lower triangle of A — the same for a symmetric matrix). Missing
-  diagonal entries are added to the pattern as zeros (PARDISO requires the diagonal of a
-  symmetric matrix to be stored). Returns ``self``.
-* ``factorize(A, inertia=False)``: phase 22 only, reusing the analysis while ``A`` has the
-  pattern (shape, indptr, indices) that was analysed; a new pattern is analysed first.
-  Returns ``self``. Raises ``PardisoError`` (a ``RuntimeError``) on an error code.
-  With ``drop_zeros`` (default) the explicit zeros of ``A`` (inactive candidate contact
-  pairs, uncoupled field blocks of the element pattern: 33-58 % of the stored entries of
-  the stage matrices) are dropped before the pattern comparison, so the analysis is reused
-  while the *nonzero* pattern (the active contact set) is unchanged and redone when it
-  changes; measured (docs/engine.md) the factor then has 36-45 % fewer entries and a
-  factorisation costs 1.4-3.5x less, while the nonzero pattern changed at about one
-  stage start in ten of a dynamic weave run. ``drop_zeros=False`` keeps the stored pattern
-  (one analysis per contact map).
-* Analysis reuse beyond the same pattern (``reuse_subpattern=True``, default): a matrix
-  whose (nonzero) pattern lies in the analysed one is factorised on the analysed pattern,
-  the missing entries as zeros (``subpattern_reuses`` counts them); otherwise the new
-  analysis is of the union with the old pattern when that is at most ``grow_limit``
-  (1.25) times the new one, else of the new one; with ``analyse_stored=True`` of the
-  stored pattern of the matrix handed in (explicit zeros included: the contact map's
-  candidate pairs), so later nonzero patterns under the same map lie in it. Measured on
-  the 80-fibril relaxation (docs/engine.md): 30 analyses for 491 factorisations at 30
-  el/fibril with ``analyse_stored`` against 283 without.
-* Stored-structure fast path: when a matrix has the stored structure mapped after the
-  last general-path call and its entries outside the analysed pattern (if any: candidate
-  pairs of a rebuilt contact map) are explicit zeros, its values are gathered straight
-  onto the analysed pattern (explicit zeros included: the same numbers as the nonzero
-  path), with no zero elimination or pattern search (``stored_fast`` counts these calls).
-* ``solve(b)``: phase 33 (b of shape (n,) or (n, k)); ``refinement_steps`` is the number
-  of iterative refinement steps PARDISO performed (iparm(7)). ``refinement=0`` is MKL's
-  default: two steps automatically when pivots were perturbed, none otherwise.
-* ``negative_pivots`` / ``positive_pivots``: iparm(23) / iparm(22) after the last
-  factorisation, the numbers of negative / positive eigenvalues of the D of LDLᵀ, i.e.
-  (Sylvester) of A itself, for the minimiser's inertia check.
-* ``perturbed_pivots``: iparm(14). A pivot smaller than 1e-8 ||A|| is replaced by ±1e-8
-  ||A|| (iparm(10) = 8, MKL's default for symmetric indefinite): then the factorisation is
-  of a nearby matrix, the solve is refined, and a caller that needs accuracy (or an exact
-  inertia) checks the residual / treats it as a near-singular factor.
-* ``factor_nnz`` (iparm(18): entries of L incl. diagonal), ``memory_kb`` (peak of
-  analysis, iparm(15); permanent + factorisation, iparm(16) + iparm(17)).
-* counters ``analyses``, ``factorizations``, ``solves``.
-* ``release()``: phase -1 (all MKL memory of this instance); also in ``__del__``.
-
-Cholesky mode (``positive_definite=True``, name ``"pardiso_spd"``; the ``cholesky()``
-companion of a symmetric instance, kept like ``unsymmetric()``): ``mtype = 2``, no pivoting,
-no matching; the same pattern policy, fast path and threads. ``factorize`` raises
-``rve.solvers.linear.NotPositiveDefiniteError`` at the first pivot <= 0 (counted in
-``indefinite``), which it meets long before the end of a whole factorisation on the energy
-minimiser's indefinite matrices: the minimiser's definiteness test
-(``rve.solvers.linear.factor_positive_definite``; ``negative_pivots`` is 0 after a success).
-
-Unsymmetric mode (``symmetric=False``, registry name ``"pardiso_unsym"``; the companion
-``unsymmetric()`` of a symmetric instance, to which ``rve.solvers.newton.StageFactorisation``
-sends the unsymmetric stage matrices of the dynamic scenes): ``mtype = 11`` on the *full*
-pattern, handed to PARDISO as the CSR of A itself (a CSC input's entries are mapped to
-their true (row, column) once per pattern, so the gather of the values per factorisation
-is the only per-call work, as in the symmetric mode; no transposed solve), the diagonal
-added to the pattern as in the symmetric mode. MKL's settings for real unsymmetric
-matrices: nonsymmetric weighted matching and scaling (iparm(13) = iparm(11) = 1, with
-``matching``), pivot perturbation 1e-13 (iparm(10) = 13), no Bunch–Kaufman
-(iparm(21) = 0); ``refinement=0`` again (iparm(8) = 0: two refinement steps when pivots
-were perturbed: measured on the full-size impact stage matrix two forced steps tripled the
-solve, 28 → 90 ms, and left the backward error at 2e-16). Analysis reuse, the sub-pattern /
-union rules, ``analyse_stored``, ``drop_zeros`` and the stored-structure fast path are
-those of the symmetric mode, on the full pattern. There is no inertia: ``negative_pivots``
-/ ``positive_pivots`` and ``factorize(A, inertia=True)`` raise ``ValueError``
-(``provides_inertia`` is False; ``stats()['negative_pivots']`` is None), and
-``rve.solvers.linear.factor_inertia`` leaves such a backend to SuperLU.
-
-Pivoting (MKL's recommendation for symmetric indefinite matrices): Bunch–Kaufman 1×1 and
-2×2 pivots within the supernodes (iparm(21) = 1) with pivot perturbation (iparm(10) = 8);
-with ``matching=True`` (default) also symmetric weighted matching and scaling
-(iparm(13) = 1, iparm(11) = 1), computed in the analysis from the values of the matrix
-analysed: when the analysis is reused for new values with the same pattern, that
-matching/scaling is the old matrix's, which stays valid (the factorisation still pivots)
-but may perturb more pivots — ``perturbed_pivots`` says so.
-
-Threads: one MKL thread by default, set for the PARDISO domain before every call
-(``MKL_Domain_Set_Num_Threads(threads, MKL_DOMAIN_PARDISO)``), so results are
-deterministic run to run and two Snakemake jobs do not oversubscribe the two cores (the
-Snakefile also runs jobs with ``MKL_NUM_THREADS=1``). ``threads=None`` leaves MKL's own
-setting (``MKL_NUM_THREADS`` / all cores).
-
-Why our own ctypes call instead of ``pypardiso.PyPardisoSolver``: pypardiso is used only to
-*find* ``mkl_rt`` (first where the MKL wheel puts it, ``_mkl_rt_direct``, without importing
-pypardiso, whose import alone ran its slow search: 0.85-7 s; then its constructor's
-search: ``PYPARDISO_MKL_RT``, ``find_library``, the
-venv's ``lib``). Its ``_call_pardiso`` is private, converts ``indptr``/``indices`` to
-1-based int32 copies on every call (O(nnz) per phase), keeps no reference to the arrays
-PARDISO reads again during the solve's iterative refinement, and its ``factorize``/``solve``
-compare the whole matrix (values too) to decide whether to refactorise. Here the 0-based
-int32 pattern of the upper triangle is built once per pattern (iparm(35) = 1), only the
-values are gathered per factorisation, and the arrays PARDISO was given are kept alive
-until the next factorisation or ``release``.
+* ``available() -> bool``, ``unavailable_reason() -> str``, ``mkl_library() -> str``: MKL
+  is found on first use (never at import).
+* ``PardisoFactorization(threads=1, matching=True, drop_zeros=True, refinement=0,
+  check=False, ordering=2, reuse_subpattern=True, grow_limit=1.25, analyse_stored=False,
+  symmetric=True, cnr=0, positive_definite=False)``: ``analyse(A)`` (phase 11), ``factorize(A,
+  inertia=False)`` (phase 22, the analysis reused while the nonzero pattern lies in the
+  analysed one), ``solve(b)`` (phase 33), ``negative_pivots`` / ``positive_pivots``
+  (symmetric mode only), ``perturbed_pivots``, ``factor_nnz``, ``memory_kb``, the counters
+  ``analyses``, ``factorizations``, ``solves``, ``subpattern_reuses``, ``stored_fast``;
+  ``unsymmetric()`` and ``cholesky()`` companions of a symmetric instance; ``release()``
+  (phase -1, also in ``__del__``).
+* ``PardisoError`` (a ``RuntimeError``) on an MKL error code;
+  ``NotPositiveDefiniteError`` from the Cholesky mode at the first pivot <= 0;
+  ``SingularFactorError`` on a zero pivot.
 """
 from __future__ import annotations
 
@@ -124,12 +33,13 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .linear import NotPositiveDefiniteError, SingularFactorError, _same_buffer
-from ..kernels import index_kernels as _index_kernels
+from ...kernels import index_kernels as _index_kernels
+from .base import NotPositiveDefiniteError, SingularFactorError
+from .base import same_structure as _same_structure
 
 __all__ = ["available", "unavailable_reason", "PardisoFactorization", "PardisoError", "mkl_library"]
 
-log = logging.getLogger("rve.solvers.pardiso")
+log = logging.getLogger("rve.solvers.backends.pardiso")
 
 #: MKL_DOMAIN_PARDISO of mkl_types.h
 _MKL_DOMAIN_PARDISO = 4
@@ -239,19 +149,11 @@ def _sorted_unique(keys):
     measured 10x slower on these ~10^5-10^6 keys). The keys come as a few sorted runs (the
     entries of a canonical matrix, the diagonal, the old pattern): timsort (``stable``) merges
     them in linear time where quicksort sorted them afresh (1.4 s of a 30-element
-    relaxation's profile, docs/engine.md "Round 8")."""
+    relaxation's profile, docs/engine.md "The pattern bookkeeping")."""
     k = np.sort(keys, kind="stable")
     if k.size:
         k = k[np.concatenate(([True], k[1:] != k[:-1]))]
     return k
-
-
-def _same_structure(A, indptr, indices) -> bool:
-    """``A`` has exactly these index arrays (identity first, then contents)."""
-    if _same_buffer(A.indices, indices) and _same_buffer(A.indptr, indptr):
-        return True
-    return (A.indptr.size == indptr.size and A.indices.size == indices.size
-            and np.array_equal(A.indptr, indptr) and np.array_equal(A.indices, indices))
 
 
 def _upper_entries(A):

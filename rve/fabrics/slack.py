@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from ..fabrics.fabric import minimal_rotation
+from .fabric import minimal_rotation
 from ..fem.mesh import FibrilMesh, fibril_mesh, straight_fibril
 
 __all__ = ["SlackWeave", "slack_weave", "crimp_amplitude", "half_wave_length", "crimped_frame"]

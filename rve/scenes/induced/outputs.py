@@ -8,7 +8,7 @@ Contract
   fibril), ``xyz``: ``position`` (mm), ``current`` (A, node average of the section current
   of the adjacent elements, along the fibril's reference direction), ``potential`` (V),
   ``temperature`` (K); dim ``step_time`` (every accepted step): terminal currents, the
-  charge, power and energy terms of ``rve.scenes.induced_balances`` and the balance
+  charge, power and energy terms of ``rve.model.balances`` and the balance
   residuals; attributes: orientation, B, balance errors;
 * ``tubes/induced.pvd`` + ``tubes/induced_NNNN.vtp``: tube meshes with point data
   ``current`` and ``temperature`` (every ``output.vtk_every``-th stored state);
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
+from ...io.atomic import atomic_path
 
 __all__ = ["write_outputs", "nodal_fields", "render_strip", "combine_orientations"]
 
@@ -129,37 +129,46 @@ def render_strip(path, rows, titles=None, scalars="current", clim=None, window=(
 
 
 def _surfaces(model, stored, cur, k, n_theta):
-    from ..io.vtk import tube_surface
+    from ...io.vtk import tube_surface
 
     return tube_surface(model.mesh, stored["x"][k], n_theta,
                         point_data={"current": cur[k], "temperature": np.asarray(stored["T"][k])})
 
 
-def write_outputs(cfg, result, history, out_dir) -> dict:
-    from ..io.vtk import write_pvd, write_tubes
+def write_netcdf(ds, path: Path) -> str:
+    """``ds`` written to ``path`` atomically; returns the path."""
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp)
+    return str(path)
 
+
+def tube_series(tdir: Path, name: str, mesh, stored, cur, pot, output) -> str:
+    """Every ``output.vtk_every``-th stored state as ``tdir/<name>_<k>.vtp`` (tubes coloured by
+    current, potential and temperature) and their series ``tdir/<name>.pvd``; returns its path."""
+    from ...io.vtk import write_pvd, write_tubes
+
+    tdir.mkdir(parents=True, exist_ok=True)
+    entries = []
+    for k in range(0, len(stored["t"]), output.vtk_every):
+        f = tdir / f"{name}_{k:04d}.vtp"
+        write_tubes(f, mesh, stored["x"][k], output.n_theta,
+                    point_data={"current": cur[k], "potential": pot[k], "temperature": np.asarray(stored["T"][k])})
+        entries.append((float(stored["t"][k]), f.name))
+    return str(write_pvd(tdir / f"{name}.pvd", entries))
+
+
+def write_outputs(cfg, result, history, out_dir) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {}
     ds, cur, pot = _dataset(cfg, result, history)
-    nc = out_dir / "induced_deformation.nc"
-    with atomic_path(nc) as tmp:
-        ds.to_netcdf(tmp)
-    files["netcdf"] = str(nc)
+    files["netcdf"] = write_netcdf(ds, out_dir / "induced_deformation.nc")
     model, st = result.model, history["stored"]
     o = cfg.output
     nt = len(st["t"])
     B = result.summary["B_kT"]
     if o.vtk:
-        tdir = out_dir / "tubes"
-        tdir.mkdir(exist_ok=True)
-        entries = []
-        for k in range(0, nt, o.vtk_every):
-            f = tdir / f"induced_{k:04d}.vtp"
-            write_tubes(f, model.mesh, st["x"][k], o.n_theta,
-                        point_data={"current": cur[k], "potential": pot[k], "temperature": np.asarray(st["T"][k])})
-            entries.append((float(st["t"][k]), f.name))
-        files["pvd"] = str(write_pvd(tdir / "induced.pvd", entries))
+        files["pvd"] = tube_series(out_dir / "tubes", "induced", model.mesh, st, cur, pot, o)
     if o.png:
         ks = np.unique(np.linspace(0, nt - 1, o.frames).round().astype(int))
         panels = [[(_surfaces(model, st, cur, int(k), o.n_theta), B) for k in ks]]
@@ -179,7 +188,7 @@ def combine_orientations(run_dirs, out_png, out_temperature_png, frames: int = 4
     import pyvista as pv  # noqa: F401
     import xarray as xr
 
-    from ..fem.mesh import FibrilMesh  # noqa: F401
+    from ...fem.mesh import FibrilMesh  # noqa: F401
 
     cols, tcols, titles, ttitles = [], [], [], []
     clim_c, clim_t = [np.inf, -np.inf], [0.0, 0.0]

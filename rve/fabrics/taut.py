@@ -3,7 +3,7 @@
 Contract
 --------
 ``taut_weave(n, span, R_warp, R_weft, elements, clearance, pretension)`` -> ``SlackWeave``
-(the record of ``rve.scenes.induced_fabric``): n warp yarns along x at
+(the record of ``rve.fabrics.slack``): n warp yarns along x at
 ``y_j = (j - (n-1)/2) s`` and n weft yarns along y at ``x_i = (i - (n-1)/2) s``,
 ``s = span / n``, single fibril each, ends on the box faces ``±span/2``.
 
@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..fem.mesh import Fibril, fibril_mesh, orthonormal_directors, straight_fibril
-from .induced_fabric import SlackWeave, crimped_frame, half_wave_length
+from .slack import SlackWeave, crimped_frame, half_wave_length
 
 __all__ = ["taut_weave", "half_wave_length"]  # half_wave_length: re-exported from induced_fabric
 

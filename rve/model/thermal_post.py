@@ -1,6 +1,7 @@
-"""Scene-level helpers of the induced-deformation scene: the thermal operators (conduction,
-capacity, contact heat transfer), the per-step temperature post-solve, and the charge and
-energy balance terms of a stored state (docs/induced_deformation.md "Balances").
+"""The temperature post-solve of the dynamic fabric scenes (T does not feed back: S =
+alpha_mu = 0): the thermal operators (conduction, capacity, contact heat transfer) and the
+per-step SDIRK solve of the heat equation on the converged stage states of the
+mechanical/electrical step (docs/induced_deformation.md).
 
 Contract
 --------
@@ -16,15 +17,9 @@ Contract
   stage states ``[(x_i, w_i)]`` of the mechanical/electrical step (T does not feed back:
   S = alpha_mu = 0), the same stage equations as the monolithic solve: (M + h a_ii K)_ff
   factorised once per h a_ii, the contact part by iterative refinement on that factor
-  (direct fallback); ``reuse=False`` the former path (a fresh solve per stage). Counters
+  (direct fallback); ``reuse=False`` the plain reference (a fresh solve per stage). Counters
   ``solves``, ``refinements``, ``fallbacks``, ``wall``.
 * ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone.
-* ``StateBalances(system, ops, circuits)``: ``__call__(x, w, t, T)`` -> dict of the charge
-  (currents in/out/leak, A), electrical (circuit power, Joule, contact Joule, Lorentz power,
-  W), mechanical (kinetic, strain, contact energy, mJ; damping power, W) and thermal (heat
-  content mJ, heat leaving through the ends W) terms of one state.
-* ``balance_errors(series)``: time integrals (trapezoid over the accepted steps) and the
-  relative errors of the charge, electrical, mechanical, thermal and total balances.
 """
 from __future__ import annotations
 
@@ -32,12 +27,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..model.assembler import ElementState
 from ..physics.contact_forms import hertz_width, lagrange_at, scalar_jump
 from ..physics.thermal_forms import capacity_matrix, conduction
-from ..model.terms.elasticity import beam_strain_energy
 
-__all__ = ["ThermalOperators", "ThermalPostSolver", "StateBalances", "balance_errors", "heat_transfer_block"]
+__all__ = ["ThermalOperators", "ThermalPostSolver", "heat_transfer_block"]
 
 
 class ThermalOperators:
@@ -198,7 +191,7 @@ class ThermalPostSolver:
     (3-5 solves); if a correction does not shrink by half the stage falls back to a direct
     sparse solve of A (``fallbacks``). Joule heat and the contact matrix come from
     ``ThermalOperators`` (memoised per state: the last stage's values serve the balances of
-    the accepted state). ``reuse=False``: the former path, a fresh ``spsolve`` of A at every
+    the accepted state). ``reuse=False``: the plain reference, a fresh ``spsolve`` of A at every
     stage with active pairs, Joule by ``BeamModel.joule_power`` and the contact matrix by
     ``scalar_jump`` at every stage (the reference of tests/test_induced_deformation.py)."""
 
@@ -286,7 +279,7 @@ class ThermalPostSolver:
         return T
 
     def _step_fresh(self, T0, stages, t0, h):
-        """The former path (class docstring): nothing memoised or kept but the base factor."""
+        """The plain reference (class docstring): nothing memoised or kept but the base factor."""
         op, tab = self.ops, self.tab
         fr, fx = op.free, op.fixed
         MT0 = op.M @ T0
@@ -345,112 +338,3 @@ class ThermalPostSolver:
                 K = sp.csr_matrix((Ju.ravel(), (np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel())),
                                   shape=(n, n))
         return K if extra is None else (K + extra).tocsr()
-
-
-class StateBalances:
-    """The balance terms of one state (module docstring)."""
-
-    def __init__(self, system, thermal: ThermalOperators, circuit_in, circuit_leak, dirichlet_out):
-        self.system, self.base, self.thermal = system, system.base, thermal
-        base = self.base
-        self.mech = np.asarray(base.mech, bool)
-        M = sp.csr_matrix(base.assembler.mass())  # unscaled
-        self.Mm = M[self.mech][:, self.mech]
-        mat = base.material
-        self.damp = mat.damping / mat.density
-        self.oV = base.oV
-        self.circuit_in = list(circuit_in)        # CircuitBC at the warp terminals
-        self.circuit_leak = list(circuit_leak)    # CircuitBC pull-downs of the weft
-        self.dirichlet_out = np.asarray(dirichlet_out, np.int64)  # V dofs held at 0
-        self.em = base.assembler.term("electromagnetic")
-
-    def _circuit_current(self, circ, wn):
-        """Current leaving through each circuit end, A, and the power into the fibril (W)."""
-        I = np.array([c.area * (c.r_bar * wn[c.node, self.oV] + c.J_bar) for c in circ])
-        V = np.array([wn[c.node, self.oV] for c in circ])
-        return I, -(I * V)
-
-    def __call__(self, x, w, t, T, F=None) -> dict:
-        """``F``: the system residual F(x, w, t) if the caller has it (else evaluated here)."""
-        base, sysm = self.base, self.system
-        wn = base.nodal(w)
-        I_in_out, P_in = self._circuit_current(self.circuit_in, wn)
-        I_leak, P_leak = self._circuit_current(self.circuit_leak, wn) if self.circuit_leak else (np.zeros(0),) * 2
-        if F is None:
-            F = sysm.evaluate(x, w, t, jacobian=False)[0]
-        F = np.asarray(F, float)
-        I_out = -F[self.dirichlet_out]
-        # Lorentz force on the nodes (minus the electromagnetic term's mech residual)
-        state = ElementState(base.basis, base.layout, x, w, t)
-        res, _ = self.em.forms(state, False)
-        P_L = 0.0
-        if "mech" in res:
-            Rl = res["mech"].reshape(base.mesh.n_elements, -1, 9)
-            v = wn[:, :9][base.mesh.conn]  # (E, nn, 9)
-            P_L = -float((Rl * v).sum())
-        joule = float(self.thermal.joule(x, w, t).sum())  # memoised: the post-solve's last stage
-        Fc, _, _, _ = sysm.contact_terms(x, w, jacobian=False)
-        P_cj = float(base.nodal(Fc)[:, self.oV] @ wn[:, self.oV]) if sysm.use_V else 0.0
-        vm = np.asarray(w, float)[self.mech]
-        Mv = self.Mm @ vm
-        kin = 0.5 * float(vm @ Mv)
-        strain = beam_strain_energy(base, x)
-        cen = float(sysm.contact_energy(x))
-        Tdot, q_out = self.thermal.rate(T, x, w, t)
-        heat = float((self.thermal.M @ T).sum())
-        return {
-            "current_in": float(-I_in_out.sum()), "current_out": float(I_out.sum()),
-            "current_leak": float(I_leak.sum()), "terminal_currents": -I_in_out,
-            "power_circuit": float(P_in.sum() + (P_leak.sum() if len(P_leak) else 0.0)),
-            "power_joule": joule, "power_contact_joule": P_cj, "power_lorentz": P_L,
-            "power_damping": float(self.damp * (vm @ Mv)),
-            "energy_kinetic": kin, "energy_strain": strain, "energy_contact": cen,
-            "heat_content": heat, "heat_out": q_out, "max_temperature": float(np.max(T)),
-        }
-
-
-def _cumtrapz(t, y):
-    t, y = np.asarray(t, float), np.asarray(y, float)
-    return np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))])
-
-
-def balance_errors(s: dict) -> dict:
-    """Relative balance errors of a series of balance terms over the accepted steps ``s['t']``.
-
-    charge: max |I_in - I_out - I_leak| / max |I_in| (instantaneous);
-    electrical: max |P_circuit - (Joule + contact Joule + Lorentz power)| / max |P_circuit|;
-    mechanical: max |Δ(kin + strain + contact) + ∫P_damping - ∫P_Lorentz| / max(|∫P_L|, |ΔE_mech|);
-    thermal: max |ΔH + ∫q_out - ∫Joule| / max ∫Joule;
-    total: max |∫P_circuit - ΔE_mech - ∫P_damping - ∫Joule - ∫P_contact_joule| / max |∫P_circuit|."""
-    t = np.asarray(s["t"], float)
-    g = {k: np.asarray(v, float) for k, v in s.items() if k != "terminal_currents"}
-    I_in = g["current_in"]
-    charge = np.abs(I_in - g["current_out"] - g["current_leak"])
-    P_el = g["power_circuit"]
-    elec = np.abs(P_el - g["power_joule"] - g["power_contact_joule"] - g["power_lorentz"])
-    Em = g["energy_kinetic"] + g["energy_strain"] + g["energy_contact"]
-    dEm = Em - Em[0]
-    W_L = _cumtrapz(t, g["power_lorentz"])
-    W_d = _cumtrapz(t, g["power_damping"])
-    mech = np.abs(dEm + W_d - W_L)
-    Q_J = _cumtrapz(t, g["power_joule"])
-    Q_out = _cumtrapz(t, g["heat_out"])
-    dH = g["heat_content"] - g["heat_content"][0]
-    therm = np.abs(dH + Q_out - Q_J)
-    W_el = _cumtrapz(t, P_el)
-    W_cj = _cumtrapz(t, g["power_contact_joule"])
-    total = np.abs(W_el - dEm - W_d - Q_J - W_cj)
-    tiny = 1e-300
-    return {
-        "charge": float(charge.max() / max(np.abs(I_in).max(), tiny)),
-        "electrical": float(elec.max() / max(np.abs(P_el).max(), tiny)),
-        "mechanical": float(mech.max() / max(np.abs(W_L).max(), np.abs(dEm).max(), tiny)),
-        "thermal": float(therm.max() / max(np.abs(Q_J).max(), tiny)) if Q_J.max() > 0 else 0.0,
-        "total": float(total.max() / max(np.abs(W_el).max(), tiny)),
-        "work_lorentz_mJ": float(W_L[-1]), "work_circuit_mJ": float(W_el[-1]), "joule_heat_mJ": float(Q_J[-1]),
-        "damping_mJ": float(W_d[-1]), "delta_mechanical_energy_mJ": float(dEm[-1]),
-        "series": {"mechanical_residual": dEm + W_d - W_L, "thermal_residual": dH + Q_out - Q_J,
-                   "total_residual": W_el - dEm - W_d - Q_J - W_cj, "charge_residual": I_in - g["current_out"]
-                   - g["current_leak"], "electrical_residual": P_el - g["power_joule"] - g["power_contact_joule"]
-                   - g["power_lorentz"]},
-    }

@@ -1,30 +1,31 @@
-"""The linear-solver backend of the impact scene: SuperLU on the *nonzero* pattern
-(docs/impact.md "Cost").
+"""SuperLU on the *nonzero* pattern with a Schur-complement border: the stage-matrix
+backend of the impact scene (docs/impact.md "Cost").
 
 Contract
 --------
-``PrunedSuperLU(symmetric=True)``: a ``rve.solvers.linear.LinearBackend`` (registry name
-``"superlu_pruned"``, added by ``register()`` through the public ``register_backend``):
+``PrunedSuperLU(symmetric=True, border=0)``: a ``LinearBackend`` (registry name
+``"superlu_pruned"``, border 0; a scene that needs a border passes
+``functools.partial(PrunedSuperLU, border=k)`` as the integrator's ``linear_backend``):
 drops the explicit zeros of the stage matrix (the inactive candidate contact pairs of both
 contact maps, the uncoupled field blocks: 24 % of the stored entries measured on a 16 x 16
-impact weave), eliminates the last ``border`` unknowns (the projectile's free dofs, set by ``register``) by a
+impact weave), eliminates the last ``border`` unknowns (the projectile's free dofs) by a
 Schur complement, then factorises the rest with SuperLU's minimum-degree ordering of A^T + A and
 threshold pivoting (``DiagPivotThresh = 0.01``: diagonal pivots unless one is below 1 % of
 its column, so the nearly symmetric but unsymmetric stage matrices of the Lorentz /
 back-EMF couplings are factorised stably); a singular pivot falls back to COLAMD with
 partial pivoting on the same pruned matrix. Measured (16 x 16 yarns, 40 elements, 12.9k
-free dofs): 6.5 s with COLAMD on the stored pattern (what the unsymmetric path of the
-Newton solver does today) vs 0.06 s. Full size (51.4k fabric dofs, t = 0.025 ms, row-scaled
+free dofs): 6.5 s with COLAMD on the stored pattern (the unsymmetric path of the
+Newton solver) vs 0.06 s. Full size (51.4k fabric dofs, t = 0.025 ms, row-scaled
 as the integrator solves it): threshold 0.1: 10.3 s, fill 23.8M (off-diagonal pivots);
 0.01: 0.49 s, fill 3.6M; 0.0: 0.74 s, fill 3.6M.
 
-``PardisoOrPruned`` (registry name ``"auto_pruned"``, added by ``register()`` too): PARDISO's
-LU of the unsymmetric stage matrix (``rve.solvers.pardiso.PardisoFactorization(symmetric=False)``:
+``PardisoOrPruned(symmetric=False, border=0)`` (registry name ``"auto_pruned"``): PARDISO's
+LU of the unsymmetric stage matrix (``rve.solvers.backends.pardiso.PardisoFactorization(symmetric=False)``:
 mtype 11, explicit zeros dropped, nonsymmetric matching and scaling, the analysis reused
 while the nonzero pattern lies in the analysed one, no Schur border: METIS orders the
 projectile's dofs well) where MKL is available, ``PrunedSuperLU`` where it is not and for
 a matrix PARDISO fails on (``kind`` says which factorised the last matrix). Measured on the
-full-size stage matrices (docs/engine.md "Unsymmetric stage matrices (round 4)").
+full-size stage matrices (docs/engine.md "Unsymmetric stage matrices").
 """
 from __future__ import annotations
 
@@ -35,11 +36,12 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..solvers.linear import BACKENDS, SingularFactorError, SuperLUBackend, register_backend
+from .base import SingularFactorError
+from .superlu import SuperLUBackend
 
-__all__ = ["PrunedSuperLU", "PardisoOrPruned", "register", "NAME", "NAME_AUTO"]
+__all__ = ["PrunedSuperLU", "PardisoOrPruned", "NAME", "NAME_AUTO"]
 
-log = logging.getLogger("rve.scenes.impact_solver")
+log = logging.getLogger("rve.solvers.backends.pruned")
 
 NAME = "superlu_pruned"
 NAME_AUTO = "auto_pruned"
@@ -64,8 +66,11 @@ class PrunedSuperLU(SuperLUBackend):
 
     name = NAME
     provides_inertia = False
-    #: unknowns at the end of the (restricted) matrix eliminated by the Schur complement
-    border = 0
+
+    def __init__(self, symmetric: bool = True, border: int = 0):
+        super().__init__(symmetric)
+        #: unknowns at the end of the (restricted) matrix eliminated by the Schur complement
+        self.border = int(border)
 
     def _factorize(self, A) -> None:
         J = sp.csc_matrix(A, copy=True)
@@ -114,9 +119,10 @@ class PardisoOrPruned:
     provides_inertia = False
     symmetric = False
 
-    def __init__(self, symmetric: bool = False):
-        from ..solvers import pardiso
+    def __init__(self, symmetric: bool = False, border: int = 0):
+        from . import pardiso
 
+        self.border = int(border)
         self._pardiso = pardiso.PardisoFactorization(symmetric=False) if pardiso.available() else None
         self._pruned = None
         self._active = None
@@ -136,7 +142,7 @@ class PardisoOrPruned:
                 self.fallbacks += 1
                 log.info("PARDISO mtype 11 failed (%s): superlu_pruned", exc)
         if self._pruned is None:
-            self._pruned = PrunedSuperLU(symmetric=False)
+            self._pruned = PrunedSuperLU(symmetric=False, border=self.border)
         self._pruned.factorize(A)
         self._active, self.kind = self._pruned, NAME
         return self
@@ -153,15 +159,3 @@ class PardisoOrPruned:
     def release(self) -> None:
         if self._pardiso is not None:
             self._pardiso.release()
-
-
-def register(border: int = 0) -> str:
-    """Make the backends available by name (idempotent: ``superlu_pruned`` with ``border``
-    trailing unknowns eliminated by the Schur complement, and ``auto_pruned``); returns
-    the name of the first."""
-    if NAME not in BACKENDS:
-        register_backend(NAME, PrunedSuperLU)
-    if NAME_AUTO not in BACKENDS:
-        register_backend(NAME_AUTO, PardisoOrPruned)
-    PrunedSuperLU.border = int(border)
-    return NAME
