@@ -121,15 +121,25 @@ def cancelled_run(work: Path, rule: str = "rve_strain_step") -> dict:
             "table_written": (work / TABLE).exists()}
 
 
-def sacct_elapsed(since: str) -> list[tuple[str, str, float]]:
-    """(job id, state, elapsed s) of this user's Slurm jobs since ``since`` (sacct's -S)."""
-    out = subprocess.run(["sacct", "-X", "-n", "-P", "-S", since, "-o", "JobID,State,ElapsedRaw"],
+def sacct_now() -> str:
+    """The current time as sacct's -S takes it."""
+    return time.strftime("%Y-%m-%dT%H:%M:%S")
+
+
+def sacct_jobs(since: str) -> list[dict]:
+    """This user's Slurm jobs since ``since``: id, state, elapsed s, the rule (from the
+    executor's job comment), allocated CPUs, requested MB and time limit in minutes."""
+    fields = "JobID,State,ElapsedRaw,AllocCPUS,ReqMem,TimelimitRaw,Comment"
+    out = subprocess.run(["sacct", "-X", "-n", "-P", "-S", since, "-o", fields],
                          capture_output=True, text=True).stdout
-    rows = []
+    jobs = []
     for line in out.splitlines():
-        job, state, elapsed = line.split("|")
-        rows.append((job, state.split()[0], float(elapsed or 0)))
-    return rows
+        job, state, elapsed, cpus, mem, limit, comment = line.split("|", 6)
+        rule = comment[len("rule_"):].split("_wildcards_")[0] if comment.startswith("rule_") else ""
+        mem_mb = float(mem.rstrip("MGn")) * (1024 if mem.rstrip("n").endswith("G") else 1) if mem else 0.0
+        jobs.append({"id": job, "state": state.split()[0], "elapsed_s": float(elapsed or 0), "rule": rule,
+                     "cpus": int(cpus or 0), "mem_mb": int(mem_mb), "limit_min": int(limit) if limit.isdigit() else 0})
+    return jobs
 
 
 def table_differences(a_path: Path, b_path: Path) -> list[str]:
@@ -171,14 +181,16 @@ def main() -> int:
         return 2
     base = args.keep or Path(tempfile.mkdtemp(prefix="rve-cluster-sweep-"))
     local, slurm, cancel = (workflow_copy(base / n) for n in ("local", "slurm", "cancelled"))
-    since = time.strftime("%Y-%m-%dT%H:%M:%S")
+    since = sacct_now()
 
     code, wall = run(local, snakemake_cmd(False))
     print(f"local -j2:         exit {code}, {wall:.1f} s wall")
     code_s, wall_s = run(slurm, snakemake_cmd(True))
-    jobs = sacct_elapsed(since)
+    jobs = sacct_jobs(since)
     print(f"slurm profile:     exit {code_s}, {wall_s:.1f} s wall; {len(jobs)} Slurm jobs, "
-          f"{sum(j[2] for j in jobs):.0f} s summed elapsed, states {sorted({j[1] for j in jobs})}")
+          f"{sum(j['elapsed_s'] for j in jobs):.0f} s summed elapsed, states {sorted({j['state'] for j in jobs})}")
+    asked = sorted({(j["rule"], j["cpus"], j["mem_mb"], j["limit_min"]) for j in jobs})
+    print("  rule, CPUs, MB, minutes asked of Slurm: " + "; ".join(" ".join(map(str, a)) for a in asked))
     c = cancelled_run(cancel)
     print(f"scancel:           job {c['job']} ({c['comment']}) cancelled while running; "
           f"snakemake exit {c['code']} after {c['wall_s']:.1f} s, table written: {c['table_written']}")
