@@ -112,7 +112,14 @@ def cancelled_run(work: Path, rule: str = "rve_strain_step") -> dict:
         try:
             job, comment = running_job(rule, proc=proc)
             subprocess.run(["scancel", job], check=True)
-            code = proc.wait(timeout=1800)
+            try:
+                code = proc.wait(timeout=900)
+            except subprocess.TimeoutExpired:
+                # the executor never saw the cancel: stop the run as a user would have to
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+                subprocess.run(snakemake_cmd(False, "--unlock"), cwd=work, env=_env(), capture_output=True)
+                code = "none: snakemake did not notice the cancel in 900 s and was killed"
         finally:
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGTERM)

@@ -6,13 +6,12 @@ The table is synthetic, in the layout ``write_table`` stores (CF netCDF-4, zlib)
 combinations, the probe, terminal and side dimensions of a real table, and as many
 variables as a real one (every variable of ``rve.tables.schema.VARIABLES``). A macro point
 is (strain, fibril_radius, contact_conductance), uniformly random inside the table; the
-lookup is the trilinear interpolation of ``probe_resistance`` (and two more variables) at
-every point (``xarray.Dataset.interp`` with the points along one new dimension).
+lookup is ``rve.tables.lookup`` (trilinear) of ``probe_resistance`` and two more
+variables at every point.
 
-* eager: ``xr.open_dataset(...).load()`` (what ``open_table`` does: the whole file in
-  memory), then the interpolation;
-* lazy: ``xr.open_dataset(..., chunks=...)``: only the variables looked up are read, chunk
-  by chunk, as dask computes the result.
+* eager: ``open_table(path)`` (the whole table in memory), then the lookup;
+* lazy: ``open_table(path, chunks=...)``: only the variables looked up are read, chunk by
+  chunk, as dask computes the result.
 
 Each path runs in a fresh child process: wall time (open + lookup), throughput (points per
 second) and peak RSS (ru_maxrss of the child) are printed; the two results are compared.
@@ -43,7 +42,7 @@ def synthetic_table(path: Path, runs: int, strains: int, seed: int = 0) -> Path:
     the schema, smooth in strain and the parameters (values do not matter, size does)."""
     import xarray as xr
 
-    from rve.tables.io import _encoding, to_cf
+    from rve.tables.io import write_table
     from rve.tables.schema import COMPONENTS, SIDE_ORDER, TERMINALS, VARIABLES
 
     import math
@@ -65,10 +64,7 @@ def synthetic_table(path: Path, runs: int, strains: int, seed: int = 0) -> Path:
         shape = (1,) + base.shape + tuple(len(coords[d]) for d in dims)
         vals = base.reshape((1,) + base.shape + (1,) * len(dims)) * (1.0 + rng.random(shape[len(lead):]))
         data[name] = (lead + dims, np.broadcast_to(vals, shape).copy(), {"units": units, "long_name": long_name})
-    ds = xr.Dataset(data, coords=coords)
-    disk = to_cf(ds)
-    disk.to_netcdf(path, encoding=_encoding(disk))
-    return path
+    return write_table(xr.Dataset(data, coords=coords), path)
 
 
 def macro_points(path: Path, n: int, seed: int = 1) -> dict[str, np.ndarray]:
@@ -79,26 +75,15 @@ def macro_points(path: Path, n: int, seed: int = 1) -> dict[str, np.ndarray]:
         return {d: rng.uniform(float(ds[d].min()), float(ds[d].max()), n) for d in ("strain",) + SWEPT}
 
 
-def lookup(ds, points: dict[str, np.ndarray]):
-    """Trilinear interpolation of the looked-up variables at every point (dimension ``point``)."""
-    import xarray as xr
-
-    at = {d: xr.DataArray(v, dims="point") for d, v in points.items()}
-    return ds[list(LOOKED_UP)].isel(mode=0).interp(at, method="linear")
-
-
 def child(kind: str, table: Path, points_file: Path, out: Path, chunk: int) -> None:
-    import xarray as xr
+    from rve.tables import lookup, open_table
 
     points = dict(np.load(points_file))
     t0 = time.perf_counter()
-    if kind == "eager":
-        ds = xr.open_dataset(table).load()
-    else:
-        ds = xr.open_dataset(table, chunks={"strain": -1, SWEPT[0]: chunk, SWEPT[1]: chunk})
+    chunks = {"strain": -1, SWEPT[0]: chunk, SWEPT[1]: chunk} if kind == "lazy" else None
+    ds = open_table(table, chunks=chunks)
     t_open = time.perf_counter() - t0
-    res = lookup(ds, points)
-    res = res.compute() if kind == "lazy" else res
+    res = lookup(ds, "uniaxial", variables=list(LOOKED_UP), **points).compute()
     wall = time.perf_counter() - t0
     np.savez(out, **{k: res[k].values for k in LOOKED_UP})
     print(json.dumps({"open_s": t_open, "wall_s": wall,
