@@ -94,10 +94,12 @@ def main() -> int:
 
     rel = [L.record_path(C.RUN, combo, Path(s).stem) for s, _, combo in tasks]
     records = [work / r for r in rel]
-    cmd = [sys.executable, "-m", "snakemake", "-j2", "--forcerun", "rve_probes", *rel, "--configfile", C.CONFIG]
+    # the targets first: --forcerun and --configfile take several values
+    cmd = [sys.executable, "-m", "snakemake", "-j2", *rel, "--forcerun", "rve_probes", "--configfile", C.CONFIG]
     code, wall_sm = C.run(work, cmd)
-    if code:
-        print(f"snakemake failed: {work}/snakemake.log")
+    ran = (work / "snakemake.log").read_text().split("Job stats:")[-1].split("Select jobs")[0]
+    if code or "rve_probes" not in ran:
+        print(f"snakemake failed or ran no probe job: {work}/snakemake.log")
         return 1
     bench = [work / L.benchmark_path(C.RUN, "probes", combo, Path(s).stem) for s, _, combo in tasks]
     own_sm = [float(b.read_text().splitlines()[1].split("\t")[0]) for b in bench]
