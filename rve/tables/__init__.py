@@ -6,7 +6,8 @@ docs/lookup_tables.md. One concept per module:
 * ``build`` -- records -> Dataset (:func:`build_table`; the network fit is
   ``rve.homogenisation.network``);
 * ``io`` -- netCDF (:func:`write_table`, :func:`open_table`);
-* ``interpolate`` -- :func:`interpolate` in strain and numeric swept parameters;
+* ``interpolate`` -- :func:`interpolate` in strain and numeric swept parameters,
+  :func:`lookup` at many macro points (pointwise);
 * ``export`` -- csv, json, dat (:func:`export_table`, :func:`read_table_csv`,
   :func:`to_json_dict`);
 * ``macro`` -- the macro quantities (:func:`add_macro_quantities`, docs/macro_export.md §1);
@@ -23,7 +24,7 @@ from ..io.provenance import package_version
 from .build import build_table
 from .export import EXPORT_FORMATS, export_table, read_table_csv, to_json_dict
 from .formats import MACRO_FORMATS, export_macro
-from .interpolate import interpolate
+from .interpolate import interpolate, lookup
 from .io import open_table, write_table
 from .macro import add_macro_quantities
 from .plot import plot_table
@@ -43,6 +44,7 @@ __all__ = [
     "write_table",
     "open_table",
     "interpolate",
+    "lookup",
     "export_table",
     "export_macro",
     "add_macro_quantities",

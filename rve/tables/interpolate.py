@@ -6,6 +6,13 @@ parameters are interpolated the same way, string-valued ones selected. Stored po
 return the stored values exactly; a point outside the table raises ValueError naming the
 range. Input: a table Dataset (``rve.tables.build``/``io``); output: a Dataset with the
 same variables.
+
+``lookup`` is the pointwise form for macro points: N points (strain_i, p_i, ...) of one
+mode give N values per variable along a new dimension ``point`` (not the N x N outer
+product ``interpolate`` returns for arrays of strains and parameters), multilinear in
+strain and the numeric swept parameters. It works the same on a table in memory and on one
+opened lazily (``open_table(path, chunks=...)``): then only the variables asked for are
+read, and dask computes the result chunk by chunk.
 """
 from __future__ import annotations
 
@@ -14,7 +21,10 @@ from typing import Optional
 import numpy as np
 import xarray as xr
 
-__all__ = ["interpolate"]
+__all__ = ["interpolate", "lookup"]
+
+#: dimensions of a table that are not swept parameters
+_TABLE_DIMS = ("mode", "strain", "probe", "side", "component", "terminal", "edge", "yarn")
 
 
 def _interp_axis(x: np.ndarray, y: np.ndarray, xq: np.ndarray, axis: int, method: str) -> np.ndarray:
@@ -141,4 +151,69 @@ def interpolate(ds: xr.Dataset, strain, mode: Optional[str] = None, method: str 
     out.attrs = dict(ds.attrs)
     out.attrs["interpolation"] = f"{method} in strain" + (
         f" and {', '.join(params)}" if params else "")
+    return out
+
+
+def _mode_strains(ds: xr.Dataset, mode: str) -> np.ndarray:
+    """Mask of the strain levels at which ``mode`` has a state: any of the per-state
+    variables (no dimension besides mode, strain and the swept ones) is finite there.
+    Those are the table's small variables, so a lazily opened table reads little here."""
+    lead = {d for d in ds.dims if d not in _TABLE_DIMS[2:]}
+    names = [v for v in ds.data_vars if "strain" in ds[v].dims and set(ds[v].dims) <= lead]
+    present = np.zeros(ds.sizes["strain"], bool)
+    for v in names:
+        arr = np.asarray(ds[v].sel(mode=mode).transpose("strain", ...).values)
+        present |= np.isfinite(arr.reshape(arr.shape[0], -1)).any(axis=1)
+    return present
+
+
+def lookup(ds: xr.Dataset, mode: str, strain, variables=None, **params) -> xr.Dataset:
+    """The table at N macro points of ``mode``: ``strain`` and every numeric swept
+    parameter in ``params`` are arrays of one length N (or scalars, broadcast), linear in
+    each of them; a string-valued parameter is one value, selected. ``variables``: the
+    names to look up (default: every variable with a strain dimension). A point outside the
+    table raises ValueError naming the range. Returns the variables with the dimension
+    ``point`` in place of strain and those parameters; on a lazily opened table, dask
+    arrays (``.compute()`` reads the chunks).
+    """
+    modes = list(ds["mode"].values)
+    if mode not in modes:
+        raise ValueError(f"mode {mode!r} is not in the table (modes: {modes})")
+    swept = [d for d in ds.dims if d not in _TABLE_DIMS]
+    names = list(variables) if variables is not None else [v for v in ds.data_vars if "strain" in ds[v].dims]
+    missing = [v for v in names if v not in ds.data_vars]
+    if missing:
+        raise ValueError(f"{missing[0]!r} is not a variable of the table")
+    sel = ds[names].sel(mode=mode)
+    points = {"strain": np.atleast_1d(np.asarray(strain, dtype=float))}
+    for name, value in params.items():
+        if name not in swept:
+            raise ValueError(f"{name!r} is not a swept parameter of the table (swept: {swept})")
+        if sel[name].dtype.kind in "OSU":
+            if value not in list(sel[name].values):
+                raise ValueError(f"{name} {value!r} is not in the table ({list(sel[name].values)})")
+            sel = sel.sel({name: value})
+        else:
+            points[name] = np.atleast_1d(np.asarray(value, dtype=float))
+    n = max(v.size for v in points.values())
+    present = _mode_strains(ds, mode)
+    sel = sel.isel(strain=np.nonzero(present)[0])
+    for name, v in points.items():
+        if v.size not in (1, n):
+            raise ValueError(f"{name}: {v.size} values for {n} points")
+        points[name] = np.broadcast_to(v, (n,))
+        x = np.asarray(sel[name].values, dtype=float)
+        context = f" of mode {mode!r}" if name == "strain" else ""
+        if not np.all(np.isfinite(points[name])):
+            raise ValueError(f"{name} values must be finite")
+        bad = points[name][(points[name] < x.min()) | (points[name] > x.max())]
+        if bad.size:
+            raise ValueError(f"{name} {bad[0]:g} is outside the table range [{x.min():g}, {x.max():g}]{context}")
+    # a dimension with one stored value has nothing to interpolate: the range check above
+    # made every point equal to it
+    at = {name: xr.DataArray(v, dims="point") for name, v in points.items() if sel.sizes[name] > 1}
+    sel = sel.isel({name: 0 for name in points if sel.sizes[name] == 1})
+    out = sel.interp(at, method="linear", assume_sorted=True) if at else sel.expand_dims(point=n)
+    out.attrs = dict(ds.attrs)
+    out.attrs["interpolation"] = f"linear at {n} points in {', '.join(points)}"
     return out

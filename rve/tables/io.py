@@ -21,12 +21,20 @@ dimensions; a version-1
 table (string coordinate variables, no macro quantities) is read as it was stored plus the
 macro quantities derived by ``rve.tables.macro.add_macro_quantities`` (its attribute
 ``rve_table_format`` stays version 1; ``rve_table_upgraded`` says what was added).
+
+``open_table(path, chunks=...)`` opens the table lazily instead (dask arrays in those
+chunks, e.g. ``{"strain": -1, "fibril_radius": 32}``; the file stays open): the trailer is
+verified as before, then a variable is read chunk by chunk only when it is computed, so a
+lookup of a few variables at many points (``rve.tables.interpolate.lookup``) reads those
+variables only. An unsealed or version-1 table is opened eagerly as above whatever
+``chunks`` says (its checks need the data in memory). docs/cluster.md "dask" has the
+figures: the eager open stays the default.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Union
+from typing import Mapping, Optional, Union
 
 import numpy as np
 import xarray as xr
@@ -99,9 +107,30 @@ def write_table(ds: xr.Dataset, path: PathLike) -> Path:
     return path
 
 
-def open_table(path: PathLike) -> xr.Dataset:
+def _open_lazily(path: Path, chunks) -> Optional[xr.Dataset]:
+    """The sealed, verified table of ``path`` as dask arrays; None for an unsealed or
+    version-1 file (opened eagerly by the caller)."""
+    from ..io.checksum import CHECKSUM_ATTR, CorruptFileError, verify
+    from .schema import TABLE_FORMAT_V1
+
+    if not verify(path).sealed:
+        return None
+    try:
+        ds = xr.open_dataset(path, chunks=chunks)
+    except Exception as exc:  # noqa: BLE001 - HDF5 raises many types
+        raise CorruptFileError(path, f"HDF5/netCDF cannot read it ({type(exc).__name__}: {exc})") from None
+    if ds.attrs.get("rve_table_format") == TABLE_FORMAT_V1:
+        ds.close()
+        return None
+    ds.attrs.pop(CHECKSUM_ATTR, None)
+    ds.encoding["rve_sealed"] = True
+    return ds
+
+
+def open_table(path: PathLike, chunks: Optional[Mapping] = None) -> xr.Dataset:
     """Open a table written by :func:`write_table` (either format version), loaded into
-    memory (file closed), with string index coordinates."""
+    memory (file closed), with string index coordinates; with ``chunks``, lazily as dask
+    arrays (module docstring)."""
     from .macro import MACRO_VARIABLES, add_macro_quantities
     from .schema import TABLE_FORMAT_V1
 
@@ -110,7 +139,9 @@ def open_table(path: PathLike) -> xr.Dataset:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no lookup table at {path}")
-    ds = open_netcdf(path)
+    ds = _open_lazily(path, chunks) if chunks is not None else None
+    if ds is None:
+        ds = open_netcdf(path)
     try:
         ds = from_cf(ds)
     except Exception as exc:  # noqa: BLE001 - a damaged label coordinate of an unsealed file

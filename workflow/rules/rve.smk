@@ -38,6 +38,7 @@ rule rve_fabric:
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
     run:
         from rve.homogenisation.jobs import fabric_job
 
@@ -61,6 +62,7 @@ rule rve_relax:
     threads: 2
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
     run:
         from rve.homogenisation.jobs import relax_job
 
@@ -82,6 +84,7 @@ rule rve_strain_step:
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
     priority: 10
     run:
         from rve.homogenisation.jobs import strain_job
@@ -114,6 +117,7 @@ rule rve_probes:
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
     run:
         from rve.homogenisation.jobs import probe_job
 
@@ -138,6 +142,7 @@ rule rve_pictures_relaxed:
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
     run:
         from rve.homogenisation.pictures import pictures_relaxed_job
 
@@ -171,6 +176,7 @@ rule rve_pictures_mode:
     threads: 1
     resources:
         mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
     run:
         from rve.homogenisation.pictures import pictures_mode_job
 
@@ -193,6 +199,7 @@ rule rve_gather:
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
     run:
         from rve.tables.jobs import gather_job
 
@@ -223,6 +230,7 @@ rule rve_exports:
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
     run:
         from rve.tables.jobs import export_job
 
@@ -244,6 +252,7 @@ rule rve_report:
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
     run:
         from rve.tables.jobs import report_job
 
@@ -271,6 +280,7 @@ rule rve_ensemble_report:
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
     run:
         from rve.tables.ensemble import ensemble_report_job
 
@@ -310,6 +320,7 @@ rule rve_table_convergence_report:
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
     run:
         from rve.studies.table_convergence import table_convergence_job
         from rve.tables import open_table

@@ -17,6 +17,7 @@ rule static_wire_point:
     threads: 1
     resources:
         mem_mb=resource_mem_mb("static_wire_point_mem_mb"),
+        runtime=config["resources"]["static_wire_point_runtime_min"],
     run:
         static_wire_study.point_job(
             output.record, log[0], input.scene, wildcards, params.overrides, params.keep_failure
@@ -38,6 +39,7 @@ rule static_wire_gather:
     threads: 1
     resources:
         mem_mb=resource_mem_mb("gather_mem_mb"),
+        runtime=config["resources"]["gather_runtime_min"],
     run:
         static_wire_study.gather_job(input.records, output.nc, log[0], params.study)
 
@@ -60,6 +62,7 @@ rule static_wire_report:
     threads: 1
     resources:
         mem_mb=resource_mem_mb("gather_mem_mb"),
+        runtime=config["resources"]["gather_runtime_min"],
     run:
         static_wire_study.report_job(
             input.nc,
