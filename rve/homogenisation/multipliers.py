@@ -19,13 +19,19 @@ record untouched, so the penalty path is bit-identical.
   largest true overlap is below ``contact.al_tolerance`` R. The info of the last solve, plus
   ``info["augmented_lagrangian"]`` (updates, the overlap history, whether the tolerance was
   met); with the penalty, one call of ``solve`` and its info as it is. A solve that did not
-  converge ends the loop (the multipliers of an unconverged state are not updated).
+  converge ends the loop (the multipliers of an unconverged state are not updated). The
+  step's ``converged`` stays the solve's (an equilibrium at the current multipliers); an
+  overlap still above the tolerance (``al_max_iter`` reached) is ``met: false`` and a warning.
 """
 from __future__ import annotations
+
+import logging
 
 from ..solvers.augmented import AugmentedLagrangian
 
 __all__ = ["multiplier_record", "seed_multipliers", "equilibrium"]
+
+log = logging.getLogger("rve.homogenisation.multipliers")
 
 
 def _term(system):
@@ -67,4 +73,7 @@ def equilibrium(system, solve, x):
         "updates": int(loop.updates), "solves": solves, "tolerance": float(loop.tolerance),
         "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
         "history": [[int(k), float(p)] for k, p in loop.history]}
+    if pen > loop.tolerance:   # an equilibrium at these multipliers, not yet the impenetrable limit
+        log.warning("augmented Lagrangian: largest overlap %.2e R above al_tolerance %.1e R after %d updates%s",
+                    pen, loop.tolerance, loop.updates, "" if info.get("converged") else " (the solve did not converge)")
     return x, info
