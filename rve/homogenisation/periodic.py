@@ -1,4 +1,4 @@
-"""The periodic cell of the RVE pipeline (``boundary: periodic``; docs/rve_pipeline.md "Periodic cell").
+"""The periodic cell of the RVE pipeline (``boundary: periodic``; docs/periodic.md).
 
 Contract
 --------
