@@ -51,6 +51,7 @@ def test_every_mode_gives_a_converged_table_with_per_width_figures(periodic_tabl
     ds = open_table(table)
     assert sorted(ds["mode"].values) == sorted(MODES) and ds.sizes["strain"] == 2
     assert float(ds["equilibrium_residual"].max()) < 1e-8
+    assert ds.attrs["boundary"] == "periodic" and "Hill-Mandel" in ds["membrane_force"].attrs["comment"]
     R = ds["probe_resistance"]
     assert np.isfinite(R).all() and (R > 0).all()
     m = ds["membrane_force"]
