@@ -13,7 +13,9 @@ their jobs, and prints:
 * the electrical figures per square: the periodic cell's sheet resistances (field along x
   and y) and the pinned table's bus-bar sheet resistance of each yarn layer (1 / (1/R_y +
   1/R_c), docs/macro_export.md), with the pinned probe resistances and R_y, R_c;
-* the largest Joule temperature rise of each probe at 1 V.
+* the largest Joule temperature rise of each probe at 1 V;
+* the contacts across the faces of the periodic relaxed state: the active pairs with a
+  periodic image and their part of the Hill-Mandel stress.
 
     python benchmarks/periodic_vs_pinned.py [--pinned results/rve/plain_weave]
         [--periodic results/rve/plain_weave_periodic] [--strains 0 0.1 0.25]
@@ -100,6 +102,27 @@ def _print_rows(title, rows, strains):
         print(f"  {label:<32}" + "".join(f"{v:13.5g}" for v in vals))
 
 
+def image_contact_share(run_dir: Path, spec: dict, state: str = "relaxed") -> None:
+    """The contacts across the cell faces of a stored periodic state: active pairs with a
+    periodic image and their part of the Hill-Mandel stress."""
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.checkpoint import load_state
+    from rve.homogenisation.periodic import cell_gradient, periodic_system
+    from rve.homogenisation.sweeps import load_run_config
+
+    cfg = load_run_config(spec, "base")
+    fab, mesh = fabric_and_mesh(cfg)
+    st = load_state(run_dir / "base" / "states" / f"{state}.nc")
+    psys = periodic_system(cfg, fab, mesh, st.x, cell_gradient(fab, mesh, st.x))
+    xr = psys.restrict(st.x.reshape(-1))
+    act = psys.active_pairs(xr)
+    n_img = int((np.abs(psys.map.shifts[act]).sum(axis=1) > 0).sum())
+    P = psys.macro_stress(xr)[:2, :2]
+    M = psys.image_contact_moment(xr)[:2, :2] / psys.ties.area
+    print(f"\ncontacts across the faces ({state}): {n_img} of {act.size} active pairs with a periodic image;")
+    print(f"  Hill-Mandel P [N/mm] = {np.round(P, 6).tolist()}, of it the image contacts' {np.round(M, 6).tolist()}")
+
+
 def main(argv=None):
     from rve.tables import open_table
 
@@ -108,6 +131,8 @@ def main(argv=None):
     ap.add_argument("--periodic", default="results/rve/plain_weave_periodic", help="the periodic run's directory")
     ap.add_argument("--benchmarks", default="results/benchmarks/rve", help="Snakemake benchmark files per run")
     ap.add_argument("--strains", nargs="*", type=float, default=[0.0, 0.1, 0.25])
+    ap.add_argument("--periodic-config", default="configs/rve/plain_weave_periodic.yaml",
+                    help="the periodic run's scene config (for the contacts across the faces)")
     args = ap.parse_args(argv)
     runs = {"pinned": Path(args.pinned), "periodic": Path(args.periodic)}
     tables = {k: open_table(p / "table.nc") for k, p in runs.items() if (p / "table.nc").exists()}
@@ -124,6 +149,8 @@ def main(argv=None):
         res = ds["equilibrium_residual"]
         print(f"  equilibrium residual: max {float(res.max()):.2e} N; converged: "
               f"{int(ds['converged'].sum())} of {ds['converged'].size}")
+    if (runs["periodic"] / "base" / "states" / "relaxed.nc").exists():
+        image_contact_share(runs["periodic"], {"scene_config": args.periodic_config, "overrides": []})
 
 
 if __name__ == "__main__":
