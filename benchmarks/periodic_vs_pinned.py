@@ -148,6 +148,8 @@ def main(argv=None):
         print(f"\n{k} ({fab}): {runs[k] / 'table.nc'}, dims {dict(ds.sizes)}")
         _print_rows("membrane force [N/mm]", membrane_rows(ds, args.strains), args.strains)
         _print_rows("electrical [ohm, K]", electrical_rows(ds, args.strains, ["uniaxial", "shear"]), args.strains)
+        mz = float(np.abs(ds["membrane_force"].sel(component="z")).max())
+        print(f"  out of plane: max |membrane force z| {mz:.2e} N/mm over every mode and strain")
         res = ds["equilibrium_residual"]
         print(f"  equilibrium residual: max {float(res.max()):.2e} N; converged: "
               f"{int(ds['converged'].sum())} of {ds['converged'].size}")
