@@ -1,4 +1,4 @@
-"""The periodic cell of the RVE pipeline (``boundary: periodic``; docs/rve_pipeline.md "Periodic cell").
+"""The periodic cell of the RVE pipeline (``boundary: periodic``; docs/periodic.md).
 
 Contract
 --------
@@ -21,13 +21,15 @@ pinned state):
   reduced system, the config's relaxation settings);
 * :func:`periodic_strain_step` -- one step: F_{n-1} -> F_n, predictor the affine map
   F_n F_{n-1}^-1 of the previous state about the held node, then the static minimisation
-  (``strain.static_minimize``), or a part of it (``eps_range``: the step halving of
+  (``cell_statics.static_minimize``), or a part of it (``eps_range``: the step halving of
   ``strain.follow_branch``);
 * :func:`periodic_energy` -- the potential of a state and its load derivative, the
   Hill-Mandel work rate (the one-path test of ``rve.homogenisation.branch``);
 * :func:`cell_gradient` -- the F a stored full state carries (its tie jumps), and
   :func:`periodic_free_residual` -- |F| on the free reduced dofs of a stored state;
-* :func:`gauge_dofs` -- the held reduced dofs above.
+* :func:`gauge_dofs` -- the held reduced dofs above;
+* :func:`newton_polish` -- a few Newton steps after an energy minimisation that stopped
+  within a factor ``POLISH_FACTOR`` of its tolerance (relaxation and strain steps).
 
 The face forces of a state (``info["reaction_force"]``, :func:`cell_reactions`) are the
 Hill-Mandel stress ``PeriodicSystem.macro_stress`` (the tie forces and the contact forces
@@ -47,10 +49,12 @@ from ..fabrics.setup import contact_params
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, ContactSystem
 from ..model.periodic import PeriodicSystem, fibril_end_ties
+from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .multipliers import equilibrium, seed_multipliers
 
 __all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
-           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "periodic_energy"]
+           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "periodic_energy",
+           "newton_polish"]
 
 log = logging.getLogger("rve.homogenisation.periodic")
 
@@ -104,8 +108,6 @@ def cell_reactions(fab, psys, x_red) -> dict:
 
 def macro_gradient(mode: str, eps: float) -> np.ndarray:
     """In-plane macro gradient (3, 3), F33 = 1, of ``mode`` at strain ``eps``."""
-    from .strain import trellis_gradient
-
     F = np.eye(3)
     if mode == "uniaxial":
         F[0, 0] += eps
@@ -139,8 +141,6 @@ def cell_gradient(fab, mesh, x_full) -> np.ndarray:
 
 def periodic_free_residual(cfg, fab, mesh, x_full, F=None) -> float:
     """|F| on the free reduced dofs (N) of a full state (its own gradient unless given)."""
-    from .strain import free_residual
-
     F = cell_gradient(fab, mesh, x_full) if F is None else F
     psys = periodic_system(cfg, fab, mesh, x_full, F)
     return free_residual(psys, psys.restrict(np.asarray(x_full, float).reshape(-1)))
@@ -152,20 +152,19 @@ def periodic_relax(cfg, fab, mesh, x0):
     full system, info)``."""
     from ..fabrics.relaxation import relax_settings
     from ..solvers.relaxation import relax_to_equilibrium
-    from .strain import free_residual, static_minimize
-
     t0 = time.perf_counter()
     params = contact_params(cfg.contact, rebuild_every=cfg.relaxation.rebuild_every, conduction=False)
     psys = periodic_system(cfg, fab, mesh, x0, np.eye(3), cfg.relaxation.damping, params)
     xr = psys.restrict(np.asarray(x0, float).reshape(-1))
     res = relax_to_equilibrium(psys, xr, np.zeros(psys.n), relax_settings(cfg))
-    xs, converged, al = res.x, bool(res.static_converged), None
+    xs, converged, polish = newton_polish(psys, res.x, bool(res.static_converged), cfg.relaxation.static_atol)
+    al = None
     if psys.augmented:   # relaxed with the penalty: the multipliers from here
         r = cfg.relaxation
         xs, al = equilibrium(psys, lambda xv: static_minimize(psys, xv, r.static_atol, r.static_max_iter), xs)
         converged = bool(al["converged"])
     st = psys.contact_state(xs)
-    info = {"method": cfg.relaxation.method, "boundary": "periodic", "converged": converged,
+    info = {"method": cfg.relaxation.method, "boundary": "periodic", "converged": converged, "polish": polish,
             "residual_N": free_residual(psys, xs), "wall_s": time.perf_counter() - t0, "dofs": int(psys.n),
             "static_newton_iterations": int(res.static_newton_iterations),
             "max_overlap_over_R": float(st["max_overlap_over_R"]), "active_pairs": int(st["active_pairs"]),
@@ -176,6 +175,30 @@ def periodic_relax(cfg, fab, mesh, x0):
     if not info["converged"]:
         log.warning("periodic relaxation: not converged (|F| = %.3e N)", info["residual_N"])
     return full_state(psys, xs), psys.full, info
+
+
+#: the Newton polish starts only this close to the tolerance (|F| <= factor x atol): near
+#: a minimum, where the energy change of a step is below the rounding of the energy
+POLISH_FACTOR = 1e3
+
+
+def newton_polish(psys, x, converged: bool, atol: float, max_iter: int = 8):
+    """``(x, converged, info)``: the energy minimiser's result, and where it stopped short
+    of ``atol`` but within ``POLISH_FACTOR`` of it, a few Newton steps more
+    (``strain.static_polish``: |F| never increases). There the energy changes of its steps
+    are below the rounding of the energy and the minimiser, which takes the energy as
+    merit, can no longer tell a descent step; Newton's quadratic rate from that close
+    stays on the same minimum."""
+    r0 = free_residual(psys, x)
+    if converged or not r0 <= POLISH_FACTOR * atol:
+        return x, bool(converged), None
+    xp, pinfo = static_polish(psys, x, atol, 1, max_iter)
+    r1 = free_residual(psys, xp)
+    info = {"from_N": float(r0), "to_N": float(r1), "iterations": int(pinfo["iterations"])}
+    log.info("Newton polish: |F| %.3e -> %.3e N in %d iterations", r0, r1, pinfo["iterations"])
+    if not r1 < r0:
+        return x, False, info
+    return xp, bool(pinfo["converged"] and r1 <= atol), info
 
 
 def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
@@ -196,8 +219,6 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     exact by construction. ``multipliers``: the contact multipliers of ``x_prev`` (the static
     solve is in the Uzawa loop, ``multipliers.equilibrium``). Returns ``(x (n_nodes, 9), full
     system, info)``."""
-    from .strain import free_residual, static_minimize, strain_levels
-
     del origin
     sp_ = cfg.strain
     if not 1 <= step <= sp_.steps:
@@ -213,7 +234,13 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     psys = periodic_system(cfg, fab, mesh, x_pred, F_next)
     xr = psys.restrict(x_pred.reshape(-1))
     seed_multipliers(psys, multipliers)
-    xs, sinfo = equilibrium(psys, lambda xv: static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter), xr)
+
+    def solve(xv):
+        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter)
+        xm, si["converged"], si["polish"] = newton_polish(psys, xm, si["converged"], sp_.static_atol)
+        return xm, si
+
+    xs, sinfo = equilibrium(psys, solve, xr)
     sinfo["wall_s"] = time.perf_counter() - t0
     info = {"mode": mode, "step": int(step), "strain": eps_to,
             "strain_increment": eps_to - eps_from, "boundary": "periodic",

@@ -1,4 +1,4 @@
-"""Field probes of a periodic cell (docs/rve_pipeline.md "Periodic cell", "Periodic probes").
+"""Field probes of a periodic cell (docs/periodic.md "Probes").
 
 On a stored full state (mechanics frozen), a probe with ``field: x`` (or ``y``) applies
 the macro field ``E = U / L_x e_x`` (U the test voltage ``probe_solver.voltage``, L_x the
@@ -38,6 +38,7 @@ from ..model import BeamModel, ContactSystem, Couplings
 from ..model.periodic import PeriodicSystem
 from ..solvers.static import static_solve
 from .periodic import cell_gradient, cell_ties
+from .probe_result import ProbeResult, _length_weights, conduction_material
 
 __all__ = ["field_solve", "solve_field_probe"]
 
@@ -122,7 +123,6 @@ def _joule_temperature(mesh, ties, xn, F, material, cparams, E, V_ws, vlay, comp
                        opts, contact_images):
     """The periodic Joule temperature with the uniform sink of each conduction component
     (module docstring)."""
-    from .probes import _length_weights
 
     full, x = _frozen(mesh, material, ("mech", "T", "V"), True, cparams, xn, disk_points, axial_points)
     flay = full.layout
@@ -152,7 +152,6 @@ def _joule_temperature(mesh, ties, xn, F, material, cparams, E, V_ws, vlay, comp
 def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False):
     """One field probe (``ProbeSpec`` with ``field``) on the stored full state ``xn``: a
     ``probes.ProbeResult`` whose resistance is the sheet resistance (module docstring)."""
-    from .probes import ProbeResult, conduction_material
 
     ps = cfg.probe_solver
     t0 = time.perf_counter()

@@ -44,6 +44,7 @@ from ..fabrics.setup import contact_params, end_nodes
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, Couplings, DirichletBC
 from ..solvers.static import static_solve
+from .probe_result import ProbeResult, _length_weights, conduction_material
 
 __all__ = ["ProbeResult", "ElectricSolution", "terminal_nodes", "electric_solve", "temperature_solve",
            "solve_probe", "solve_probes", "conduction_material"]
@@ -64,44 +65,6 @@ class ElectricSolution:
     system: object = field(default=None, repr=False)
     x: Optional[np.ndarray] = field(default=None, repr=False)
     w: Optional[np.ndarray] = field(default=None, repr=False)
-
-
-@dataclass
-class ProbeResult:
-    name: str
-    voltage: float
-    current_plus: float
-    current_minus: float
-    leak: float
-    conservation_error: float
-    temperature_max: float = float("nan")
-    temperature_mean: float = float("nan")
-    newton_iterations: dict = field(default_factory=dict)
-    wall_s: dict = field(default_factory=dict)
-    connected: bool = True
-    #: further entries of the record (a periodic field probe's per-width figures)
-    extra: dict = field(default_factory=dict)
-    V: Optional[np.ndarray] = field(default=None, repr=False)
-    T: Optional[np.ndarray] = field(default=None, repr=False)
-
-    @property
-    def resistance(self) -> float:
-        i = 0.5 * (self.current_plus - self.current_minus)
-        return self.voltage / i if i != 0 else float("inf")
-
-    def record(self) -> dict:
-        """The probe's entry of an ``rve.tables`` record (+ diagnostics)."""
-        return {"voltage": self.voltage, "current": {"+": self.current_plus, "-": self.current_minus},
-                "temperature_max": self.temperature_max, "temperature_mean": self.temperature_mean,
-                "leak_current": self.leak, "conservation_error": self.conservation_error,
-                "resistance": self.resistance, "connected": self.connected, "newton_iterations": self.newton_iterations,
-                "wall_s": self.wall_s, **self.extra}
-
-
-def conduction_material(cfg) -> BeamMaterial:
-    m = cfg.material
-    return BeamMaterial(m.youngs_modulus, m.poisson_ratio, m.density, electrical_conductivity=m.electrical_conductivity,
-                        thermal_conductivity=m.thermal_conductivity)
 
 
 def terminal_nodes(fab, mesh, terminal) -> np.ndarray:
@@ -183,13 +146,6 @@ def temperature_solve(mesh, xn, V, material: BeamMaterial, contact: Optional[Con
     x, w = _full_state(base, xn, V)
     _, _, ws, res = _frozen_solve(base, contact, x, w, "temperature", newton_opts)
     return base.nodal(ws)[:, base.oT].copy(), res
-
-
-def _length_weights(mesh) -> np.ndarray:
-    """Nodal weights int N_a ds of the reference fibril length (lumped: each element's
-    length shared equally by its nodes)."""
-    nn = mesh.conn.shape[1]
-    return np.bincount(mesh.conn.ravel(), weights=np.repeat(mesh.elem_length / nn, nn), minlength=mesh.n_nodes)
 
 
 def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeResult:

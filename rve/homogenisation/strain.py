@@ -61,8 +61,8 @@ import numpy as np
 
 from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
-from ..solvers.minimize import capped_newton, minimize_energy
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
+from .cell_statics import _active, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
@@ -75,12 +75,6 @@ log = logging.getLogger("rve.homogenisation.strain")
 MODE_DIRECTION = {"uniaxial": 0, "shear": 1, "uniaxial_y": 1, "trellis": 0}
 #: reference coordinate the velocity is proportional to (X1 by default; X2 for uniaxial_y)
 MODE_SOURCE = {"uniaxial_y": 1}
-
-
-def strain_levels(cfg) -> np.ndarray:
-    """Strain after step 0..steps (step 0 = the relaxed state)."""
-    n = int(cfg.strain.steps)
-    return np.array([round(i * cfg.strain.total / n, 12) for i in range(n + 1)])
 
 
 def mech_system(fab, mesh, cfg, damping: float, x, end_velocity=None, twist_gauge: str = "first") -> ContactSystem:
@@ -96,61 +90,6 @@ def _settings(duration, steps, k, rtol, max_iter, atol, static, static_rounds=4,
     return RelaxSettings(duration=float(duration), steps=int(steps), rebuild_every=int(k), newton_rtol=rtol,
                          newton_max_iter=int(max_iter), newton_atol=atol, static=static, static_atol=atol,
                          static_rounds=int(static_rounds), static_max_iter=int(static_max_iter))
-
-
-def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
-    """Static equilibrium as a local minimum of the potential (``rve.solvers.minimize.minimize_energy``:
-    trust-region Newton with an inertia check, the energy as merit, centroid steps capped,
-    map rebuilt as fibrils move; docs/relaxation.md), from a state near it (plain Newton
-    first), then a map rebuild that must find no newly active pair. Returns ``(x, info)``."""
-    x = np.asarray(x, float).reshape(-1)
-    system.rebuild(x)
-    before = set(zip(*_active(system, x)))
-    xs, _, res = minimize_energy(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter), sigma0=0.0,
-                                 backtrack=3, label="strain step")
-    after_rebuild = system.rebuild(xs)
-    del after_rebuild
-    after = set(zip(*_active(system, xs)))
-    missed = len(after - before)
-    info = {"converged": bool(res.converged) and True, "iterations": int(res.iterations),
-            "factorizations": int(res.factorizations), "rejections": int(res.rejections),
-            "negative_pivots": int(res.negative_pivots), "residuals": [float(v) for v in res.residuals][-6:],
-            "reason": res.reason, "method": "energy"}
-    if missed:
-        log.info("static minimisation: %d active pairs appeared at the final rebuild", missed)
-    return xs, info
-
-
-def static_polish(system, x, atol: float, rounds: int, max_iter: int) -> tuple:
-    """Bounded static solve: up to ``rounds`` capped-step Newton solves
-    (``rve.solvers.minimize.capped_newton``: centroid moves capped at half the search margin,
-    map rebuilt as fibrils move, Levenberg-Marquardt safeguard, |F| never increases), each
-    after a contact-map rebuild, until converged with no newly active pair. No
-    pseudo-transient fallback: the iteration budget is ``rounds * max_iter``.
-    Returns ``(x, info)``."""
-    cap = 0.5 * float(system.params.margin)
-    x = np.asarray(x, float).reshape(-1)
-    info = {"converged": False, "iterations": 0, "residuals": []}
-    for _ in range(int(rounds)):
-        system.rebuild(x)
-        xs, _, res = capped_newton(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter), step_cap=cap)
-        x = xs
-        info["iterations"] += int(res.iterations)
-        info["residuals"] = [float(v) for v in res.residuals][-6:]
-        info["converged"] = bool(res.converged)
-        before = set(zip(*_active(system, x)))
-        system.rebuild(x)
-        after = set(zip(*_active(system, x)))
-        if res.converged and after <= before:
-            break
-        if not res.converged:
-            log.info("static polish: %s", res.reason)
-    return x, info
-
-
-def _active(system, x):
-    act = system.active_pairs(x)
-    return system.map.e_plus[act], system.map.e_minus[act]
 
 
 def _summary(res, system, x) -> dict:
@@ -242,15 +181,6 @@ def _relax_energy_scene(cfg, fab, mesh, x0, t0):
     return x.reshape(mesh.n_nodes, 9), sys_out, info
 
 
-def free_residual(system, x) -> float:
-    """|F(x, 0)| on the free dofs (N): the equilibrium error of a state."""
-    F, _, _ = system.evaluate(np.asarray(x, float).reshape(-1), np.zeros(system.n), 0.0, jacobian=False)
-    idx, _ = system.constraints(0.0)
-    F = np.array(F, copy=True)
-    F[np.asarray(idx, dtype=np.int64)] = 0.0
-    return float(np.linalg.norm(F))
-
-
 def affine_velocity(origin, mode: str, rate: float) -> np.ndarray:
     """The driving velocity field at the nodes, (n_nodes, 9): rate * X1 e_i on the
     centroids and rate * (g_a)_1 e_i on the directors (X, g_a of ``origin``); uniaxial_y:
@@ -262,13 +192,6 @@ def affine_velocity(origin, mode: str, rate: float) -> np.ndarray:
     for blk in range(3):  # r, g1, g2: the src component of each drives component d
         w[:, 3 * blk + d] = rate * origin[:, 3 * blk + src]
     return w
-
-
-def trellis_gradient(theta: float) -> np.ndarray:
-    """In-plane deformation gradient (3, 3) of the picture frame at angle drop ``theta``
-    (rad): F e1 = (cos t/2, sin t/2), F e2 = (sin t/2, cos t/2), |F e1| = |F e2| = 1."""
-    c, s = np.cos(theta / 2.0), np.sin(theta / 2.0)
-    return np.array([[c, s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def secant_velocity(origin, F_prev: np.ndarray, F_next: np.ndarray, t_step: float) -> np.ndarray:

@@ -1,0 +1,99 @@
+"""Static solves of a cell state and the macro path's levels, shared by the pinned
+(``rve.homogenisation.strain``) and the periodic (``rve.homogenisation.periodic``) steps.
+
+* :func:`strain_levels` -- the strain after step 0..steps of ``cfg.strain``;
+* :func:`static_minimize` -- static equilibrium as a local minimum of the potential
+  (trust-region Newton, inertia check, energy as merit), then a map rebuild that must find
+  no newly active pair; ``(x, info)``;
+* :func:`static_polish` -- bounded capped-step Newton solves, |F| never increases;
+* :func:`free_residual` -- |F(x, 0)| on the free dofs (N);
+* :func:`trellis_gradient` -- the picture frame's in-plane deformation gradient.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ..solvers.minimize import capped_newton, minimize_energy
+
+__all__ = ["strain_levels", "static_minimize", "static_polish", "free_residual", "trellis_gradient"]
+
+log = logging.getLogger("rve.homogenisation.strain")
+
+
+def strain_levels(cfg) -> np.ndarray:
+    """Strain after step 0..steps (step 0 = the relaxed state)."""
+    n = int(cfg.strain.steps)
+    return np.array([round(i * cfg.strain.total / n, 12) for i in range(n + 1)])
+
+
+def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
+    """Static equilibrium as a local minimum of the potential (``rve.solvers.minimize.minimize_energy``:
+    trust-region Newton with an inertia check, the energy as merit, centroid steps capped,
+    map rebuilt as fibrils move; docs/relaxation.md), from a state near it (plain Newton
+    first), then a map rebuild that must find no newly active pair. Returns ``(x, info)``."""
+    x = np.asarray(x, float).reshape(-1)
+    system.rebuild(x)
+    before = set(zip(*_active(system, x)))
+    xs, _, res = minimize_energy(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter), sigma0=0.0,
+                                 backtrack=3, label="strain step")
+    after_rebuild = system.rebuild(xs)
+    del after_rebuild
+    after = set(zip(*_active(system, xs)))
+    missed = len(after - before)
+    info = {"converged": bool(res.converged) and True, "iterations": int(res.iterations),
+            "factorizations": int(res.factorizations), "rejections": int(res.rejections),
+            "negative_pivots": int(res.negative_pivots), "residuals": [float(v) for v in res.residuals][-6:],
+            "reason": res.reason, "method": "energy"}
+    if missed:
+        log.info("static minimisation: %d active pairs appeared at the final rebuild", missed)
+    return xs, info
+
+
+def static_polish(system, x, atol: float, rounds: int, max_iter: int) -> tuple:
+    """Bounded static solve: up to ``rounds`` capped-step Newton solves
+    (``rve.solvers.minimize.capped_newton``: centroid moves capped at half the search margin,
+    map rebuilt as fibrils move, Levenberg-Marquardt safeguard, |F| never increases), each
+    after a contact-map rebuild, until converged with no newly active pair. No
+    pseudo-transient fallback: the iteration budget is ``rounds * max_iter``.
+    Returns ``(x, info)``."""
+    cap = 0.5 * float(system.params.margin)
+    x = np.asarray(x, float).reshape(-1)
+    info = {"converged": False, "iterations": 0, "residuals": []}
+    for _ in range(int(rounds)):
+        system.rebuild(x)
+        xs, _, res = capped_newton(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter), step_cap=cap)
+        x = xs
+        info["iterations"] += int(res.iterations)
+        info["residuals"] = [float(v) for v in res.residuals][-6:]
+        info["converged"] = bool(res.converged)
+        before = set(zip(*_active(system, x)))
+        system.rebuild(x)
+        after = set(zip(*_active(system, x)))
+        if res.converged and after <= before:
+            break
+        if not res.converged:
+            log.info("static polish: %s", res.reason)
+    return x, info
+
+
+def _active(system, x):
+    act = system.active_pairs(x)
+    return system.map.e_plus[act], system.map.e_minus[act]
+
+
+def free_residual(system, x) -> float:
+    """|F(x, 0)| on the free dofs (N): the equilibrium error of a state."""
+    F, _, _ = system.evaluate(np.asarray(x, float).reshape(-1), np.zeros(system.n), 0.0, jacobian=False)
+    idx, _ = system.constraints(0.0)
+    F = np.array(F, copy=True)
+    F[np.asarray(idx, dtype=np.int64)] = 0.0
+    return float(np.linalg.norm(F))
+
+
+def trellis_gradient(theta: float) -> np.ndarray:
+    """In-plane deformation gradient (3, 3) of the picture frame at angle drop ``theta``
+    (rad): F e1 = (cos t/2, sin t/2), F e2 = (sin t/2, cos t/2), |F e1| = |F e2| = 1."""
+    c, s = np.cos(theta / 2.0), np.sin(theta / 2.0)
+    return np.array([[c, s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
