@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Literal, Optional
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from .fields import (
     ContactConductance, DampingCoefficient, Density, Dimensionless, HeatTransferCoefficient, Integer, Length,
@@ -62,6 +62,27 @@ class FabricContact(Section):
     onset: Dimensionless = Field(
         0.0, ge=0, description="width of the C2 onset of the penalty law, fraction of R (0: the linear law P* g); "
                                "the law of the relaxed state")
+    geometry: Literal["chord", "curve"] = Field(
+        "chord", description="chord: the elements' linear chords, one-sided points, clamped closest point (thesis); "
+                             "curve: the Lagrange centroid curves, both sides, closest point continued to the "
+                             "neighbour element (docs/contact.md)")
+    enforcement: Literal["penalty", "augmented_lagrangian"] = Field(
+        "penalty", description="penalty (Table 7.1's P*) or augmented Lagrangian (Uzawa multipliers until the "
+                               "largest overlap is below al_tolerance R)")
+    al_tolerance: Dimensionless = Field(1e-4, gt=0, description="augmented Lagrangian: largest overlap, fraction of R")
+    al_max_iter: Integer = Field(20, ge=1, description="augmented Lagrangian: most multiplier updates per solve")
+    conductance_law: Literal["width", "holm"] = Field(
+        "width", description="width: h_C, sigma_C times the Hertz width (thesis); holm: Holm a-spots of radius "
+                             "spot_radius carrying the line load at the hardness")
+    hardness: Stress = Field("0 MPa", ge=0, description="holm: hardness H of the contact spots")
+    spot_radius: Length = Field("0 mm", ge=0, description="holm: a-spot radius a_s")
+
+    @model_validator(mode="after")
+    def _holm_needs_its_constants(self):
+        if self.conductance_law == "holm" and not (self.hardness > 0 and self.spot_radius > 0):
+            raise ValueError("contact.conductance_law = 'holm' needs contact.hardness > 0 and contact.spot_radius > 0 "
+                             f"(got hardness = {self.hardness} MPa, spot_radius = {self.spot_radius} mm)")
+        return self
 
 
 class FabricMesh(Section):

@@ -94,7 +94,17 @@ def contact_params(contact, rebuild_every: int, conduction: bool = True) -> Cont
                          conductance=contact.conductance if conduction else 0.0, n_gp=contact.n_gp,
                          margin=contact.margin, g_eps=contact.g_eps,
                          recompute_closest=getattr(contact, "recompute_closest", True),
-                         rebuild_every=rebuild_every, onset=float(getattr(contact, "onset", 0.0)))
+                         rebuild_every=rebuild_every, onset=float(getattr(contact, "onset", 0.0)),
+                         **_contact_options(contact))
+
+
+#: ContactParams options a contact section may carry (a section without them: the defaults)
+_CONTACT_OPTIONS = ("geometry", "enforcement", "al_tolerance", "al_max_iter", "conductance_law", "hardness",
+                    "spot_radius")
+
+
+def _contact_options(contact) -> dict:
+    return {k: getattr(contact, k) for k in _CONTACT_OPTIONS if hasattr(contact, k)}
 
 
 def mechanics_system(fab: Fabric, mesh, cfg, params: ContactParams, damping: float, x, end_velocity=None,

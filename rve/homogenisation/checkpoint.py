@@ -156,11 +156,7 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
     if contact is not None and contact.map is not None:
         cmap = contact.map
         xflat = np.ascontiguousarray(state.x).reshape(-1)
-        if cmap.n_pairs:
-            geo = contact.geometry(xflat)
-            act = geo.active.sum(axis=1).astype(np.int32)
-        else:
-            act = np.zeros(0, np.int32)
+        act = contact.active_points(xflat)
         data["contact_element_plus"] = (("pair",), np.asarray(cmap.e_plus, np.int32),
                                         {"long_name": "element (+ side) of each contact pair of the map"})
         data["contact_element_minus"] = (("pair",), np.asarray(cmap.e_minus, np.int32),

@@ -62,7 +62,9 @@ class ContactSystem:
                                              mat.poisson_ratio, mat.poisson_ratio))
         else:
             raise ValueError("ContactParams.youngs_modulus is needed when the base model has no material")
-        self.term = ContactTerm(self.mesh, self.layout, params, E_star)
+        cond = (float(getattr(mat, "electrical_conductivity", 0.0)), float(getattr(mat, "thermal_conductivity", 0.0))) \
+            if mat is not None else (0.0, 0.0)
+        self.term = ContactTerm(self.mesh, self.layout, params, E_star, *cond)
         self.E_star = self.term.E_star
         self.fields = [f for f in ("T", "V") if self.layout.has(f)]
         self.use_T, self.use_V, self.scalar = self.term.use_T, self.term.use_V, self.term.scalar
@@ -122,7 +124,8 @@ class ContactSystem:
         self.term.set_onset(fraction)
 
     def geometry(self, x, sel=None):
-        """Chord geometry (``ChordGeometry``) of the map's pairs (or pairs ``sel``) at ``x``."""
+        """``ChordGeometry`` of the map's pairs (or pairs ``sel``) at ``x``; with ``geometry:
+        curve`` the ``CurveGeometry`` of their oriented rows."""
         return self.term.geometry(x, sel)
 
 
@@ -133,6 +136,10 @@ class ContactSystem:
     def active_pairs(self, x) -> np.ndarray:
         """Indices of the map's pairs with at least one overlapping point at ``x``."""
         return self.term.active_pairs(x)
+
+    def active_points(self, x) -> np.ndarray:
+        """Overlapping points of every map pair at ``x``, (n_pairs,) int32."""
+        return self.term.active_points(x)
 
     def contact_energy(self, x) -> float:
         """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x``."""
@@ -150,6 +157,27 @@ class ContactSystem:
         F = np.bincount(self.assembler.union.gdofs[act].ravel(), weights=R.ravel(), minlength=self.n) \
             if act.size else np.zeros(self.n)
         return F, act, Kx, Kw
+
+    # ------------------------------------------------------------------ augmented Lagrangian
+    @property
+    def augmented(self) -> bool:
+        """True when impenetrability is enforced by multipliers (``enforcement:
+        augmented_lagrangian``; ``rve.solvers.augmented`` drives their updates)."""
+        return self.term.augmented
+
+    @property
+    def multipliers(self):
+        """Contact multipliers (rows, n_gp) (line loads, N/mm) or None for the penalty."""
+        return self.term.multipliers
+
+    def max_penetration(self, x) -> float:
+        """Largest true overlap over the radius at ``x`` (g / min(R+, R-), 0 if none)."""
+        return self.term.max_penetration(x)
+
+    def update_multipliers(self, x) -> None:
+        """One Uzawa update of the multipliers at ``x`` (``ContactTerm.update_multipliers``);
+        the structure is unchanged."""
+        self.term.update_multipliers(x)
 
     # ------------------------------------------------------------------ DynamicSystem
     def evaluate(self, x, w, t, jacobian: bool = True):

@@ -137,7 +137,8 @@ class ChordGeometry:
 def chord_geometry(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> ChordGeometry:
     """Contact kinematics for chords (a+, b+) and (a-, b-), each (P, 3).
 
-    ``gap_radius`` (P,) is R+ + R-. ``s_minus=None`` recomputes the clamped closest points
+    ``gap_radius`` (P,) is R+ + R- (or (P, G), one per point: R+ + R- + lambda/P* of the
+    augmented Lagrangian). ``s_minus=None`` recomputes the clamped closest points
     (with their tangent ``ds``); an array freezes them (``ds = 0``)."""
     ap, bp, am, bm = (np.asarray(v, float) for v in (ap, bp, am, bm))
     sp_ = np.asarray(s_plus, float)
@@ -159,7 +160,8 @@ def chord_geometry(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> ChordGeo
     rho = np.sqrt(np.einsum("pgi,pgi->pg", j, j))
     tiny = 1e-300
     n = j / np.maximum(rho, tiny)[..., None]
-    g = np.asarray(gap_radius, float)[:, None] - rho
+    gr = np.asarray(gap_radius, float)
+    g = (gr[:, None] if gr.ndim == 1 else gr) - rho
     c = np.stack([1.0 - sp_, sp_, -(1.0 - s), -s], axis=-1)  # (P, G, 4)
     # ds/dX_k = (c_k d - cm_k [[r]]) / |d|^2 where the closest point is interior
     ds = (c[..., None] * d[:, None, None, :] - _CM[None, None, :, None] * j[:, :, None, :]) / ddsafe[:, None, None, None]
@@ -248,7 +250,8 @@ def chord_gaps(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> np.ndarray:
         s = np.asarray(s_minus, float)
     j = h[:, None, :] + sp_[..., None] * e[:, None, :] - s[..., None] * d[:, None, :]
     rho = np.sqrt(np.einsum("pgi,pgi->pg", j, j))
-    return np.asarray(gap_radius, float)[:, None] - rho
+    gr = np.asarray(gap_radius, float)
+    return (gr[:, None] if gr.ndim == 1 else gr) - rho
 
 
 def lagrange_at(order: int, s) -> tuple[np.ndarray, np.ndarray]:
@@ -260,18 +263,22 @@ def lagrange_at(order: int, s) -> tuple[np.ndarray, np.ndarray]:
 
 
 def scalar_jump(geo: ChordGeometry, order: int, u_plus, u_minus, weight, coef, kappa, g_eps: float = 0.0,
-                jacobian: bool = True):
+                jacobian: bool = True, width=None):
     """Thermal or electric contact term ``int [[du]] coef a(g) [[u]]`` for all pairs.
 
     ``u_plus``, ``u_minus`` (P, nn): nodal T or V of the two elements; ``coef`` h_C or
     sigma_C; ``kappa`` (scalar or (P,)) of the Hertz width. Returns ``(R, Ju, JX)``:
     R (P, 2nn) rows (+ nodes, - nodes); Ju (P, 2nn, 2nn) = dR/du; JX (P, 2nn, 4, 3) =
-    dR/dX (chord ends). Ju, JX are None without jacobian."""
+    dR/dX (chord ends). Ju, JX are None without jacobian. ``width`` (optional) is a pair
+    ``(a, da/dg)`` of (P, G) arrays that replaces the Hertz width (another conductance law)."""
     P, G = geo.g.shape
     w = np.broadcast_to(np.asarray(weight, float).reshape(P, -1), (P, G))
     kap = np.asarray(kappa, float)
     kap = kap[:, None] if kap.ndim == 1 else kap
-    a, da = hertz_width(np.where(geo.active, geo.g, 0.0), kap, g_eps)
+    if width is None:
+        a, da = hertz_width(np.where(geo.active, geo.g, 0.0), kap, g_eps)
+    else:
+        a, da = (np.where(geo.active, v, 0.0) for v in width)
     Np, _ = lagrange_at(order, geo.s_plus)  # (P, G, nn)
     Nm, dNm = lagrange_at(order, geo.s_minus)
     up = np.asarray(u_plus, float)

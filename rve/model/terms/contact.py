@@ -21,6 +21,15 @@ params, E_star)``: a term of *pair elements*, not of beam elements:
   energy, the potential of the mechanical residual), ``contact_state(x)``,
   ``conductance_by_pair(x, field)``; ``onset`` / ``set_onset`` (C² onset of the penalty
   law).
+
+Options (``ContactParams``; the defaults are the chord, the penalty and the width law, as in
+the thesis): ``geometry="curve"`` evaluates the contact on the elements' Lagrange curves
+with two half passes (``rve.model.terms.contact_pairs.HalfPasses``; every pair has m = 2nn
+local nodes, its rows are the oriented pairs); ``enforcement="augmented_lagrangian"`` carries
+multipliers per point (``multipliers`` (rows, n_gp), kept by point key over rebuilds) that
+shift the penalty law's overlap to ``g + lambda/P*``, updated by ``update_multipliers(x)``
+(driven by ``rve.solvers.augmented``), ``penetration`` / ``max_penetration`` the true
+overlaps; ``conductance_law="holm"`` the a-spot law (``conductance_law``).
 """
 from __future__ import annotations
 
@@ -29,12 +38,16 @@ from typing import Optional
 
 import numpy as np
 
-from ...contact.search import ContactMap, build_contact_map
+from ...contact.search import ContactMap, build_contact_map, element_neighbours, segment_distance
 from ...kernels import use_numba
+from ...physics.contact_curve import (
+    END_SNAP, chord_deviation, curve_basis, curve_penalty_forces, curve_scalar_jump, lagrange_monomials,
+)
 from ...physics.contact_forms import (
     chord_gaps, chord_geometry, effective_radius, hertz_kappa, hertz_width, penalty_energy,
     penalty_forces, penalty_law, scalar_jump,
 )
+from .contact_pairs import HalfPasses, gather_by_key, point_keys
 
 __all__ = ["ContactParams", "ContactTerm", "GEOMETRIES", "ENFORCEMENTS", "CONDUCTANCE_LAWS"]
 
@@ -68,8 +81,11 @@ class ContactParams:
     until the largest overlap is below ``al_tolerance`` x R, at most ``al_max_iter``
     updates). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
     line load) or ``"holm"`` (the a-spot constriction conductance of the line load with the
-    hardness ``hardness`` (MPa) and a-spot radius ``spot_radius`` (mm); the fibrils' bulk
-    conductivities ``holm_conductivity``/``holm_thermal_conductivity`` from the model)."""
+    hardness ``hardness`` (MPa) and a-spot radius ``spot_radius`` (mm): per unit length
+    ``2 k0 p / (pi H a_s)``, k0 the material's ``electrical_conductivity`` (V) or
+    ``thermal_conductivity`` (T), p the line load; the term of a field is on when that
+    conductivity is > 0, and ``conductance``/``heat_transfer`` are not used).
+    ``al_tolerance`` is a fraction of the fibril radius (default 1e-4 R)."""
 
     penalty: float
     youngs_modulus: Optional[float] = None
@@ -83,7 +99,7 @@ class ContactParams:
     onset: float = 0.0
     geometry: str = "chord"
     enforcement: str = "penalty"
-    al_tolerance: float = 1e-3
+    al_tolerance: float = 1e-4
     al_max_iter: int = 20
     conductance_law: str = "width"
     hardness: float = 0.0
@@ -120,19 +136,28 @@ class ContactParams:
 class ContactTerm:
     name = "contact"
 
-    def __init__(self, mesh, layout, params: ContactParams, E_star: float):
+    def __init__(self, mesh, layout, params: ContactParams, E_star: float, conductivity: float = 0.0,
+                 thermal_conductivity: float = 0.0):
         self.mesh, self.layout, self.params = mesh, layout, params
         self.E_star = float(E_star)
-        self.use_T = layout.has("T") and params.heat_transfer > 0
-        self.use_V = layout.has("V") and params.conductance > 0
+        self.curve = params.geometry == "curve"
+        self.augmented = params.enforcement == "augmented_lagrangian"
+        self.holm = params.conductance_law == "holm"
+        if self.holm:
+            # a-spots of radius a_s, each carrying pi a_s^2 H: 2 sigma0 / (pi H a_s) per line load
+            scale = 2.0 / (np.pi * float(params.hardness) * float(params.spot_radius))
+            self.law_coef = {"V": scale * float(conductivity), "T": scale * float(thermal_conductivity)}
+            self.use_T = layout.has("T") and self.law_coef["T"] > 0
+            self.use_V = layout.has("V") and self.law_coef["V"] > 0
+        else:
+            self.law_coef = {"V": float(params.conductance), "T": float(params.heat_transfer)}
+            self.use_T = layout.has("T") and params.heat_transfer > 0
+            self.use_V = layout.has("V") and params.conductance > 0
         self.scalar = [f for f, on in (("T", self.use_T), ("V", self.use_V)) if on]
         self.comps = np.array([0, 1, 2] + [layout.offset[f] for f in self.scalar], dtype=np.int64)
         self.nC = len(self.comps)
         self.g_eps = float(params.g_eps) * float(mesh.radius.min())
         self.onset = float(params.onset) * float(mesh.radius.min())
-        #: > 0: the tangent (not the residual) also holds the normal penalty stiffness of the
-        #: points whose separation is below this (mm), ramped to 0 at it: a model for Newton
-        #: steps that close gaps (``minimize_energy`` sets it while far from the solution)
         self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
         self.map: Optional[ContactMap] = None
         #: periodic images searched at every rebuild (translations T, (K, 3)) and the
@@ -142,6 +167,12 @@ class ContactTerm:
         #: {field: c (3,)}: on a pair with the image at shift T the - side's field value is
         #: its node value + T . c (the macro jump of T or V over the lattice vector)
         self.field_jumps = {}
+        #: the two half passes of the curve geometry (None for the chords)
+        self.passes: Optional[HalfPasses] = None
+        #: augmented Lagrangian multipliers (rows, n_gp), line loads (N/mm) of the points of
+        #: every row (map pair for the chords, oriented row for the curve); None: penalty
+        self.multipliers: Optional[np.ndarray] = None
+        self._keys = None
 
     def set_periodic(self, images=None, wrap=None, field_jumps=None) -> None:
         """Periodic images for the next ``rebuild``: ``images`` (K, 3) lattice translations
@@ -155,7 +186,8 @@ class ContactTerm:
         self.field_jumps = {f: np.asarray(c, float).reshape(3) for f, c in (field_jumps or {}).items()}
 
     def rebuild(self, x) -> np.ndarray:
-        """Contact map at state ``x``; returns the pair connectivity (P, m)."""
+        """Contact map at state ``x``; returns the pair connectivity (P, m). The multipliers
+        of the points that are still in the map are carried over (by point key)."""
         mesh = self.mesh
         xn = self.layout.as_nodal(np.asarray(x, float))
         if self.images is None:
@@ -167,7 +199,7 @@ class ContactTerm:
         conn = mesh.conn
         nn = conn.shape[1]
         ep, em = cmap.e_plus, cmap.e_minus
-        if self.scalar:
+        if self.scalar or self.curve:
             local = np.concatenate([conn[ep], conn[em]], axis=1)  # (P, 2nn)
             self.endpos = np.array([0, nn - 1, nn, 2 * nn - 1])
         else:
@@ -177,10 +209,83 @@ class ContactTerm:
         fp, fm = cmap.fibril_plus, cmap.fibril_minus
         R = mesh.radius
         self.gap_radius = R[fp] + R[fm]
-        self.weight = mesh.elem_length[ep] / cmap.n_gp
         self.kappa = hertz_kappa(effective_radius(R[fp], R[fm]), self.params.penalty, self.E_star)
+        if self.curve:
+            self.passes = HalfPasses.build(cmap, mesh, self.params.n_gp, element_neighbours(mesh, self.wrap))
+            self.weight = self.passes.weight
+            self.row_pair = np.tile(np.arange(cmap.n_pairs), 2)
+        else:
+            self.passes = None
+            self.weight = mesh.elem_length[ep] / cmap.n_gp
+            self.row_pair = np.arange(cmap.n_pairs)
+        if self.augmented:
+            self._carry_multipliers()
         return local
 
+    # ------------------------------------------------------------------ multipliers
+    def _point_keys(self) -> np.ndarray:
+        cmap, G = self.map, self.params.n_gp
+        if self.curve:
+            ps = self.passes
+            return point_keys(ps.a_elem, self.mesh.elem_fibril[ps.b_elem], ps.b_shift - ps.a_shift, G)
+        # the chord's closest point stays on its element (clamped): a point is per pair
+        return point_keys(cmap.e_plus, cmap.e_minus, cmap.shifts, G)
+
+    def _carry_multipliers(self) -> None:
+        keys = self._point_keys()
+        if self.multipliers is None or self._keys is None:
+            lam = np.zeros(keys.shape[0])
+        else:
+            lam = gather_by_key(keys, self._keys, self.multipliers)
+        self._keys = keys
+        self.multipliers = lam.reshape(self.row_pair.size, self.params.n_gp)
+
+    def row_gap_radius(self, rows=None) -> np.ndarray:
+        """R+ + R- of every row (rows,), or with the multipliers (rows, G): R+ + R- + lambda/P*
+        (the penalty law of the shifted overlap is the augmented Lagrangian line load)."""
+        rows = np.arange(self.row_pair.size) if rows is None else rows
+        gr = self.gap_radius[self.row_pair[rows]]
+        if self.multipliers is None:
+            return gr
+        return gr[:, None] + self.multipliers[rows] / float(self.params.penalty)
+
+    def penetration(self, x) -> np.ndarray:
+        """True overlaps R+ + R- - rho (rows, G) of the points: the law's overlap minus
+        lambda/P*. -inf where a curve point is not owned and, with multipliers, where a
+        chord point's closest point is clamped to an element end: such a point duplicates
+        the contact of the neighbour element's pair, and pushing it out would separate
+        fibrils that are not in contact there (it keeps the plain penalty, lambda = 0)."""
+        if self.multipliers is None:
+            return self.gaps(x)
+        if self.curve:
+            g = self.gaps(x)
+        else:
+            geo = self.geometry(x)
+            sm = geo.s_minus
+            g = np.where((sm > 0.0) & (sm < 1.0), geo.g, -np.inf)
+        return g - self.multipliers / float(self.params.penalty)
+
+    def max_penetration(self, x) -> float:
+        """Largest true overlap over the radius, max_k g_k / min(R+, R-) (0 if none)."""
+        if self.map.n_pairs == 0:
+            return 0.0
+        g = self.penetration(x)
+        R = self.mesh.radius
+        rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])[self.row_pair]
+        return float(max(0.0, (g / rmin[:, None]).max()))
+
+    def update_multipliers(self, x) -> None:
+        """Uzawa update ``lambda <- max(0, lambda + P* g)`` at state ``x`` (g the true overlap
+        of the owned points), then shared by point key (``contact_pairs.gather_by_key``)."""
+        if self.multipliers is None:
+            raise ValueError("update_multipliers needs enforcement 'augmented_lagrangian'")
+        if self.map.n_pairs == 0:
+            return
+        g = self.penetration(x)
+        new = np.maximum(0.0, self.multipliers + float(self.params.penalty) * np.where(np.isfinite(g), g, -np.inf))
+        self.multipliers = gather_by_key(self._keys, self._keys, new).reshape(self.multipliers.shape)
+
+    # ------------------------------------------------------------------ geometry
     def set_onset(self, fraction: float) -> None:
         """Onset width of the penalty law as a fraction of the smallest radius (0: linear)."""
         if not fraction >= 0:
@@ -208,91 +313,225 @@ class ContactTerm:
         ext = (r[cmap.nodes_minus] + cmap.shift[:, None, :]).reshape(-1, 3)
         return np.concatenate([r, ext]), r.shape[0] + np.arange(2 * P, dtype=cmap.nodes_minus.dtype).reshape(P, 2)
 
+    def _compiled(self) -> bool:
+        return not self.scalar and not self.curve and self.multipliers is None and use_numba()
+
     def geometry(self, x, sel=None):
+        """``ChordGeometry`` of the map pairs ``sel`` (all by default), or for the curve the
+        ``CurveGeometry`` of their oriented rows (``HalfPasses.rows(sel)``)."""
+        if self.curve:
+            rows = self.passes.rows(sel)
+            r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+            return self.passes.geometry(self.mesh.order, self.mesh.conn, r, self.row_gap_radius(rows), rows)
         cmap = self.map
-        sp_, sm, gr = cmap.s_plus, None if self.params.recompute_closest else cmap.s_minus, self.gap_radius
+        sp_, sm = cmap.s_plus, None if self.params.recompute_closest else cmap.s_minus
+        gr = self.row_gap_radius()
         if sel is not None:
             sp_, gr = sp_[sel], gr[sel]
             sm = None if sm is None else sm[sel]
         return chord_geometry(*self.ends(x, sel), sp_, gr, sm)
 
     def gaps(self, x) -> np.ndarray:
-        """Overlaps g (n_pairs, n_gp) of every point of the map at ``x`` (no tangent data)."""
+        """Overlaps of the law (R+ + R- [+ lambda/P*] - rho) of every point of every row at
+        ``x``, (rows, n_gp); -inf where a curve point is not owned."""
         cmap = self.map
+        if self.curve:
+            out = np.full((self.row_pair.size, self.params.n_gp), -np.inf)
+            cand = self.curve_candidates(x)
+            if cand.size:
+                geo = self.geometry(x, cand)
+                out[self.passes.rows(cand)] = np.where(geo.owned, geo.g, -np.inf)
+            return out
         sm = None if self.params.recompute_closest else cmap.s_minus
-        if use_numba():
+        if self.multipliers is None and use_numba():
             from ...kernels.contact import chord_gaps as compiled
 
             r, nminus = self._shifted(self.layout.as_nodal(np.asarray(x, float))[:, :3])
             return compiled(r, cmap.nodes_plus, nminus, cmap.s_plus, self.gap_radius, sm,
                             bool(self.params.recompute_closest))
-        return chord_gaps(*self.ends(x), cmap.s_plus, self.gap_radius, sm)
+        return chord_gaps(*self.ends(x), cmap.s_plus, self.row_gap_radius(), sm)
+
+    def curve_candidates(self, x) -> np.ndarray:
+        """Map pairs whose curves may overlap at ``x``: the distance of their chords minus the
+        curves' deviation bounds (``chord_deviation``) below the largest gap radius of the
+        pair (with its multipliers). The others have no active point, so the curve's
+        Newton projection and forms run on these only."""
+        cmap, mesh = self.map, self.mesh
+        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        conn = mesh.conn
+        X = r[conn]
+        dev = chord_deviation(mesh.order, X)
+        S = cmap.shifts
+        d, _, _ = segment_distance(X[cmap.e_plus, 0], X[cmap.e_plus, -1], X[cmap.e_minus, 0] + S,
+                                   X[cmap.e_minus, -1] + S)
+        reach = self.gap_radius.copy()
+        if self.multipliers is not None:
+            lam = self.multipliers.reshape(-1, cmap.n_pairs, self.params.n_gp).max(axis=(0, 2))
+            reach = reach + lam / float(self.params.penalty)
+        return np.flatnonzero(d - dev[cmap.e_plus] - dev[cmap.e_minus] < reach)
+
+    def _pairs_of_rows(self, flags) -> np.ndarray:
+        """Map pairs with a True in any of their rows' (rows, G) ``flags``."""
+        P = self.map.n_pairs
+        any_row = flags.any(axis=1)
+        return np.flatnonzero(any_row.reshape(-1, P).any(axis=0))
 
     def active_pairs(self, x) -> np.ndarray:
         """Indices of the map's pairs with at least one overlapping point at ``x``."""
         if self.map.n_pairs == 0:
             return np.zeros(0, dtype=np.int64)
-        return np.flatnonzero((self.gaps(x) > 0.0).any(axis=1))
+        return self._pairs_of_rows(self.gaps(x) > 0.0)
+
+    def active_points(self, x) -> np.ndarray:
+        """Overlapping (for the curve: owned and overlapping) points of every map pair at
+        ``x``, (P,) int32 (the curve's two half passes added)."""
+        if self.map.n_pairs == 0:
+            return np.zeros(0, np.int32)
+        n = self.geometry(x).active.sum(axis=1)
+        return n.reshape(-1, self.map.n_pairs).sum(axis=0).astype(np.int32)
 
     def energy(self, x) -> float:
-        """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x``."""
+        """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x`` (with multipliers:
+        of the shifted overlap, the potential of the residual at fixed multipliers)."""
         if self.map.n_pairs == 0:
             return 0.0
         return penalty_energy(self.gaps(x), self.weight, self.params.penalty, self.onset)
 
+    def conductance_law(self, g, field: str, kappa):
+        """Conductance per unit length and its derivative in g, ``(k, dk/dg)``, of the
+        field's contact law at the law's overlaps ``g``: ``c_C a(g)`` (Hertz width) or the
+        Holm a-spot law ``c_H φ'(g)`` (line load φ'). Zero where g <= 0."""
+        coef = self.law_coef[field]
+        if self.holm:
+            _, f1, f2 = penalty_law(g, self.params.penalty, self.onset)
+            return coef * f1, coef * f2
+        a, da = hertz_width(np.where(g > 0.0, g, 0.0), kappa, self.g_eps)
+        return coef * a, coef * da
+
+    # ------------------------------------------------------------------ forms
     def forms(self, x, w, jacobian: bool = True):
         """Local residuals and tangents of the active pairs: ``(act, R, Kx, Kw)``, ``act`` the
         active pair indices, ``R`` (len(act), m*nC) laid out as the pair dofs, ``Kx``/``Kw``
         (len(act), (m*nC)^2) (None without jacobian; Kw None for mechanics only)."""
-        m, nC = self.m, self.nC
         none = np.zeros(0, np.int64), np.zeros(0), None, None
         if self.map.n_pairs == 0:
             return none
-        if not self.scalar and use_numba():
+        if self._compiled():
             return self._forms_compiled(x, jacobian)
+        if self.curve:
+            return self._forms_curve(x, w, jacobian)
         act = self.active_pairs(x)
         if act.size == 0:
             return none
         geo = self.geometry(x, act)
-        Pa = act.size
         wgt = self.weight[act]
+        Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
         if not self.scalar:  # mechanics only: the local unknowns are the 4 chord ends x 3
-            Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
-            if not jacobian:
-                return act, Rm, None, None
-            return act, Rm, Km.reshape(Pa, -1), None
+            return act, Rm, (Km.reshape(act.size, -1) if jacobian else None), None
+        return self._with_scalars_chord(x, w, act, geo, wgt, Rm, Km, jacobian)
+
+    def _with_scalars_chord(self, x, w, act, geo, wgt, Rm, Km, jacobian):
+        m, nC, Pa = self.m, self.nC, act.size
         Rl = np.zeros((Pa, m, nC))
         Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
         Kw = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
-        Rm, Km = penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
         ep = self.endpos
         Rl[:, ep, 0:3] += Rm
         if jacobian:
             for k in range(4):
                 for l in range(4):
                     Kx[:, ep[k], 0:3, ep[l], 0:3] += Km[:, k, :, l, :]
-        if self.scalar:
-            wn = self.layout.as_nodal(np.asarray(w, float))
-            conn = self.mesh.conn
-            epair, mpair = self.map.e_plus[act], self.map.e_minus[act]
-            for ic, f in enumerate(self.scalar):
-                c = 3 + ic
-                off = self.layout.offset[f]
-                coef = self.params.heat_transfer if f == "T" else self.params.conductance
-                u = wn[:, off]
-                u_minus = u[conn[mpair]]
-                if f in self.field_jumps and self.map.shift is not None:
-                    u_minus = u_minus + (self.map.shift[act] @ self.field_jumps[f])[:, None]
-                R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u_minus, wgt, coef,
-                                        self.kappa[act], self.g_eps, jacobian)
-                Rl[:, :, c] += R
-                if jacobian:
-                    Kw[:, :, c, :, c] += Ju
-                    for k in range(4):
-                        Kx[:, :, c, ep[k], 0:3] += JX[:, :, k, :]
+        wn = self.layout.as_nodal(np.asarray(w, float))
+        conn = self.mesh.conn
+        epair, mpair = self.map.e_plus[act], self.map.e_minus[act]
+        for ic, f in enumerate(self.scalar):
+            c = 3 + ic
+            u = wn[:, self.layout.offset[f]]
+            u_minus = u[conn[mpair]]
+            if f in self.field_jumps and self.map.shift is not None:
+                u_minus = u_minus + (self.map.shift[act] @ self.field_jumps[f])[:, None]
+            if self.holm:
+                width = self.conductance_law(geo.g, f, None)
+                R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u_minus, wgt, 1.0,
+                                        self.kappa[act], self.g_eps, jacobian, width=width)
+            else:
+                R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u_minus, wgt,
+                                        self.law_coef[f], self.kappa[act], self.g_eps, jacobian)
+            Rl[:, :, c] += R
+            if jacobian:
+                Kw[:, :, c, :, c] += Ju
+                for k in range(4):
+                    Kx[:, :, c, ep[k], 0:3] += JX[:, :, k, :]
         if not jacobian:
             return act, Rl, None, None
         return act, Rl, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
+
+    def _forms_curve(self, x, w, jacobian: bool):
+        """``forms`` on the centroid curves: both half passes of every active pair, folded
+        into the pair's (e+ nodes, e- nodes) layout."""
+        ps, nn = self.passes, self.mesh.order + 1
+        cand = self.curve_candidates(x)
+        if cand.size == 0:
+            return np.zeros(0, np.int64), np.zeros(0), None, None
+        if not self.scalar and use_numba():
+            return self._forms_curve_compiled(x, cand, jacobian)
+        geo_c = self.geometry(x, cand)
+        hit = geo_c.active.any(axis=1).reshape(2, -1).any(axis=0)
+        act = cand[hit]
+        if act.size == 0:
+            return np.zeros(0, np.int64), np.zeros(0), None, None
+        rows = ps.rows(act)
+        geo = HalfPasses.take(geo_c, np.concatenate([np.flatnonzero(hit), cand.size + np.flatnonzero(hit)]))
+        wgt = self.weight[rows]
+        Rm, Km = curve_penalty_forces(geo, wgt, self.params.penalty, jacobian, self.onset)
+        Rm = HalfPasses.fold(Rm, nn)
+        Km = HalfPasses.fold(Km, nn, axes=(1, 3)) if jacobian else None
+        Pa = act.size
+        if not self.scalar:
+            return act, Rm, (Km.reshape(Pa, -1) if jacobian else None), None
+        m, nC = self.m, self.nC
+        Rl = np.zeros((Pa, m, nC))
+        Rl[:, :, 0:3] = Rm
+        Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
+        Kw = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
+        if jacobian:
+            Kx[:, :, 0:3, :, 0:3] = Km
+        wn = self.layout.as_nodal(np.asarray(w, float))
+        conn = self.mesh.conn
+        kap = self.kappa[self.row_pair[rows]][:, None]
+        for ic, f in enumerate(self.scalar):
+            c = 3 + ic
+            u = wn[:, self.layout.offset[f]]
+            k, dk = self.conductance_law(geo.g, f, kap)
+            R, Ju, JX = curve_scalar_jump(geo, u[conn[ps.a_elem[rows]]], u[conn[ps.b_elem[rows]]], wgt * k,
+                                          wgt * dk, jacobian)
+            Rl[:, :, c] = HalfPasses.fold(R, nn)
+            if jacobian:
+                Kw[:, :, c, :, c] = HalfPasses.fold(Ju, nn, axes=(1, 2))
+                Kx[:, :, c, :, 0:3] = HalfPasses.fold(JX, nn, axes=(1, 2))
+        if not jacobian:
+            return act, Rl, None, None
+        return act, Rl, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
+
+    def _forms_curve_compiled(self, x, cand, jacobian: bool):
+        """Mechanics-only curve ``forms`` on the candidate pairs by the compiled kernel
+        (``rve.kernels.contact_curve``)."""
+        from ...kernels.contact_curve import curve_penalty_rows
+
+        ps, order = self.passes, self.mesh.order
+        rows = ps.rows(cand)
+        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        Xa, Xb, has_next, t_next, has_prev = ps.inputs(order, self.mesh.conn, r, rows)
+        gr = self.row_gap_radius(rows)
+        active, Rr, Kr = curve_penalty_rows(order, lagrange_monomials(order), curve_basis(order, ps.s)[0], END_SNAP,
+                                            Xa, Xb, t_next, has_next, has_prev, ps.s, gr, self.weight[rows],
+                                            float(self.params.penalty), self.onset, jacobian)
+        act = cand[active]
+        if act.size == 0:
+            return np.zeros(0, np.int64), np.zeros(0), None, None
+        if not jacobian:
+            return act, Rr[active], None, None
+        return act, Rr[active], Kr[active].reshape(act.size, -1), None
 
     def _forms_compiled(self, x, jacobian: bool):
         """``forms`` of a mechanics-only term by the compiled kernel (rve.kernels.contact)."""
@@ -308,12 +547,14 @@ class ContactTerm:
             return np.zeros(0, np.int64), np.zeros(0), None, None
         return act, Rm, (Km.reshape(act.size, -1) if jacobian else None), None
 
+    # ------------------------------------------------------------------ diagnostics
     def contact_state(self, x) -> dict:
         """Overlap statistics of the current map at ``x``.
 
-        ``max_overlap`` (mm) and ``max_overlap_over_R`` (overlap / min(R+, R-)),
-        ``pairs``, ``active_pairs``, ``active_points``, ``max_width`` (Hertz a, mm),
-        ``total_normal_force`` (N; sum over points of w φ'(g), i.e. w P* g for the linear law)."""
+        ``max_overlap`` (mm) and ``max_overlap_over_R`` (true overlap / min(R+, R-)),
+        ``pairs``, ``active_pairs``, ``active_points``, ``max_width`` (Hertz a of the line
+        load, mm), ``total_normal_force`` (N; sum over points of w φ'(g), i.e. w P* g for
+        the linear law; with multipliers g is the shifted overlap, so w φ' is the line load)."""
         out = {"pairs": int(self.map.n_pairs), "active_pairs": 0, "active_points": 0, "max_overlap": 0.0,
                "max_overlap_over_R": 0.0, "max_width": 0.0, "total_normal_force": 0.0}
         if self.map.n_pairs == 0:
@@ -321,31 +562,36 @@ class ContactTerm:
         g = self.gaps(x)
         active = g > 0.0
         g = np.where(active, g, 0.0)
+        pen = self.penetration(x)
+        pen = np.where(active, pen, 0.0)
         R = self.mesh.radius
-        rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])
-        a, _ = hertz_width(g, self.kappa[:, None], self.g_eps)
-        out.update(active_pairs=int(active.any(axis=1).sum()), active_points=int(active.sum()),
-                   max_overlap=float(g.max()), max_overlap_over_R=float((g / rmin[:, None]).max()),
+        rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])[self.row_pair]
+        a, _ = hertz_width(g, self.kappa[self.row_pair][:, None], self.g_eps)
+        w = np.broadcast_to(np.asarray(self.weight, float).reshape(g.shape[0], -1), g.shape)
+        out.update(active_pairs=int(self._pairs_of_rows(active).size), active_points=int(active.sum()),
+                   max_overlap=float(max(pen.max(), 0.0)), max_overlap_over_R=float(max((pen / rmin[:, None]).max(), 0.0)),
                    max_width=float(a.max()),
-                   total_normal_force=float((self.weight[:, None]
-                                             * penalty_law(g, self.params.penalty, self.onset)[1]).sum()))
+                   total_normal_force=float((w * penalty_law(g, self.params.penalty, self.onset)[1]).sum()))
         return out
 
     def conductance_by_pair(self, x, field: str = "V") -> dict:
         """Discrete contact conductance between every pair of fibrils in contact:
-        ``{(f+, f-): sum_points w c_C a(g)}`` (A/V for V, W/K for T)."""
-        coef = self.params.conductance if field == "V" else self.params.heat_transfer
+        ``{(f+, f-): sum_points w k(g)}`` (A/V for V, W/K for T; k the field's law)."""
         out: dict = {}
         if self.map.n_pairs == 0:
             return out
         geo = self.geometry(x)
         g = np.where(geo.active, geo.g, 0.0)
-        a, _ = hertz_width(g, self.kappa[:, None], self.g_eps)
-        Gp = (self.weight[:, None] * coef * a).sum(axis=1)
+        kap = self.kappa[self.row_pair][:, None]
+        w = np.broadcast_to(np.asarray(self.weight, float).reshape(g.shape[0], -1), g.shape)
+        if self.holm:
+            Gp = (w * self.conductance_law(g, field, kap)[0]).sum(axis=1)
+        else:
+            a, _ = hertz_width(g, kap, self.g_eps)
+            Gp = (w * self.law_coef[field] * a).sum(axis=1)
         nf = self.mesh.n_fibrils
-        key = self.map.fibril_plus.astype(np.int64) * nf + self.map.fibril_minus
+        pr = self.row_pair
+        key = self.map.fibril_plus[pr].astype(np.int64) * nf + self.map.fibril_minus[pr]
         uk, inv = np.unique(key, return_inverse=True)
         tot = np.bincount(inv, weights=Gp, minlength=uk.size)
         return {(int(k // nf), int(k % nf)): float(v) for k, v in zip(uk, tot) if v > 0}
-
-

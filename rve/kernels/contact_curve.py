@@ -1,0 +1,226 @@
+"""Compiled penalty forms of the centroid-curve contact (docs/contact.md "Contact on the
+centroid curve", docs/kernels.md).
+
+Contract
+--------
+``curve_penalty_rows(order, C, Na, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a,
+gap_radius, weight, penalty, onset, jacobian)`` -> ``(active (P,) bool, R (P, M, 3), K (P, M,
+3, M, 3) or None)`` for the 2P oriented rows of P pairs (row i: points on e+, row P + i:
+points on e-; each row's a nodes, then b nodes; M = 2 nn), both rows of a pair added into
+the pair's (e+ nodes, e- nodes) layout (``HalfPasses.fold``): the closest point, the
+ownership and the penalty residual and tangent of ``rve.physics.contact_curve``
+(``curve_geometry`` + ``curve_penalty_forces``, the reference, formulas there), fused in one
+pass per point with no (Pr, G, M, 3) temporaries. ``gap_radius`` and ``weight`` are (Pr, G).
+The projection stops per point (the reference stops when every point has converged), so
+the two agree to rounding (tests/test_kernels_contact_curve.py).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..threads import run_chunked
+
+__all__ = ["curve_penalty_rows"]
+
+#: rows per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
+MIN_CHUNK = 512
+_TINY = 1e-300
+
+
+@njit(cache=True, nogil=True)
+def _basis(C, s, N, dN, d2N):
+    """Lagrange values and s-derivatives at s from the monomial coefficients C (nn, nn)."""
+    nn = C.shape[0]
+    xi = 2.0 * s - 1.0
+    for a in range(nn):
+        v = 0.0
+        d = 0.0
+        d2 = 0.0
+        pw = 1.0  # xi^k
+        pw1 = 0.0  # xi^(k-1)
+        pw2 = 0.0  # xi^(k-2)
+        for k in range(nn):
+            v += C[a, k] * pw
+            d += k * C[a, k] * pw1
+            d2 += k * (k - 1) * C[a, k] * pw2
+            pw2 = pw1
+            pw1 = pw
+            pw = pw * xi
+        N[a] = v
+        dN[a] = 2.0 * d
+        d2N[a] = 4.0 * d2
+
+
+@njit(cache=True, nogil=True)
+def _law(g, P, eps):
+    """Line load and stiffness of the penalty law (``penalty_law``)."""
+    gp = g if g > 0.0 else 0.0
+    if eps <= 0.0:
+        return P * gp, (P if g > 0.0 else 0.0)
+    if gp < eps:
+        return P * gp * gp / (2.0 * eps), (P * gp / eps if g > 0.0 else 0.0)
+    return P * (gp - 0.5 * eps), (P if g > 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True)
+def _project(order, C, end_snap, Xb, r, p, N, dN, d2N):
+    nn = C.shape[0]
+    d0 = Xb[r, nn - 1, 0] - Xb[r, 0, 0]
+    d1 = Xb[r, nn - 1, 1] - Xb[r, 0, 1]
+    d2 = Xb[r, nn - 1, 2] - Xb[r, 0, 2]
+    dd = d0 * d0 + d1 * d1 + d2 * d2
+    s = ((p[0] - Xb[r, 0, 0]) * d0 + (p[1] - Xb[r, 0, 1]) * d1 + (p[2] - Xb[r, 0, 2]) * d2) / (dd if dd > 0 else 1.0)
+    s = min(max(s, 0.0), 1.0)
+    if order == 1:
+        return s
+    for _ in range(12):
+        _basis(C, s, N, dN, d2N)
+        f = 0.0
+        tt = 0.0
+        et2 = 0.0
+        for i in range(3):
+            q = 0.0
+            t = 0.0
+            t2 = 0.0
+            for b in range(nn):
+                q += N[b] * Xb[r, b, i]
+                t += dN[b] * Xb[r, b, i]
+                t2 += d2N[b] * Xb[r, b, i]
+            e = q - p[i]
+            f += e * t
+            tt += t * t
+            et2 += e * t2
+        fp = tt + et2
+        fp = max(fp, 0.1 * tt)
+        step = f / (fp if fp > 0 else 1.0)
+        s_new = min(max(s - step, 0.0), 1.0)
+        done = abs(s_new - s) <= 1e-15
+        s = s_new
+        if done:
+            break
+    if s < end_snap:
+        s = 0.0
+    elif s > 1.0 - end_snap:
+        s = 1.0
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a, Na, gr, w, Pstar, eps, jacobian, lo, hi,
+           active, R, K):
+    """Pairs lo..hi-1: rows i (points on e+) and half + i (points on e-), each folded into
+    the pair's (e+ nodes, e- nodes) layout of R[i - lo], K[i - lo]."""
+    half = Xa.shape[0] // 2
+    nn = C.shape[0]
+    M = 2 * nn
+    G = s_a.shape[0]
+    N = np.empty(nn)
+    dN = np.empty(nn)
+    d2N = np.empty(nn)
+    p = np.empty(3)
+    c = np.empty(M)
+    m = np.empty(M)
+    ds = np.empty((M, 3))
+    j = np.empty(3)
+    t = np.empty(3)
+    t2 = np.empty(3)
+    slot = np.empty(M, np.int64)
+    for i in range(lo, hi):
+        o = i - lo
+        for side in range(2):
+            r = i + side * half
+            for k in range(M):  # the oriented row's (a, b) nodes in the pair's (e+, e-) layout
+                slot[k] = k if side == 0 else (k + nn) % M
+            for g in range(G):
+                for ii in range(3):
+                    v = 0.0
+                    for a in range(nn):
+                        v += Na[g, a] * Xa[r, a, ii]
+                    p[ii] = v
+                s = _project(order, C, end_snap, Xb, r, p, N, dN, d2N)
+                _basis(C, s, N, dN, d2N)
+                for ii in range(3):
+                    q = 0.0
+                    ti = 0.0
+                    t2i = 0.0
+                    for b in range(nn):
+                        q += N[b] * Xb[r, b, ii]
+                        ti += dN[b] * Xb[r, b, ii]
+                        t2i += d2N[b] * Xb[r, b, ii]
+                    j[ii] = p[ii] - q
+                    t[ii] = ti
+                    t2[ii] = t2i
+                rho = np.sqrt(j[0] * j[0] + j[1] * j[1] + j[2] * j[2])
+                gap = gr[r, g] - rho
+                interior = (s > 0.0) and (s < 1.0)
+                tn2 = t_next[r, 0] ** 2 + t_next[r, 1] ** 2 + t_next[r, 2] ** 2
+                grow = 0.0
+                for ii in range(3):
+                    grow += (Xb[r, nn - 1, ii] - p[ii]) * t_next[r, ii]
+                grows = grow >= -2.0 * end_snap * tn2
+                owned = interior or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
+                if not (owned and gap > 0.0 and rho > _TINY):
+                    continue
+                active[o] = True
+                rr = max(rho, _TINY)
+                nv = (j[0] / rr, j[1] / rr, j[2] / rr)
+                for a in range(nn):
+                    c[a] = Na[g, a]
+                    c[nn + a] = -N[a]
+                    m[a] = 0.0
+                    m[nn + a] = dN[a]
+                f1, f2 = _law(gap, Pstar, eps)
+                f = w[r, g] * f1
+                for k in range(M):
+                    for ii in range(3):
+                        R[o, slot[k], ii] -= f * c[k] * nv[ii]
+                if not jacobian:
+                    continue
+                A = t[0] * t[0] + t[1] * t[1] + t[2] * t[2] - (j[0] * t2[0] + j[1] * t2[1] + j[2] * t2[2])
+                Asafe = A if (interior and A > 0) else 1.0
+                for k in range(M):
+                    for ii in range(3):
+                        ds[k, ii] = (c[k] * t[ii] + m[k] * j[ii]) / Asafe if interior else 0.0
+                kk = w[r, g] * f2
+                fr = f / rho
+                beta = fr * A
+                for k in range(M):
+                    sk = slot[k]
+                    for ii in range(3):
+                        for l in range(M):
+                            sl = slot[l]
+                            ckl = c[k] * c[l]
+                            for jj in range(3):
+                                B = (kk + fr) * nv[ii] * nv[jj] - (fr if ii == jj else 0.0)
+                                K[o, sk, ii, sl, jj] += ckl * B + beta * ds[k, ii] * ds[l, jj]
+
+
+def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_next, has_prev, s_a, gap_radius,
+                       weight, penalty: float, onset: float = 0.0, jacobian: bool = True):
+    """``(active, R, K)`` of the oriented rows (module docstring). ``C`` (nn, nn) are the
+    basis' monomial coefficients and ``Na`` (G, nn) its values at ``s_a`` (from
+    ``rve.physics.contact_curve``: ``lagrange_monomials``, ``curve_basis``), ``end_snap`` its
+    ``END_SNAP``."""
+    Xa = np.ascontiguousarray(Xa, dtype=np.float64)
+    Xb = np.ascontiguousarray(Xb, dtype=np.float64)
+    Pr, nn, _ = Xa.shape
+    s_a = np.ascontiguousarray(s_a, dtype=np.float64)
+    G = s_a.shape[0]
+    Na = np.ascontiguousarray(Na, dtype=np.float64).reshape(G, nn)
+    C = np.ascontiguousarray(C, dtype=np.float64)
+    gr = np.ascontiguousarray(np.broadcast_to(np.asarray(gap_radius, float).reshape(Pr, -1), (Pr, G)))
+    w = np.ascontiguousarray(np.broadcast_to(np.asarray(weight, float).reshape(Pr, -1), (Pr, G)))
+    tn = np.ascontiguousarray(t_next, dtype=np.float64)
+    hn = np.ascontiguousarray(has_next, dtype=np.bool_)
+    hp = np.ascontiguousarray(has_prev, dtype=np.bool_)
+    M = 2 * nn
+    half = Pr // 2
+    active = np.zeros(half, np.bool_)
+    R = np.zeros((half, M, 3))
+    K = np.zeros((half, M, 3, M, 3)) if jacobian else np.zeros((0, M, 3, M, 3))
+    jac, snap = bool(jacobian), float(end_snap)
+    run_chunked(half, lambda a, b: _pairs(int(order), C, snap, Xa, Xb, tn, hn, hp, s_a, Na, gr, w, float(penalty),
+                                          float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
+                MIN_CHUNK)
+    return active, R, (K if jacobian else None)
