@@ -179,3 +179,32 @@ def test_picture_rules_are_default_targets_and_run_beside_the_chains():
     assert "rve_pictures_mode" in out
     # the trellis pictures need the trellis chain only (not the other modes' steps)
     assert "mode=trellis" in out and "mode=shear" not in out and "state=shear_01" not in out
+
+
+def test_a_periodic_cell_is_drawn_tiled_by_its_deformed_lattice():
+    """The 3 x 3 tiling of a periodic cell: nine copies, each the cell translated by a
+    lattice vector of the macro gradient the state carries (here a shear); a pinned cell
+    is drawn as it is."""
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.config import RVEConfig
+    from rve.homogenisation.periodic import _affine_predictor, macro_gradient
+    from rve.homogenisation.pictures import tiled
+    from rve.io.vtk import tube_surface
+
+    cfg = RVEConfig(scene="rve", boundary="periodic", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 4})
+    fab, mesh = fabric_and_mesh(cfg)
+    F = macro_gradient("shear", 0.2)
+    x = _affine_predictor(fab.initial_state(mesh), F, np.zeros(3))
+    surf = tube_surface(mesh, x, 8, {"fibril": mesh.node_fibril.astype(float)})
+    big = tiled(surf, cfg, fab, mesh, x)
+    assert big.n_points == 9 * surf.n_points and set(big.point_data) >= set(surf.point_data)
+    a1, a2 = 2.0 * fab.half_widths[0] * F[:, 0], 2.0 * fab.half_widths[1] * F[:, 1]
+    pts, copies = np.asarray(surf.points), np.asarray(big.points).reshape(9, -1, 3)
+    shifts = {tuple(np.round(c[0] - pts[0], 12)) for c in copies}
+    want = {tuple(np.round(i * a1 + j * a2, 12)) for i in (-1, 0, 1) for j in (-1, 0, 1)}
+    assert shifts == want
+    for c in copies:  # each copy is a rigid translation of the cell
+        assert np.allclose(c - pts, c[0] - pts[0], atol=1e-12)
+    pinned = RVEConfig(scene="rve", fabric={"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]},
+                       mesh={"elements": 4})
+    assert tiled(surf, pinned, fab, mesh, x) is surf

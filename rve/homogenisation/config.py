@@ -216,7 +216,7 @@ class Packing(Section):
 
 
 class PeriodicCell(Section):
-    """The periodic cell (``boundary: periodic``; docs/rve_pipeline.md "Periodic cell"): the
+    """The periodic cell (``boundary: periodic``; docs/periodic.md): the
     smallest repeat of the weave pattern (plain 2 x 2 yarns, twill 2/1 3 x 3, twill 2/2 and
     basket 4 x 4), ``repeat`` times in each direction; every fibril spans one period and
     its end is tied to its start."""

@@ -1,4 +1,4 @@
-"""The periodic cell of the RVE pipeline (``boundary: periodic``; docs/rve_pipeline.md "Periodic cell").
+"""The periodic cell of the RVE pipeline (``boundary: periodic``; docs/periodic.md).
 
 Contract
 --------
@@ -27,7 +27,9 @@ pinned state):
   Hill-Mandel work rate (the one-path test of ``rve.homogenisation.branch``);
 * :func:`cell_gradient` -- the F a stored full state carries (its tie jumps), and
   :func:`periodic_free_residual` -- |F| on the free reduced dofs of a stored state;
-* :func:`gauge_dofs` -- the held reduced dofs above.
+* :func:`gauge_dofs` -- the held reduced dofs above;
+* :func:`newton_polish` -- a few Newton steps after an energy minimisation that stopped
+  within a factor ``POLISH_FACTOR`` of its tolerance (relaxation and strain steps).
 
 The face forces of a state (``info["reaction_force"]``, :func:`cell_reactions`) are the
 Hill-Mandel stress ``PeriodicSystem.macro_stress`` (the tie forces and the contact forces
@@ -49,7 +51,8 @@ from ..model import BeamMaterial, BeamModel, ContactSystem
 from ..model.periodic import PeriodicSystem, fibril_end_ties
 
 __all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
-           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "periodic_energy"]
+           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "newton_polish",
+           "periodic_energy"]
 
 log = logging.getLogger("rve.homogenisation.periodic")
 
@@ -158,8 +161,10 @@ def periodic_relax(cfg, fab, mesh, x0):
     psys = periodic_system(cfg, fab, mesh, x0, np.eye(3), cfg.relaxation.damping, params)
     xr = psys.restrict(np.asarray(x0, float).reshape(-1))
     res = relax_to_equilibrium(psys, xr, np.zeros(psys.n), relax_settings(cfg))
+    x_relaxed, converged, polish = newton_polish(psys, res.x, bool(res.static_converged), cfg.relaxation.static_atol)
+    res.x = x_relaxed
     st = psys.contact_state(res.x)
-    info = {"method": cfg.relaxation.method, "boundary": "periodic", "converged": bool(res.static_converged),
+    info = {"method": cfg.relaxation.method, "boundary": "periodic", "converged": converged, "polish": polish,
             "residual_N": free_residual(psys, res.x), "wall_s": time.perf_counter() - t0, "dofs": int(psys.n),
             "static_newton_iterations": int(res.static_newton_iterations),
             "max_overlap_over_R": float(st["max_overlap_over_R"]), "active_pairs": int(st["active_pairs"]),
@@ -168,6 +173,32 @@ def periodic_relax(cfg, fab, mesh, x0):
     if not info["converged"]:
         log.warning("periodic relaxation: not converged (|F| = %.3e N)", info["residual_N"])
     return full_state(psys, res.x), psys.full, info
+
+
+#: the Newton polish starts only this close to the tolerance (|F| <= factor x atol): near
+#: a minimum, where the energy change of a step is below the rounding of the energy
+POLISH_FACTOR = 1e3
+
+
+def newton_polish(psys, x, converged: bool, atol: float, max_iter: int = 8):
+    """``(x, converged, info)``: the energy minimiser's result, and where it stopped short
+    of ``atol`` but within ``POLISH_FACTOR`` of it, a few Newton steps more
+    (``strain.static_polish``: |F| never increases). There the energy changes of its steps
+    are below the rounding of the energy and the minimiser, which takes the energy as
+    merit, can no longer tell a descent step; Newton's quadratic rate from that close
+    stays on the same minimum."""
+    from .strain import free_residual, static_polish
+
+    r0 = free_residual(psys, x)
+    if converged or not r0 <= POLISH_FACTOR * atol:
+        return x, bool(converged), None
+    xp, pinfo = static_polish(psys, x, atol, 1, max_iter)
+    r1 = free_residual(psys, xp)
+    info = {"from_N": float(r0), "to_N": float(r1), "iterations": int(pinfo["iterations"])}
+    log.info("Newton polish: |F| %.3e -> %.3e N in %d iterations", r0, r1, pinfo["iterations"])
+    if not r1 < r0:
+        return x, False, info
+    return xp, bool(pinfo["converged"] and r1 <= atol), info
 
 
 def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
@@ -203,6 +234,7 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     psys = periodic_system(cfg, fab, mesh, x_pred, F_next)
     xr = psys.restrict(x_pred.reshape(-1))
     xs, sinfo = static_minimize(psys, xr, sp_.static_atol, sp_.static_max_iter)
+    xs, sinfo["converged"], sinfo["polish"] = newton_polish(psys, xs, sinfo["converged"], sp_.static_atol)
     sinfo["wall_s"] = time.perf_counter() - t0
     info = {"mode": mode, "step": int(step), "strain": eps_to,
             "strain_increment": eps_to - eps_from, "boundary": "periodic",

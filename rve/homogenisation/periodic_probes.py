@@ -1,4 +1,4 @@
-"""Field probes of a periodic cell (docs/rve_pipeline.md "Periodic cell", "Periodic probes").
+"""Field probes of a periodic cell (docs/periodic.md "Probes").
 
 On a stored full state (mechanics frozen), a probe with ``field: x`` (or ``y``) applies
 the macro field ``E = U / L_x e_x`` (U the test voltage ``probe_solver.voltage``, L_x the

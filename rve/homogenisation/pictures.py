@@ -28,7 +28,9 @@ Switched by ``output.pictures`` of the RVE config (on by default). Three kinds o
   before and after relaxation (``cross_section.png``, Fig. 7.4.2), and per mode the final
   strained state by axial force (``{mode}_axial_force.png``, Fig. 7.4.5), the current
   and the temperature of every probe at the final strain (``{mode}_current.png``,
-  ``{mode}_temperature.png``, Figs. 7.4.6-7.4.7).
+  ``{mode}_temperature.png``, Figs. 7.4.6-7.4.7). A periodic cell (``boundary: periodic``)
+  is drawn tiled 3 x 3 (``tiled``: copies translated by the deformed lattice vectors), so
+  the picture reads as a fabric; its tube files and ``.pvd`` series hold the one cell.
 
 Job bodies (workflow/rules/rve.smk): ``pictures_relaxed_job`` (rule ``rve_pictures_relaxed``:
 initial + relaxed state) and ``pictures_mode_job`` (rule ``rve_pictures_mode``, one per
@@ -52,7 +54,7 @@ from ..io.atomic import atomic_path
 from ..io.provenance import logging_to
 
 __all__ = ["axial_force", "nodal_mean", "section_currents", "state_point_data", "write_state_tubes",
-           "ensure_tubes", "write_mode_series", "render_panels", "plot_cross_section", "pictures_relaxed_job",
+           "ensure_tubes", "write_mode_series", "tiled", "render_panels", "plot_cross_section", "pictures_relaxed_job",
            "pictures_mode_job"]
 
 log = logging.getLogger("rve.homogenisation.pictures")
@@ -191,6 +193,33 @@ def write_mode_series(pvd: PathLike, entries: Sequence[tuple[float, PathLike]]) 
 
 
 # ============================================================================ renders
+#: copies of a periodic cell per side in the renders (the cell drawn among its neighbours)
+PERIODIC_TILES = 3
+
+
+def tiled(surface, cfg, fab, mesh, xn, n: int = PERIODIC_TILES):
+    """A periodic cell's tube surface drawn ``n`` x ``n`` times, each copy translated by a
+    lattice vector of the deformed cell, i F L1 + j F L2 (F the macro gradient the state
+    carries), so that the picture reads as a piece of fabric; the point data are copied
+    with it. A pinned cell (or ``n`` = 1) is returned as it is."""
+    if getattr(cfg, "boundary", "pinned") != "periodic" or int(n) <= 1:
+        return surface
+    from .periodic import cell_gradient, cell_ties
+
+    a1, a2 = cell_ties(fab, mesh).periods @ cell_gradient(fab, mesh, xn).T
+    k = np.arange(int(n)) - (int(n) - 1) / 2.0
+    copies = [surface.translate(i * a1 + j * a2, inplace=False) for i in k for j in k]
+    return copies[0].merge(copies[1:])
+
+
+def _cell_text(cfg, fab, mesh) -> str:
+    """Title line of a render: the fabric, its fibrils and mesh (and the tiling of a periodic cell)."""
+    text = f"{fab.kind}: {mesh.n_fibrils} fibrils, {cfg.mesh.elements} elements each"
+    if getattr(cfg, "boundary", "pinned") == "periodic":
+        text += f"\nperiodic cell, drawn {PERIODIC_TILES} x {PERIODIC_TILES}"
+    return text
+
+
 def _camera(bounds, elevation=_VIEW_ELEVATION_DEG, azimuth=_VIEW_AZIMUTH_DEG, distance=2.35, shift=0.08):
     """Camera [position, focal point, view up] looking at the box ``bounds`` from
     ``elevation``/``azimuth`` (deg); the focal point moved by ``shift`` x the box size to
@@ -395,9 +424,11 @@ def pictures_relaxed_job(initial_state: PathLike, relaxed_state: PathLike, relax
         f1 = axial_force(mesh, m.youngs_modulus, m.poisson_ratio, st1.x, cfg.mesh.disk_points, cfg.mesh.axial_points)
         s0 = tube_surface(mesh, st0.x, int(cfg.output.n_theta), {"axial_force": nodal_mean(mesh, f0.mean(1))})
         how = render_panels(outputs["relaxed_axial_force"],
-                            [(s0, "axial_force", "designed initial state", "initial: axial force [N]"),
-                             (tubes, "axial_force", "relaxed state (strain 0)", "relaxed: axial force [N]")],
-                            title=f"{fab.kind}: {mesh.n_fibrils} fibrils, {cfg.mesh.elements} elements each")
+                            [(tiled(s0, cfg, fab, mesh, st0.x), "axial_force", "designed initial state",
+                              "initial: axial force [N]"),
+                             (tiled(tubes, cfg, fab, mesh, st1.x), "axial_force", "relaxed state (strain 0)",
+                              "relaxed: axial force [N]")],
+                            title=_cell_text(cfg, fab, mesh))
         yarn = _centre_warp_yarn(fab)
         if yarn is not None:
             xs = [float(x) for x in fab.params.get("weft_x", [0.0])]
@@ -433,11 +464,12 @@ def pictures_mode_job(mode: str, state_files: Sequence[PathLike], tubes_files: S
             ensure_tubes(tf, sf, spec, combo)
             entries.append((float(st.strain), tf))
         pvd = write_mode_series(outputs["pvd"], entries)
-        final = _read(tubes_files[-1])
+        final = tiled(_read(tubes_files[-1]), cfg, fab, mesh, st.x)
         strain = entries[-1][0]
         what = f"{mode} {strain:g}"
         how = render_panels(outputs["axial_force"], [(final, "axial_force", f"{mode}, strain {strain:g}",
                                                       "axial force [N]")],
+                            title=_cell_text(cfg, fab, mesh) if cfg.boundary == "periodic" else "",
                             panel_size=(1200, 900))
         probes = [p.name for p in cfg.probes]
         for key, field, bar in (("current", "current", "current [A]"),

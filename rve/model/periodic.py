@@ -1,4 +1,4 @@
-"""Periodic boundary conditions by master-slave elimination (docs/rve_pipeline.md "Periodic cell").
+"""Periodic boundary conditions by master-slave elimination (docs/periodic.md).
 
 Contract
 --------

@@ -68,6 +68,21 @@ def _fabric_desc(fab, mesh, cfg) -> dict:
     return desc
 
 
+def _describe_periodic(ds, cfg) -> None:
+    """What the face forces and resistances of a periodic cell's table are (docs/periodic.md)."""
+    ds.attrs["boundary"] = "periodic"
+    ds.attrs["cell_repeat"] = int(cfg.cell.repeat)
+    for name in ("reaction_force", "membrane_force"):
+        if name in ds:
+            ds[name].attrs["comment"] = "; ".join(filter(None, [
+                ds[name].attrs.get("comment"), "periodic cell: the Hill-Mandel stress P times the face length "
+                "(tie forces and contact forces on the periodic images), x+ = P e1 L_y, y+ = P e2 L_x"]))
+    if "probe_resistance" in ds:
+        ds["probe_resistance"].attrs["comment"] = "; ".join(filter(None, [
+            ds["probe_resistance"].attrs.get("comment"), "periodic cell: sheet resistance (ohm per square) of a "
+            "macro field along the probe's axis, E / j with j the current per unit reference width"]))
+
+
 def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: PathLike, out_summary: PathLike,
                log_path: Optional[PathLike], spec: Mapping, run: str = ""):
     """All probe records of a run -> the lookup table (netCDF), its CSV export and a
@@ -92,6 +107,8 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
             log.warning("table %s: %d state(s) are not static equilibria (see equilibrium_residual): %s",
                         out_table, len(unconverged), ", ".join(unconverged))
         ds.attrs["probe_definitions"] = json.dumps([p.model_dump() for p in first.probes])
+        if first.boundary == "periodic":
+            _describe_periodic(ds, first)
         if spec.get("accuracy"):  # the stated accuracy of this run's table, from its convergence study (issue 14)
             from .accuracy import annotate_accuracy, read_accuracy
 
