@@ -131,10 +131,12 @@ def main(argv=None):
     ap.add_argument("--periodic", default="results/rve/plain_weave_periodic", help="the periodic run's directory")
     ap.add_argument("--benchmarks", default="results/benchmarks/rve", help="Snakemake benchmark files per run")
     ap.add_argument("--strains", nargs="*", type=float, default=[0.0, 0.1, 0.25])
-    ap.add_argument("--periodic-config", default="configs/rve/plain_weave_periodic.yaml",
+    ap.add_argument("--periodic-config", default="configs/rve/plain_weave_periodic_p1.yaml",
                     help="the periodic run's scene config (for the contacts across the faces)")
+    ap.add_argument("--names", nargs=2, default=["pinned", "periodic"],
+                    help="labels of the two runs (e.g. 1x1 2x2 for two periodic cells)")
     args = ap.parse_args(argv)
-    runs = {"pinned": Path(args.pinned), "periodic": Path(args.periodic)}
+    runs = dict(zip(args.names, (Path(args.pinned), Path(args.periodic))))
     tables = {k: open_table(p / "table.nc") for k, p in runs.items() if (p / "table.nc").exists()}
     print("cost (Snakemake benchmark files):")
     print(f"  {'run':<10}{'jobs':>6}{'CPU s':>10}{'job wall s':>12}{'max RSS MB':>12}")
@@ -146,11 +148,15 @@ def main(argv=None):
         print(f"\n{k} ({fab}): {runs[k] / 'table.nc'}, dims {dict(ds.sizes)}")
         _print_rows("membrane force [N/mm]", membrane_rows(ds, args.strains), args.strains)
         _print_rows("electrical [ohm, K]", electrical_rows(ds, args.strains, ["uniaxial", "shear"]), args.strains)
+        mz = float(np.abs(ds["membrane_force"].sel(component="z")).max())
+        print(f"  out of plane: max |membrane force z| {mz:.2e} N/mm over every mode and strain")
         res = ds["equilibrium_residual"]
         print(f"  equilibrium residual: max {float(res.max()):.2e} N; converged: "
               f"{int(ds['converged'].sum())} of {ds['converged'].size}")
-    if (runs["periodic"] / "base" / "states" / "relaxed.nc").exists():
-        image_contact_share(runs["periodic"], {"scene_config": args.periodic_config, "overrides": []})
+    second = runs[args.names[1]]
+    if tables.get(args.names[1]) is not None and tables[args.names[1]].attrs.get("boundary") == "periodic" \
+            and Path(args.periodic_config).exists() and (second / "base" / "states" / "relaxed.nc").exists():
+        image_contact_share(second, {"scene_config": args.periodic_config, "overrides": []})
 
 
 if __name__ == "__main__":
