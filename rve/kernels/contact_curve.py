@@ -107,6 +107,34 @@ def _project(order, C, end_snap, Xb, r, p, N, dN, d2N):
 
 
 @njit(cache=True, nogil=True)
+def _accumulate(Ro, Ko, jacobian, slot, c, m, nv, j, t, t2, rho, interior, f, kk, ds):
+    """Add one point's residual ``-f c n`` and tangent (``curve_penalty_forces``) to the
+    pair's local arrays, row nodes mapped by ``slot``; ``f``, ``kk`` = w phi', w phi''."""
+    M = c.shape[0]
+    for k in range(M):
+        for ii in range(3):
+            Ro[slot[k], ii] -= f * c[k] * nv[ii]
+    if not jacobian:
+        return
+    A = t[0] * t[0] + t[1] * t[1] + t[2] * t[2] - (j[0] * t2[0] + j[1] * t2[1] + j[2] * t2[2])
+    Asafe = A if (interior and A > 0) else 1.0
+    for k in range(M):
+        for ii in range(3):
+            ds[k, ii] = (c[k] * t[ii] + m[k] * j[ii]) / Asafe if interior else 0.0
+    fr = f / rho
+    beta = fr * A
+    for k in range(M):
+        sk = slot[k]
+        for ii in range(3):
+            for l in range(M):
+                sl = slot[l]
+                ckl = c[k] * c[l]
+                for jj in range(3):
+                    B = (kk + fr) * nv[ii] * nv[jj] - (fr if ii == jj else 0.0)
+                    Ko[sk, ii, sl, jj] += ckl * B + beta * ds[k, ii] * ds[l, jj]
+
+
+@njit(cache=True, nogil=True)
 def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a, Na, gr, w, Pstar, eps, jacobian, lo, hi,
            active, R, K):
     """Pairs lo..hi-1: rows i (points on e+) and half + i (points on e-), each folded into
@@ -171,29 +199,8 @@ def _pairs(order, C, end_snap, Xa, Xb, t_next, has_next, has_prev, s_a, Na, gr, 
                     m[a] = 0.0
                     m[nn + a] = dN[a]
                 f1, f2 = _law(gap, Pstar, eps)
-                f = w[r, g] * f1
-                for k in range(M):
-                    for ii in range(3):
-                        R[o, slot[k], ii] -= f * c[k] * nv[ii]
-                if not jacobian:
-                    continue
-                A = t[0] * t[0] + t[1] * t[1] + t[2] * t[2] - (j[0] * t2[0] + j[1] * t2[1] + j[2] * t2[2])
-                Asafe = A if (interior and A > 0) else 1.0
-                for k in range(M):
-                    for ii in range(3):
-                        ds[k, ii] = (c[k] * t[ii] + m[k] * j[ii]) / Asafe if interior else 0.0
-                kk = w[r, g] * f2
-                fr = f / rho
-                beta = fr * A
-                for k in range(M):
-                    sk = slot[k]
-                    for ii in range(3):
-                        for l in range(M):
-                            sl = slot[l]
-                            ckl = c[k] * c[l]
-                            for jj in range(3):
-                                B = (kk + fr) * nv[ii] * nv[jj] - (fr if ii == jj else 0.0)
-                                K[o, sk, ii, sl, jj] += ckl * B + beta * ds[k, ii] * ds[l, jj]
+                _accumulate(R[o], K[o if jacobian else 0], jacobian, slot, c, m, nv, j, t, t2, rho, interior,
+                            w[r, g] * f1, w[r, g] * f2, ds)
 
 
 def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_next, has_prev, s_a, gap_radius,
@@ -218,7 +225,7 @@ def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_n
     half = Pr // 2
     active = np.zeros(half, np.bool_)
     R = np.zeros((half, M, 3))
-    K = np.zeros((half, M, 3, M, 3)) if jacobian else np.zeros((0, M, 3, M, 3))
+    K = np.zeros((half, M, 3, M, 3)) if jacobian else np.zeros((1, M, 3, M, 3))  # one scratch block
     jac, snap = bool(jacobian), float(end_snap)
     run_chunked(half, lambda a, b: _pairs(int(order), C, snap, Xa, Xb, tn, hn, hp, s_a, Na, gr, w, float(penalty),
                                           float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),

@@ -20,9 +20,13 @@ element group), ``params`` a ``ContactParams`` (the ``ContactTerm``'s law); impl
 * ``evaluate(x, w, t, jacobian)``: the base terms + penalty + ``h_C a [[T]]`` (T and
   ``heat_transfer > 0``) + ``sigma_C a [[V]]`` (V and ``conductance > 0``), exact tangents
   (``rve.model.assembler.ContactAssembler``).
+* Options of ``params`` (docs/contact.md): ``geometry="curve"`` (contact on the elements'
+  Lagrange curves, both half passes), ``enforcement="augmented_lagrangian"``
+  (``max_penetration``, ``update_multipliers``, ``multipliers``; the Uzawa loop around a
+  solve is ``rve.solvers.augmented``), ``conductance_law="holm"``.
 * ``energy(x)``: beam strain energy (``beam_strain_energy``) + penalty energy
   (``contact_energy``) of a mechanics-only system; ``F(x, 0)`` is its exact gradient.
-* Diagnostics: ``gaps``, ``active_pairs``, ``geometry``, ``contact_state``,
+* Diagnostics: ``gaps``, ``active_pairs``, ``active_points``, ``geometry``, ``contact_state``,
   ``fibril_contact_forces``, ``contact_conductance``, ``max_displacement_since_rebuild``;
   ``onset`` / ``set_onset``, ``map``; ``stats`` (counts and wall times).
 

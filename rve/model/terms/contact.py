@@ -503,7 +503,11 @@ class ContactTerm:
             c = 3 + ic
             u = wn[:, self.layout.offset[f]]
             k, dk = self.conductance_law(geo.g, f, kap)
-            R, Ju, JX = curve_scalar_jump(geo, u[conn[ps.a_elem[rows]]], u[conn[ps.b_elem[rows]]], wgt * k,
+            ua, ub = u[conn[ps.a_elem[rows]]], u[conn[ps.b_elem[rows]]]
+            if f in self.field_jumps:
+                ua = ua + (ps.a_shift[rows] @ self.field_jumps[f])[:, None]
+                ub = ub + (ps.b_shift[rows] @ self.field_jumps[f])[:, None]
+            R, Ju, JX = curve_scalar_jump(geo, ua, ub, wgt * k,
                                           wgt * dk, jacobian)
             Rl[:, :, c] = HalfPasses.fold(R, nn)
             if jacobian:
