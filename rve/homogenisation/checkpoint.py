@@ -35,6 +35,10 @@ reaction_force              side, xyz                    N        clamp force on
                                                                   summed per side
 contact_element_plus/minus  pair                         1        element pairs of the map
 contact_active_points       pair                         1        overlapping points per pair
+contact_multiplier_key      contact_point, point_key     1        key of each multiplier's
+                                                                  point (augmented Lagrangian
+                                                                  only; ``point_keys``)
+contact_multiplier          contact_point                N/mm     its multiplier (line load)
 ==========================  ===========================  =======  ==========================
 
 Attributes: ``rve_state_format``, ``kind`` (initial | relaxed | strained), ``mode``,
@@ -92,6 +96,8 @@ class State:
     contact_count: int = 0
     solver: dict = field(default_factory=dict)
     reference: Optional[np.ndarray] = None
+    #: augmented Lagrangian contact multipliers at x: (keys (n, 6) int64, values (n,)) or None
+    multipliers: Optional[tuple] = None
 
     @property
     def x_flat(self) -> np.ndarray:
@@ -163,6 +169,14 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
                                          {"long_name": "element (- side) of each contact pair of the map"})
         data["contact_active_points"] = (("pair",), act,
                                          {"long_name": "overlapping contact points of the pair at the state"})
+    if state.multipliers is not None:
+        keys, values = state.multipliers
+        data["contact_multiplier_key"] = (("contact_point", "point_key"), np.asarray(keys, np.int64),
+                                          {"long_name": "contact point of each multiplier: element a, point index, "
+                                                        "fibril of b, shift of b (1e-6 mm units, 3)"})
+        data["contact_multiplier"] = (("contact_point",), np.asarray(values, float),
+                                      {"long_name": "augmented Lagrangian contact multiplier (line load)",
+                                       "units": "N/mm"})
     attrs = {
         "title": f"rve state: {fabric.kind} {state.kind}"
                  + (f" {state.mode} step {state.step} (strain {state.strain:g})" if state.mode else ""),
@@ -252,6 +266,8 @@ def _build_state(ds) -> State:
         contact_count=int(a.get("contact_count", 0)),
         solver=json.loads(a.get("solver", "{}")),
         reference=np.asarray(ds["reference"].values, float),
+        multipliers=(np.asarray(ds["contact_multiplier_key"].values, np.int64),
+                     np.asarray(ds["contact_multiplier"].values, float)) if "contact_multiplier" in ds else None,
     )
 
 

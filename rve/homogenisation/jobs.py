@@ -141,6 +141,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
     from .checkpoint import State, load_state
     from ..fabrics.setup import clamp_reactions
     from ..solvers.linear import linear_threads, solver_threads
+    from .multipliers import multiplier_record
     from .strain import relax_fabric
 
     with logging_to(log_path), linear_threads(threads):
@@ -156,7 +157,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
         st = State(x=x, w=np.zeros_like(x), origin=x, kind="relaxed", step=0, strain=0.0,
                    time=float(cfg.relaxation.duration), combo=combo, params=combo_params(spec, combo),
                    config=_config_dict(cfg), reaction_force=reac, contact_count=int(cstate["active_points"]),
-                   solver=info)
+                   solver=info, multipliers=multiplier_record(system))
         _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"relax job ({combo})")
         log.info("relaxed: converged=%s (|F| = %.3e N), %d active contact points, reactions %s, %.1f s -> %s",
                  info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"], out_state)
@@ -168,6 +169,7 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
     """One strain step (Algorithm 7.1) from ``in_state``; write the new state."""
     from .checkpoint import State, load_state
     from ..fabrics.setup import clamp_reactions
+    from .multipliers import multiplier_record
     from .strain import strain_step
 
     step = int(step)
@@ -182,14 +184,14 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
         if prev.kind != expect or (step > 1 and (prev.mode != mode or prev.step != step - 1)):
             raise ValueError(f"{in_state}: expected the {expect} state before {mode} step {step}, got kind="
                              f"{prev.kind} mode={prev.mode!r} step={prev.step}")
-        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step)
+        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers)
         # a periodic cell gives its face forces (the Hill-Mandel stress); the pinned cell its clamps
         reac = info.pop("reaction_force", None) or clamp_reactions(fab, system, x)
         cstate = system.contact_state(x.reshape(-1))
         st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="strained", mode=mode, step=step,
                    strain=float(info["strain"]), time=prev.time + cfg.strain.t_step + cfg.strain.t_relax,
                    combo=combo, params=combo_params(spec, combo), config=_config_dict(cfg), reaction_force=reac,
-                   contact_count=int(cstate["active_points"]), solver=info)
+                   contact_count=int(cstate["active_points"]), solver=info, multipliers=multiplier_record(system))
         _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"{mode} step {step} ({combo})")
         log.info("%s step %d (strain %g): converged=%s (|F| = %.3e N), %d contact points, reactions %s, %.1f s -> %s",
                  mode, step, st.strain, info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"],

@@ -49,6 +49,7 @@ from ..fabrics.setup import contact_params
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, ContactSystem
 from ..model.periodic import PeriodicSystem, fibril_end_ties
+from .multipliers import equilibrium, seed_multipliers
 
 __all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
            "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "newton_polish",
@@ -154,25 +155,31 @@ def periodic_relax(cfg, fab, mesh, x0):
     full system, info)``."""
     from ..fabrics.relaxation import relax_settings
     from ..solvers.relaxation import relax_to_equilibrium
-    from .strain import free_residual
+    from .strain import free_residual, static_minimize
 
     t0 = time.perf_counter()
     params = contact_params(cfg.contact, rebuild_every=cfg.relaxation.rebuild_every, conduction=False)
     psys = periodic_system(cfg, fab, mesh, x0, np.eye(3), cfg.relaxation.damping, params)
     xr = psys.restrict(np.asarray(x0, float).reshape(-1))
     res = relax_to_equilibrium(psys, xr, np.zeros(psys.n), relax_settings(cfg))
-    x_relaxed, converged, polish = newton_polish(psys, res.x, bool(res.static_converged), cfg.relaxation.static_atol)
-    res.x = x_relaxed
-    st = psys.contact_state(res.x)
+    xs, converged, polish = newton_polish(psys, res.x, bool(res.static_converged), cfg.relaxation.static_atol)
+    al = None
+    if psys.augmented:   # relaxed with the penalty: the multipliers from here
+        r = cfg.relaxation
+        xs, al = equilibrium(psys, lambda xv: static_minimize(psys, xv, r.static_atol, r.static_max_iter), xs)
+        converged = bool(al["converged"])
+    st = psys.contact_state(xs)
     info = {"method": cfg.relaxation.method, "boundary": "periodic", "converged": converged, "polish": polish,
-            "residual_N": free_residual(psys, res.x), "wall_s": time.perf_counter() - t0, "dofs": int(psys.n),
+            "residual_N": free_residual(psys, xs), "wall_s": time.perf_counter() - t0, "dofs": int(psys.n),
             "static_newton_iterations": int(res.static_newton_iterations),
             "max_overlap_over_R": float(st["max_overlap_over_R"]), "active_pairs": int(st["active_pairs"]),
-            "macro_stress_N_per_mm": psys.macro_stress(res.x)[:2, :2].tolist(),
-            "reaction_force": cell_reactions(fab, psys, res.x)}
+            "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
+            "reaction_force": cell_reactions(fab, psys, xs)}
+    if al is not None:
+        info["static"] = al
     if not info["converged"]:
         log.warning("periodic relaxation: not converged (|F| = %.3e N)", info["residual_N"])
-    return full_state(psys, res.x), psys.full, info
+    return full_state(psys, xs), psys.full, info
 
 
 #: the Newton polish starts only this close to the tolerance (|F| <= factor x atol): near
@@ -211,12 +218,14 @@ def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
     return x
 
 
-def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_range=None):
+def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_range=None, multipliers=None):
     """One strain step of the periodic cell from ``x_prev`` (full, n_nodes x 9) at strain
     eps_{step-1} to eps_step (module docstring), or between the strains ``eps_range = (from,
     to)`` (a part of the step, ``strain.follow_branch``; ``step`` labels the record).
     ``origin`` (the relaxed state) is not used: the cell's strain is its macro gradient,
-    exact by construction. Returns ``(x (n_nodes, 9), full system, info)``."""
+    exact by construction. ``multipliers``: the contact multipliers of ``x_prev`` (the static
+    solve is in the Uzawa loop, ``multipliers.equilibrium``). Returns ``(x (n_nodes, 9), full
+    system, info)``."""
     from .strain import free_residual, static_minimize, strain_levels
 
     del origin
@@ -233,8 +242,13 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     x_pred = _affine_predictor(x_prev, dF, x_prev[held, :3])
     psys = periodic_system(cfg, fab, mesh, x_pred, F_next)
     xr = psys.restrict(x_pred.reshape(-1))
-    xs, sinfo = static_minimize(psys, xr, sp_.static_atol, sp_.static_max_iter)
-    xs, sinfo["converged"], sinfo["polish"] = newton_polish(psys, xs, sinfo["converged"], sp_.static_atol)
+    def static(xv):   # the energy minimiser, then the Newton polish close to the tolerance
+        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter)
+        xm, si["converged"], si["polish"] = newton_polish(psys, xm, si["converged"], sp_.static_atol)
+        return xm, si
+
+    seed_multipliers(psys, multipliers)
+    xs, sinfo = equilibrium(psys, static, xr)
     sinfo["wall_s"] = time.perf_counter() - t0
     info = {"mode": mode, "step": int(step), "strain": eps_to,
             "strain_increment": eps_to - eps_from, "boundary": "periodic",

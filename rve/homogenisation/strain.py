@@ -63,6 +63,7 @@ from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
 from ..solvers.minimize import capped_newton, minimize_energy
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
+from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
@@ -198,7 +199,8 @@ def relax_fabric(cfg, fab, mesh, x0):
         x = res.x
     if r.static:
         t1 = time.perf_counter()
-        x, sinfo = static_polish(system, x, r.static_atol, r.static_rounds, r.static_max_iter)
+        x, sinfo = equilibrium(system, lambda xs: static_polish(system, xs, r.static_atol, r.static_rounds,
+                                                                r.static_max_iter), x)
         sinfo["wall_s"] = time.perf_counter() - t1
         info["static"] = sinfo
     info.update({"converged": bool(info.get("static", {}).get("converged", False)),
@@ -223,11 +225,18 @@ def _relax_energy_scene(cfg, fab, mesh, x0, t0):
     x = np.asarray(x, float)
     # our clamps: the scene's (centroids of every end pinned, g1_z gauge at first nodes)
     sys_out = mech_system(fab, mesh, cfg, cfg.relaxation.damping, x)
+    al = None
+    if sys_out.augmented:   # the scene relaxed with the penalty: the multipliers from here
+        r = cfg.relaxation
+        x, al = equilibrium(sys_out, lambda xs: static_minimize(sys_out, xs, r.static_atol, r.static_max_iter), x)
     info = {"relax": {k: summary.get(k) for k in ("static_converged", "static_newton_iterations", "map_rebuilds",
                                                  "max_overlap_over_R", "active_contact_pairs", "stack",
                                                  "static_residuals", "coarse") if k in summary},
             "method": "energy", "converged": bool(summary.get("static_converged")),
             "residual_N": free_residual(sys_out, x), "wall_s": time.perf_counter() - t0, "dofs": int(system.n)}
+    if al is not None:
+        info["static"] = al
+        info["converged"] = bool(al["converged"])
     if not info["converged"]:
         log.warning("relaxation (energy): not converged (|F| = %.3e N)", info["residual_N"])
     return x.reshape(mesh.n_nodes, 9), sys_out, info
@@ -284,10 +293,12 @@ def end_targets(origin_ends: np.ndarray, mode: str, eps: float) -> np.ndarray:
     return target
 
 
-def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
+def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None):
     """One step of Algorithm 7.1 (or of the periodic cell, ``boundary: periodic``) from
-    ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to eps_step (module docstring). Returns
-    ``(x (n_nodes, 9), system, info)``."""
+    ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to eps_step (module docstring).
+    ``multipliers``: the contact multipliers of ``x_prev`` (``multipliers.multiplier_record``,
+    the checkpoint's; None: zero), for ``contact.enforcement: augmented_lagrangian``. Returns
+    ``(x (n_nodes, 9), system, info)``; the system holds the multipliers of ``x``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
     sp_ = cfg.strain
@@ -295,14 +306,15 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
     if periodic:
         from .periodic import periodic_energy, periodic_strain_step
 
-        def part(x, e_from, e_to, whole=False):
-            return periodic_strain_step(cfg, fab, mesh, x, origin, mode, step, None if whole else (e_from, e_to))
+        def part(x, e_from, e_to, whole=False, lam=multipliers):
+            return periodic_strain_step(cfg, fab, mesh, x, origin, mode, step, None if whole else (e_from, e_to),
+                                        multipliers=lam)
 
         def energy(system, x, e):
             return periodic_energy(cfg, fab, mesh, x, mode, e)
     else:
-        def part(x, e_from, e_to, whole=False):
-            return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to)
+        def part(x, e_from, e_to, whole=False, lam=multipliers):
+            return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam)
 
         def energy(system, x, e):
             if system is None:
@@ -313,23 +325,25 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int):
     levels = strain_levels(cfg)
     eps_prev, eps = float(levels[step - 1]), float(levels[step])
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
-        return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy)
+        return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy, multipliers)
     return part(x_prev, eps_prev, eps, whole=True)
 
 
-def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of):
+def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=None):
     """The step ``part(x, eps_from, eps_to)`` through ``branch.follow_branch``: the potential
     of a state and its load derivative ``energy_of(system, x, eps)`` (pinned: the clamp
     forces times the end velocity per unit strain, ``pinned_energy``; periodic: the
     Hill-Mandel work rate, ``periodic.periodic_energy``); the inertia from the energy
-    minimiser's definiteness verdict."""
+    minimiser's definiteness verdict. A part starts from the multipliers of the state it
+    starts from (``multipliers`` for the step's start)."""
     from .branch import BranchSettings, StepSolution, follow_branch
 
     t0 = time.perf_counter()
     nn = mesh.n_nodes
 
     def solve(start, e_from, e_to):
-        x2, sys2, inf = part(start.x, e_from, e_to)
+        lam = multipliers if start.extra is None else multiplier_record(start.extra)
+        x2, sys2, inf = part(start.x, e_from, e_to, lam=lam)
         return StepSolution(x2, inf, sys2)
 
     def energy(sol, e):
@@ -368,9 +382,11 @@ def pinned_energy(fab, mesh, system, x, origin, mode: str, eps: float) -> tuple:
     return float(system.energy(xf)), work_rate
 
 
-def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float):
+def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
+                    multipliers=None):
     """Algorithm 7.1 from ``x_prev`` at strain ``eps_prev`` to ``eps`` (module docstring;
-    ``step`` labels the record)."""
+    ``step`` labels the record). The multipliers (``strain_step``) pass from phase to phase;
+    the static solve is in the Uzawa loop (``multipliers.equilibrium``)."""
     sp_ = cfg.strain
     t_start = time.perf_counter()
     d_eps = float(eps - eps_prev)
@@ -390,6 +406,7 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     # 1. driven phase
     t0 = time.perf_counter()
     sys1 = mech_system(fab, mesh, cfg, sp_.damping, x, end_velocity=end_vel)
+    seed_multipliers(sys1, multipliers)
     s1 = _settings(sp_.t_step, sp_.stretch_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
                    sp_.static_atol, static=False)
     res1 = relax_to_equilibrium(sys1, x.reshape(-1), w_aff.reshape(-1), s1)
@@ -415,6 +432,7 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     # 2.-3. heavily damped relaxation with the ends held, then the static solve
     t0 = time.perf_counter()
     sys2 = mech_system(fab, mesh, cfg, sp_.relax_damping, x1)
+    seed_multipliers(sys2, multiplier_record(sys1))
     s2 = _settings(sp_.t_relax, sp_.relax_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
                    sp_.static_atol, static=False)
     res2 = relax_to_equilibrium(sys2, x1.reshape(-1), np.zeros(sys2.n), s2)
@@ -422,9 +440,12 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     info["relax"]["wall_s_total"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if sp_.static_method == "energy":
-        x2, sinfo = static_minimize(sys2, res2.x, sp_.static_atol, sp_.static_max_iter)
+        def static(xs):
+            return static_minimize(sys2, xs, sp_.static_atol, sp_.static_max_iter)
     else:
-        x2, sinfo = static_polish(sys2, res2.x, sp_.static_atol, sp_.static_rounds, sp_.static_max_iter)
+        def static(xs):
+            return static_polish(sys2, xs, sp_.static_atol, sp_.static_rounds, sp_.static_max_iter)
+    x2, sinfo = equilibrium(sys2, static, res2.x)
     sinfo["wall_s"] = time.perf_counter() - t0
     info["static"] = sinfo
     x2 = x2.reshape(nn, 9)

@@ -290,6 +290,21 @@ class PeriodicSystem:
     def contact_state(self, x) -> dict:
         return self.full.contact_state(self.expand(x))
 
+    # the augmented Lagrangian protocol of rve.solvers.augmented, on the full system
+    @property
+    def augmented(self) -> bool:
+        return self.full.augmented
+
+    @property
+    def multipliers(self):
+        return self.full.multipliers
+
+    def max_penetration(self, x) -> float:
+        return self.full.max_penetration(self.expand(x))
+
+    def update_multipliers(self, x) -> None:
+        self.full.update_multipliers(self.expand(x))
+
     # ------------------------------------------------------------------ macro quantities
     def full_residual(self, x, w=None, t: float = 0.0) -> np.ndarray:
         w = np.zeros(self.n) if w is None else w

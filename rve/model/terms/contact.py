@@ -240,6 +240,22 @@ class ContactTerm:
         self._keys = keys
         self.multipliers = lam.reshape(self.row_pair.size, self.params.n_gp)
 
+    def multiplier_record(self):
+        """``(keys (n, 6) int64, values (n,))`` of the multipliers at the current map (a
+        copy), or None for the penalty: what a later system needs to go on from here."""
+        if self.multipliers is None or self._keys is None:
+            return None
+        return np.array(self._keys, np.int64), np.array(self.multipliers, float).reshape(-1)
+
+    def seed_multipliers(self, keys, values) -> None:
+        """Multipliers of the current map from a record (``multiplier_record`` of another
+        system or a checkpoint): by point key, 0 where a point is not in the record."""
+        if self.multipliers is None:
+            raise ValueError("seed_multipliers needs enforcement 'augmented_lagrangian'")
+        self._keys = np.asarray(keys, np.int64).reshape(-1, 6)
+        self.multipliers = np.asarray(values, float).reshape(-1)
+        self._carry_multipliers()
+
     def row_gap_radius(self, rows=None) -> np.ndarray:
         """R+ + R- of every row (rows,), or with the multipliers (rows, G): R+ + R- + lambda/P*
         (the penalty law of the shifted overlap is the augmented Lagrangian line load)."""

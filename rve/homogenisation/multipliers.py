@@ -1,0 +1,70 @@
+"""Augmented Lagrangian contact multipliers along the RVE's strain path (``contact.enforcement:
+augmented_lagrangian``; docs/contact.md "Augmented Lagrangian in the RVE pipeline").
+
+Contract
+--------
+A relaxation or strain step builds a new system for each phase (driven dynamics, damped
+relaxation, static solve; the periodic cell one per step). The multipliers are per contact
+point, keyed by the point (``contact_pairs.point_keys``), so they pass from one system to the
+next by key, and from one step to the next through the checkpoint. With the penalty
+(``enforcement: penalty``) every function here is a no-op that leaves the solve and its
+record untouched, so the penalty path is bit-identical.
+
+* :func:`multiplier_record` ``(system) -> (keys (n, 6) int64, values (n,)) | None``: the
+  multipliers of a ``ContactSystem`` or ``PeriodicSystem`` at its current map.
+* :func:`seed_multipliers` ``(system, record)``: the system's multipliers from a record (by
+  key; points not in it start at 0). No-op for None or a penalty system.
+* :func:`equilibrium` ``(system, solve, x) -> (x, info)``: ``solve(x) -> (x, info)`` (a static
+  solve) wrapped in the Uzawa loop ``rve.solvers.augmented.solve_with_multipliers`` until the
+  largest true overlap is below ``contact.al_tolerance`` R. The info of the last solve, plus
+  ``info["augmented_lagrangian"]`` (updates, the overlap history, whether the tolerance was
+  met); with the penalty, one call of ``solve`` and its info as it is. A solve that did not
+  converge ends the loop (the multipliers of an unconverged state are not updated).
+"""
+from __future__ import annotations
+
+from ..solvers.augmented import AugmentedLagrangian
+
+__all__ = ["multiplier_record", "seed_multipliers", "equilibrium"]
+
+
+def _term(system):
+    full = getattr(system, "full", system)   # a PeriodicSystem holds the ContactSystem as .full
+    return full.term
+
+
+def multiplier_record(system):
+    """``(keys, values)`` of the system's contact multipliers, or None (penalty)."""
+    if not getattr(system, "augmented", False):
+        return None
+    return _term(system).multiplier_record()
+
+
+def seed_multipliers(system, record) -> None:
+    """The multipliers of ``system``'s current map from ``record`` (module docstring)."""
+    if record is None or not getattr(system, "augmented", False):
+        return
+    keys, values = record
+    _term(system).seed_multipliers(keys, values)
+
+
+def equilibrium(system, solve, x):
+    """``solve`` in the Uzawa loop (module docstring); ``(x, info)``."""
+    if not getattr(system, "augmented", False):
+        return solve(x)
+    loop = AugmentedLagrangian(system)
+    solves = 0
+    while True:
+        x, info = solve(x)
+        solves += 1
+        if not info.get("converged", False):
+            break
+        if loop.update(x) or loop.exhausted:
+            break
+    pen = float(system.max_penetration(x))
+    info = dict(info)
+    info["augmented_lagrangian"] = {
+        "updates": int(loop.updates), "solves": solves, "tolerance": float(loop.tolerance),
+        "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
+        "history": [[int(k), float(p)] for k, p in loop.history]}
+    return x, info
