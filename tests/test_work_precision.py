@@ -129,20 +129,3 @@ def test_report_on_synthetic_runs(tmp_path):
     pinned.attrs["config"] = json.dumps({"scene": {"mesh": {"order": 1}, "contact": {"n_gp": 4}, "boundary": "periodic",
                                                    "cell": {"repeat": 2}}})
     assert annotate_accuracy(pinned, periodic, 6, 50.0) == []
-
-
-def test_a_lever_the_rve_steps_do_not_act_on_is_skipped(monkeypatch):
-    """A config the model accepts but the RVE steps would not run as written (augmented
-    Lagrangian without the Uzawa updates in the relaxation and strain solves) is refused
-    with the reason; once the steps drive the multipliers it runs."""
-    from rve.homogenisation import layout, strain
-
-    spec = {"scene_config": None, "overrides": ["contact.enforcement=augmented_lagrangian"],
-            "scene": {"scene": "rve", "fabric": {"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]},
-                      "mesh": {"elements": 6}}}
-    monkeypatch.setattr(strain, "DRIVES_CONTACT_MULTIPLIERS", False, raising=False)
-    why = layout._config_refusal(spec, "wp_enforcement")
-    assert why is not None and "Uzawa" in why and "contact.enforcement" in why
-    assert layout._config_refusal({**spec, "overrides": []}, "wp_default") is None
-    monkeypatch.setattr(strain, "DRIVES_CONTACT_MULTIPLIERS", True, raising=False)
-    assert layout._config_refusal(spec, "wp_enforcement") is None
