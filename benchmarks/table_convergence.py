@@ -141,6 +141,8 @@ def work_precision(a) -> int:
         return 1
     print(Path(target).read_text())
     acc = json.loads((d / "accuracy.json").read_text())
+    if not acc["stated_relative_error"]:
+        print(f"no stated error: study {study} has no default run compared with its reference {acc['reference']}")
     print(f"stated error of the default run ({acc['default']}) against the reference run {acc['reference']} "
           f"({acc['measure']} measure, max over strains, labels and modes):")
     for q, tgt in acc["targets"].items():

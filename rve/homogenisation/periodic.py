@@ -53,8 +53,8 @@ from .cell_statics import free_residual, static_minimize, static_polish, strain_
 from .multipliers import equilibrium, seed_multipliers
 
 __all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
-           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "periodic_energy",
-           "newton_polish"]
+           "cell_gradient", "periodic_free_residual", "gauge_dofs", "full_state", "cell_reactions", "newton_polish",
+           "periodic_energy"]
 
 log = logging.getLogger("rve.homogenisation.periodic")
 
@@ -233,14 +233,13 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     x_pred = _affine_predictor(x_prev, dF, x_prev[held, :3])
     psys = periodic_system(cfg, fab, mesh, x_pred, F_next)
     xr = psys.restrict(x_pred.reshape(-1))
-    seed_multipliers(psys, multipliers)
-
-    def solve(xv):
+    def static(xv):   # the energy minimiser, then the Newton polish close to the tolerance
         xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter)
         xm, si["converged"], si["polish"] = newton_polish(psys, xm, si["converged"], sp_.static_atol)
         return xm, si
 
-    xs, sinfo = equilibrium(psys, solve, xr)
+    seed_multipliers(psys, multipliers)
+    xs, sinfo = equilibrium(psys, static, xr)
     sinfo["wall_s"] = time.perf_counter() - t0
     info = {"mode": mode, "step": int(step), "strain": eps_to,
             "strain_increment": eps_to - eps_from, "boundary": "periodic",

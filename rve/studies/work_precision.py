@@ -149,8 +149,12 @@ def study_points(reference, default, levers: Mapping, costs: Mapping) -> list[di
     out = []
     entries = ([("default", default)] if default is not None else []) + list(levers.items())
     for lever, (run, ds) in entries:
-        swept = [d for d in ds.dims if d in ds.coords and d not in ("mode", "strain", "probe", "side", "component",
-                                                                      "terminal")]
+        # the table's own record of its sweep (rve.tables.build); label dimensions (side, probe,
+        # edge, yarn, ...) are not runs
+        named = ds.attrs.get("swept_parameters")
+        swept = ([d for d in str(named).split() if d in ds.dims] if named is not None else
+                 [d for d in ds.dims if d in ds.coords and d not in ("mode", "strain", "probe", "side", "component",
+                                                                      "terminal", "edge", "yarn")])
         combos = [{}]
         for d in swept:
             combos = [dict(c, **{d: v}) for c in combos for v in ds[d].values.tolist()]
@@ -199,6 +203,12 @@ def work_precision_report(points: Sequence[Mapping], skipped: Mapping[str, str],
         out.append(f"| {p['lever']} | {p['label']} | {c.get('cpu_s', np.nan):.1f} | {c.get('wall_s', np.nan):.1f} | "
                    f"{c.get('max_rss_mb', np.nan):.0f} | " + " | ".join(cells)
                    + f" | {p['worst_ratio']:.3g} | {'yes' if i in front else ''} | {meets} |")
+    out += ["", "Per mode (range measure, max over labels and strains):", ""]
+    for p in points:
+        by = p["errors"].get("range_by_mode") or {}
+        cells = "; ".join(f"{QUANTITIES[q]} " + ", ".join(f"{m} {100 * e:.3g} %" for m, e in sorted(by[q].items()))
+                          for q in qs if q in by)
+        out.append(f"* {p['lever']} {p['label']}: {cells}")
     out += ["", "Targets: " + ", ".join(f"{QUANTITIES[q]} {100 * t:g} %" for q, t in TARGETS.items())]
     met = [p for p in points if p["meets"]]
     out += ["", "Runs meeting every target: " + (", ".join(f"{p['lever']} {p['label']} ({p['cost'].get('cpu_s', np.nan):.0f}"
