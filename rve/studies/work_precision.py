@@ -329,3 +329,30 @@ def work_precision_job(reference, default, levers: Mapping, costs: Mapping, skip
         atomic_write_json(outputs["json"], json.loads(json.dumps(acc, default=float)))
         log.info("work-precision study:\n%s", text)
     return acc
+
+
+def work_precision_rule(wp: Mapping, run_configs: Mapping, benchmark_dir: PathLike, table_path, outputs: Mapping,
+                        log_path: Optional[PathLike], study: str) -> dict:
+    """The body of the Snakemake rule ``rve_work_precision_report``: ``wp`` the study's runs
+    (``rve.homogenisation.layout.work_precision_runs``: reference, default, levers, skipped),
+    ``run_configs`` the pipeline's ``rve.runs``, ``table_path(run)`` a run's table path;
+    opens the tables, reads each run's job costs and calls :func:`work_precision_job`."""
+    from ..homogenisation.sweeps import load_run_config
+    from ..tables import open_table
+    from .table_convergence import combo_costs
+
+    default = wp["default"]
+    cfg = load_run_config(run_configs[default or wp["reference"]])
+    default_config = {"mesh_elements": float(cfg.mesh.elements), "contact_penalty": float(cfg.contact.penalty),
+                      "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp),
+                      "boundary": str(cfg.boundary), "cell_repeat": int(cfg.cell.repeat)}
+    runs = [wp["reference"]] + ([default] if default else []) + list(wp["levers"].values())
+    costs = {r: combo_costs(benchmark_dir, r) for r in runs}
+
+    def table(run):
+        return open_table(table_path(run)["table"])
+
+    return work_precision_job(table(wp["reference"]), (default, table(default)) if default else None,
+                              {lv: (r, table(r)) for lv, r in wp["levers"].items()}, costs, wp["skipped"],
+                              outputs, log_path, {"study": study, "reference": wp["reference"]}, default_config)
+

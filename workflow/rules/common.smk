@@ -59,3 +59,9 @@ def resource_mem_mb(key):
 # static_wire / dynamic_wire = the verification studies. The `all` rule in the Snakefile
 # resolves them once every rule file is included.
 from rve.homogenisation.layout import default_targets as rve_default_targets
+
+
+def _work_precision(w):
+    """The runs of work-precision study ``w.study`` (rve.work_precision in the config)."""
+    return rve_layout.work_precision_runs(config["rve"], w.study)
+

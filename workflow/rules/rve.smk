@@ -345,10 +345,6 @@ rule rve_table_convergence:
 #   snakemake -j2 rve_work_precision
 
 
-def _work_precision(w):
-    return rve_layout.work_precision_runs(config["rve"], w.study)
-
-
 rule rve_work_precision_report:
     """Every lever's runs against one reference: errors, CPU time, front, the default's stated error."""
     input:
@@ -369,23 +365,10 @@ rule rve_work_precision_report:
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
     run:
-        from rve.studies.table_convergence import combo_costs
-        from rve.studies.work_precision import work_precision_job
-        from rve.homogenisation.sweeps import load_run_config
-        from rve.tables import open_table
+        from rve.studies.work_precision import work_precision_rule
 
-        wp = params.runs
-        default = wp["default"]
-        cfg = load_run_config(config["rve"]["runs"][default or wp["reference"]])
-        default_config = {"mesh_elements": float(cfg.mesh.elements), "contact_penalty": float(cfg.contact.penalty),
-                          "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp),
-                          "boundary": str(cfg.boundary), "cell_repeat": int(cfg.cell.repeat)}
-        runs = [wp["reference"]] + ([default] if default else []) + list(wp["levers"].values())
-        costs = {r: combo_costs(rve_layout.BENCHMARK_DIR, r) for r in runs}
-        work_precision_job(open_table(input.reference), (default, open_table(input.default[0])) if default else None,
-                           {lv: (r, open_table(rve_layout.table_outputs(r)["table"])) for lv, r in wp["levers"].items()},
-                           costs, wp["skipped"], dict(output), log[0],
-                           {"study": wildcards.study, "reference": wp["reference"]}, default_config)
+        work_precision_rule(params.runs, config["rve"]["runs"], rve_layout.BENCHMARK_DIR, rve_layout.table_outputs,
+                            dict(output), log[0], wildcards.study)
 
 
 rule rve_work_precision:
