@@ -113,13 +113,23 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
         arr = getattr(state, name)
         if np.shape(arr) != (nn, 9):
             raise ValueError(f"state.{name} must be (n_nodes, 9) = ({nn}, 9), got {np.shape(arr)}")
+    data = _state_arrays(state, fabric, mesh)
+    data.update(_contact_arrays(state, contact))
+    ds = xr.Dataset(data, coords={"component": list(COMPONENTS), "side": list(SIDES), "xyz": ["x", "y", "z"]},
+                    attrs=_state_attributes(state, fabric, mesh, version))
+    atomic_netcdf(ds, path)
+    return Path(path)
+
+
+def _state_arrays(state: State, fabric, mesh) -> dict:
+    """The state, the mesh and the fabric's yarns and ends as checkpoint variables."""
     tags = fabric.end_tags
     mm = {"units": "mm"}
     reac = np.full((len(SIDES), 3), np.nan)
     for i, s in enumerate(SIDES):
         if s in state.reaction_force:
             reac[i] = state.reaction_force[s]
-    data = {
+    return {
         "state": (("node", "component"), np.asarray(state.x, float),
                   {"long_name": "beam state: centroid r and directors g1, g2", **mm}),
         "velocity": (("node", "component"), np.asarray(state.w, float),
@@ -151,6 +161,12 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
         "reaction_force": (("side", "xyz"), reac,
                            {"long_name": "force of the clamps on the fibril ends, summed per box side", "units": "N"}),
     }
+
+
+def _contact_arrays(state: State, contact) -> dict:
+    """The contact map at the state (pairs, active points) and the augmented Lagrangian
+    multipliers, when there are any."""
+    data = {}
     if contact is not None and contact.map is not None:
         cmap = contact.map
         xflat = np.ascontiguousarray(state.x).reshape(-1)
@@ -169,7 +185,12 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
         data["contact_multiplier"] = (("contact_point",), np.asarray(values, float),
                                       {"long_name": "augmented Lagrangian contact multiplier (line load)",
                                        "units": "N/mm"})
-    attrs = {
+    return data
+
+
+def _state_attributes(state: State, fabric, mesh, version: Optional[str]) -> dict:
+    """The checkpoint's global attributes: what the state is and how it was made."""
+    return {
         "title": f"rve state: {fabric.kind} {state.kind}"
                  + (f" {state.mode} step {state.step} (strain {state.strain:g})" if state.mode else ""),
         "rve_state_format": STATE_FORMAT,
@@ -190,10 +211,6 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
         "rve_version": version or package_version(),
         "conventions": "node-interleaved beam state (9 per node); internal units mm, ms, g, N, MPa, K, A, V",
     }
-    ds = xr.Dataset(data, coords={"component": list(COMPONENTS), "side": list(SIDES), "xyz": ["x", "y", "z"]},
-                    attrs=attrs)
-    atomic_netcdf(ds, path)
-    return Path(path)
 
 
 def load_state(path, quarantine: bool = False) -> State:

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Optional
 
 __all__ = ["BASE_COMBO", "SWEEP_ALIASES", "Combo", "combos", "combo_ids", "combo_params", "swept_dims",
-           "load_run_config"]
+           "load_run_config", "lever_values"]
 
 #: the one combination of a run without a sweep
 BASE_COMBO = "base"
@@ -196,3 +196,14 @@ def load_run_config(spec: Mapping, combo_id: str = BASE_COMBO):
     combo = _combo(spec, combo_id)
     raw = apply_overrides(raw, [*(spec.get("overrides") or []), *combo.overrides])
     return validate_config(raw)
+
+
+def lever_values(spec: Mapping) -> dict:
+    """The method levers of a run's base combination, as a work-precision study names them
+    (``rve.studies.work_precision``): elements per fibril, P*, p, contact points, boundary,
+    cell repeat."""
+    cfg = load_run_config(spec)
+    return {"mesh_elements": float(cfg.mesh.elements), "contact_penalty": float(cfg.contact.penalty),
+            "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp),
+            "boundary": str(cfg.boundary), "cell_repeat": int(cfg.cell.repeat)}
+

@@ -331,21 +331,16 @@ def work_precision_job(reference, default, levers: Mapping, costs: Mapping, skip
     return acc
 
 
-def work_precision_rule(wp: Mapping, run_configs: Mapping, benchmark_dir: PathLike, table_path, outputs: Mapping,
-                        log_path: Optional[PathLike], study: str) -> dict:
+def work_precision_rule(wp: Mapping, default_config: Mapping, open_table, table_path, benchmark_dir: PathLike,
+                        outputs: Mapping, log_path: Optional[PathLike], study: str) -> dict:
     """The body of the Snakemake rule ``rve_work_precision_report``: ``wp`` the study's runs
     (``rve.homogenisation.layout.work_precision_runs``: reference, default, levers, skipped),
-    ``run_configs`` the pipeline's ``rve.runs``, ``table_path(run)`` a run's table path;
-    opens the tables, reads each run's job costs and calls :func:`work_precision_job`."""
-    from ..homogenisation.sweeps import load_run_config
-    from ..tables import open_table
+    ``default_config`` the default run's lever values (``rve.homogenisation.sweeps.lever_values``),
+    ``open_table(path)`` the table reader, ``table_path(run)`` a run's table files; reads
+    each run's job costs and calls :func:`work_precision_job`."""
     from .table_convergence import combo_costs
 
     default = wp["default"]
-    cfg = load_run_config(run_configs[default or wp["reference"]])
-    default_config = {"mesh_elements": float(cfg.mesh.elements), "contact_penalty": float(cfg.contact.penalty),
-                      "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp),
-                      "boundary": str(cfg.boundary), "cell_repeat": int(cfg.cell.repeat)}
     runs = [wp["reference"]] + ([default] if default else []) + list(wp["levers"].values())
     costs = {r: combo_costs(benchmark_dir, r) for r in runs}
 
@@ -354,5 +349,4 @@ def work_precision_rule(wp: Mapping, run_configs: Mapping, benchmark_dir: PathLi
 
     return work_precision_job(table(wp["reference"]), (default, table(default)) if default else None,
                               {lv: (r, table(r)) for lv, r in wp["levers"].items()}, costs, wp["skipped"],
-                              outputs, log_path, {"study": study, "reference": wp["reference"]}, default_config)
-
+                              outputs, log_path, {"study": study, "reference": wp["reference"]}, dict(default_config))

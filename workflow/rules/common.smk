@@ -65,3 +65,11 @@ def _work_precision(w):
     """The runs of work-precision study ``w.study`` (rve.work_precision in the config)."""
     return rve_layout.work_precision_runs(config["rve"], w.study)
 
+
+def _work_precision_levers(w):
+    """The lever values of study ``w.study``'s default run (else its reference)."""
+    from rve.homogenisation.sweeps import lever_values
+
+    wp = _work_precision(w)
+    return lever_values(config["rve"]["runs"][wp["default"] or wp["reference"]])
+

@@ -361,15 +361,16 @@ rule rve_work_precision_report:
         study=r"[A-Za-z0-9_]+",
     params:
         runs=_work_precision,
+        default_config=_work_precision_levers,
     threads: 1
     resources:
         mem_mb=config["resources"]["gather_mem_mb"],
     run:
         from rve.studies.work_precision import work_precision_rule
+        from rve.tables import open_table
 
-        work_precision_rule(params.runs, config["rve"]["runs"], rve_layout.BENCHMARK_DIR, rve_layout.table_outputs,
-                            dict(output), log[0], wildcards.study)
-
+        work_precision_rule(params.runs, params.default_config, open_table, rve_layout.table_outputs,
+                            rve_layout.BENCHMARK_DIR, dict(output), log[0], wildcards.study)
 
 rule rve_work_precision:
     """`snakemake -j2 rve_work_precision`: the work-precision study of the default table."""
