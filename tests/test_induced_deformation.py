@@ -325,3 +325,29 @@ def test_post_step_refinement_and_fallback(h_C):
         assert new.refinements >= 2 and new.fallbacks == 0
     else:
         assert new.fallbacks == 2
+
+
+@pytest.mark.parametrize("h_C", [0.1, 1.0e4])
+def test_post_step_on_the_dirk_stepper(h_C):
+    """The post-solve on rve.solvers.dirk.DirkStepper (rve.scenes.thermal_post) against the
+    dense solve of the stage equations, with active contact pairs at two stage states: equal
+    to the Newton tolerance, over two steps (the second reusing the kept factorisation)."""
+    from rve.model.thermal_post import ThermalOperators
+    from rve.scenes.thermal_post import DirkThermalPost
+    from rve.solvers.dirk import sdirk
+
+    p, x, w = _pressed_state()
+    x1 = x.copy()
+    p.model.nodal(x1)[:, 2] *= 0.98
+    ops = ThermalOperators(p.system, h_C, p.fixed_T_nodes)
+    T0 = np.random.default_rng(1).uniform(0.0, 5.0, ops.n)
+    T0[ops.fixed] = 0.0
+    tab, h = sdirk(2), 0.005
+    post = DirkThermalPost(ops, tab)
+    T1 = post.step(T0, [(x1, w), (x, w)], 0.1, h)
+    T1d = _dense_stage_solve(ops, tab, T0, [(x1, w), (x, w)], 0.1, h)
+    assert np.abs(T1 - T1d).max() <= 1e-12 * np.abs(T1d).max()
+    T2 = post.step(T1, [(x, w), (x1, w)], 0.1 + h, h)
+    T2d = _dense_stage_solve(ops, tab, T1d, [(x, w), (x1, w)], 0.1 + h, h)
+    assert np.abs(T2 - T2d).max() <= 1e-12 * np.abs(T2d).max()
+    assert np.all(T2[ops.fixed] == 0.0) and post.solves >= 4

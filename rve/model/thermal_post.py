@@ -19,6 +19,8 @@ Contract
   factorised once per h a_ii, the contact part by iterative refinement on that factor
   (direct fallback); ``reuse=False`` the plain reference (a fresh solve per stage). Counters
   ``solves``, ``refinements``, ``fallbacks``, ``wall``.
+* ``StageHeatSystem(ops, T_fixed)``: the same heat equation as a ``DynamicSystem`` (all dofs
+  T), ``drive(stages, t0, h, tableau)`` giving it the stage states of one step.
 * ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone.
 """
 from __future__ import annotations
@@ -30,7 +32,7 @@ import scipy.sparse.linalg as spla
 from ..physics.contact_forms import hertz_width, lagrange_at, scalar_jump
 from ..physics.thermal_forms import capacity_matrix, conduction
 
-__all__ = ["ThermalOperators", "ThermalPostSolver", "heat_transfer_block"]
+__all__ = ["ThermalOperators", "ThermalPostSolver", "StageHeatSystem", "heat_transfer_block"]
 
 
 class ThermalOperators:
@@ -338,3 +340,42 @@ class ThermalPostSolver:
                 K = sp.csr_matrix((Ju.ravel(), (np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel())),
                                   shape=(n, n))
         return K if extra is None else (K + extra).tocsr()
+
+
+class StageHeatSystem:
+    """The heat equation of one mechanical/electrical step as a ``DynamicSystem`` (all dofs
+    T, none mechanical): ``M dT/dt + (K + K_c(x_i)) T - Q(x_i, w_i, t_i) = 0`` at the stage
+    times ``t0 + c_i h``, each stage taking the contact matrix and the Joule heat of its own
+    mechanical/electrical stage state."""
+
+    def __init__(self, ops: ThermalOperators, T_fixed: float):
+        self.ops = ops
+        self.n = ops.n
+        self.mech = np.zeros(ops.n, bool)
+        self._fixed_values = np.full(ops.fixed.size, float(T_fixed))
+        self._zero = sp.csr_matrix((ops.n, ops.n))
+        self._times = np.zeros(0)
+        self._stages: list = []
+
+    def drive(self, stages, t0: float, h: float, tableau) -> None:
+        """The stage states ``[(x_i, w_i)]`` of the step from ``t0`` of size ``h``."""
+        self._stages = list(stages)
+        self._times = t0 + np.asarray(tableau.c, float)[: len(self._stages)] * h
+
+    def mass(self):
+        return self.ops.M
+
+    def constraints(self, t):
+        return self.ops.fixed, self._fixed_values
+
+    def admissible(self, x) -> bool:
+        return True
+
+    def evaluate(self, x, w, t, jacobian: bool = True):
+        xi, wi = self._stages[int(np.argmin(np.abs(self._times - t)))]
+        op = self.ops
+        F = op.K @ w + op.contact_apply(xi, w) - op.joule(xi, wi, t)
+        if not jacobian:
+            return F, None, None
+        return F, self._zero, (op.K + op.contact(xi)).tocsr()
+
