@@ -39,6 +39,7 @@ import numpy as np
 from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
 from ..io.provenance import cf_attributes, logging_to, package_version, to_jsonable
 from .convergence import fit_order, fit_points
+from .layout import point_name, radius_token, study_points
 
 __all__ = [
     "PARITIES",
@@ -74,41 +75,11 @@ _DIMLESS = "1"  # CF/udunits unit of a dimensionless number
 
 
 # --------------------------------------------------------------------------- study design
-def radius_token(radius: float) -> str:
-    """The radius (mm) as it appears in file names and wildcards: ``0.02``, ``0.005``."""
-    return format(float(radius), "g")
-
-
-def point_name(order: int, elements: int, radius: float) -> str:
-    """File stem of one solve: ``p2_N40_R0.02``."""
-    return f"p{int(order)}_N{int(elements)}_R{radius_token(radius)}"
-
-
 def point_overrides(order: int, elements: int, radius: float, overrides: Iterable[str] = ()) -> list[str]:
     """Scene-config overrides of one study point (radius in mm); the study's own overrides
     come first so that the point's order, N and R always win."""
     return [*overrides, f"mesh.order={int(order)}", f"mesh.elements={int(elements)}",
             f"fibril.radius={radius_token(radius)} mm"]
-
-
-def study_points(study: Mapping) -> list[tuple[int, int, float]]:
-    """Every solve ``(order, elements, radius_mm)`` of the study (radius sweep and
-    convergence series), without duplicates, sorted by radius (descending), p, N."""
-    points: dict[tuple[int, int, str], tuple[int, int, float]] = {}
-
-    def add(p, n, r):
-        points.setdefault((int(p), int(n), radius_token(r)), (int(p), int(n), float(r)))
-
-    sweep = study.get("radius_sweep")
-    if sweep:
-        for r in sweep["radii_mm"]:
-            add(sweep["order"], sweep["elements"], r)
-    conv = study.get("convergence")
-    if conv:
-        for series in conv["series"]:
-            for n in series["elements"]:
-                add(series["order"], n, conv["radius_mm"])
-    return sorted(points.values(), key=lambda t: (-t[2], t[0], t[1]))
 
 
 def _range_pair(value: Any) -> tuple[int, int]:
