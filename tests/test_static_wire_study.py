@@ -315,3 +315,18 @@ def test_dynamic_wire_plan_defaults_come_from_the_schema():
     cfg["verification"]["dynamic_wire"] = {"series": {"4": {"steps": [10], "fit": [10, 10]}}}
     with pytest.raises(WorkflowError):
         validate(cfg, schema=str(SCHEMA))
+
+
+def test_rule_files_import_only_layouts_at_parse_time():
+    """At parse time the Snakefile and the rule files import rve's layout modules and the
+    config reader only; the job bodies are imported inside the rules."""
+    allowed = {"rve.scenes.layout", "rve.studies.layout", "rve.homogenisation.layout", "rve.config.loader",
+               "rve.scenes", "rve.studies", "rve.homogenisation"}
+    for path in [ROOT / "Snakefile", *sorted((ROOT / "workflow/rules").glob("*.smk"))]:
+        for line in path.read_text().splitlines():
+            if line.startswith(("from rve", "import rve")):
+                module = line.split()[1]
+                names = line.split(" import ", 1)[1] if " import " in line else ""
+                assert module in allowed, f"{path.name}: {line}"
+                if module in ("rve.scenes", "rve.studies", "rve.homogenisation"):
+                    assert names.split()[0] == "layout", f"{path.name}: {line}"
