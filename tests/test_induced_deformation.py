@@ -233,7 +233,7 @@ def test_post_temperature_equals_monolithic_with_contact(monkeypatch):
     (Two runs of the mechanics are not bitwise equal: ~1e-11 mm between repeated runs in one
     process, so the reuse is checked on shared stage states, not across runs.)"""
     import rve.scenes.induced.scene as scene
-    from rve.model.thermal_post import ThermalPostSolver
+    from rve.scenes.thermal_post import ThermalPostSolver
 
     twins = []
 
@@ -300,7 +300,8 @@ def test_post_step_refinement_and_fallback(h_C):
     iterative refinement (h_C = 0.1, the scene's value) and its direct fallback (h_C = 1e4,
     a contact far stiffer than the capacity: the refinement does not contract) against the
     plain reference and a dense solve of the stage equations, to round-off."""
-    from rve.model.thermal_post import ThermalOperators, ThermalPostSolver
+    from rve.model.thermal_post import ThermalOperators
+    from rve.scenes.thermal_post import ThermalPostSolver
     from rve.solvers.dirk import sdirk
 
     p, x, w = _pressed_state()
@@ -326,28 +327,3 @@ def test_post_step_refinement_and_fallback(h_C):
     else:
         assert new.fallbacks == 2
 
-
-@pytest.mark.parametrize("h_C", [0.1, 1.0e4])
-def test_post_step_on_the_dirk_stepper(h_C):
-    """The post-solve on rve.solvers.dirk.DirkStepper (rve.scenes.thermal_post) against the
-    dense solve of the stage equations, with active contact pairs at two stage states: equal
-    to the Newton tolerance, over two steps (the second reusing the kept factorisation)."""
-    from rve.model.thermal_post import ThermalOperators
-    from rve.scenes.thermal_post import DirkThermalPost
-    from rve.solvers.dirk import sdirk
-
-    p, x, w = _pressed_state()
-    x1 = x.copy()
-    p.model.nodal(x1)[:, 2] *= 0.98
-    ops = ThermalOperators(p.system, h_C, p.fixed_T_nodes)
-    T0 = np.random.default_rng(1).uniform(0.0, 5.0, ops.n)
-    T0[ops.fixed] = 0.0
-    tab, h = sdirk(2), 0.005
-    post = DirkThermalPost(ops, tab)
-    T1 = post.step(T0, [(x1, w), (x, w)], 0.1, h)
-    T1d = _dense_stage_solve(ops, tab, T0, [(x1, w), (x, w)], 0.1, h)
-    assert np.abs(T1 - T1d).max() <= 1e-12 * np.abs(T1d).max()
-    T2 = post.step(T1, [(x, w), (x1, w)], 0.1 + h, h)
-    T2d = _dense_stage_solve(ops, tab, T1d, [(x, w), (x1, w)], 0.1 + h, h)
-    assert np.abs(T2 - T2d).max() <= 1e-12 * np.abs(T2d).max()
-    assert np.all(T2[ops.fixed] == 0.0) and post.solves >= 4

@@ -1,53 +1,59 @@
-"""The temperature post-solve of the dynamic fabric scenes on the one SDIRK stepper.
+"""The temperature post-solve of the dynamic fabric scenes (T does not feed back: S =
+alpha_mu = 0), on the one SDIRK stepper.
 
 Contract
 --------
-``DirkThermalPost(ops, tableau, T_fixed=0, rtol=1e-12)``: ``step(T0, stages, t0, h) -> T1``
-as ``rve.model.thermal_post.ThermalPostSolver``, each stage one (modified) Newton solve of
-``rve.solvers.dirk.DirkStepper`` on ``rve.model.thermal_post.StageHeatSystem``. Not the
-scenes' default: it agrees with ``ThermalPostSolver`` to the Newton tolerance, not bit for
-bit (benchmarks/thermal_post_dirk.py measures the difference).
+``ThermalPostSolver(ops, tableau, T_fixed=0, reuse=True)``: ``step(T0, stages, t0, h) -> T1``,
+one SDIRK step of the heat equation ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` with the
+stage states ``[(x_i, w_i)]`` of the mechanical/electrical step, the same stage equations as
+the monolithic solve: ``rve.solvers.dirk.DirkStepper`` on
+``rve.model.thermal_post.StageHeatSystem`` with its linear stages
+``rve.model.thermal_post.KeptFactorStages`` (the factor of (M + h a_ii K)_ff kept per h a_ii,
+the contact part by iterative refinement on it, direct fallback) or, ``reuse=False``, the
+plain reference ``FreshStages`` (a fresh solve per stage). Counters ``solves``,
+``refinements``, ``fallbacks``, ``wall``. docs/induced_deformation.md "Temperature path".
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
-from ..model.thermal_post import StageHeatSystem, ThermalOperators
+from ..model.thermal_post import FreshStages, KeptFactorStages, StageHeatSystem, ThermalOperators
 from ..solvers.dirk import DirkStepper
 
-__all__ = ["DirkThermalPost"]
+__all__ = ["ThermalPostSolver"]
 
 
-class DirkThermalPost:
-    """The temperature post-solve on ``rve.solvers.dirk.DirkStepper``: the same stage
-    equations as :class:`ThermalPostSolver`, each stage one Newton solve of the linear heat
-    equation (modified Newton on a kept factorisation: on a linear equation that is
-    iterative refinement with the exact stage matrix in the residual). Equal to
-    ``ThermalPostSolver`` to the Newton tolerance ``rtol`` (relative to the stage's first
-    residual), not bit for bit: the stage right-hand sides are summed in another order.
-    ``step(T0, stages, t0, h) -> T1`` and the counters ``solves``, ``refinements``,
-    ``fallbacks`` (always 0) and ``wall`` as ``ThermalPostSolver``."""
-
-    def __init__(self, ops: ThermalOperators, tableau, T_fixed: float = 0.0, rtol: float = 1e-12,
-                 jacobian_reuse: bool = True):
+class ThermalPostSolver:
+    def __init__(self, ops: ThermalOperators, tableau, T_fixed: float = 0.0, reuse: bool = True,
+                 refine_tol: float = 1e-14, max_refine: int = 12):
         self.ops, self.tab = ops, tableau
+        self.T_fixed = float(T_fixed)
+        self.reuse = bool(reuse)
+        self.stages = (KeptFactorStages(ops, T_fixed, refine_tol, max_refine) if self.reuse
+                       else FreshStages(ops, T_fixed))
         self.system = StageHeatSystem(ops, T_fixed)
-        self.stepper = DirkStepper(self.system, tableau, {"atol": 0.0, "rtol": float(rtol), "max_iter": 30,
-                                                          "line_search": False},
-                                   predictor_degree=0, lazy_jacobian=True, jacobian_reuse=jacobian_reuse)
-        self.solves = 0
-        self.refinements = 0
-        self.fallbacks = 0
+        self.stepper = DirkStepper(self.system, tableau, linear_stages=self.stages)
         self.wall = 0.0
 
-    def step(self, T0, stages, t0: float, h: float):
-        import time
+    @property
+    def solves(self) -> int:
+        return self.stages.solves
 
+    @property
+    def refinements(self) -> int:
+        return self.stages.refinements
+
+    @property
+    def fallbacks(self) -> int:
+        return self.stages.fallbacks
+
+    def step(self, T0, stages, t0: float, h: float):
         w0 = time.perf_counter()
+        self.stages.drive(stages)
         self.system.drive(stages, t0, h, self.tab)
         T0 = np.asarray(T0, float)
-        _, T1, info = self.stepper.step(T0, T0, t0, h)
-        self.solves += int(info.linear_solves)
-        self.refinements += int(sum(info.stage_reuses))
+        T1 = self.stepper.step(T0, T0, t0, h)[1]
         self.wall += time.perf_counter() - w0
         return T1

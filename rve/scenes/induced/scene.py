@@ -52,8 +52,8 @@ from ...model import RowScaledSystem
 from ...solvers.dirk import IntegrationFailure, integrate, sdirk
 from ...solvers.dirk import integrator_options as integrator_options_of
 from ...model.balances import StateBalances
-from ...model.thermal_post import ThermalOperators, ThermalPostSolver
-from ..thermal_post import DirkThermalPost
+from ...model.thermal_post import ThermalOperators
+from ..thermal_post import ThermalPostSolver
 from .record import InducedRecorder, induced_summary
 from ..rebuild import MapRebuild
 from ...fabrics.slack import slack_weave
@@ -159,8 +159,7 @@ def _induced_start(cfg, problem, h0, tab, nopts, record, progress, t_end, post_r
     thermal = ThermalOperators(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes)
     post = None
     if problem.mode == "post":
-        post = (DirkThermalPost(thermal, tab, cfg.end_temperature) if post_reuse == "dirk"
-                else ThermalPostSolver(thermal, tab, cfg.end_temperature, reuse=post_reuse))
+        post = ThermalPostSolver(thermal, tab, cfg.end_temperature, reuse=post_reuse)
     balances = StateBalances(sysm, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
     w, _ = _initial_w(problem, rs, x, 0.0, nopts)
     T0 = None
@@ -174,13 +173,11 @@ def _induced_start(cfg, problem, h0, tab, nopts, record, progress, t_end, post_r
 
 def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | None = None,
           steps: int | None = None, progress: bool = False, integrator_options: dict | None = None,
-          measure_memory: bool = False, post_reuse: bool | str = True) -> SceneResult:
+          measure_memory: bool = False, post_reuse: bool = True) -> SceneResult:
     """Run the scene in memory (module docstring). ``t_end``/``steps`` override the config
     (short horizons for tests and the convergence study); ``post_reuse`` False: the T
     post-solve without reuse (``ThermalPostSolver(reuse=False)``, the reference of the
-    tests and benchmarks); ``"dirk"``: the post-solve on the SDIRK stepper
-    (``rve.scenes.thermal_post.DirkThermalPost``, equal to the Newton tolerance, not bit for
-    bit). Raises ``SceneFailure``."""
+    tests and benchmarks). Raises ``SceneFailure``."""
     wall0 = time.perf_counter()
     if measure_memory:
         tracemalloc.start()
