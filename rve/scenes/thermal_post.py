@@ -36,18 +36,7 @@ class ThermalPostSolver:
         self.system = StageHeatSystem(ops, T_fixed)
         self.stepper = DirkStepper(self.system, tableau, linear_stages=self.stages)
         self.wall = 0.0
-
-    @property
-    def solves(self) -> int:
-        return self.stages.solves
-
-    @property
-    def refinements(self) -> int:
-        return self.stages.refinements
-
-    @property
-    def fallbacks(self) -> int:
-        return self.stages.fallbacks
+        self.solves = self.refinements = self.fallbacks = 0
 
     def step(self, T0, stages, t0: float, h: float):
         w0 = time.perf_counter()
@@ -55,5 +44,7 @@ class ThermalPostSolver:
         self.system.drive(stages, t0, h, self.tab)
         T0 = np.asarray(T0, float)
         T1 = self.stepper.step(T0, T0, t0, h)[1]
+        st = self.stages
+        self.solves, self.refinements, self.fallbacks = st.solves, st.refinements, st.fallbacks
         self.wall += time.perf_counter() - w0
         return T1
