@@ -17,7 +17,7 @@ slow machine; it only prints. Run: ``python benchmarks/dynamic_wire_study_time.p
 
 ``--variants off,on,auto [--repeats 2]``: the whole study once per factorisation-reuse
 variant of ``rve.solvers.dirk.integrate`` (``jacobian_reuse`` False / True / "auto";
-``rve.scenes.dynamic_wire.integrate`` patched in this process before the pool forks),
+given to every run as ``run_study(integrator_options={"jacobian_reuse": ...})``),
 interleaved (A B C A B C ...); then per variant the median study wall time and its ratio
 to ``off`` measured in the same run, the fitted orders, and the largest probe difference
 to ``off`` over every (s, N) (docs/time_integration.md "Factorisation reuse").
@@ -25,7 +25,6 @@ to ``off`` over every (s, N) (docs/time_integration.md "Factorisation reuse").
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 import time
 
@@ -81,22 +80,15 @@ REUSE = {"off": False, "on": True, "auto": "auto"}
 
 
 def compare(plan, args) -> None:
-    import rve.scenes.dynamic_wire as scene
-    from rve.solvers.dirk import ReusePolicy, integrate
-
     names = [v for v in args.variants.split(",") if v]
     load0 = os.getloadavg()
     walls = {v: [] for v in names}
     data = {}
     for rep in range(args.repeats):
         for v in names:
-            scene.integrate = functools.partial(integrate, reuse=ReusePolicy(mode=REUSE[v]))
-            try:
-                t0 = time.perf_counter()
-                ds, timing = run_study(plan, workers=args.workers)
-                walls[v].append(time.perf_counter() - t0)
-            finally:
-                scene.integrate = integrate
+            t0 = time.perf_counter()
+            ds, timing = run_study(plan, workers=args.workers, integrator_options={"jacobian_reuse": REUSE[v]})
+            walls[v].append(time.perf_counter() - t0)
             data[v] = (ds, timing)
             print(f"  repeat {rep + 1} {v:>4}: study {walls[v][-1]:7.2f} s, "
                   f"sum of runs {timing['sum_of_run_walls_s']:7.2f} s",

@@ -81,7 +81,7 @@ def contact_check(a, ov):
     equations: K_c per stage (the exact stage equations) and K_c frozen at the step's end
     state for both stages. Prints max |T_post - T_chain| / max T over the run and at t_end."""
     import rve.scenes.induced.scene as scene
-    from rve.model.thermal_post import ThermalPostSolver
+    from rve.scenes.thermal_post import ThermalPostSolver
 
     def dense_step(ops, tab, T0, stages, t0, h, x_ref=None):
         M, K = ops.M.toarray(), ops.K.toarray()

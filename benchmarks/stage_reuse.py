@@ -31,12 +31,13 @@ configs/rve/plain_weave.yaml with ``--strain-fabric`` warp/weft yarns of 10 fibr
 12 el/fibril; uniaxial step 1 from the relaxed state, relaxed once by the scene's energy
 path and cached under ``--cache``): the driven phase (backward Euler, 2 steps of 5 µs,
 loose stage Newton rtol 1e-3, max 8 iterations) and the heavily damped relaxation (2 steps
-of 1 ms), ``rve.solvers.relaxation.integrate`` patched in this process only to pass the
-variant's options. Same table; the final state is the damped phase's.
+of 1 ms), the variant's options given to both phases as
+``RelaxSettings.integrator_options``. Same table; the final state is the damped phase's.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -120,7 +121,6 @@ def _rel(a, b) -> float:
 def strain_phases(cfg, fab, mesh, x_rel, integrate_opts):
     """Driven + damped phases of uniaxial strain step 1 (``strain_step`` up to its static
     solve) with ``integrate_opts`` passed to every ``integrate`` call -> (x, w, stats)."""
-    import rve.solvers.dirk as dirk
     import rve.solvers.relaxation as relaxation
     from rve.homogenisation.strain import _settings, affine_velocity, clamped_ends, mech_system, strain_levels
 
@@ -131,27 +131,19 @@ def strain_phases(cfg, fab, mesh, x_rel, integrate_opts):
     x = np.array(x_rel, float).reshape(nn, 9)
     ends, _, _ = clamped_ends(fab, mesh)
     w_aff = affine_velocity(x, "uniaxial", rate)
-    calls = []
-    real = relaxation.integrate
-
-    def patched(*args, **kw):
-        res = dirk.integrate(*args, **integrator_options(**kw, **integrate_opts))
-        calls.append(res)
-        return res
-
-    relaxation.integrate = patched
-    try:
-        sys1 = mech_system(fab, mesh, cfg, sp_.damping, x, end_velocity=w_aff[ends, :3])
-        s1 = _settings(sp_.t_step, sp_.stretch_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
-                       sp_.static_atol, static=False)
-        res1 = relaxation.relax_to_equilibrium(sys1, x.reshape(-1), w_aff.reshape(-1), s1)
-        x1 = res1.x.reshape(nn, 9).copy()
-        sys2 = mech_system(fab, mesh, cfg, sp_.relax_damping, x1)
-        s2 = _settings(sp_.t_relax, sp_.relax_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
-                       sp_.static_atol, static=False)
-        res2 = relaxation.relax_to_equilibrium(sys2, x1.reshape(-1), np.zeros(sys2.n), s2)
-    finally:
-        relaxation.integrate = real
+    opts = dict(integrate_opts)
+    sys1 = mech_system(fab, mesh, cfg, sp_.damping, x, end_velocity=w_aff[ends, :3])
+    s1 = _settings(sp_.t_step, sp_.stretch_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
+                   sp_.static_atol, static=False)
+    res1 = relaxation.relax_to_equilibrium(sys1, x.reshape(-1), w_aff.reshape(-1),
+                                           dataclasses.replace(s1, integrator_options=opts))
+    x1 = res1.x.reshape(nn, 9).copy()
+    sys2 = mech_system(fab, mesh, cfg, sp_.relax_damping, x1)
+    s2 = _settings(sp_.t_relax, sp_.relax_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
+                   sp_.static_atol, static=False)
+    res2 = relaxation.relax_to_equilibrium(sys2, x1.reshape(-1), np.zeros(sys2.n),
+                                           dataclasses.replace(s2, integrator_options=opts))
+    calls = res1.integrations + res2.integrations
     return res2.x, res2.w, calls, (res1.t, res2.t)
 
 

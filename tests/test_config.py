@@ -313,6 +313,51 @@ def test_quantity_types_for_new_models():
         Probe(gap=1, colour=2)
 
 
+def test_bare_section_field_takes_the_section_defaults():
+    from pydantic import Field
+
+    class Inner(Section):
+        gap: Length = Field("2 mm", gt=0)
+
+    def _wide():
+        return Inner(gap="5 mm")
+
+    class Needs(Section):
+        elements: int = Field(ge=1)
+
+    class Outer(SceneConfig):
+        scene: Literal["outer"] = Field(description="scene name")
+        first: Inner
+        count: int
+        wide: Inner = Field(default_factory=_wide)
+        last: Inner
+        needs: Needs
+
+    keys = ["scene", "first", "count", "wide", "last", "needs"]
+    assert list(Outer.model_fields) == keys
+    assert Outer.model_json_schema()["required"] == ["scene", "count", "needs"]
+    cfg = Outer(scene="outer", count=1, last={"gap": "3 mm"}, needs={"elements": 2})
+    assert (cfg.first.gap, cfg.wide.gap, cfg.last.gap) == (2.0, 5.0, 3.0)
+    assert list(cfg.model_dump()) == keys
+    with pytest.raises(Exception, match="first.gap"):
+        Outer(scene="outer", count=1, first={"gap": -1}, needs={"elements": 2})
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_scene_sections_default_in_declaration_order(name):
+    from rve.config.loader import scene_models
+
+    model = scene_models()[name]
+    declared = [k for cls in reversed(model.__mro__) for k in getattr(cls, "__annotations__", {})
+                if k in model.model_fields]
+    assert list(model.model_fields) == list(dict.fromkeys(declared))
+    cfg = model(scene=name)
+    for key, info in model.model_fields.items():
+        if isinstance(info.annotation, type) and issubclass(info.annotation, Section):
+            assert not info.is_required(), key
+            assert isinstance(getattr(cfg, key), info.annotation)
+
+
 def test_json_schema_accepts_raw_yaml():
     import jsonschema
     import yaml

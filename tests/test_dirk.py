@@ -441,3 +441,67 @@ def test_lazy_jacobian_skips_assembly_at_converged_points_only():
     assert lazy.residuals == eager.residuals
     assert calls["full"] == n_eager - 1 == eager.iterations
     assert calls["residual"] == eager.iterations
+
+
+def test_linear_stages_equal_the_newton_stages():
+    """DirkStepper(linear_stages=...) on M w' + L_i w - q(t) = 0 (no mechanical dofs, one
+    constrained dof): the stage solves by the linear-stage object give the step that the
+    stage Newton gives on the same system, to round-off, for s = 1, 2, 3."""
+    import scipy.sparse as sp_
+
+    from rve.solvers.dirk import DirkStepper, sdirk
+
+    rng = np.random.default_rng(3)
+    n = 6
+    B = rng.normal(size=(n, n))
+    L = sp_.csr_matrix(B @ B.T + n * np.eye(n))
+    M = sp_.csr_matrix(np.diag(rng.uniform(1.0, 2.0, n)))
+    fixed, value = np.array([0]), np.array([0.5])
+
+    def q(t):
+        return np.sin(np.arange(1, n + 1) * t)
+
+    class Linear:
+        n_ = n
+        mech = np.zeros(n, bool)
+
+        def __init__(self):
+            self.n = n
+
+        def mass(self):
+            return M
+
+        def constraints(self, t):
+            return fixed, value
+
+        def admissible(self, x):
+            return True
+
+        def evaluate(self, x, w, t, jacobian=True):
+            F = L @ w - q(t)
+            return (F, None, None) if not jacobian else (F, sp_.csr_matrix((n, n)), L)
+
+    class Stages:
+        def source(self, i, t):
+            return q(t)
+
+        def apply(self, i, w, t):
+            return L @ w
+
+        def solve(self, i, haii, rhs, t):
+            A = (M + haii * L).toarray()
+            w = np.empty(n)
+            w[fixed] = value
+            free = np.arange(1, n)
+            w[free] = np.linalg.solve(A[np.ix_(free, free)], rhs[free] - A[np.ix_(free, fixed)] @ value)
+            return w
+
+    w0 = rng.normal(size=n)
+    w0[fixed] = value
+    for s in (1, 2, 3):
+        tab = sdirk(s)
+        ref = DirkStepper(Linear(), tab, {"atol": 0.0, "rtol": 1e-14, "max_iter": 10}).step(w0, w0, 0.2, 0.05)
+        lin = DirkStepper(Linear(), tab, linear_stages=Stages()).step(w0, w0, 0.2, 0.05)
+        assert np.abs(lin[1] - ref[1]).max() <= 1e-12 * np.abs(ref[1]).max()
+        assert len(lin[2].stage_states) == s and lin[1][0] == value[0]
+        assert np.abs(lin[1] - w0).max() > 1e-3   # the step moved

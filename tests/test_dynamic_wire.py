@@ -206,3 +206,7 @@ def test_study_dataset_orders_and_plots(tmp_path):
     cfg.time.t_max = 1e-4
     rec = run_point(cfg, 2, 4)
     assert rec["steps"] == 4 and np.isfinite(rec["probes"]["V_half"])
+    # the study passes integrator options to every run (no module patching)
+    assert run_point(cfg, 2, 4, {"jacobian_reuse": False})["probes"] == rec["probes"]
+    with pytest.raises(ValueError, match="predictor_degree"):
+        run_point(cfg, 2, 4, {"predictor_degree": 7})

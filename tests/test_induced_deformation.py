@@ -233,7 +233,7 @@ def test_post_temperature_equals_monolithic_with_contact(monkeypatch):
     (Two runs of the mechanics are not bitwise equal: ~1e-11 mm between repeated runs in one
     process, so the reuse is checked on shared stage states, not across runs.)"""
     import rve.scenes.induced.scene as scene
-    from rve.model.thermal_post import ThermalPostSolver
+    from rve.scenes.thermal_post import ThermalPostSolver
 
     twins = []
 
@@ -300,7 +300,8 @@ def test_post_step_refinement_and_fallback(h_C):
     iterative refinement (h_C = 0.1, the scene's value) and its direct fallback (h_C = 1e4,
     a contact far stiffer than the capacity: the refinement does not contract) against the
     plain reference and a dense solve of the stage equations, to round-off."""
-    from rve.model.thermal_post import ThermalOperators, ThermalPostSolver
+    from rve.model.thermal_post import ThermalOperators
+    from rve.scenes.thermal_post import ThermalPostSolver
     from rve.solvers.dirk import sdirk
 
     p, x, w = _pressed_state()
@@ -325,3 +326,4 @@ def test_post_step_refinement_and_fallback(h_C):
         assert new.refinements >= 2 and new.fallbacks == 0
     else:
         assert new.fallbacks == 2
+

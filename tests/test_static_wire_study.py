@@ -290,3 +290,43 @@ def test_snakemake_lint_is_clean(tmp_path):
     proc = _snakemake(work, "--lint", timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Congratulations" in proc.stdout + proc.stderr
+
+
+def test_dynamic_wire_plan_defaults_come_from_the_schema():
+    """The schema's verification.dynamic_wire defaults are the study's DEFAULT_PLAN, a given
+    series replaces the default ones and a partial reference keeps the other default; a
+    series outside s = 1..3 is refused."""
+    from snakemake.exceptions import WorkflowError
+    from snakemake.utils import validate
+
+    from rve.studies.dynamic_wire import normalise_plan
+
+    cfg = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
+    validate(cfg, schema=str(SCHEMA))
+    assert normalise_plan(cfg["verification"]["dynamic_wire"]) == normalise_plan(None)
+    cfg = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
+    cfg["verification"]["dynamic_wire"] = {"reference": {"steps": 2000},
+                                           "series": {"2": {"steps": [10, 20], "fit": [10, 20]}}}
+    validate(cfg, schema=str(SCHEMA))
+    plan = normalise_plan(cfg["verification"]["dynamic_wire"])
+    assert plan["reference"] == {"stages": 3, "steps": 2000}
+    assert plan["series"] == {2: {"steps": [10, 20], "fit": [10, 20]}}
+    assert plan["scene_config"] == "configs/scenes/dynamic_wire.yaml"
+    cfg["verification"]["dynamic_wire"] = {"series": {"4": {"steps": [10], "fit": [10, 10]}}}
+    with pytest.raises(WorkflowError):
+        validate(cfg, schema=str(SCHEMA))
+
+
+def test_rule_files_import_only_layouts_at_parse_time():
+    """At parse time the Snakefile and the rule files import rve's layout modules and the
+    config reader only; the job bodies are imported inside the rules."""
+    allowed = {"rve.scenes.layout", "rve.studies.layout", "rve.homogenisation.layout", "rve.config.loader",
+               "rve.scenes", "rve.studies", "rve.homogenisation"}
+    for path in [ROOT / "Snakefile", *sorted((ROOT / "workflow/rules").glob("*.smk"))]:
+        for line in path.read_text().splitlines():
+            if line.startswith(("from rve", "import rve")):
+                module = line.split()[1]
+                names = line.split(" import ", 1)[1] if " import " in line else ""
+                assert module in allowed, f"{path.name}: {line}"
+                if module in ("rve.scenes", "rve.studies", "rve.homogenisation"):
+                    assert names.split()[0] == "layout", f"{path.name}: {line}"

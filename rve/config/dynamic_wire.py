@@ -8,14 +8,14 @@ from __future__ import annotations
 
 from typing import Literal, Optional
 
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from .fields import (
     Angle, DampingCoefficient, Density, Dimensionless, ElectricConductivity, Integer, Length, MagneticField,
-    Quantity, SceneConfig, Section, SeebeckCoefficient, SofteningRate, SpecificHeat, Stress, Temperature,
+    Quantity, Section, SeebeckCoefficient, SofteningRate, SpecificHeat, Stress, Temperature,
     ThermalConductivity, Time, Voltage
 )
-from .sections import BeamMesh, Newton
+from .sections import BeamMesh, Newton, WireSceneConfig
 
 __all__ = ["DynamicWireConfig"]
 
@@ -94,22 +94,16 @@ class DynamicWireNewton(Newton):
     max_iter: Integer = Field(20, ge=1, description="Newton iterations per stage")
 
 
-class DynamicWireConfig(SceneConfig):
+class DynamicWireConfig(WireSceneConfig):
     """The pinned wire with coupled current, heat and motion in a magnetic field (thesis §6.4)."""
 
     scene: Literal["dynamic_wire"] = Field(description="scene name")
-    geometry: DynamicWireGeometry = Field(default_factory=DynamicWireGeometry)
-    fibril: DynamicWireFibril = Field(default_factory=DynamicWireFibril)
-    material: DynamicWireMaterial = Field(default_factory=DynamicWireMaterial)
-    load: DynamicWireLoad = Field(default_factory=DynamicWireLoad)
-    couplings: DynamicWireCouplings = Field(default_factory=DynamicWireCouplings)
-    mesh: DynamicWireMesh = Field(default_factory=DynamicWireMesh)
-    time: DynamicWireTime = Field(default_factory=DynamicWireTime)
-    newton: DynamicWireNewton = Field(default_factory=DynamicWireNewton)
-
-    @model_validator(mode="after")
-    def _feasible(self):
-        # radius vs length, mesh vs memory (rve.config.limits)
-        from .limits import wire_feasibility
-
-        return wire_feasibility(self, 11)
+    dofs_per_node = 11
+    geometry: DynamicWireGeometry
+    fibril: DynamicWireFibril
+    material: DynamicWireMaterial
+    load: DynamicWireLoad
+    couplings: DynamicWireCouplings
+    mesh: DynamicWireMesh
+    time: DynamicWireTime
+    newton: DynamicWireNewton

@@ -133,9 +133,9 @@ class FabricRelaxConfig(SceneConfig):
     """Relax a generated fabric to static equilibrium under contact (thesis §7.3-7.4)."""
 
     scene: Literal["fabric_relax"] = Field(description="scene name")
-    fabric: FabricSpec = Field(default_factory=FabricSpec)
-    material: FabricMaterial = Field(default_factory=FabricMaterial)
-    contact: FabricContact = Field(default_factory=FabricContact)
-    mesh: FabricMesh = Field(default_factory=FabricMesh)
-    relaxation: FabricRelaxation = Field(default_factory=FabricRelaxation)
-    output: FabricOutput = Field(default_factory=FabricOutput)
+    fabric: FabricSpec
+    material: FabricMaterial
+    contact: FabricContact
+    mesh: FabricMesh
+    relaxation: FabricRelaxation
+    output: FabricOutput

@@ -22,6 +22,15 @@ a string with units, and store the converted internal-unit ``float`` after valid
 Constraints (``gt``, ``ge``, ``lt``, ``le``) apply to the converted value, in internal
 units. Defaults may carry units too (``"1 T"``): sections validate their defaults.
 
+A field whose type is a section and that is declared without a default defaults to that
+section's own defaults (when every key of the section has one), so a scene lists its
+sections by type alone::
+
+    class MySceneConfig(SceneConfig):
+        scene: Literal["my_scene"] = Field(description="scene name")
+        mesh: BeamMesh                                  # default: BeamMesh()
+        warp: Yarn = Field(default_factory=_warp)       # any other default is explicit
+
 A new scene is a subclass of :class:`SceneConfig` with ``scene: Literal["name"]``, named
 in ``rve.scenes.registry.SCENES`` (docs/configuration.md, "Adding a scene").
 """
@@ -36,6 +45,7 @@ from numbers import Real
 from typing import Annotated, Any, Literal, Optional
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic.fields import FieldInfo
 from pydantic_core import PydanticCustomError
 
 from .units import UnitConversionError, convert, dimension_name
@@ -234,6 +244,21 @@ class Section(BaseModel):
     units) are validated, and assignments are validated too."""
 
     model_config = ConfigDict(extra="forbid", validate_default=True, validate_assignment=True)
+
+    @classmethod
+    def __pydantic_init_subclass__(cls, **kwargs: Any) -> None:
+        # a section-typed field declared without a default takes the section's defaults where
+        # every key of the section has one (else the section stays required: "mesh missing");
+        # the fields keep their declaration order (it is the key order of every dump)
+        super().__pydantic_init_subclass__(**kwargs)
+        fields = cls.__pydantic_fields__
+        bare = [name for name, info in fields.items()
+                if info.is_required() and isinstance(info.annotation, type) and issubclass(info.annotation, Section)
+                and not any(f.is_required() for f in info.annotation.model_fields.values())]
+        for name in bare:
+            fields[name] = FieldInfo.merge_field_infos(fields[name], default_factory=fields[name].annotation)
+        if bare:
+            cls.model_rebuild(force=True)
 
 
 class SceneConfig(Section):

@@ -156,17 +156,17 @@ class ImpactConfig(SceneConfig):
     """A projectile into a current-carrying plain weave in a magnetic field (thesis §8.4)."""
 
     scene: Literal["impact"] = Field(description="scene name")
-    geometry: ImpactGeometry = Field(default_factory=ImpactGeometry)
+    geometry: ImpactGeometry
     warp: ImpactYarn = Field(default_factory=_warp)
     weft: ImpactYarn = Field(default_factory=_weft)
-    material: ImpactMaterial = Field(default_factory=ImpactMaterial)
-    projectile: ImpactProjectile = Field(default_factory=ImpactProjectile)
-    contact: ImpactContact = Field(default_factory=ImpactContact)
-    field: ImpactField = Field(default_factory=ImpactField)
-    mesh: ImpactMesh = Field(default_factory=ImpactMesh)
-    relaxation: ImpactRelaxation = Field(default_factory=ImpactRelaxation)
-    time: ImpactTime = Field(default_factory=ImpactTime)
-    newton: ImpactNewton = Field(default_factory=ImpactNewton)
-    output: SceneOutput = Field(default_factory=SceneOutput)
+    material: ImpactMaterial
+    projectile: ImpactProjectile
+    contact: ImpactContact
+    field: ImpactField
+    mesh: ImpactMesh
+    relaxation: ImpactRelaxation
+    time: ImpactTime
+    newton: ImpactNewton
+    output: SceneOutput
     end_temperature: Temperature = Field("0 K", description="T held at every fibril end (T-bar)")
     label: Optional[str] = Field(None, description="free text for the outputs")

@@ -120,16 +120,16 @@ class InducedDeformationConfig(SceneConfig):
     """A current-carrying plain weave moved by a magnetic field (thesis §8.3)."""
 
     scene: Literal["induced_deformation"] = Field(description="scene name")
-    geometry: InducedGeometry = Field(default_factory=InducedGeometry)
+    geometry: InducedGeometry
     warp: InducedYarn = Field(default_factory=_warp)
     weft: InducedYarn = Field(default_factory=_weft)
-    material: InducedMaterial = Field(default_factory=InducedMaterial)
-    contact: InducedContact = Field(default_factory=InducedContact)
-    field: InducedField = Field(default_factory=InducedField)
-    coupling: InducedCoupling = Field(default_factory=InducedCoupling)
-    mesh: LinearMesh = Field(default_factory=LinearMesh)
-    time: InducedTime = Field(default_factory=InducedTime)
-    newton: InducedNewton = Field(default_factory=InducedNewton)
-    output: SceneOutput = Field(default_factory=SceneOutput)
+    material: InducedMaterial
+    contact: InducedContact
+    field: InducedField
+    coupling: InducedCoupling
+    mesh: LinearMesh
+    time: InducedTime
+    newton: InducedNewton
+    output: SceneOutput
     end_temperature: Temperature = Field("0 K", description="T held at every fibril end")
     label: Optional[str] = Field(None, description="free text for the outputs")

@@ -14,17 +14,21 @@ Contract
   rho, sigma, k, c_p, the volumetric damping gamma; Tables 8.1/8.2).
 * ``SceneOutput``: ``vtk``, ``vtk_every``, ``png``, ``frames``, ``n_theta`` of the outputs
   of the dynamic fabric scenes.
+* ``WireSceneConfig``: base of the pinned-wire scenes; a subclass names its
+  ``dofs_per_node`` and is checked by ``rve.config.limits.wire_feasibility`` (radius
+  against length, the mesh against the available memory).
 """
 from __future__ import annotations
 
-from typing import Literal, Optional
+from typing import ClassVar, Literal, Optional
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from .fields import (DampingCoefficient, Density, Dimensionless, ElectricConductivity, Integer, Section,
-                     SpecificHeat, Stress, ThermalConductivity)
+from .fields import (DampingCoefficient, Density, Dimensionless, ElectricConductivity, Integer, SceneConfig,
+                     Section, SpecificHeat, Stress, ThermalConductivity)
+from .limits import wire_feasibility
 
-__all__ = ["BeamMesh", "LinearMesh", "Newton", "StageNewton", "WeaveMaterial", "SceneOutput"]
+__all__ = ["BeamMesh", "LinearMesh", "Newton", "StageNewton", "WeaveMaterial", "SceneOutput", "WireSceneConfig"]
 
 
 class BeamMesh(Section):
@@ -80,3 +84,15 @@ class SceneOutput(Section):
     png: bool = Field(True, description="render PNG plots and frames (headless)")
     frames: Integer = Field(4, ge=1, description="time frames in the PNG strip")
     n_theta: Integer = Field(12, ge=3, description="points around a tube section")
+
+
+class WireSceneConfig(SceneConfig):
+    """Base of the pinned-wire scenes: radius against length and the mesh against memory
+    are checked after validation."""
+
+    #: unknowns per node of the scene's beam model (the memory estimate)
+    dofs_per_node: ClassVar[int]
+
+    @model_validator(mode="after")
+    def _feasible(self):
+        return wire_feasibility(self, self.dofs_per_node)

@@ -12,10 +12,10 @@ from typing import Literal, Optional
 from pydantic import Field, model_validator
 
 from .fields import (
-    Angle, CurrentDensity, DampingCoefficient, Density, Dimensionless, Integer, Length, MagneticField, SceneConfig,
+    Angle, CurrentDensity, DampingCoefficient, Density, Dimensionless, Integer, Length, MagneticField,
     Section, Stress, Time, cross_field_error,
 )
-from .sections import BeamMesh, Newton
+from .sections import BeamMesh, Newton, WireSceneConfig
 
 __all__ = ["StaticWireConfig", "Geometry", "Fibril", "Material", "WireLoad", "Mesh", "Relaxation", "NewtonSettings",
            "StaticWireSolver"]
@@ -73,24 +73,18 @@ class StaticWireSolver(Section):
     path: Literal["dynamic_relaxation", "continuation"] = Field(
         "dynamic_relaxation",
         description="how the static solution is reached: dynamic relaxation then static Newton, or load continuation")
-    relaxation: Relaxation = Field(default_factory=Relaxation)
-    newton: Newton = Field(default_factory=Newton)
+    relaxation: Relaxation
+    newton: Newton
 
 
-class StaticWireConfig(SceneConfig):
+class StaticWireConfig(WireSceneConfig):
     """The pinned wire in a magnetic field (thesis ch. 3, §6.3, Tables 6.1-6.2)."""
 
     scene: Literal["static_wire"] = Field(description="scene name")
-    geometry: Geometry = Field(default_factory=Geometry)
-    fibril: Fibril = Field(default_factory=Fibril)
-    material: Material = Field(default_factory=Material)
-    load: WireLoad = Field(default_factory=WireLoad)
-    mesh: Mesh = Field(default_factory=Mesh)
-    solver: StaticWireSolver = Field(default_factory=StaticWireSolver)
-
-    @model_validator(mode="after")
-    def _feasible(self):
-        # radius vs length, mesh vs memory (rve.config.limits)
-        from .limits import wire_feasibility
-
-        return wire_feasibility(self, 9)
+    dofs_per_node = 9
+    geometry: Geometry
+    fibril: Fibril
+    material: Material
+    load: WireLoad
+    mesh: Mesh
+    solver: StaticWireSolver

@@ -61,25 +61,23 @@ def _rule_4() -> tuple[np.ndarray, np.ndarray]:
     return pts, w
 
 
+def _two_rings(r_out: float, r_in: float, n: int, w_out: float, w_in: float) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` points on each of two rings, the inner one turned by half a spacing."""
+    angles = np.arange(n) * (2.0 * np.pi / n)
+    pts = np.vstack([_ring(r_out, angles), _ring(r_in, angles + np.pi / n)])
+    return pts, np.concatenate([np.full(n, w_out), np.full(n, w_in)])
+
+
 def _rule_8() -> tuple[np.ndarray, np.ndarray]:
     s3 = math.sqrt(3.0)
-    r_out = math.sqrt(1.0 + s3 / 3.0)  # printed column value is r**2
-    r_in = math.sqrt(1.0 - s3 / 3.0)
-    quarter = np.arange(4) * (np.pi / 2)
-    pts = np.vstack([_ring(r_out, quarter), _ring(r_in, quarter + np.pi / 4)])
-    w = np.concatenate([np.full(4, np.pi * (2.0 - s3) / 16.0),
-                        np.full(4, np.pi * (2.0 + s3) / 16.0)])
-    return pts, w
+    # the printed column values are r**2
+    return _two_rings(math.sqrt(1.0 + s3 / 3.0), math.sqrt(1.0 - s3 / 3.0), 4,
+                      np.pi * (2.0 - s3) / 16.0, np.pi * (2.0 + s3) / 16.0)
 
 
 def _rule_16() -> tuple[np.ndarray, np.ndarray]:
     s3 = math.sqrt(3.0)
-    r_out = math.sqrt(0.5 + s3 / 6.0)  # printed column value is r**2
-    r_in = math.sqrt(0.5 - s3 / 6.0)
-    eighth = np.arange(8) * (np.pi / 4)
-    pts = np.vstack([_ring(r_out, eighth), _ring(r_in, eighth + np.pi / 8)])
-    w = np.full(16, np.pi / 16)
-    return pts, w
+    return _two_rings(math.sqrt(0.5 + s3 / 6.0), math.sqrt(0.5 - s3 / 6.0), 8, np.pi / 16, np.pi / 16)
 
 
 _BUILDERS = {4: _rule_4, 8: _rule_8, 16: _rule_16}

@@ -1,6 +1,6 @@
 """The temperature post-solve of the dynamic fabric scenes (T does not feed back: S =
 alpha_mu = 0): the thermal operators (conduction, capacity, contact heat transfer) and the
-per-step SDIRK solve of the heat equation on the converged stage states of the
+stage solves of the heat equation on the converged stage states of the
 mechanical/electrical step (docs/induced_deformation.md).
 
 Contract
@@ -12,13 +12,16 @@ Contract
   w, t)`` the nodal Joule heat (W), ``fixed`` the T = 0 end nodes; ``active_pairs``,
   ``contact_triplets``, ``contact_apply`` and ``joule`` memoised for the last state (and
   contact map).
-* ``ThermalPostSolver(ops, tableau, T_fixed=0, reuse=True)``: ``step(T0, stages, t0, h) -> T1``:
-  one SDIRK step of the heat equation ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` with the
-  stage states ``[(x_i, w_i)]`` of the mechanical/electrical step (T does not feed back:
-  S = alpha_mu = 0), the same stage equations as the monolithic solve: (M + h a_ii K)_ff
-  factorised once per h a_ii, the contact part by iterative refinement on that factor
-  (direct fallback); ``reuse=False`` the plain reference (a fresh solve per stage). Counters
-  ``solves``, ``refinements``, ``fallbacks``, ``wall``.
+* ``KeptFactorStages(ops, T_fixed=0)``: the stage solves of the heat equation
+  ``M dT/dt + (K + K_c(x)) T - Q(x, w, t) = 0`` on the stage states ``[(x_i, w_i)]`` of the
+  mechanical/electrical step (``drive(stages)``; T does not feed back: S = alpha_mu = 0), as
+  the ``linear_stages`` of ``rve.solvers.dirk.DirkStepper``: (M + h a_ii K)_ff factorised
+  once per h a_ii, the contact part by iterative refinement on that factor (direct
+  fallback); ``FreshStages`` the plain reference (a fresh solve per stage). Counters
+  ``solves``, ``refinements``, ``fallbacks``. The stepping itself is
+  ``rve.scenes.thermal_post.ThermalPostSolver``.
+* ``StageHeatSystem(ops, T_fixed)``: the same heat equation as a ``DynamicSystem`` (all dofs
+  T), ``drive(stages, t0, h, tableau)`` giving it the stage states of one step.
 * ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone.
 """
 from __future__ import annotations
@@ -30,7 +33,7 @@ import scipy.sparse.linalg as spla
 from ..physics.contact_forms import hertz_width, lagrange_at, scalar_jump
 from ..physics.thermal_forms import capacity_matrix, conduction
 
-__all__ = ["ThermalOperators", "ThermalPostSolver", "heat_transfer_block"]
+__all__ = ["ThermalOperators", "KeptFactorStages", "FreshStages", "StageHeatSystem", "heat_transfer_block"]
 
 
 class ThermalOperators:
@@ -177,35 +180,37 @@ def heat_transfer_block(geo, order: int, weight, coef, kappa, g_eps: float = 0.0
     return np.einsum("pgA,pgB->pAB", (k * a)[..., None] * phi, phi)
 
 
-class ThermalPostSolver:
-    """One SDIRK step of the heat equation from the mechanical/electrical stage states.
+class KeptFactorStages:
+    """The stage solves of the heat equation on the free nodes for
+    ``rve.solvers.dirk.DirkStepper(linear_stages=...)``, driven by the stage states
+    ``[(x_i, w_i)]`` of a mechanical/electrical step (``drive``): stage i solves
+    ``(M + h a_ii (K + K_c(x_i)))_ff T_i = rhs_ff`` less the fixed ends' columns.
 
-    Stage i on the free nodes: ``(M + h a_ii (K + K_c(x_i)))_ff T_i = rhs_i`` with
-    ``rhs_i = M T0 + h a_ii Q(x_i) - h sum_{j<i} a_ij F_j`` (less the fixed ends' columns).
-    ``reuse=True`` (default): ``(M + h a_ii K)_ff`` is factorised once per ``h a_ii`` (one
-    per step size, kept across steps and contact patterns); without active contact pairs
-    the stage is that one solve; with active pairs the contact part ``h a_ii K_c(x_i)``
-    (a small, positive semi-definite perturbation: ~3e-5 of the capacity) is taken by
-    iterative refinement on the kept factor, ``T <- T + LU^-1 (rhs - A T)`` with the exact
-    stage matrix A in the residual, until the correction is <= ``refine_tol`` times |T|
-    (3-5 solves); if a correction does not shrink by half the stage falls back to a direct
-    sparse solve of A (``fallbacks``). Joule heat and the contact matrix come from
-    ``ThermalOperators`` (memoised per state: the last stage's values serve the balances of
-    the accepted state). ``reuse=False``: the plain reference, a fresh ``spsolve`` of A at every
-    stage with active pairs, Joule by ``BeamModel.joule_power`` and the contact matrix by
-    ``scalar_jump`` at every stage (the reference of tests/test_induced_deformation.py)."""
+    ``(M + h a_ii K)_ff`` is factorised once per ``h a_ii`` (one per step size, kept across
+    steps and contact patterns); without active contact pairs the stage is that one solve;
+    with active pairs the contact part ``h a_ii K_c(x_i)`` (a small, positive semi-definite
+    perturbation: ~3e-5 of the capacity) is taken by iterative refinement on the kept
+    factor, ``T <- T + LU^-1 (rhs - A T)`` with the exact stage matrix A in the residual,
+    until the correction is <= ``refine_tol`` times |T| (3-5 solves); if a correction does
+    not shrink by half the stage falls back to a direct sparse solve of A (``fallbacks``).
+    Joule heat and the contact matrix come from ``ThermalOperators`` (memoised per state:
+    the last stage's values serve the balances of the accepted state). Counters ``solves``,
+    ``refinements``, ``fallbacks``."""
 
-    def __init__(self, ops: ThermalOperators, tableau, T_fixed: float = 0.0, reuse: bool = True,
-                 refine_tol: float = 1e-14, max_refine: int = 12):
-        self.ops, self.tab = ops, tableau
+    def __init__(self, ops: ThermalOperators, T_fixed: float = 0.0, refine_tol: float = 1e-14,
+                 max_refine: int = 12):
+        self.ops = ops
         self.T_fixed = float(T_fixed)
-        self.reuse = bool(reuse)
         self.refine_tol, self.max_refine = float(refine_tol), int(max_refine)
         self.solves = 0
         self.refinements = 0
         self.fallbacks = 0
-        self.wall = 0.0
         self._lu = {}
+        self._stages: list = []
+
+    def drive(self, stages) -> None:
+        """The stage states ``[(x_i, w_i)]`` of the step about to be taken."""
+        self._stages = list(stages)
 
     def _base(self, haii):
         """(LU of (M + h a_ii K)_ff, (M + h a_ii K)_fc, M + h a_ii K), kept per h a_ii."""
@@ -218,38 +223,26 @@ class ThermalPostSolver:
                                     (op.M_fc + haii * op.K_fc).tocsr(), (op.M + haii * op.K).tocsr())
         return hit
 
-    def step(self, T0, stages, t0: float, h: float):
-        import time
+    def source(self, i, t):
+        x, w = self._stages[i]
+        return self.ops.joule(x, w, t)
 
-        w0 = time.perf_counter()
-        T = self._step_reuse(T0, stages, t0, h) if self.reuse else self._step_fresh(T0, stages, t0, h)
-        self.wall += time.perf_counter() - w0
-        return T
+    def apply(self, i, T, t):
+        x = self._stages[i][0]
+        return self.ops.K @ T + self.ops.contact_apply(x, T)
 
-    def _step_reuse(self, T0, stages, t0, h):
-        op, tab = self.ops, self.tab
+    def solve(self, i, haii, rhs, t):
+        op = self.ops
         fr, fx = op.free, op.fixed
-        rhs0 = op.M @ T0
+        x = self._stages[i][0]
         T_fix = np.full(fx.size, self.T_fixed)
-        Fs = []
-        T = np.array(T0, float, copy=True)
-        last = len(stages) - 1
-        for i, (x, w) in enumerate(stages):
-            ti = t0 + tab.c[i] * h
-            haii = h * tab.A[i, i]
-            Q = op.joule(x, w, ti)
-            rhs = rhs0 + haii * Q
-            for j in range(i):
-                rhs = rhs - h * tab.A[i, j] * Fs[j]
-            lu, A_fc, A = self._base(haii)
-            T = np.empty(op.n)
-            T[fx] = T_fix
-            T[fr] = lu.solve(rhs[fr] - A_fc @ T_fix)
-            self.solves += 1
-            if op.contact_triplets(x)[2].size:  # active pairs (or, impact, the projectile sink)
-                T = self._refine(T, rhs, lu, A, haii, x)
-            if i < last:  # F of the last stage is not needed
-                Fs.append(op.K @ T + op.contact_apply(x, T) - Q)
+        lu, A_fc, A = self._base(haii)
+        T = np.empty(op.n)
+        T[fx] = T_fix
+        T[fr] = lu.solve(rhs[fr] - A_fc @ T_fix)
+        self.solves += 1
+        if op.contact_triplets(x)[2].size:  # active pairs (or, impact, the projectile sink)
+            T = self._refine(T, rhs, lu, A, haii, x)
         return T
 
     def _refine(self, T, rhs, lu, A, haii, x):
@@ -270,40 +263,49 @@ class ThermalPostSolver:
             prev = nd
         # not contracting (a contact much stiffer than the capacity): a direct solve of A
         self.fallbacks += 1
-        blocks = op.contact_blocks(x)
-        Kff, Kfc = blocks
+        Kff, Kfc = op.contact_blocks(x)
         T_fix = T[op.fixed]
         rhs_f = rhs[fr] - (op.M_fc + haii * (op.K_fc + Kfc)) @ T_fix
         T[fr] = spla.spsolve((op.M_ff + haii * (op.K_ff + Kff)).tocsc(), rhs_f)
         self.solves += 1
         return T
 
-    def _step_fresh(self, T0, stages, t0, h):
-        """The plain reference (class docstring): nothing memoised or kept but the base factor."""
-        op, tab = self.ops, self.tab
+
+class FreshStages(KeptFactorStages):
+    """The plain reference of :class:`KeptFactorStages`: a fresh ``spsolve`` of the stage
+    matrix at every stage with active pairs, Joule by ``BeamModel.joule_power`` and the
+    contact matrix by ``scalar_jump`` at every stage; only the base factor is kept (the
+    reference of tests/test_induced_deformation.py)."""
+
+    def __init__(self, ops: ThermalOperators, T_fixed: float = 0.0):
+        super().__init__(ops, T_fixed)
+        self._Kc: dict = {}
+
+    def drive(self, stages) -> None:
+        super().drive(stages)
+        self._Kc = {}
+
+    def source(self, i, t):
+        return self.ops.base.joule_power(*self._fabric(*self._stages[i]), t)
+
+    def apply(self, i, T, t):
+        return self.ops.K @ T + self._Kc[i] @ T
+
+    def solve(self, i, haii, rhs, t):
+        op = self.ops
         fr, fx = op.free, op.fixed
-        MT0 = op.M @ T0
-        Fs = []
         T_fix = np.full(fx.size, self.T_fixed)
-        for i, (x, w) in enumerate(stages):
-            ti = t0 + tab.c[i] * h
-            haii = h * tab.A[i, i]
-            Q = op.base.joule_power(*self._fabric(x, w), ti)
-            rhs = MT0 + haii * Q
-            for j in range(i):
-                rhs = rhs - h * tab.A[i, j] * Fs[j]
-            Kc = self._contact_fresh(x)
-            rhs_f = rhs[fr] - (op.M_fc + haii * op.K_fc) @ T_fix
-            T = np.empty(op.n)
-            T[fx] = T_fix
-            if Kc.nnz == 0:
-                T[fr] = self._base(haii)[0].solve(rhs_f)
-            else:
-                Kff, Kfc = Kc[fr][:, fr].tocsc(), Kc[fr][:, fx].tocsr()
-                rhs_f = rhs_f - haii * (Kfc @ T_fix)
-                T[fr] = spla.spsolve((op.M_ff + haii * (op.K_ff + Kff)).tocsc(), rhs_f)
-            self.solves += 1
-            Fs.append(op.K @ T + Kc @ T - Q)
+        Kc = self._Kc[i] = self._contact_fresh(self._stages[i][0])
+        rhs_f = rhs[fr] - (op.M_fc + haii * op.K_fc) @ T_fix
+        T = np.empty(op.n)
+        T[fx] = T_fix
+        if Kc.nnz == 0:
+            T[fr] = self._base(haii)[0].solve(rhs_f)
+        else:
+            Kff, Kfc = Kc[fr][:, fr].tocsc(), Kc[fr][:, fx].tocsr()
+            rhs_f = rhs_f - haii * (Kfc @ T_fix)
+            T[fr] = spla.spsolve((op.M_ff + haii * (op.K_ff + Kff)).tocsc(), rhs_f)
+        self.solves += 1
         return T
 
     def _fabric(self, x, w):
@@ -338,3 +340,42 @@ class ThermalPostSolver:
                 K = sp.csr_matrix((Ju.ravel(), (np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel())),
                                   shape=(n, n))
         return K if extra is None else (K + extra).tocsr()
+
+
+class StageHeatSystem:
+    """The heat equation of one mechanical/electrical step as a ``DynamicSystem`` (all dofs
+    T, none mechanical): ``M dT/dt + (K + K_c(x_i)) T - Q(x_i, w_i, t_i) = 0`` at the stage
+    times ``t0 + c_i h``, each stage taking the contact matrix and the Joule heat of its own
+    mechanical/electrical stage state."""
+
+    def __init__(self, ops: ThermalOperators, T_fixed: float):
+        self.ops = ops
+        self.n = ops.n
+        self.mech = np.zeros(ops.n, bool)
+        self._fixed_values = np.full(ops.fixed.size, float(T_fixed))
+        self._zero = sp.csr_matrix((ops.n, ops.n))
+        self._times = np.zeros(0)
+        self._stages: list = []
+
+    def drive(self, stages, t0: float, h: float, tableau) -> None:
+        """The stage states ``[(x_i, w_i)]`` of the step from ``t0`` of size ``h``."""
+        self._stages = list(stages)
+        self._times = t0 + np.asarray(tableau.c, float)[: len(self._stages)] * h
+
+    def mass(self):
+        return self.ops.M
+
+    def constraints(self, t):
+        return self.ops.fixed, self._fixed_values
+
+    def admissible(self, x) -> bool:
+        return True
+
+    def evaluate(self, x, w, t, jacobian: bool = True):
+        xi, wi = self._stages[int(np.argmin(np.abs(self._times - t)))]
+        op = self.ops
+        F = op.K @ w + op.contact_apply(xi, w) - op.joule(xi, wi, t)
+        if not jacobian:
+            return F, None, None
+        return F, self._zero, (op.K + op.contact(xi)).tocsr()
+

@@ -36,22 +36,22 @@ def neo_hookean_energy(F, mu, lam, det=None):
     return 0.5 * mu * ((a * a).sum(axis=-1) - 3.0) - mu * lnJ + 0.5 * lam * lnJ * lnJ
 
 
-def neo_hookean_stress(F, mu, lam):
+def _stress_parts(F, mu, lam):
+    """(P, F^-T, ln J, mu and lam broadcast to F's batch shape) of the compressible neo-Hookean law."""
     Finv, J = inv_det3(F)
     lnJ = np.log(J)
     FinvT = np.swapaxes(Finv, -1, -2)
     mu_ = _b(mu, F)
     lam_ = _b(lam, F)
-    return mu_ * (F - FinvT) + lam_ * lnJ[..., None, None] * FinvT
+    return mu_ * (F - FinvT) + lam_ * lnJ[..., None, None] * FinvT, FinvT, lnJ, mu_, lam_
+
+
+def neo_hookean_stress(F, mu, lam):
+    return _stress_parts(F, mu, lam)[0]
 
 
 def neo_hookean_tangent(F, mu, lam):
-    Finv, J = inv_det3(F)
-    lnJ = np.log(J)
-    FinvT = np.swapaxes(Finv, -1, -2)
-    mu_ = _b(mu, F)
-    lam_ = _b(lam, F)
-    P = mu_ * (F - FinvT) + lam_ * lnJ[..., None, None] * FinvT
+    P, FinvT, lnJ, mu_, lam_ = _stress_parts(F, mu, lam)
     c1 = (mu_ - lam_ * lnJ[..., None, None])[..., None, None]
     # A[i,J,k,L] = mu d_ik d_JL + (mu - lam lnJ) Finv[J,k] Finv[L,i] + lam Finv[J,i] Finv[L,k]
     A = c1 * (FinvT[..., :, :, None, None] * FinvT[..., None, None, :, :]).transpose(

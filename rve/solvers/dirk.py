@@ -328,13 +328,19 @@ class DirkStepper:
     ``watch_structure`` False: the system's ``structure_token`` does not drop the held
     factorisation (``integrate`` with a ``rebuild`` hook: the hook reports structure
     changes and the step control restarts on a fresh stepper).
+
+    ``linear_stages``: the stage solves of a linear system without mechanical dofs
+    (``F(w, t) = L_i w - q_i``; e.g. ``rve.model.thermal_post.KeptFactorStages``) instead of
+    Newton: ``source(i, t) -> q_i``, ``solve(i, h a_ii, rhs, t) -> w_i`` of
+    ``(M + h a_ii L_i) w_i = rhs`` with the constraints, ``apply(i, w, t) -> L_i w``.
     """
 
     def __init__(self, system, tableau: Tableau, newton_opts: Optional[dict] = None,
                  predictor_degree: int = 2, lazy_jacobian: bool = True, jacobian_reuse=False,
                  reuse_contraction: float = 0.5, reuse_h_rtol: float = 0.1, linear_backend: Optional[str] = None,
-                 watch_structure: bool = True):
+                 watch_structure: bool = True, linear_stages=None):
         self.system = system
+        self.linear_stages = linear_stages
         self.watch_structure = bool(watch_structure)
         if jacobian_reuse not in (False, True, "auto"):
             raise ValueError(f"jacobian_reuse must be False, True or 'auto', not {jacobian_reuse!r}")
@@ -361,6 +367,8 @@ class DirkStepper:
 
     def step(self, x0, w0, t0: float, h: float):
         """One step from (x0, w0, t0) of size h -> (x1, w1, StepInfo); raises StepFailure."""
+        if self.linear_stages is not None:
+            return self._linear_step(np.asarray(x0, float), np.asarray(w0, float), t0, h)
         sysm, tab, M, mechf = self.system, self.tableau, self.M, self.mechf
         x0 = np.asarray(x0, float)
         w0 = np.asarray(w0, float)
@@ -425,6 +433,27 @@ class DirkStepper:
             info.stage_contractions.append(list(r.contractions))
         info.rejected_reuses = counts["rejected_reuses"]
         return xi, W[-1], info
+
+    def _linear_step(self, x0, w0, t0: float, h: float):
+        """One step of a linear system without mechanical dofs, ``F(w, t) = L_i w - q_i`` at
+        stage i, by ``linear_stages`` (class docstring): stage i solves
+        ``(M + h a_ii L_i) w_i = M w0 + h a_ii q_i - sum_j h a_ij F_j`` (summed in that order)."""
+        tab, lin = self.tableau, self.linear_stages
+        rhs0 = self.M @ w0
+        Fs, states = [], []
+        s = tab.stages
+        for i in range(s):
+            ti = t0 + tab.c[i] * h
+            haii = h * tab.A[i, i]
+            q = lin.source(i, ti)
+            rhs = rhs0 + haii * q
+            for j in range(i):
+                rhs = rhs - h * tab.A[i, j] * Fs[j]
+            w = lin.solve(i, haii, rhs, ti)
+            states.append((x0, w))
+            if i < s - 1:  # the last stage's F is not needed (stiffly accurate)
+                Fs.append(lin.apply(i, w, ti) - q)
+        return x0, w, StepInfo(t0, h, [0] * s, [[] for _ in range(s)], stage_states=states)
 
     def _stage_functions(self, ti, haii, xhat, rhs, fd, wi):
         """``(state, fun, residual, admissible, cache)`` of one stage: the state of the free

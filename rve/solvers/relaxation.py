@@ -51,6 +51,7 @@ dynamic, static, total), iteration counts, and the last static ``NewtonResult``
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -58,7 +59,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .dirk import IntegrationFailure, integrate
+from .dirk import IntegrationFailure, integrate, integrator_options
 from .minimize import active_pair_keys, capped_newton, minimize_energy
 from .newton import NewtonResult
 from .static import pseudo_transient_solve
@@ -89,6 +90,9 @@ class RelaxSettings:
     time_budget: Optional[float] = None
     backtrack: int = 3
     linear_backend: Optional[str] = None   # None: $RVE_LINEAR_BACKEND, else auto (rve.solvers.linear)
+    #: flat ``rve.solvers.dirk.integrator_options`` of the dynamic phase's ``integrate`` calls
+    #: (e.g. ``{"jacobian_reuse": True}``); empty: the integrator's defaults
+    integrator_options: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -103,6 +107,9 @@ class RelaxResult:
     static_newton_iterations: int = 0
     static_converged: bool = False
     static_result: object = None
+    #: the ``IntegrationResult`` of every ``integrate`` call of the dynamic phase, counts only
+    #: (states and step history dropped)
+    integrations: list = field(default_factory=list)
 
 
 def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Optional[Callable] = None,
@@ -154,12 +161,13 @@ def _relax_dynamic(system, x, w, t, s: RelaxSettings, out: RelaxResult, on_rebui
         system.rebuild(x)
         try:
             res = integrate(system, x, w, t, t + m * h, m, stages=1, newton_opts=nopts, consistent=False,
-                            on_step=on_step)
+                            on_step=on_step, **integrator_options(**s.integrator_options))
         except IntegrationFailure as exc:
             log.warning("dynamic relaxation stopped at t = %.4g: %s", exc.t, exc)
             x, w, t = exc.x, exc.w, exc.t
             break
         x, w, t = res.x, res.w, res.t
+        out.integrations.append(dataclasses.replace(res, x=None, w=None, history=[]))
         done += m
         chunk += 1
         out.dynamic_steps += res.steps

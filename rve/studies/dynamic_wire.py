@@ -82,14 +82,17 @@ def load_scene_config(path=None, overrides: Sequence[str] = ()):
     return load_config(source, list(overrides))
 
 
-def run_point(cfg, stages: int, steps: int) -> dict:
-    """One fixed-step run -> record (probes at t_max, wall time, Newton iterations)."""
+def run_point(cfg, stages: int, steps: int, integrator_options: Optional[Mapping] = None) -> dict:
+    """One fixed-step run -> record (probes at t_max, wall time, Newton iterations);
+    ``integrator_options`` (flat ``rve.solvers.dirk.integrator_options`` names, e.g.
+    ``{"jacobian_reuse": True}``) go to the scene's ``integrate``."""
     from ..scenes.dynamic_wire import solve
     from ..scenes.protocol import SceneFailure
 
     t0 = time.perf_counter()
     try:
-        out = solve(cfg, stages=stages, steps=steps, fixed_step=True, record=True).summary
+        out = solve(cfg, stages=stages, steps=steps, fixed_step=True, record=True,
+                    integrator_options=dict(integrator_options or {})).summary
     except SceneFailure as exc:  # a fixed-step run that cannot be done: recorded as NaN
         log.warning("s = %d, N = %d failed: %s", stages, steps, exc)
         return {"stages": int(stages), "steps": int(steps), "failed": str(exc),
@@ -106,32 +109,34 @@ def run_point(cfg, stages: int, steps: int) -> dict:
             "dofs": out["dofs"], "V_half_initial": out["V_half_initial"], "t_max": float(cfg.time.t_max)}
 
 
-def run_series(cfg, stages: int, steps: Sequence[int]) -> list:
-    return [run_point(cfg, stages, n) for n in steps]
+def run_series(cfg, stages: int, steps: Sequence[int], integrator_options: Optional[Mapping] = None) -> list:
+    return [run_point(cfg, stages, n, integrator_options) for n in steps]
 
 
-def run_reference(cfg, stages: int = 3, steps: int = 1500) -> dict:
-    rec = run_point(cfg, stages, steps)
+def run_reference(cfg, stages: int = 3, steps: int = 1500, integrator_options: Optional[Mapping] = None) -> dict:
+    rec = run_point(cfg, stages, steps, integrator_options)
     rec["reference"] = True
     return rec
 
 
 def _task(args):
-    kind, cfg_path, overrides, s, steps = args
+    kind, cfg_path, overrides, s, steps, options = args
     cfg = load_scene_config(cfg_path, overrides)
     if kind == "reference":
-        return [run_reference(cfg, s, steps)]
-    return [run_point(cfg, s, steps)]
+        return [run_reference(cfg, s, steps, options)]
+    return [run_point(cfg, s, steps, options)]
 
 
-def run_study(plan: Optional[Mapping] = None, workers: int = 2) -> tuple:
-    """All runs of the plan on ``workers`` processes. Returns (dataset, timings)."""
+def run_study(plan: Optional[Mapping] = None, workers: int = 2, integrator_options: Optional[Mapping] = None) -> tuple:
+    """All runs of the plan on ``workers`` processes, ``integrator_options`` given to every
+    run (``run_point``). Returns (dataset, timings)."""
+    options = dict(integrator_options or {})
     plan = normalise_plan(plan)
     ref = plan["reference"]
-    tasks = [("reference", plan["scene_config"], plan["overrides"], ref["stages"], ref["steps"])]
+    tasks = [("reference", plan["scene_config"], plan["overrides"], ref["stages"], ref["steps"], options)]
     for s, ser in plan["series"].items():
         for n in ser["steps"]:
-            tasks.append(("point", plan["scene_config"], plan["overrides"], s, n))
+            tasks.append(("point", plan["scene_config"], plan["overrides"], s, n, options))
     tasks.sort(key=lambda t: -t[3] * t[4])  # longest (stages x steps) first
     t0 = time.perf_counter()
     records = []

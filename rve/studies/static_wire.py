@@ -39,6 +39,7 @@ import numpy as np
 from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
 from ..io.provenance import cf_attributes, logging_to, package_version, to_jsonable
 from .convergence import fit_order, fit_points
+from .layout import point_name, radius_token, study_points
 
 __all__ = [
     "PARITIES",
@@ -74,41 +75,11 @@ _DIMLESS = "1"  # CF/udunits unit of a dimensionless number
 
 
 # --------------------------------------------------------------------------- study design
-def radius_token(radius: float) -> str:
-    """The radius (mm) as it appears in file names and wildcards: ``0.02``, ``0.005``."""
-    return format(float(radius), "g")
-
-
-def point_name(order: int, elements: int, radius: float) -> str:
-    """File stem of one solve: ``p2_N40_R0.02``."""
-    return f"p{int(order)}_N{int(elements)}_R{radius_token(radius)}"
-
-
 def point_overrides(order: int, elements: int, radius: float, overrides: Iterable[str] = ()) -> list[str]:
     """Scene-config overrides of one study point (radius in mm); the study's own overrides
     come first so that the point's order, N and R always win."""
     return [*overrides, f"mesh.order={int(order)}", f"mesh.elements={int(elements)}",
             f"fibril.radius={radius_token(radius)} mm"]
-
-
-def study_points(study: Mapping) -> list[tuple[int, int, float]]:
-    """Every solve ``(order, elements, radius_mm)`` of the study (radius sweep and
-    convergence series), without duplicates, sorted by radius (descending), p, N."""
-    points: dict[tuple[int, int, str], tuple[int, int, float]] = {}
-
-    def add(p, n, r):
-        points.setdefault((int(p), int(n), radius_token(r)), (int(p), int(n), float(r)))
-
-    sweep = study.get("radius_sweep")
-    if sweep:
-        for r in sweep["radii_mm"]:
-            add(sweep["order"], sweep["elements"], r)
-    conv = study.get("convergence")
-    if conv:
-        for series in conv["series"]:
-            for n in series["elements"]:
-                add(series["order"], n, conv["radius_mm"])
-    return sorted(points.values(), key=lambda t: (-t[2], t[0], t[1]))
 
 
 def _range_pair(value: Any) -> tuple[int, int]:
@@ -307,11 +278,23 @@ def build_dataset(records: Iterable[Union[Mapping, PathLike]], *, convergence_ra
     |c - c_ref| at the convergence radius (default: the radius with the most points), c_ref
     the reference solution there (default: highest converged p, then largest N);
     ``error_vs_analytical`` is |c - c_analytical| everywhere."""
-    import xarray as xr
-
     recs = _load_records(records)
     if not recs:
         raise ValueError("build_dataset: no records")
+    ds = _point_grid(recs)
+    ref_p, ref_n, r_sel = _add_errors(ds, convergence_radius, reference)
+    # flag variable: make the meaning machine-readable too (CF flags)
+    ds["converged"].attrs.update({"flag_values": np.array([0, 1], dtype=np.int8),
+                                  "flag_meanings": "failed converged"})
+    _add_attributes(ds, recs, f"p={ref_p}, N={ref_n}, R={radius_token(r_sel)} mm", r_sel, provenance)
+    return ds
+
+
+def _point_grid(recs: list):
+    """The Dataset of the ``_VARIABLES`` of the records on the (order, elements, radius)
+    grid (radii descending), NaN where no record is."""
+    import xarray as xr
+
     orders = sorted({int(r["order"]) for r in recs})
     elements = sorted({int(r["elements"]) for r in recs})
     radii = sorted({float(radius_token(r["radius"])) for r in recs}, reverse=True)
@@ -339,9 +322,16 @@ def build_dataset(records: Iterable[Union[Mapping, PathLike]], *, convergence_ra
         "h": ("elements", 2.0 / np.asarray(elements, dtype=float),
               {"units": _DIMLESS, "long_name": "element length h = 2L/N divided by the half-length L"}),
     }
-    ds = xr.Dataset(data, coords=coords)
+    return xr.Dataset(data, coords=coords)
 
-    # reference solution and errors
+
+def _add_errors(ds, convergence_radius: Optional[float], reference: Optional[tuple[int, int]]):
+    """Add ``error``, ``error_vs_analytical`` and ``reference_centre_displacement`` to the
+    grid; returns the reference (p, N) and the convergence radius."""
+    import xarray as xr
+
+    orders, elements = [int(p) for p in ds["order"].values], [int(n) for n in ds["elements"].values]
+    radii = [float(r) for r in ds["radius"].values]
     c = ds["centre_displacement"]
     if convergence_radius is None:
         counts = np.isfinite(c.values).sum(axis=(0, 1))
@@ -361,9 +351,8 @@ def build_dataset(records: Iterable[Union[Mapping, PathLike]], *, convergence_ra
     c_ref = float(at_r.sel(order=ref_p, elements=ref_n))
     if not math.isfinite(c_ref):
         raise ValueError(f"reference p={ref_p} N={ref_n} R={r_sel} mm has no converged solution")
-    err = np.full(shape, np.nan)
-    ir = radii.index(r_sel)
-    err[:, :, ir] = np.abs(at_r.values - c_ref)
+    err = np.full(c.shape, np.nan)
+    err[:, :, radii.index(r_sel)] = np.abs(at_r.values - c_ref)
     ds["error"] = xr.Variable(("order", "elements", "radius"), err, attrs={
         "units": _DIMLESS,
         "long_name": "|centre displacement - reference centre displacement| divided by L "
@@ -381,10 +370,11 @@ def build_dataset(records: Iterable[Union[Mapping, PathLike]], *, convergence_ra
         "long_name": f"centre displacement of the reference solution (p={ref_p}, N={ref_n}, "
                      f"R={radius_token(r_sel)} mm) divided by L",
     })
-    # flag variable: make the meaning machine-readable too (CF flags)
-    ds["converged"].attrs.update({"flag_values": np.array([0, 1], dtype=np.int8),
-                                  "flag_meanings": "failed converged"})
+    return ref_p, ref_n, r_sel
 
+
+def _add_attributes(ds, recs: list, reference_solution: str, r_sel: float, provenance: Optional[Mapping]) -> None:
+    """The CF attributes, the scene config of the study and the caller's provenance."""
     n_failed = int(np.nansum(ds["converged"].values == 0))
     ds.attrs.update(cf_attributes(
         title="Static wire verification study (thesis section 6.3): radius sweep and "
@@ -394,7 +384,7 @@ def build_dataset(records: Iterable[Union[Mapping, PathLike]], *, convergence_ra
                    "docs/verification_static_wire.md",
         history="rve.studies.static_wire.build_dataset",
         source_revision=_git_revision(),
-        reference_solution=f"p={ref_p}, N={ref_n}, R={radius_token(r_sel)} mm",
+        reference_solution=reference_solution,
         convergence_radius_mm=r_sel,
         points=len(recs),
         failed_points=n_failed,
@@ -414,7 +404,6 @@ def build_dataset(records: Iterable[Union[Mapping, PathLike]], *, convergence_ra
         ds.attrs["solver_path"] = str(first.get("solver_path", ""))
     for key, value in (provenance or {}).items():
         ds.attrs[key] = value if isinstance(value, (str, int, float)) else json.dumps(to_jsonable(value))
-    return ds
 
 
 def gather_static_wire(records: Iterable[Union[Mapping, PathLike]], out_nc: PathLike, *,

@@ -1,9 +1,11 @@
-# Shared set-up of the rve pipeline: config validation, study helpers, the default targets.
-# Rules live in the other .smk files; they call package functions (rve.studies.*).
+# Shared set-up of the rve pipeline: config validation, the verification studies' layout,
+# the default targets. Rules live in the other .smk files; they call package functions
+# (rve.studies.*), imported in the rule bodies; paths come from rve.studies.layout (no study
+# module is imported at parse time).
 
 from snakemake.utils import validate
 
-from rve.studies import static_wire as static_wire_study
+from rve.studies import layout as study_layout
 
 
 # Snakemake's own YAML load keeps the last of two equal keys (a duplicated section drops the
@@ -25,32 +27,15 @@ wildcard_constraints:
 
 # --------------------------------------------------------------------------- static wire
 STATIC_WIRE = config["verification"]["static_wire"]
-STATIC_WIRE_DIR = "results/verification/static_wire"
-STATIC_WIRE_NC = "results/verification/static_wire.nc"
-STATIC_WIRE_RADIUS_PNG = "results/verification/static_wire_radius.png"
-STATIC_WIRE_CONVERGENCE_PNG = "results/verification/static_wire_convergence.png"
-STATIC_WIRE_ORDERS_CSV = "results/verification/static_wire_orders.csv"
-STATIC_WIRE_ORDERS_MD = "results/verification/static_wire_orders.md"
-
-STATIC_WIRE_OUTPUTS = [
-    STATIC_WIRE_NC,
-    STATIC_WIRE_RADIUS_PNG,
-    STATIC_WIRE_CONVERGENCE_PNG,
-    STATIC_WIRE_ORDERS_CSV,
-    STATIC_WIRE_ORDERS_MD,
-]
+STATIC_WIRE_OUTPUTS = study_layout.STATIC_WIRE_OUTPUTS
 
 
 def static_wire_point_records(wildcards=None):
     """JSON records of every solve of the study (radius sweep and convergence series)."""
     return [
-        f"{STATIC_WIRE_DIR}/points/{static_wire_study.point_name(p, n, r)}.json"
-        for p, n, r in static_wire_study.study_points(STATIC_WIRE)
+        study_layout.static_wire_point(p, n, study_layout.radius_token(r))
+        for p, n, r in study_layout.study_points(STATIC_WIRE)
     ]
-
-
-def resource_mem_mb(key):
-    return config["resources"][key]
 
 
 # --------------------------------------------------------------------------- default target

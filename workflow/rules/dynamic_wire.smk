@@ -1,22 +1,18 @@
 # Dynamic wire time-convergence study (thesis §6.4, Fig. 6.4.4, Table 6.4).
 # Include from the Snakefile after common.smk:   include: "workflow/rules/dynamic_wire.smk"
 # Targets: DYNAMIC_WIRE_OUTPUTS (results/verification/dynamic_wire.nc, the orders table and
-# two plots). The study design is rve.studies.dynamic_wire.DEFAULT_PLAN, updated by the
-# optional pipeline config key verification.dynamic_wire (scene_config, overrides,
-# reference {stages, steps}, series {s: {steps: [...], fit: [lo, hi]}}).
+# two plots). The study design is the pipeline config key verification.dynamic_wire
+# (scene_config, overrides, reference {stages, steps}, series {s: {steps: [...], fit: [lo, hi]}}),
+# its defaults in workflow/schemas/pipeline.schema.yaml; memory from config
+# resources.dynamic_wire_mem_mb; every path from rve.studies.layout; the job bodies
+# (rve.studies.dynamic_wire) are imported in the rule bodies.
 # Jobs: one per scheme (all its step counts in one process: a process start costs more
 # than a short run) and one for the reference, so `snakemake -j2` runs the reference on one
 # core and the three series on the other.
 
-from rve.studies import dynamic_wire as dynamic_wire_study
-
-DYNAMIC_WIRE = dynamic_wire_study.normalise_plan(config.get("verification", {}).get("dynamic_wire"))
-DYNAMIC_WIRE_DIR = "results/verification/dynamic_wire"
-DYNAMIC_WIRE_NC = "results/verification/dynamic_wire.nc"
-DYNAMIC_WIRE_ORDERS_MD = "results/verification/dynamic_wire_orders.md"
-DYNAMIC_WIRE_ERRORS_PNG = "results/verification/dynamic_wire_errors.png"
-DYNAMIC_WIRE_WORK_PNG = "results/verification/dynamic_wire_work_precision.png"
-DYNAMIC_WIRE_OUTPUTS = [DYNAMIC_WIRE_NC, DYNAMIC_WIRE_ORDERS_MD, DYNAMIC_WIRE_ERRORS_PNG, DYNAMIC_WIRE_WORK_PNG]
+DYNAMIC_WIRE = config["verification"]["dynamic_wire"]
+DYNAMIC_WIRE_SERIES = {int(s): series for s, series in DYNAMIC_WIRE["series"].items()}
+DYNAMIC_WIRE_OUTPUTS = study_layout.DYNAMIC_WIRE_OUTPUTS
 
 
 wildcard_constraints:
@@ -28,11 +24,11 @@ rule dynamic_wire_reference:
     input:
         scene=DYNAMIC_WIRE["scene_config"],
     output:
-        record=f"{DYNAMIC_WIRE_DIR}/reference.json",
+        record=study_layout.dynamic_wire_reference(),
     log:
-        "results/logs/verification/dynamic_wire/reference.log",
+        study_layout.log_path("dynamic_wire", "reference"),
     benchmark:
-        "results/benchmarks/verification/dynamic_wire/reference.tsv"
+        study_layout.benchmark_path("dynamic_wire", "reference")
     params:
         overrides=DYNAMIC_WIRE["overrides"],
         stages=DYNAMIC_WIRE["reference"]["stages"],
@@ -42,7 +38,9 @@ rule dynamic_wire_reference:
     resources:
         mem_mb=config["resources"]["dynamic_wire_mem_mb"],
     run:
-        dynamic_wire_study.reference_job(
+        from rve.studies.dynamic_wire import reference_job
+
+        reference_job(
             output.record, log[0], input.scene, params.overrides, params.stages, params.steps
         )
 
@@ -52,19 +50,21 @@ rule dynamic_wire_series:
     input:
         scene=DYNAMIC_WIRE["scene_config"],
     output:
-        records=f"{DYNAMIC_WIRE_DIR}/series_s{{dw_stages}}.json",
+        records=study_layout.dynamic_wire_series("{dw_stages}"),
     log:
-        "results/logs/verification/dynamic_wire/series_s{dw_stages}.log",
+        study_layout.log_path("dynamic_wire", "series_s{dw_stages}"),
     benchmark:
-        "results/benchmarks/verification/dynamic_wire/series_s{dw_stages}.tsv"
+        study_layout.benchmark_path("dynamic_wire", "series_s{dw_stages}")
     params:
         overrides=DYNAMIC_WIRE["overrides"],
-        steps=lambda wc: DYNAMIC_WIRE["series"][int(wc.dw_stages)]["steps"],
+        steps=lambda wc: DYNAMIC_WIRE_SERIES[int(wc.dw_stages)]["steps"],
     threads: 1
     resources:
         mem_mb=config["resources"]["dynamic_wire_mem_mb"],
     run:
-        dynamic_wire_study.series_job(
+        from rve.studies.dynamic_wire import series_job
+
+        series_job(
             output.records, log[0], input.scene, params.overrides, int(wildcards.dw_stages), params.steps
         )
 
@@ -73,24 +73,26 @@ rule dynamic_wire_study:
     """Gather -> results/verification/dynamic_wire.nc (dims stages x steps, fitted orders),
     the orders table and the error / work-precision plots."""
     input:
-        series=expand(f"{DYNAMIC_WIRE_DIR}/series_s{{s}}.json", s=sorted(DYNAMIC_WIRE["series"])),
-        reference=f"{DYNAMIC_WIRE_DIR}/reference.json",
+        series=[study_layout.dynamic_wire_series(s) for s in sorted(DYNAMIC_WIRE_SERIES)],
+        reference=study_layout.dynamic_wire_reference(),
     output:
-        nc=DYNAMIC_WIRE_NC,
-        orders_md=DYNAMIC_WIRE_ORDERS_MD,
-        errors_png=DYNAMIC_WIRE_ERRORS_PNG,
-        work_png=DYNAMIC_WIRE_WORK_PNG,
+        nc=study_layout.DYNAMIC_WIRE_NC,
+        orders_md=study_layout.DYNAMIC_WIRE_ORDERS_MD,
+        errors_png=study_layout.DYNAMIC_WIRE_ERRORS_PNG,
+        work_png=study_layout.DYNAMIC_WIRE_WORK_PNG,
     log:
-        "results/logs/verification/dynamic_wire/study.log",
+        study_layout.log_path("dynamic_wire", "study"),
     benchmark:
-        "results/benchmarks/verification/dynamic_wire/study.tsv"
+        study_layout.benchmark_path("dynamic_wire", "study")
     params:
         plan=DYNAMIC_WIRE,
     threads: 1
     resources:
         mem_mb=config["resources"]["dynamic_wire_mem_mb"],
     run:
-        dynamic_wire_study.gather_job(
+        from rve.studies.dynamic_wire import gather_job
+
+        gather_job(
             input.series, input.reference, output.nc, output.orders_md, output.errors_png, output.work_png,
             params.plan,
         )

@@ -1,4 +1,5 @@
-# Verification studies (thesis ch. 6). Each rule is a thin call into rve.studies.*.
+# Verification studies (thesis ch. 6). Each rule is a thin call into rve.studies.*, imported in
+# the rule body; every path from rve.studies.layout; memory from config resources.
 
 
 rule static_wire_point:
@@ -6,20 +7,22 @@ rule static_wire_point:
     input:
         scene=STATIC_WIRE["scene_config"],
     output:
-        record=f"{STATIC_WIRE_DIR}/points/p{{order}}_N{{elements}}_R{{radius}}.json",
+        record=study_layout.static_wire_point("{order}", "{elements}", "{radius}"),
     log:
-        "results/logs/verification/static_wire/points/p{order}_N{elements}_R{radius}.log",
+        study_layout.log_path("static_wire", "points/p{order}_N{elements}_R{radius}"),
     benchmark:
-        "results/benchmarks/verification/static_wire/points/p{order}_N{elements}_R{radius}.tsv"
+        study_layout.benchmark_path("static_wire", "points/p{order}_N{elements}_R{radius}")
     params:
         overrides=STATIC_WIRE["overrides"],
         keep_failure=STATIC_WIRE["keep_failed_points"],
     threads: 1
     resources:
-        mem_mb=resource_mem_mb("static_wire_point_mem_mb"),
+        mem_mb=config["resources"]["static_wire_point_mem_mb"],
         runtime=config["resources"]["static_wire_point_runtime_min"],
     run:
-        static_wire_study.point_job(
+        from rve.studies.static_wire import point_job
+
+        point_job(
             output.record, log[0], input.scene, wildcards, params.overrides, params.keep_failure
         )
 
@@ -29,42 +32,46 @@ rule static_wire_gather:
     input:
         records=static_wire_point_records,
     output:
-        nc=STATIC_WIRE_NC,
+        nc=study_layout.STATIC_WIRE_NC,
     log:
-        "results/logs/verification/static_wire/gather.log",
+        study_layout.log_path("static_wire", "gather"),
     benchmark:
-        "results/benchmarks/verification/static_wire/gather.tsv"
+        study_layout.benchmark_path("static_wire", "gather")
     params:
         study=STATIC_WIRE,
     threads: 1
     resources:
-        mem_mb=resource_mem_mb("gather_mem_mb"),
+        mem_mb=config["resources"]["gather_mem_mb"],
         runtime=config["resources"]["gather_runtime_min"],
     run:
-        static_wire_study.gather_job(input.records, output.nc, log[0], params.study)
+        from rve.studies.static_wire import gather_job
+
+        gather_job(input.records, output.nc, log[0], params.study)
 
 
 rule static_wire_report:
     """Radius-sweep and convergence plots and the fitted-orders table from the netCDF."""
     input:
-        nc=STATIC_WIRE_NC,
+        nc=study_layout.STATIC_WIRE_NC,
     output:
-        radius_png=STATIC_WIRE_RADIUS_PNG,
-        convergence_png=STATIC_WIRE_CONVERGENCE_PNG,
-        orders_csv=STATIC_WIRE_ORDERS_CSV,
-        orders_md=STATIC_WIRE_ORDERS_MD,
+        radius_png=study_layout.STATIC_WIRE_RADIUS_PNG,
+        convergence_png=study_layout.STATIC_WIRE_CONVERGENCE_PNG,
+        orders_csv=study_layout.STATIC_WIRE_ORDERS_CSV,
+        orders_md=study_layout.STATIC_WIRE_ORDERS_MD,
     log:
-        "results/logs/verification/static_wire/report.log",
+        study_layout.log_path("static_wire", "report"),
     benchmark:
-        "results/benchmarks/verification/static_wire/report.tsv"
+        study_layout.benchmark_path("static_wire", "report")
     params:
         study=STATIC_WIRE,
     threads: 1
     resources:
-        mem_mb=resource_mem_mb("gather_mem_mb"),
+        mem_mb=config["resources"]["gather_mem_mb"],
         runtime=config["resources"]["gather_runtime_min"],
     run:
-        static_wire_study.report_job(
+        from rve.studies.static_wire import report_job
+
+        report_job(
             input.nc,
             output.radius_png,
             output.convergence_png,

@@ -52,7 +52,7 @@ from .record import (ImpactCheckpoint, ImpactRecorder, angular_velocity, impact_
                             wall_split)
 from .thermal import ImpactThermal
 from ..rebuild import ChunkedRebuild
-from ...model.thermal_post import ThermalPostSolver
+from ..thermal_post import ThermalPostSolver
 from ..induced.scene import warp_circuit
 from ...fabrics.taut import chord_clearance, taut_weave, weave_with_chord_clearance
 from ..protocol import SceneFailure, SceneResult

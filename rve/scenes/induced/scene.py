@@ -52,7 +52,8 @@ from ...model import RowScaledSystem
 from ...solvers.dirk import IntegrationFailure, integrate, sdirk
 from ...solvers.dirk import integrator_options as integrator_options_of
 from ...model.balances import StateBalances
-from ...model.thermal_post import ThermalOperators, ThermalPostSolver
+from ...model.thermal_post import ThermalOperators
+from ..thermal_post import ThermalPostSolver
 from .record import InducedRecorder, induced_summary
 from ..rebuild import MapRebuild
 from ...fabrics.slack import slack_weave
