@@ -20,6 +20,11 @@ Each gather runs in a fresh child process; its wall time and peak RSS (ru_maxrss
 child) are printed, and the two tables are checked to hold the same values.
 
     nice -n 10 python benchmarks/dask_gather.py                  # 200 and 2,000 runs
+    nice -n 10 python benchmarks/dask_gather.py --build --runs 2000 20000   # build_table alone
+
+``--build`` times ``build_table`` alone on the records in memory (no files) for the
+near-square two-parameter grid and for a one-parameter sweep of the same size (1 x N), and
+prints a digest of the table's bits, to compare two commits.
     nice -n 10 python benchmarks/dask_gather.py --runs 200 2000 20000 --lazy-up-to 200
 """
 from __future__ import annotations
@@ -129,6 +134,29 @@ def lazy_gather(table_files: list[Path], out: Path, chunk: int = 64) -> None:
         ds.to_netcdf(out, encoding=enc)
 
 
+def build_only(runs: int, one_d: bool) -> tuple[float, str]:
+    """Seconds of build_table on the in-memory records of ``runs`` runs, and a digest of
+    every variable's bytes and the coordinates (one sweep of N values with ``one_d``)."""
+    import hashlib
+
+    from rve.tables.build import build_table
+    from rve.tables.jobs import gather_records
+
+    rng = np.random.default_rng(0)
+    na, nb = (1, runs) if one_d else sweep_shape(runs)
+    recs = gather_records([r for i in range(na) for j in range(nb) for r in synthetic_records(i, j, rng)], ["uniaxial"])
+    t0 = time.perf_counter()
+    ds = build_table(recs, fabric=FABRIC, config={}, swept=SWEPT)
+    wall = time.perf_counter() - t0
+    digest = hashlib.sha256()
+    for name in sorted(ds.variables):
+        values = ds[name].values
+        # numbers by their bytes; labels (object arrays hold pointers) by their text
+        data = np.ascontiguousarray(values).tobytes() if values.dtype.kind in "biufc" else repr(values.tolist()).encode()
+        digest.update(name.encode() + data)
+    return wall, digest.hexdigest()[:16]
+
+
 def child(kind: str, inputs: Path, out: Path) -> None:
     files = [Path(p) for p in json.loads(inputs.read_text())]
     {"eager": eager_gather, "lazy": lazy_gather, "run_tables": lambda f, o: run_tables(f, o)}[kind](files, out)
@@ -164,6 +192,7 @@ def main() -> int:
     parser.add_argument("--lazy-up-to", type=int, default=2000,
                         help="run the lazy path only up to this many runs (open_mfdataset costs ~0.1-1 s per file here)")
     parser.add_argument("--probes", type=int, default=1, choices=(1, 4), help="probes per state (4: with the network fits)")
+    parser.add_argument("--build", action="store_true", help="time build_table alone (2-D and 1-D sweeps)")
     parser.add_argument("--child", nargs=3, metavar=("KIND", "INPUTS", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     del PROBES[args.probes:]
@@ -171,6 +200,14 @@ def main() -> int:
         child(args.child[0], Path(args.child[1]), Path(args.child[2]))
         return 0
     print(f"{len(PROBES)} probe(s) per state")
+    if args.build:
+        print(f"{'runs':>6} {'sweep':<12} {'build_table s':>14} {'digest':>17}")
+        for runs in sorted(args.runs):
+            for one_d in (False, True):
+                wall, digest = build_only(runs, one_d)
+                shape = f"1 x {runs}" if one_d else "{} x {}".format(*sweep_shape(runs))
+                print(f"{runs:6d} {shape:<12} {wall:14.2f} {digest:>17}", flush=True)
+        return 0
     print(f"{'runs':>6} {'path':<24} {'wall s':>8} {'peak RSS MB':>12} {'table MB':>9}")
     for runs in sorted(args.runs):
         work = Path(tempfile.mkdtemp(prefix=f"rve-gather-{runs}-"))
