@@ -1,6 +1,8 @@
 """rve.probe_executor dask (rve.homogenisation.distributed): the probe records written on a
 dask.distributed LocalCluster are the per-state jobs' records bit for bit (every field but
-the wall times), on the CI run's relaxed state; the task list is the run's record list."""
+the wall times), on the CI run's relaxed state; the task list is the run's record list.
+With a running Slurm cluster (``pytest -m slurm tests/test_probe_dask.py``, after
+``workflow/slurm/local-cluster up``) the same on a dask-jobqueue SLURMCluster."""
 from __future__ import annotations
 
 import json
@@ -45,18 +47,44 @@ def test_unknown_cluster_kind_is_named():
             pass
 
 
-def test_dask_records_equal_the_per_state_jobs_records(tmp_path):
-    pytest.importorskip("dask.distributed")
+def _records_on(cluster: str, folder: Path):
+    """The CI relaxed state's record by probe_job and by a one-worker dask ``cluster``."""
     from rve.homogenisation.distributed import ProbeTask, run_probe_tasks
     from rve.homogenisation.jobs import fabric_job, probe_job, relax_job
 
     spec = _ci_spec()
-    fabric_job(tmp_path / "initial.nc", None, spec, "base")
-    relax_job(tmp_path / "initial.nc", tmp_path / "relaxed.nc", None, spec, "base")
-    probe_job(tmp_path / "relaxed.nc", tmp_path / "job.json", None, spec, "base")
-    task = ProbeTask(str(tmp_path / "relaxed.nc"), str(tmp_path / "dask.json"), str(tmp_path / "dask.log"), "base",
-                     str(tmp_path / "tubes.vtp"))
-    assert run_probe_tasks([task], spec, "local", workers=1) == [task.record]
+    fabric_job(folder / "initial.nc", None, spec, "base")
+    relax_job(folder / "initial.nc", folder / "relaxed.nc", None, spec, "base")
+    probe_job(folder / "relaxed.nc", folder / "job.json", None, spec, "base")
+    task = ProbeTask(str(folder / "relaxed.nc"), str(folder / "dask.json"), str(folder / "dask.log"), "base",
+                     str(folder / "tubes.vtp"))
+    written = run_probe_tasks([task], spec, cluster, workers=1, mem_mb=1500, runtime_min=10)
+    return spec, task, written
+
+
+@pytest.mark.slurm
+def test_slurm_cluster_records_equal_the_per_state_jobs_records(tmp_path):
+    pytest.importorskip("dask_jobqueue")
+    import sys
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import cluster_sweep as C
+
+    reason = C.cluster_up()
+    if reason:
+        pytest.skip(f"no Slurm cluster ({reason}); start one with workflow/slurm/local-cluster up")
+    _, task, written = _records_on("slurm", tmp_path)
+    assert written == [task.record]
+    job, dask = (json.loads((tmp_path / f).read_text()) for f in ("job.json", "dask.json"))
+    assert _without_wall_times(dask) == _without_wall_times(job)
+
+
+def test_dask_records_equal_the_per_state_jobs_records(tmp_path):
+    pytest.importorskip("dask.distributed")
+    from rve.homogenisation.distributed import run_probe_tasks
+
+    spec, task, written = _records_on("local", tmp_path)
+    assert written == [task.record]
     job, dask = (json.loads((tmp_path / f).read_text()) for f in ("job.json", "dask.json"))
     assert _without_wall_times(dask) == _without_wall_times(job)
     assert (tmp_path / "dask.log").read_text()  # the task logged to its own file
