@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import tempfile
 from pathlib import Path
 from typing import Iterator, Mapping, NamedTuple, Optional, Sequence
 
@@ -69,8 +70,10 @@ def _probe(task: ProbeTask, spec: Mapping) -> str:
 
 
 @contextlib.contextmanager
-def dask_cluster(kind: str, workers: int, mem_mb: int = 1500, runtime_min: int = 60) -> Iterator:
-    """A running cluster of ``workers`` single-threaded workers, closed on exit."""
+def dask_cluster(kind: str, workers: int, mem_mb: int = 1500, runtime_min: int = 60,
+                 log_directory: Optional[str] = None) -> Iterator:
+    """A running cluster of ``workers`` single-threaded workers, closed on exit; on Slurm the
+    worker jobs' output files go to ``log_directory`` (default: a temporary folder)."""
     for key, value in ONE_THREAD.items():
         os.environ.setdefault(key, value)  # workers (processes or Slurm jobs) inherit it
     if kind == "local":
@@ -86,7 +89,8 @@ def dask_cluster(kind: str, workers: int, mem_mb: int = 1500, runtime_min: int =
         except ImportError as exc:
             raise ImportError("rve.probe_dask.cluster 'slurm' needs dask-jobqueue: pip install -e '.[cluster]'") from exc
         hours, minutes = divmod(int(runtime_min), 60)
-        cluster = SLURMCluster(cores=1, processes=1, memory=f"{int(mem_mb)}MB", walltime=f"{hours:02d}:{minutes:02d}:00",
+        log_directory = log_directory or tempfile.mkdtemp(prefix="rve-dask-workers-")
+        cluster = SLURMCluster(log_directory=log_directory, cores=1, processes=1, memory=f"{int(mem_mb)}MB", walltime=f"{hours:02d}:{minutes:02d}:00",
                                job_name="rve_probes_dask", scheduler_options={"dashboard_address": None})
         cluster.scale(jobs=workers)
     else:
@@ -96,7 +100,7 @@ def dask_cluster(kind: str, workers: int, mem_mb: int = 1500, runtime_min: int =
 
 
 def run_probe_tasks(tasks: Sequence[ProbeTask], spec: Mapping, cluster: str = "local", workers: int = 2,
-                    mem_mb: int = 1500, runtime_min: int = 60) -> list[str]:
+                    mem_mb: int = 1500, runtime_min: int = 60, log_directory: Optional[str] = None) -> list[str]:
     """Run the tasks whose record is missing on a ``cluster`` of ``workers``; the records written.
 
     A failing task raises its own exception here (after the others finished or were
@@ -106,7 +110,7 @@ def run_probe_tasks(tasks: Sequence[ProbeTask], spec: Mapping, cluster: str = "l
     todo = [t for t in tasks if not Path(t.record).exists()]
     if not todo:
         return []
-    with dask_cluster(cluster, workers, mem_mb, runtime_min) as c, Client(c) as client:
+    with dask_cluster(cluster, workers, mem_mb, runtime_min, log_directory) as c, Client(c) as client:
         futures = [client.submit(_probe, t, spec, pure=False, key=f"probe-{t.combo}-{Path(t.state).stem}")
                    for t in todo]
         wait(futures)
@@ -130,4 +134,5 @@ def probes_dask_job(spec: Mapping, run: str, log_path: Optional[str], dask_cfg: 
     workers = int(threads) if kind == "local" else int(dask_cfg.get("workers", 2))
     with logging_to(log_path):
         return run_probe_tasks(probe_tasks(spec, run, root, log_root), spec, kind, workers,
-                               resources.get("rve_mem_mb", 1500), resources.get("rve_runtime_min", 60))
+                               resources.get("rve_mem_mb", 1500), resources.get("rve_runtime_min", 60),
+                               log_directory=str(Path(log_path).parent / "dask_workers") if log_path else None)
