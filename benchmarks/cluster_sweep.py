@@ -50,9 +50,12 @@ def cluster_up() -> str | None:
         proc = subprocess.run(["sinfo", "-h", "-N", "-o", "%T"], capture_output=True, text=True, timeout=20)
     except subprocess.TimeoutExpired:
         return "sinfo did not answer in 20 s (slurmctld not running?)"
+    if proc.returncode != 0:
+        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+        return f"sinfo failed: {last}"
     states = proc.stdout.split()
-    if proc.returncode != 0 or not any(s.rstrip("*") in ("idle", "mixed", "allocated") for s in states):
-        return f"no Slurm node takes jobs (sinfo: {proc.stdout.strip() or proc.stderr.strip()})"
+    if not any(s.rstrip("*") in ("idle", "mixed", "allocated") for s in states):
+        return f"no Slurm node takes jobs (node states: {' '.join(states) or 'none'})"
     return None
 
 

@@ -61,7 +61,8 @@ LOG_DIR = "results/logs/rve"
 BENCHMARK_DIR = "results/benchmarks/rve"
 
 #: the jobs of a run, in DAG order (one Snakemake rule each)
-STAGES = ("fabric", "relax", "strain", "probes", "pictures", "gather", "exports", "report", "ensemble_report")
+STAGES = ("fabric", "relax", "strain", "probes", "probes_dask", "pictures", "gather", "exports", "report",
+          "ensemble_report")
 
 
 # ============================================================================ state names
@@ -256,10 +257,11 @@ def ensemble_report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
 def job_name(stage: str, combo: Optional[str] = None, state: Optional[str] = None) -> str:
     """Name of a job within its run (the relative path of its log and benchmark):
     ``{combo}/fabric``, ``{combo}/relax``, ``{combo}/strain/{state}``,
-    ``{combo}/probes/{state}``, ``gather``, ``report``."""
+    ``{combo}/probes/{state}``, ``probes_dask`` (every probe job of the run on dask), ``gather``,
+    ``report``."""
     if stage not in STAGES:
         raise ValueError(f"unknown stage {stage!r} (have {', '.join(STAGES)})")
-    if stage in ("gather", "exports", "report", "ensemble_report"):
+    if stage in ("probes_dask", "gather", "exports", "report", "ensemble_report"):
         return stage
     if combo is None:
         raise ValueError(f"stage {stage!r}: a job of one combination needs its combo")

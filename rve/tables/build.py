@@ -350,11 +350,14 @@ def _fill(records, pnames, pvalues, mode_coord, strains, strain_coord, probes, s
 
     pidx = {p: i for i, p in enumerate(probes)}
     sidx = {s: i for i, s in enumerate(sides)}
+    # positions by dict, not list.index: a 1-D sweep of N runs would cost O(N^2) otherwise
+    mpos = {m: i for i, m in enumerate(mode_coord)}
+    spos = {s: i for i, s in enumerate(strain_coord)}
+    ppos = {p: {v: i for i, v in enumerate(pvalues[p])} for p in pnames}
     for n, rec in enumerate(records):
         params = _record_params(rec)
-        idx = (mode_coord.index(rec["mode"]), strain_coord.index(strains[n])) + tuple(
-            pvalues[p].index(float(params[p]) if not isinstance(params[p], str) else params[p])
-            for p in pnames)
+        idx = (mpos[rec["mode"]], spos[strains[n]]) + tuple(
+            ppos[p][float(params[p]) if not isinstance(params[p], str) else params[p]] for p in pnames)
         if filled[idx]:
             raise ValueError(f"record {n}: state mode={rec['mode']}, strain={strains[n]}"
                              f"{''.join(f', {p}={params[p]}' for p in pnames)} given twice")

@@ -13,6 +13,7 @@
 # The job modules are imported in the rule bodies: parsing the workflow stays cheap.
 
 from rve.homogenisation import layout as rve_layout
+from rve.homogenisation.distributed import probe_tasks as rve_probe_tasks
 
 
 wildcard_constraints:
@@ -100,28 +101,63 @@ rule rve_strain_step:
         )
 
 
-rule rve_probes:
-    """Decoupled probe solves (voltage, terminal currents, Joule temperature) on one state."""
-    input:
-        state=rve_layout.state_path("{run}", "{combo}", "{state}"),
-    output:
-        record=rve_layout.record_path("{run}", "{combo}", "{state}"),
-    log:
-        rve_layout.log_path("{run}", "probes", "{combo}", "{state}"),
-    benchmark:
-        rve_layout.benchmark_path("{run}", "probes", "{combo}", "{state}")
-    params:
-        spec=lambda w: config["rve"]["runs"][w.run],
-        # side output with output.pictures (rve.homogenisation.pictures): the state's tube mesh
-        tubes=lambda w: rve_layout.tubes_path(w.run, w.combo, w.state),
-    threads: 1
-    resources:
-        mem_mb=config["resources"]["rve_mem_mb"],
-        runtime=config["resources"]["rve_runtime_min"],
-    run:
-        from rve.homogenisation.jobs import probe_job
+# The probe solves: one job per stored state (rve.probe_executor snakemake, the default), or
+# one job per run that runs them all on a dask.distributed cluster (dask): the same records,
+# bit for bit, without a process per second-long solve (rve.homogenisation.distributed).
+PROBE_EXECUTOR = config["rve"].get("probe_executor", "snakemake")
 
-        probe_job(input.state, output.record, log[0], params.spec, wildcards.combo, params.tubes)
+if PROBE_EXECUTOR == "snakemake":
+
+    rule rve_probes:
+        """Decoupled probe solves (voltage, terminal currents, Joule temperature) on one state."""
+        input:
+            state=rve_layout.state_path("{run}", "{combo}", "{state}"),
+        output:
+            record=rve_layout.record_path("{run}", "{combo}", "{state}"),
+        log:
+            rve_layout.log_path("{run}", "probes", "{combo}", "{state}"),
+        benchmark:
+            rve_layout.benchmark_path("{run}", "probes", "{combo}", "{state}")
+        params:
+            spec=lambda w: config["rve"]["runs"][w.run],
+            # side output with output.pictures (rve.homogenisation.pictures): the state's tube mesh
+            tubes=lambda w: rve_layout.tubes_path(w.run, w.combo, w.state),
+        threads: 1
+        resources:
+            mem_mb=config["resources"]["rve_mem_mb"],
+            runtime=config["resources"]["rve_runtime_min"],
+        run:
+            from rve.homogenisation.jobs import probe_job
+
+            probe_job(input.state, output.record, log[0], params.spec, wildcards.combo, params.tubes)
+
+else:
+    PROBE_DASK = config["rve"].get("probe_dask", {})
+    for _run, _spec in config["rve"]["runs"].items():
+
+        rule:
+            """Every probe solve of one run on a dask.distributed cluster (rve.probe_executor dask)."""
+            name:
+                f"rve_probes_dask_{_run}"
+            input:
+                states=[t.state for t in rve_probe_tasks(_spec, _run)],
+            output:
+                records=[t.record for t in rve_probe_tasks(_spec, _run)],
+            log:
+                rve_layout.log_path(_run, "probes_dask"),
+            benchmark:
+                rve_layout.benchmark_path(_run, "probes_dask")
+            params:
+                run=_run,
+                spec=_spec,
+            threads: PROBE_DASK.get("workers", 2) if PROBE_DASK.get("cluster", "local") == "local" else 1
+            resources:
+                mem_mb=config["resources"]["rve_mem_mb"],
+                runtime=config["resources"]["rve_runtime_min"],
+            run:
+                from rve.homogenisation.distributed import probes_dask_job
+
+                probes_dask_job(params.spec, params.run, log[0], PROBE_DASK, config["resources"], threads)
 
 
 rule rve_pictures_relaxed:
