@@ -252,6 +252,12 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
 
     t0 = time.perf_counter()
     cfg = load_run_config(spec, combo)
+    if cfg.contact.enforcement != "penalty":
+        # the probe systems and the residual check are built without the state's multipliers:
+        # their contact width would be the penalty overlap's, not the multipliers' line load
+        raise ValueError(f"{state_file}: contact.enforcement = {cfg.contact.enforcement!r}: the probe solves of a "
+                         "table support only 'penalty' (the augmented Lagrangian runs in the relaxation and strain "
+                         "steps; docs/contact.md 'Augmented Lagrangian in the RVE pipeline')")
     fab, mesh = _fabric_mesh(cfg)
     st = load_state(state_file, quarantine=True)
     _check_state(st, mesh, state_file)
