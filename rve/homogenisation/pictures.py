@@ -275,6 +275,7 @@ def render_panels(path: PathLike, panels: Sequence[tuple], title: str = "", pane
 
 
 def _render_panels_matplotlib(path, panels, title, cmap) -> str:
+    from ..io.vtk import quad_faces
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -286,15 +287,7 @@ def _render_panels_matplotlib(path, panels, title, cmap) -> str:
     FigureCanvasAgg(fig)
     for k, (surf, scalars, ptitle, bar) in enumerate(panels):
         ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
-        faces = np.asarray(surf.faces)
-        quads = []
-        i = 0
-        while i < faces.size:
-            m = int(faces[i])
-            if m == 4:
-                quads.append(faces[i + 1:i + 5])
-            i += m + 1
-        quads = np.asarray(quads)
+        quads = quad_faces(surf)
         pts = np.asarray(surf.points)
         col = Poly3DCollection(pts[quads], linewidths=0, cmap=cmap)
         col.set_array(np.asarray(surf.point_data[scalars])[quads].mean(axis=1))

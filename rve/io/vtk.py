@@ -28,7 +28,7 @@ import numpy as np
 
 from .atomic import atomic_path, atomic_write_text
 
-__all__ = ["tube_surface", "write_tubes", "write_pvd", "render_png"]
+__all__ = ["tube_surface", "write_tubes", "write_pvd", "render_png", "quad_faces"]
 
 log = logging.getLogger("rve.io.vtk")
 
@@ -136,15 +136,7 @@ def render_png(path, surface, scalars: str | None = None, title: str = "", windo
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    faces = surface.faces
-    quads = []
-    i = 0
-    while i < faces.size:  # decode the VTK face stream (one pass over the faces)
-        k = int(faces[i])
-        if k == 4:
-            quads.append(faces[i + 1:i + 5])
-        i += k + 1
-    quads = np.asarray(quads)
+    quads = quad_faces(surface)
     pts = np.asarray(surface.points)
     fig = plt.figure(figsize=(window_size[0] / 100, window_size[1] / 100), dpi=100)
     ax = fig.add_subplot(111, projection="3d")
@@ -166,3 +158,18 @@ def render_png(path, surface, scalars: str | None = None, title: str = "", windo
         fig.savefig(tmp)
     plt.close(fig)
     return "matplotlib"
+
+
+def quad_faces(surface) -> np.ndarray:
+    """The quadrilaterals of a pyvista surface's VTK face stream, (n, 4) point indices
+    (faces of other sizes are skipped)."""
+    faces = np.asarray(surface.faces)
+    quads = []
+    i = 0
+    while i < faces.size:  # one pass over the stream: [n, i_1 .. i_n, n, ...]
+        k = int(faces[i])
+        if k == 4:
+            quads.append(faces[i + 1:i + 5])
+        i += k + 1
+    return np.asarray(quads)
+

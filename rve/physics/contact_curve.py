@@ -53,7 +53,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..fem.lagrange import lagrange_basis, lagrange_nodes
-from .contact_forms import penalty_law
+from .contact_forms import PointKinematics, penalty_law, point_loads
 
 __all__ = [
     "CurveGeometry",
@@ -164,24 +164,16 @@ def chord_deviation(order: int, X) -> np.ndarray:
 
 
 @dataclass
-class CurveGeometry:
-    """Kinematics of the points of P oriented pairs (G points each).
-
-    s_a, s_b (P, G); j = [[r]], n (P, G, 3); rho, g (P, G); c (P, G, M); ds (P, G, M, 3)
-    (zero where s_b is clamped); A (P, G) = t.t - [[r]].t'; owned, active (P, G) bool;
-    Na (P, G, nn) (or (G, nn)), Nb, dNb (P, G, nn)."""
+class CurveGeometry(PointKinematics):
+    """Kinematics of the points of P oriented pairs (G points each) on the centroid curves:
+    :class:`~rve.physics.contact_forms.PointKinematics` (ds zero where s_b is clamped),
+    plus s_a, s_b (P, G); A (P, G) = t.t - [[r]].t'; owned (P, G) bool; Na (P, G, nn) (or
+    (G, nn)), Nb, dNb (P, G, nn)."""
 
     s_a: np.ndarray
     s_b: np.ndarray
-    j: np.ndarray
-    rho: np.ndarray
-    n: np.ndarray
-    g: np.ndarray
-    c: np.ndarray
-    ds: np.ndarray
     A: np.ndarray
     owned: np.ndarray
-    active: np.ndarray
     Na: np.ndarray
     Nb: np.ndarray
     dNb: np.ndarray
@@ -247,16 +239,10 @@ def curve_penalty_forces(geo: CurveGeometry, weight, penalty, jacobian: bool = T
     P, G = geo.g.shape
     M = geo.c.shape[-1]
     w = np.broadcast_to(np.asarray(weight, float), (P, G))
-    _, phi1, phi2 = penalty_law(np.where(geo.active, geo.g, 0.0), penalty, onset)
-    f = np.where(geo.active, w * phi1, 0.0)
+    f, B, fr = point_loads(geo, w, penalty, onset, jacobian)
     R = -np.matmul(np.swapaxes(f[..., None] * geo.c, 1, 2), geo.n)
     if not jacobian:
         return R, None
-    k = np.where(geo.active, w * phi2, 0.0)
-    rho = np.where(geo.active, geo.rho, 1.0)
-    fr = f / rho
-    nn_ = geo.n[..., :, None] * geo.n[..., None, :]
-    B = (k + fr)[..., None, None] * nn_ - fr[..., None, None] * np.eye(3)  # (P, G, 3, 3)
     cc = (geo.c[..., :, None] * geo.c[..., None, :]).reshape(P, G, M * M)
     K = np.matmul(np.swapaxes(cc, 1, 2), B.reshape(P, G, 9)).reshape(P, M, M, 3, 3).transpose(0, 1, 3, 2, 4)
     beta = fr * np.where(geo.active, geo.A, 0.0)

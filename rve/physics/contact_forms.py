@@ -115,23 +115,31 @@ def hertz_width(g, kappa, g_eps: float = 0.0):
 
 
 @dataclass
-class ChordGeometry:
-    """Per-point kinematics of the contact table (P pairs, G points).
+class PointKinematics:
+    """What a contact point's forms read, for the chord and the curve alike: j (P, G, 3) =
+    [[r]]; rho (P, G) = |[[r]]|; n (P, G, 3) = [[r]]/rho; g (P, G) the overlap; c (P, G, M)
+    the node weights of [[r]]; ds (P, G, M, 3) = d s/d X of the closest point; active
+    (P, G) bool."""
 
-    s_plus, s_minus (P, G); j (P, G, 3) = [[r]]; rho (P, G); n (P, G, 3); g (P, G);
-    c (P, G, 4) chord weights of X in [[r]]; ds (P, G, 4, 3) = d s-/d X (zero when clamped
-    or frozen); dd (P,) = |b- - a-|^2; active (P, G) = g > 0."""
-
-    s_plus: np.ndarray
-    s_minus: np.ndarray
     j: np.ndarray
     rho: np.ndarray
     n: np.ndarray
     g: np.ndarray
     c: np.ndarray
     ds: np.ndarray
-    dd: np.ndarray
     active: np.ndarray
+
+
+@dataclass
+class ChordGeometry(PointKinematics):
+    """Per-point kinematics of the contact table (P pairs, G points) on the chords
+    (:class:`PointKinematics`, M = 4: c the chord weights of X in [[r]], ds zero when
+    clamped or frozen; active = g > 0), plus s_plus, s_minus (P, G) and dd (P,) =
+    |b- - a-|^2."""
+
+    s_plus: np.ndarray
+    s_minus: np.ndarray
+    dd: np.ndarray
 
 
 def chord_geometry(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> ChordGeometry:
@@ -167,7 +175,7 @@ def chord_geometry(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> ChordGeo
     ds = (c[..., None] * d[:, None, None, :] - _CM[None, None, :, None] * j[:, :, None, :]) / ddsafe[:, None, None, None]
     ds *= free[..., None, None]
     active = (g > 0.0) & (rho > tiny)
-    return ChordGeometry(sp_, s, j, rho, n, g, c, ds, dd, active)
+    return ChordGeometry(j=j, rho=rho, n=n, g=g, c=c, ds=ds, active=active, s_plus=sp_, s_minus=s, dd=dd)
 
 
 def penalty_law(g, penalty, onset: float = 0.0):
@@ -198,6 +206,23 @@ def penalty_energy(geo, weight, penalty, onset: float = 0.0) -> float:
     return float((w * e).sum())
 
 
+
+def point_loads(geo, weight, penalty, onset, jacobian: bool):
+    """Per contact point of a penalty law on overlaps ``geo.g`` (P, G) with normals ``geo.n``
+    and distances ``geo.rho``: ``f`` the line load times ``weight`` (zero where not active)
+    and, with ``jacobian``, the point stiffness ``A = (k + f/rho) n n^T - (f/rho) I``
+    (P, G, 3, 3) and ``f/rho`` (else None, None); shared by the chord and the curve forms."""
+    _, phi1, phi2 = penalty_law(np.where(geo.active, geo.g, 0.0), penalty, onset)
+    f = np.where(geo.active, weight * phi1, 0.0)
+    if not jacobian:
+        return f, None, None
+    k = np.where(geo.active, weight * phi2, 0.0)
+    rho = np.where(geo.active, geo.rho, 1.0)
+    fr = f / rho
+    nn = geo.n[..., :, None] * geo.n[..., None, :]
+    return f, (k + fr)[..., None, None] * nn - fr[..., None, None] * np.eye(3), fr
+
+
 def penalty_forces(geo: ChordGeometry, weight, penalty, jacobian: bool = True, onset: float = 0.0):
     """Penalty residual (P, 4, 3) and tangent (P, 4, 3, 4, 3) (None without jacobian).
 
@@ -206,17 +231,10 @@ def penalty_forces(geo: ChordGeometry, weight, penalty, jacobian: bool = True, o
     w = np.broadcast_to(np.asarray(weight, float).reshape(geo.g.shape[0], -1), geo.g.shape)
     Ps = np.asarray(penalty, float)
     Ps = Ps[:, None] if Ps.ndim == 1 else Ps
-    gpos = np.where(geo.active, geo.g, 0.0)
-    _, phi1, phi2 = penalty_law(gpos, Ps, onset)
-    f = np.where(geo.active, w * phi1, 0.0)  # line load times weight
+    f, A, fr = point_loads(geo, w, Ps, onset, jacobian)
     R = -np.einsum("pg,pgk,pgi->pki", f, geo.c, geo.n)
     if not jacobian:
         return R, None
-    k = np.where(geo.active, w * phi2, 0.0)
-    rho = np.where(geo.active, geo.rho, 1.0)
-    fr = f / rho
-    nn = geo.n[..., :, None] * geo.n[..., None, :]
-    A = (k + fr)[..., None, None] * nn - fr[..., None, None] * np.eye(3)  # (P, G, 3, 3)
     P_, G_ = geo.g.shape
     # sum over points as batched matmuls: (c_k c_l) x A_ij and (beta ds_ki) x ds_lj
     cc = (geo.c[..., :, None] * geo.c[..., None, :]).reshape(P_, G_, 16)
