@@ -84,7 +84,7 @@ def worker(kind: str, arg: str, out_npy: str, profile: str = "") -> dict:
         from rve.homogenisation.strain import strain_step
         from rve.solvers.static import StaticProblem
 
-        import rve.homogenisation.config  # noqa: F401  (registers the RVE config with load_config)
+        import rve.config.rve  # noqa: F401  (registers the RVE config with load_config)
 
         try:
             from rve.fabrics.setup import fabric_and_mesh

@@ -116,7 +116,7 @@ def stage_matrix(system, x, w, t: float, haii: float):
 
 
 def strain_matrices(elements: int, out: Path, which: str) -> None:
-    import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
+    import rve.config.rve  # noqa: F401  (registers the "rve" scene)
     from rve.config.loader import load_config
     from rve.fabrics.setup import fabric_and_mesh
     from rve.homogenisation.strain import affine_velocity, clamped_ends, mech_system
@@ -146,7 +146,7 @@ def strain_matrices(elements: int, out: Path, which: str) -> None:
 
 def impact_matrix(out: Path, fields=("mech", "T", "V"), n_yarns: int = 32, elements: int = 80,
                   h: float = 5e-4, name: str = "impact_stage") -> None:
-    import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
+    import rve.config.rve  # noqa: F401  (registers the "rve" scene)
     from rve.config.loader import load_config
     from rve.model.contact_model import ContactParams, ContactSystem
     from rve.fabrics import weave

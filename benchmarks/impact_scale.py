@@ -43,7 +43,7 @@ def child(n: int, steps: int) -> dict:
     """One size: the relaxation and ``steps`` steps, with the linear solver's calls timed."""
     from rve.config.loader import load_config
     from rve.scenes import impact
-    from rve.scenes.impact_solver import PardisoOrPruned
+    from rve.solvers.backends.pruned import PardisoOrPruned
 
     calls = {"factorize": [], "solve": [], "nnz": 0}
     factorize, solve = PardisoOrPruned.factorize, PardisoOrPruned.solve

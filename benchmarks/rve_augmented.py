@@ -13,7 +13,7 @@ import sys
 import time
 
 from rve.fabrics.setup import clamp_reactions, fabric_and_mesh
-from rve.homogenisation.config import RVEConfig
+from rve.config.rve import RVEConfig
 from rve.homogenisation.multipliers import multiplier_record
 from rve.homogenisation.strain import relax_fabric, strain_step
 

@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def build(n: int, elements: int, v0: float):
-    import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
+    import rve.config.rve  # noqa: F401  (registers the "rve" scene)
     from rve.config.loader import load_config
     from rve.model.contact_model import ContactParams, ContactSystem
     from rve.fabrics import weave
@@ -163,7 +163,7 @@ class _Summed:
 
 
 def main_strain(a) -> None:
-    import rve.homogenisation.config  # noqa: F401  (registers the "rve" scene)
+    import rve.config.rve  # noqa: F401  (registers the "rve" scene)
     from rve.config.loader import load_config
     from rve.fabrics.setup import fabric_and_mesh
     from rve.homogenisation.strain import relax_fabric

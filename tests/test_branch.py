@@ -145,7 +145,7 @@ def test_periodic_work_rate_is_the_derivative_of_the_energy_along_the_branch():
     shear step is a detection: the small steps stay on a branch with 3 negative pivots, the
     whole step drops 2e-4 N mm below it into a minimum; a limit point, the naive state kept.)"""
     from rve.fabrics.setup import fabric_and_mesh
-    from rve.homogenisation.config import RVEConfig
+    from rve.config.rve import RVEConfig
     from rve.homogenisation.periodic import periodic_energy, periodic_strain_step
     from rve.homogenisation.strain import relax_fabric, strain_step
 

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # --------------------------------------------------------------------------- packing
 def test_zero_perturbation_is_the_designed_packing_bit_for_bit():
     from rve.fabrics.setup import fabric_and_mesh, make_fabric
-    from rve.homogenisation.config import RVEConfig
+    from rve.config.rve import RVEConfig
 
     cfg = RVEConfig(scene="rve", fabric={"n_warp": 2, "n_weft": 2}, mesh={"elements": 6})
     assert cfg.packing.perturbation == 0.0

@@ -14,7 +14,7 @@ def test_loading_a_config_imports_only_its_scene_model():
     code = ("import sys; from rve.config import load_config; "
             "load_config('configs/scenes/plain_weave_relax.yaml', ['mesh.elements=12']); "
             "mods = ['rve.config.static_wire', 'rve.config.dynamic_wire', 'rve.config.impact', "
-            "'rve.config.induced_deformation', 'rve.homogenisation.config']; "
+            "'rve.config.induced_deformation', 'rve.config.rve']; "
             "print([m for m in mods if m in sys.modules]); print('rve.config.fabric' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     loaded, fabric = out.stdout.strip().splitlines()

@@ -141,7 +141,7 @@ def test_rigid_rotation_gives_zero_stress_and_rotates_every_director():
 @pytest.fixture(scope="module")
 def woven_cell():
     from rve.fabrics.setup import fabric_and_mesh
-    from rve.homogenisation.config import RVEConfig
+    from rve.config.rve import RVEConfig
     from rve.homogenisation.strain import relax_fabric
 
     cfg = RVEConfig(scene="rve", boundary="periodic", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 6},
@@ -234,7 +234,7 @@ def _repeat_figures(kind, repeat, mode):
     """Per-width membrane forces P11, P22 (N/mm), sheet resistances (ohm) and the energy per
     pattern cell (mJ) after one strain step of ``mode`` of a periodic ``kind`` cell."""
     from rve.fabrics.setup import fabric_and_mesh
-    from rve.homogenisation.config import RVEConfig
+    from rve.config.rve import RVEConfig
     from rve.homogenisation.periodic import macro_gradient, periodic_system
     from rve.homogenisation.probes import solve_probes
     from rve.homogenisation.strain import relax_fabric, strain_step

@@ -186,7 +186,7 @@ def test_a_periodic_cell_is_drawn_tiled_by_its_deformed_lattice():
     lattice vector of the macro gradient the state carries (here a shear); a pinned cell
     is drawn as it is."""
     from rve.fabrics.setup import fabric_and_mesh
-    from rve.homogenisation.config import RVEConfig
+    from rve.config.rve import RVEConfig
     from rve.homogenisation.periodic import _affine_predictor, macro_gradient
     from rve.homogenisation.pictures import tiled
     from rve.io.vtk import tube_surface

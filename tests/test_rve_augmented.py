@@ -11,7 +11,7 @@ BOUNDARIES = [pytest.param("pinned", marks=pytest.mark.slow), "periodic"]
 
 
 def _cfg(boundary, enforcement, penalty, steps=1):
-    from rve.homogenisation.config import RVEConfig
+    from rve.config.rve import RVEConfig
 
     return RVEConfig(scene="rve", boundary=boundary, fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 6},
                      contact={"onset": 0.05, "enforcement": enforcement, "penalty": penalty, "al_tolerance": TOL},

@@ -277,7 +277,7 @@ def test_configs_validate_and_default_target_is_the_plain_weave_table():
     from snakemake.exceptions import WorkflowError
     from snakemake.utils import validate
 
-    from rve.homogenisation.config import RVEConfig
+    from rve.config.rve import RVEConfig
 
     cfg = yaml.safe_load((ROOT / "configs/pipeline.yaml").read_text())
     validate(cfg, schema=str(SCHEMA))

@@ -79,9 +79,9 @@ def test_no_module_registers_on_import():
     assert not {"rve.config.static_wire", "rve.config.dynamic_wire", "rve.config.fabric"} & mods
     mods = _modules_after("import rve.scenes.registry")
     assert not {"rve.scenes.static_wire", "rve.scenes.dynamic_wire", "rve.scenes.fabric_relax",
-                "rve.homogenisation.config", "rve.config.static_wire", "rve.model"} & mods
+                "rve.config.rve", "rve.config.static_wire", "rve.model"} & mods
     for module in ("rve.config.static_wire", "rve.config.dynamic_wire", "rve.config.fabric",
-                   "rve.homogenisation.config"):
+                   "rve.config.rve"):
         mods = _modules_after(f"import {module}")
         assert not {m for m in mods if m.startswith("rve.scenes")}, module
 

@@ -2,7 +2,7 @@
 
 This package holds what every config shares; the scene config models live in their own
 modules (``rve.config.static_wire``, ``rve.config.dynamic_wire``, ``rve.config.fabric``,
-``rve.homogenisation.config``), and the one list naming every scene with its model and
+``rve.config.rve``), and the one list naming every scene with its model and
 runner is ``rve.scenes.registry``. Importing ``rve.config`` registers nothing and imports
 no scene. See docs/configuration.md.
 """

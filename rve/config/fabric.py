@@ -1,7 +1,7 @@
 """Config model of the fabric relaxation scene (``scene: fabric_relax``; thesis §7.3-7.4).
 
 Contract: :class:`FabricRelaxConfig` and its sections (fabric, material, contact, mesh,
-relaxation, output); the RVE config (``rve.homogenisation.config.RVEConfig``) reuses the
+relaxation, output); the RVE config (``rve.config.rve.RVEConfig``) reuses the
 sections. Named in ``rve.scenes.registry.SCENES``; the scene is
 ``rve.scenes.fabric_relax``. Parameter choices: docs/relaxation.md.
 """

@@ -7,7 +7,7 @@ annotated quantity types (``Length``, ``MagneticField``, ... or ``Quantity(unit)
 strict ``Integer``, the base classes :class:`Section` and :class:`SceneConfig`,
 :func:`cross_field_error` and :func:`field_unit`. No scene model lives here: the scene
 models are in their own modules (``rve.config.static_wire``, ``rve.config.dynamic_wire``,
-``rve.config.fabric``, ``rve.homogenisation.config``) and the one list of scenes is
+``rve.config.fabric``, ``rve.config.rve``) and the one list of scenes is
 ``rve.scenes.registry``.
 
 Every model forbids unknown keys. Fields with a physical dimension are declared with the

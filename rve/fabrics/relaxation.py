@@ -4,7 +4,7 @@ Contract
 --------
 In: a config with ``fabric``, ``material`` (``youngs_modulus``, ``poisson_ratio``,
 ``density``), ``contact``, ``mesh`` and ``relaxation`` sections (a
-``rve.config.fabric.FabricRelaxConfig`` or an ``rve.homogenisation.config.RVEConfig``;
+``rve.config.fabric.FabricRelaxConfig`` or an ``rve.config.rve.RVEConfig``;
 duck-typed, nothing is imported from rve.config). Out:
 
 * :func:`relaxation_system` -- ``(fabric, system, x0)``: the mechanics-only

@@ -47,6 +47,7 @@ import numpy as np
 
 from rve.fem.mesh import straight_fibril
 
+from ..config.weaves import WEAVE_PATTERNS, twill_pattern
 from .fabric import EndTag, Fabric, Yarn, hex_stack_offsets, minimal_rotation
 
 __all__ = [
@@ -58,22 +59,6 @@ __all__ = [
     "twill_weave",
     "weave",
 ]
-
-
-def twill_pattern(over: int = 2, under: int = 1) -> np.ndarray:
-    """``over``/``under`` twill: warp j floats over ``over`` wefts, under ``under``, and
-    the pattern shifts by one weft from one warp to the next."""
-    n = int(over) + int(under)
-    base = np.array([1] * int(over) + [0] * int(under))
-    return np.array([np.roll(base, j) for j in range(n)])
-
-
-WEAVE_PATTERNS = {
-    "plain": np.array([[1, 0], [0, 1]]),
-    "twill_2_1": twill_pattern(2, 1),
-    "twill_2_2": twill_pattern(2, 2),
-    "basket_2_2": np.array([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 1], [0, 0, 1, 1]]),
-}
 
 
 def float_lengths(states) -> list[int]:

@@ -1,6 +1,6 @@
 """The probe solves of a run on a dask.distributed cluster (``rve.probe_executor: dask``).
 
-Contract: :func:`probe_tasks` lists every probe job of a run (each stored state but the
+Contract: ``layout.probe_tasks`` lists every probe job of a run (each stored state but the
 initial one, across all sweep combinations) with the paths the per-state rule
 ``rve_probes`` would use; :func:`run_probe_tasks` runs them as ``probe_job`` calls on a
 dask cluster and returns once every record is on disk. Each task is exactly the body of
@@ -28,37 +28,16 @@ import logging
 import os
 import tempfile
 from pathlib import Path
-from typing import Iterator, Mapping, NamedTuple, Optional, Sequence
+from typing import Iterator, Mapping, Optional, Sequence
 
 from . import layout as L
-from .sweeps import combos, load_run_config
+from .layout import ProbeTask, probe_tasks
 
 log = logging.getLogger(__name__)
 
 #: one BLAS/OpenMP/PARDISO thread per worker: the records are then those of the per-state jobs
 ONE_THREAD = {"RVE_PARDISO_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
               "MKL_NUM_THREADS": "1"}
-
-
-class ProbeTask(NamedTuple):
-    """One probe job: the stored state, its record, its log, its combination, its tube file."""
-
-    state: str
-    record: str
-    log: str
-    combo: str
-    tubes: str
-
-
-def probe_tasks(spec: Mapping, run: str, root: str = L.RVE_DIR, log_root: str = L.LOG_DIR) -> list[ProbeTask]:
-    """Every probe job of run ``run``, in the order of :func:`layout.run_record_paths`."""
-    tasks = []
-    for c in combos(spec):
-        for name in L.state_names(load_run_config(spec, c.id)):
-            tasks.append(ProbeTask(L.state_path(run, c.id, name, root), L.record_path(run, c.id, name, root),
-                                   L.log_path(run, "probes", c.id, name, log_root), c.id,
-                                   L.tubes_path(run, c.id, name, root)))
-    return tasks
 
 
 def _probe(task: ProbeTask, spec: Mapping) -> str:

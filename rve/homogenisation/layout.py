@@ -42,12 +42,12 @@ import functools
 import hashlib
 import json
 import os
-from typing import Mapping, Optional, Sequence, Union
+from typing import Mapping, NamedTuple, Optional, Sequence, Union
 
 from .sweeps import combos, load_run_config
 
 __all__ = [
-    "RVE_DIR", "LOG_DIR", "BENCHMARK_DIR", "STAGES", "state_name", "state_names", "state_path", "record_path",
+    "ProbeTask", "probe_tasks", "RVE_DIR", "LOG_DIR", "BENCHMARK_DIR", "STAGES", "state_name", "state_names", "state_path", "record_path",
     "previous_state", "run_record_paths", "table_outputs", "export_outputs", "report_prefix", "report_outputs", "job_name",
     "log_path", "benchmark_path", "default_targets", "tubes_path", "picture_outputs", "picture_targets",
     "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default", "config_digest",
@@ -307,3 +307,24 @@ def default_targets(config: Mapping, extra: Optional[Mapping[str, Sequence[str]]
         else:
             raise ValueError(f"default_targets: unknown target group {name!r} (have rve, {', '.join(extra)})")
     return out
+
+
+class ProbeTask(NamedTuple):
+    """One probe job: the stored state, its record, its log, its combination, its tube file."""
+
+    state: str
+    record: str
+    log: str
+    combo: str
+    tubes: str
+
+
+def probe_tasks(spec: Mapping, run: str, root: str = RVE_DIR, log_root: str = LOG_DIR) -> list[ProbeTask]:
+    """Every probe job of run ``run``, in the order of :func:`layout.run_record_paths`."""
+    tasks = []
+    for c in combos(spec):
+        for name in state_names(load_run_config(spec, c.id)):
+            tasks.append(ProbeTask(state_path(run, c.id, name, root), record_path(run, c.id, name, root),
+                                   log_path(run, "probes", c.id, name, log_root), c.id,
+                                   tubes_path(run, c.id, name, root)))
+    return tasks

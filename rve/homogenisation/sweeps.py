@@ -83,7 +83,7 @@ def _sweep_key(key: str) -> tuple[str, str, Optional[float]]:
 def _path_unit(path: str) -> Optional[str]:
     from ..config import config_units
 
-    from .config import RVEConfig
+    from ..config.rve import RVEConfig
 
     node: Any = config_units(RVEConfig)
     for part in path.split("."):

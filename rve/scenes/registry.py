@@ -70,7 +70,7 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
     Scene("static_wire", "rve.config.static_wire:StaticWireConfig", "rve.scenes.static_wire"),
     Scene("dynamic_wire", "rve.config.dynamic_wire:DynamicWireConfig", "rve.scenes.dynamic_wire"),
     Scene("fabric_relax", "rve.config.fabric:FabricRelaxConfig", "rve.scenes.fabric_relax"),
-    Scene("rve", "rve.homogenisation.config:RVEConfig", "rve.scenes.rve_pipeline", kind="pipeline"),
+    Scene("rve", "rve.config.rve:RVEConfig", "rve.scenes.rve_pipeline", kind="pipeline"),
     Scene("induced_deformation", "rve.config.induced_deformation:InducedDeformationConfig",
           "rve.scenes.induced"),
     Scene("impact", "rve.config.impact:ImpactConfig", "rve.scenes.impact"),

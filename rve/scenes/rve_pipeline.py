@@ -2,7 +2,7 @@
 
 Contract
 --------
-``scene: rve`` (``rve.homogenisation.config.RVEConfig``) is not run in-process by
+``scene: rve`` (``rve.config.rve.RVEConfig``) is not run in-process by
 ``rve run``: its chain (fabric -> relax -> strain steps -> probes -> table) is the jobs of
 workflow/rules/rve.smk. :func:`snakemake_command(config_path, overrides)` returns the
 exact command that builds the table ``results/rve/<run>/table.nc`` of a config file:

@@ -13,7 +13,6 @@
 # The job modules are imported in the rule bodies: parsing the workflow stays cheap.
 
 from rve.homogenisation import layout as rve_layout
-from rve.homogenisation.distributed import probe_tasks as rve_probe_tasks
 
 
 wildcard_constraints:
@@ -140,9 +139,9 @@ else:
             name:
                 f"rve_probes_dask_{_run}"
             input:
-                states=[t.state for t in rve_probe_tasks(_spec, _run)],
+                states=[t.state for t in rve_layout.probe_tasks(_spec, _run)],
             output:
-                records=[t.record for t in rve_probe_tasks(_spec, _run)],
+                records=[t.record for t in rve_layout.probe_tasks(_spec, _run)],
             log:
                 rve_layout.log_path(_run, "probes_dask"),
             benchmark:

@@ -17,8 +17,9 @@ from typing import Literal, Optional
 
 from pydantic import Field, field_validator, model_validator
 
-from ..config.fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
-from ..config.fields import (
+from .weaves import WEAVE_PATTERNS
+from .fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
+from .fields import (
     DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, SceneConfig, Section, ThermalConductivity,
     Time, Voltage,
 )
@@ -268,8 +269,6 @@ class RVEConfig(SceneConfig):
         if self.fabric.kind == "knit":
             raise ValueError("boundary: periodic is defined for the weaves (fabric.kind plain, twill_2_1, "
                              "twill_2_2, basket_2_2), not the knit")
-        from ..fabrics.weave import WEAVE_PATTERNS
-
         m, n = WEAVE_PATTERNS[self.fabric.kind].shape
         want = {"n_warp": m * self.cell.repeat, "n_weft": n * self.cell.repeat}
         for key, value in want.items():
