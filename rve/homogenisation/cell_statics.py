@@ -38,11 +38,10 @@ def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
     before = set(zip(*_active(system, x)))
     xs, _, res = minimize_energy(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter), sigma0=0.0,
                                  backtrack=3, label="strain step")
-    after_rebuild = system.rebuild(xs)
-    del after_rebuild
+    system.rebuild(xs)
     after = set(zip(*_active(system, xs)))
     missed = len(after - before)
-    info = {"converged": bool(res.converged) and True, "iterations": int(res.iterations),
+    info = {"converged": bool(res.converged), "iterations": int(res.iterations),
             "factorizations": int(res.factorizations), "rejections": int(res.rejections),
             "negative_pivots": int(res.negative_pivots), "residuals": [float(v) for v in res.residuals][-6:],
             "reason": res.reason, "method": "energy"}

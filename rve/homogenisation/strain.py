@@ -62,7 +62,7 @@ import numpy as np
 from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
-from .cell_statics import _active, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
