@@ -12,7 +12,7 @@ import numpy as np
 
 from .fem.mesh import Fibril, orthonormal_directors
 
-__all__ = ["fd_jacobian", "rel_err", "helix_fibril"]
+__all__ = ["fd_jacobian", "fd_nodes", "rel_err", "helix_fibril"]
 
 
 def fd_jacobian(fun, u, cols=None, eps: float = 1e-6) -> np.ndarray:
@@ -25,6 +25,20 @@ def fd_jacobian(fun, u, cols=None, eps: float = 1e-6) -> np.ndarray:
         um = u.copy()
         um[k] -= eps
         out[:, j] = (fun(up) - fun(um)) / (2 * eps)
+    return out
+
+
+def fd_nodes(fun, X, h: float = 1e-7) -> np.ndarray:
+    """Central differences of ``fun(X)`` (P, ...) with respect to every node coordinate of
+    ``X`` (P, n, 3), batched over P: returns (P, ..., n, 3)."""
+    f0 = fun(X)
+    out = np.zeros(f0.shape + X.shape[1:])
+    for k in range(X.shape[1]):
+        for i in range(3):
+            Xp, Xm = X.copy(), X.copy()
+            Xp[:, k, i] += h
+            Xm[:, k, i] -= h
+            out[..., k, i] = (fun(Xp) - fun(Xm)) / (2 * h)
     return out
 
 

@@ -5,6 +5,8 @@ p = 1 forms against the chord forms, and the jump terms' tangents."""
 import numpy as np
 import pytest
 
+from rve.testing import fd_nodes
+
 from rve.physics.contact_curve import (
     curve_basis, curve_geometry, curve_penalty_energy, curve_penalty_forces, curve_scalar_jump,
     gauss_legendre_01, project_to_curve,
@@ -37,16 +39,6 @@ def _geo(order, Xa, Xb, G=4, has_next=False, has_prev=False, t_next=None):
     return curve_geometry(order, Xa, Xb, s, np.full(P, R2), np.full(P, has_next), tn, np.full(P, has_prev))
 
 
-def _fd(fun, X, h=1e-7):
-    f0 = fun(X)
-    out = np.zeros(f0.shape + X.shape[1:])
-    for k in range(X.shape[1]):
-        for i in range(3):
-            Xp, Xm = X.copy(), X.copy()
-            Xp[:, k, i] += h
-            Xm[:, k, i] -= h
-            out[..., k, i] = (fun(Xp) - fun(Xm)) / (2 * h)
-    return out
 
 
 @pytest.mark.parametrize("order", [2, 3])
@@ -96,8 +88,8 @@ def test_penalty_gradient_and_tangent(order):
     geo = _geo(order, Xa, Xb)
     assert geo.active.sum() > 4 and np.any((geo.s_b > 0) & (geo.s_b < 1) & geo.active)
     R, K = curve_penalty_forces(geo, w, Ps, True)
-    np.testing.assert_allclose(R, _fd(energy, X), rtol=1e-6, atol=1e-9)
-    Kfd = _fd(resid, X)
+    np.testing.assert_allclose(R, fd_nodes(energy, X), rtol=1e-6, atol=1e-9)
+    Kfd = fd_nodes(resid, X)
     np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
     M = 2 * nn
     Km = K.reshape(-1, 3 * M, 3 * M)
@@ -121,7 +113,7 @@ def test_clamped_closest_points_tangent(order):
     geo = _geo(order, Xa, Xb)
     assert np.any(geo.active & (geo.s_b >= 1.0))
     R, K = curve_penalty_forces(geo, w, 50.0)
-    Kfd = _fd(lambda Y: curve_penalty_forces(_geo(order, Y[:, :nn], Y[:, nn:]), w, 50.0, False)[0], X)
+    Kfd = fd_nodes(lambda Y: curve_penalty_forces(_geo(order, Y[:, :nn], Y[:, nn:]), w, 50.0, False)[0], X)
     np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
 
 
@@ -174,7 +166,7 @@ def test_scalar_jump_tangents(order):
     geo = _geo(order, Xa, Xb)
     k, dk = law(geo)
     R, Ju, JX = curve_scalar_jump(geo, ua, ub, k, dk)
-    np.testing.assert_allclose(JX, _fd(res, X), rtol=1e-5, atol=1e-7 * np.abs(JX).max())
+    np.testing.assert_allclose(JX, fd_nodes(res, X), rtol=1e-5, atol=1e-7 * np.abs(JX).max())
     U = np.concatenate([ua, ub], axis=1)
     np.testing.assert_allclose(np.einsum("pAB,pB->pA", Ju, U), R, rtol=1e-12, atol=1e-15)  # linear in u
     np.testing.assert_allclose(R.sum(axis=1), 0.0, atol=1e-14)  # conservative

@@ -3,6 +3,8 @@ assembled ContactSystem: every block, recomputed and frozen closest points, the 
 import numpy as np
 import pytest
 
+from rve.testing import fd_nodes
+
 from rve.physics.contact_forms import (
     chord_geometry, hertz_kappa, hertz_width, penalty_forces, scalar_jump,
 )
@@ -34,17 +36,6 @@ def _residual(X, sp, w, Ps, s_minus=None, jac=True):
     return penalty_forces(geo, w, Ps, jac)
 
 
-def _fd(fun, X, h=1e-7):
-    """Central differences of fun(X) (P, ...) w.r.t. every X[p, k, i] -> (P, ..., 4, 3)."""
-    f0 = fun(X)
-    out = np.zeros(f0.shape + (4, 3))
-    for k in range(4):
-        for i in range(3):
-            Xp, Xm = X.copy(), X.copy()
-            Xp[:, k, i] += h
-            Xm[:, k, i] -= h
-            out[..., k, i] = (fun(Xp) - fun(Xm)) / (2 * h)
-    return out
 
 
 @pytest.mark.parametrize("frozen", [False, True])
@@ -58,9 +49,9 @@ def test_penalty_is_energy_gradient_and_tangent_exact(frozen):
     R, K = _residual(X, sp, w, Ps, sm)
     assert np.abs(R).max() > 1e-3  # really in contact
     if not frozen:  # recomputed closest points: the residual is the energy gradient
-        dE = _fd(lambda Y: _energy(Y, sp, w, Ps, None), X)
+        dE = fd_nodes(lambda Y: _energy(Y, sp, w, Ps, None), X)
         np.testing.assert_allclose(R, dE, rtol=1e-6, atol=1e-9)
-    Kfd = _fd(lambda Y: _residual(Y, sp, w, Ps, sm, False)[0], X)
+    Kfd = fd_nodes(lambda Y: _residual(Y, sp, w, Ps, sm, False)[0], X)
     np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-7 * np.abs(K).max())
     if not frozen:
         np.testing.assert_allclose(K, np.swapaxes(np.swapaxes(K, 1, 3), 2, 4), atol=1e-10 * np.abs(K).max())
@@ -82,7 +73,7 @@ def test_clamped_closest_point_tangent():
     assert geo.active.any()
     w = np.full(3, 0.1)
     R, K = _residual(X, sp, w, 50.0)
-    Kfd = _fd(lambda Y: _residual(Y, sp, w, 50.0, None, False)[0], X)
+    Kfd = fd_nodes(lambda Y: _residual(Y, sp, w, 50.0, None, False)[0], X)
     np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-7 * np.abs(K).max())
 
 
@@ -96,7 +87,7 @@ def test_onset_one_sided():
         Y = X.copy()
         Y[:, 2:, 2] += -dz  # dz > 0: apart, dz < 0: overlap of 1e-4
         R, K = _residual(Y, sp, w, Ps)
-        Kfd = _fd(lambda Z: _residual(Z, sp, w, Ps, None, False)[0], Y, h=1e-6)
+        Kfd = fd_nodes(lambda Z: _residual(Z, sp, w, Ps, None, False)[0], Y, h=1e-6)
         np.testing.assert_allclose(K, Kfd, rtol=1e-4, atol=1e-9)
         if closed:
             assert abs(R[0, 0, 2]) == pytest.approx(0.5 * w[0] * Ps * 1e-4, rel=1e-6)
@@ -155,7 +146,7 @@ def test_scalar_jump_jacobians(order, frozen):
     assert np.abs(R).max() > 1e-3
     # conservation: what leaves + enters - (sum of rows is zero for constant test fns)
     np.testing.assert_allclose(R[:, :nn].sum(1), -R[:, nn:].sum(1), atol=1e-14)
-    JXfd = _fd(res, X, h=1e-7)
+    JXfd = fd_nodes(res, X, h=1e-7)
     np.testing.assert_allclose(JX, JXfd, rtol=1e-5, atol=1e-7 * np.abs(JX).max())
     # linear in u: Ju u = R
     u = np.concatenate([up, um], axis=1)
@@ -258,14 +249,14 @@ def test_penalty_with_onset_gradient_and_tangent(frozen):
 
     R, K = res(X, True)
     assert np.abs(R).max() > 1e-5
-    Kfd = _fd(lambda Y: res(Y)[0], X)
+    Kfd = fd_nodes(lambda Y: res(Y)[0], X)
     np.testing.assert_allclose(K, Kfd, atol=1e-5 * np.abs(K).max())
     if not frozen:
         def energy(Y):
             geo = chord_geometry(Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], sp, np.full(Y.shape[0], R2))
             return np.array([penalty_energy(geo.g[p:p + 1], w[p:p + 1], Ps, eps) for p in range(Y.shape[0])])
 
-        np.testing.assert_allclose(R, _fd(energy, X), atol=1e-7)  # residual = dE/dX
+        np.testing.assert_allclose(R, fd_nodes(energy, X), atol=1e-7)  # residual = dE/dX
 
 
 def test_contact_system_energy_gradient():
