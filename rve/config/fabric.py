@@ -62,10 +62,11 @@ class FabricContact(Section):
     onset: Dimensionless = Field(
         0.0, ge=0, description="width of the C2 onset of the penalty law, fraction of R (0: the linear law P* g); "
                                "the law of the relaxed state")
-    geometry: Literal["chord", "curve"] = Field(
+    geometry: Literal["chord", "curve", "smooth"] = Field(
         "chord", description="chord: the elements' linear chords, one-sided points, clamped closest point (thesis); "
                              "curve: the Lagrange centroid curves, both sides, closest point continued to the "
-                             "neighbour element (docs/contact.md)")
+                             "neighbour element; smooth: as curve on the C1 Hermite curve through the element end "
+                             "nodes with averaged nodal tangents (docs/contact.md)")
     enforcement: Literal["penalty", "augmented_lagrangian"] = Field(
         "penalty", description="penalty (Table 7.1's P*) or augmented Lagrangian (Uzawa multipliers until the "
                                "largest overlap is below al_tolerance R)")

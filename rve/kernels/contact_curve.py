@@ -13,6 +13,12 @@ ownership and the penalty residual and tangent of ``rve.physics.contact_curve``
 pass per point with no (Pr, G, M, 3) temporaries. ``gap_radius`` and ``weight`` are (Pr, G).
 The projection stops per point (the reference stops when every point has converged), so
 the two agree to rounding (tests/test_kernels_contact_curve.py).
+
+``smooth_penalty_rows(Ha, end_snap, Ya, Sa, Yb, Sb, has_next, t_next, has_prev, gap_radius,
+weight, penalty, onset, jacobian)``: the same on the C¹ Hermite contact curves
+(``rve.physics.contact_smooth``: ``smooth_geometry`` + ``curve_penalty_forces``): Hermite data
+``Y`` (Pr, 4, 3) and stencil matrices ``S`` (Pr, 4, Ms) of each row's two sides, ``Ha`` (G, 4)
+the Hermite basis at the points; M = 2 Ms local nodes per pair.
 """
 from __future__ import annotations
 
@@ -21,7 +27,7 @@ from numba import njit
 
 from ..threads import run_chunked
 
-__all__ = ["curve_penalty_rows"]
+__all__ = ["curve_penalty_rows", "smooth_penalty_rows"]
 
 #: rows per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
 MIN_CHUNK = 512
@@ -229,5 +235,177 @@ def curve_penalty_rows(order: int, C, Na, end_snap: float, Xa, Xb, t_next, has_n
     jac, snap = bool(jacobian), float(end_snap)
     run_chunked(half, lambda a, b: _pairs(int(order), C, snap, Xa, Xb, tn, hn, hp, s_a, Na, gr, w, float(penalty),
                                           float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
+                MIN_CHUNK)
+    return active, R, (K if jacobian else None)
+
+
+@njit(cache=True, nogil=True)
+def _hermite(s, H, dH, d2H):
+    """Cubic Hermite basis (h00, h01, h10, h11) and its s-derivatives at s."""
+    s2 = s * s
+    s3 = s2 * s
+    H[0] = 2 * s3 - 3 * s2 + 1
+    H[1] = -2 * s3 + 3 * s2
+    H[2] = s3 - 2 * s2 + s
+    H[3] = s3 - s2
+    dH[0] = 6 * s2 - 6 * s
+    dH[1] = -6 * s2 + 6 * s
+    dH[2] = 3 * s2 - 4 * s + 1
+    dH[3] = 3 * s2 - 2 * s
+    d2H[0] = 12 * s - 6
+    d2H[1] = -12 * s + 6
+    d2H[2] = 6 * s - 4
+    d2H[3] = 6 * s - 2
+
+
+@njit(cache=True, nogil=True)
+def _project_hermite(end_snap, Yb, r, p, H, dH, d2H):
+    d0 = Yb[r, 1, 0] - Yb[r, 0, 0]
+    d1 = Yb[r, 1, 1] - Yb[r, 0, 1]
+    d2 = Yb[r, 1, 2] - Yb[r, 0, 2]
+    dd = d0 * d0 + d1 * d1 + d2 * d2
+    s = ((p[0] - Yb[r, 0, 0]) * d0 + (p[1] - Yb[r, 0, 1]) * d1 + (p[2] - Yb[r, 0, 2]) * d2) / (dd if dd > 0 else 1.0)
+    s = min(max(s, 0.0), 1.0)
+    for _ in range(12):
+        _hermite(s, H, dH, d2H)
+        f = 0.0
+        tt = 0.0
+        et2 = 0.0
+        for i in range(3):
+            q = 0.0
+            t = 0.0
+            t2 = 0.0
+            for b in range(4):
+                q += H[b] * Yb[r, b, i]
+                t += dH[b] * Yb[r, b, i]
+                t2 += d2H[b] * Yb[r, b, i]
+            e = q - p[i]
+            f += e * t
+            tt += t * t
+            et2 += e * t2
+        fp = max(tt + et2, 0.1 * tt)
+        s_new = min(max(s - f / (fp if fp > 0 else 1.0), 0.0), 1.0)
+        done = abs(s_new - s) <= 1e-15
+        s = s_new
+        if done:
+            break
+    if s < end_snap:
+        s = 0.0
+    elif s > 1.0 - end_snap:
+        s = 1.0
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g, gr, H, dH, d2H, p, c, m, j, t, t2):
+    """One point of row r on the Hermite curves: fills c, m, j, t, t2; returns
+    ``(gap, rho, interior, counted)`` (counted: owned, overlapping, rho > 0)."""
+    Ms = Sa.shape[2]
+    for ii in range(3):
+        v = 0.0
+        for a in range(4):
+            v += Ha[g, a] * Ya[r, a, ii]
+        p[ii] = v
+    s = _project_hermite(end_snap, Yb, r, p, H, dH, d2H)
+    _hermite(s, H, dH, d2H)
+    for ii in range(3):
+        q = 0.0
+        ti = 0.0
+        t2i = 0.0
+        for b in range(4):
+            q += H[b] * Yb[r, b, ii]
+            ti += dH[b] * Yb[r, b, ii]
+            t2i += d2H[b] * Yb[r, b, ii]
+        j[ii] = p[ii] - q
+        t[ii] = ti
+        t2[ii] = t2i
+    rho = np.sqrt(j[0] * j[0] + j[1] * j[1] + j[2] * j[2])
+    gap = gr[r, g] - rho
+    interior = (s > 0.0) and (s < 1.0)
+    tn2 = t_next[r, 0] ** 2 + t_next[r, 1] ** 2 + t_next[r, 2] ** 2
+    grow = 0.0
+    for ii in range(3):
+        grow += (Yb[r, 1, ii] - p[ii]) * t_next[r, ii]
+    grows = grow >= -2.0 * end_snap * tn2
+    owned = interior or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
+    counted = owned and gap > 0.0 and rho > _TINY
+    if counted:
+        for k in range(Ms):
+            ca = 0.0
+            cb = 0.0
+            mb = 0.0
+            for a in range(4):
+                ca += Ha[g, a] * Sa[r, a, k]
+                cb += H[a] * Sb[r, a, k]
+                mb += dH[a] * Sb[r, a, k]
+            c[k] = ca
+            c[Ms + k] = -cb
+            m[k] = 0.0
+            m[Ms + k] = mb
+    return gap, rho, interior, counted
+
+
+@njit(cache=True, nogil=True)
+def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, w, Pstar, eps, jacobian, lo, hi,
+                  active, R, K):
+    """Pairs lo..hi-1 on the Hermite curves (as ``_pairs``)."""
+    half = Ya.shape[0] // 2
+    Ms = Sa.shape[2]
+    M = 2 * Ms
+    G = Ha.shape[0]
+    H = np.empty(4)
+    dH = np.empty(4)
+    d2H = np.empty(4)
+    p = np.empty(3)
+    c = np.empty(M)
+    m = np.empty(M)
+    ds = np.empty((M, 3))
+    j = np.empty(3)
+    t = np.empty(3)
+    t2 = np.empty(3)
+    slot = np.empty(M, np.int64)
+    for i in range(lo, hi):
+        o = i - lo
+        for side in range(2):
+            r = i + side * half
+            for k in range(M):
+                slot[k] = k if side == 0 else (k + Ms) % M
+            for g in range(G):
+                gap, rho, interior, counted = _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev,
+                                                            Ha, r, g, gr, H, dH, d2H, p, c, m, j, t, t2)
+                if not counted:
+                    continue
+                active[o] = True
+                nv = (j[0] / rho, j[1] / rho, j[2] / rho)
+                f1, f2 = _law(gap, Pstar, eps)
+                _accumulate(R[o], K[o if jacobian else 0], jacobian, slot, c, m, nv, j, t, t2, rho, interior,
+                            w[r, g] * f1, w[r, g] * f2, ds)
+
+
+def smooth_penalty_rows(Ha, end_snap: float, Ya, Sa, Yb, Sb, has_next, t_next, has_prev, gap_radius, weight,
+                        penalty: float, onset: float = 0.0, jacobian: bool = True):
+    """``(active, R, K)`` of the oriented rows on the Hermite curves (module docstring);
+    ``Ha`` (G, 4) from ``rve.physics.contact_smooth.hermite_basis``, ``end_snap`` its
+    ``END_SNAP``."""
+    Ya = np.ascontiguousarray(Ya, dtype=np.float64)
+    Yb = np.ascontiguousarray(Yb, dtype=np.float64)
+    Sa = np.ascontiguousarray(Sa, dtype=np.float64)
+    Sb = np.ascontiguousarray(Sb, dtype=np.float64)
+    Pr, _, Ms = Sa.shape
+    Ha = np.ascontiguousarray(Ha, dtype=np.float64).reshape(-1, 4)
+    G = Ha.shape[0]
+    gr = np.ascontiguousarray(np.broadcast_to(np.asarray(gap_radius, float).reshape(Pr, -1), (Pr, G)))
+    w = np.ascontiguousarray(np.broadcast_to(np.asarray(weight, float).reshape(Pr, -1), (Pr, G)))
+    tn = np.ascontiguousarray(t_next, dtype=np.float64)
+    hn = np.ascontiguousarray(has_next, dtype=np.bool_)
+    hp = np.ascontiguousarray(has_prev, dtype=np.bool_)
+    M = 2 * Ms
+    half = Pr // 2
+    active = np.zeros(half, np.bool_)
+    R = np.zeros((half, M, 3))
+    K = np.zeros((half, M, 3, M, 3)) if jacobian else np.zeros((1, M, 3, M, 3))
+    jac, snap = bool(jacobian), float(end_snap)
+    run_chunked(half, lambda a, b: _smooth_pairs(snap, Ya, Sa, Yb, Sb, tn, hn, hp, Ha, gr, w, float(penalty),
+                                                 float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
                 MIN_CHUNK)
     return active, R, (K if jacobian else None)

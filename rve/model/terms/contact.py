@@ -25,7 +25,9 @@ params, E_star)``: a term of *pair elements*, not of beam elements:
 Options (``ContactParams``; the defaults are the chord, the penalty and the width law, as in
 the thesis): ``geometry="curve"`` evaluates the contact on the elements' Lagrange curves
 with two half passes (``rve.model.terms.contact_pairs.HalfPasses``; every pair has m = 2nn
-local nodes, its rows are the oriented pairs); ``enforcement="augmented_lagrangian"`` carries
+local nodes, its rows are the oriented pairs); ``geometry="smooth"`` the same on the C¹
+Hermite contact curve through the end nodes (``rve.physics.contact_smooth``; a side's local
+nodes are its element's stencil, 3nn); ``enforcement="augmented_lagrangian"`` carries
 multipliers per point (``multipliers`` (rows, n_gp), kept by point key over rebuilds) that
 shift the penalty law's overlap to ``g + lambda/P*``, updated by ``update_multipliers(x)``
 (driven by ``rve.solvers.augmented``), ``penetration`` / ``max_penetration`` the true
@@ -43,6 +45,7 @@ from ...kernels import use_numba
 from ...physics.contact_curve import (
     END_SNAP, chord_deviation, curve_basis, curve_penalty_forces, curve_scalar_jump, lagrange_monomials,
 )
+from ...physics.contact_smooth import hermite_basis, hermite_deviation, smooth_stencil
 from ...physics.contact_forms import (
     chord_gaps, chord_geometry, effective_radius, hertz_kappa, hertz_width, penalty_energy,
     penalty_forces, penalty_law, scalar_jump,
@@ -51,8 +54,9 @@ from .contact_pairs import HalfPasses, gather_by_key, point_keys
 
 __all__ = ["ContactParams", "ContactTerm", "GEOMETRIES", "ENFORCEMENTS", "CONDUCTANCE_LAWS"]
 
-#: contact geometry: the linear chords of the elements, or their Lagrange centroid curve
-GEOMETRIES = ("chord", "curve")
+#: contact geometry: the linear chords of the elements, their Lagrange centroid curve, or the
+#: C¹ Hermite curve through their end nodes
+GEOMETRIES = ("chord", "curve", "smooth")
 #: how impenetrability is enforced: a penalty, or augmented Lagrangian multipliers on it
 ENFORCEMENTS = ("penalty", "augmented_lagrangian")
 #: contact conductance: the Hertz width law, or Holm's a-spot constriction from the force
@@ -76,7 +80,9 @@ class ContactParams:
     ``geometry``: ``"chord"`` (the linear centroid chords, one-sided points, the closest
     point clamped to the - element) or ``"curve"`` (the elements' Lagrange centroid curve,
     both sides' points, the closest point continued to the neighbour element;
-    docs/contact.md "Contact on the centroid curve"). ``enforcement``: ``"penalty"`` or
+    docs/contact.md "Contact on the centroid curve") or ``"smooth"`` (as ``"curve"``, on a
+    C¹ cubic Hermite curve through the element end nodes with averaged nodal tangents;
+    docs/contact.md "The smooth contact curve"). ``enforcement``: ``"penalty"`` or
     ``"augmented_lagrangian"`` (Uzawa multipliers driven by ``rve.solvers.augmented``
     until the largest overlap is below ``al_tolerance`` x R, at most ``al_max_iter``
     updates). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
@@ -140,7 +146,9 @@ class ContactTerm:
                  thermal_conductivity: float = 0.0):
         self.mesh, self.layout, self.params = mesh, layout, params
         self.E_star = float(E_star)
-        self.curve = params.geometry == "curve"
+        #: the half passes on a curve (Lagrange or, with ``smooth``, the C¹ Hermite one)
+        self.curve = params.geometry in ("curve", "smooth")
+        self.smooth = params.geometry == "smooth"
         self.augmented = params.enforcement == "augmented_lagrangian"
         self.holm = params.conductance_law == "holm"
         if self.holm:
@@ -199,7 +207,13 @@ class ContactTerm:
         conn = mesh.conn
         nn = conn.shape[1]
         ep, em = cmap.e_plus, cmap.e_minus
-        if self.scalar or self.curve:
+        stencil = None
+        if self.smooth:
+            nb = element_neighbours(mesh, self.wrap)
+            stencil = smooth_stencil(mesh.order, conn, nb.prev, nb.next, mesh.elem_length)
+            local = np.concatenate([stencil.nodes[ep], stencil.nodes[em]], axis=1)  # (P, 2 (3nn))
+            self.endpos = None
+        elif self.scalar or self.curve:
             local = np.concatenate([conn[ep], conn[em]], axis=1)  # (P, 2nn)
             self.endpos = np.array([0, nn - 1, nn, 2 * nn - 1])
         else:
@@ -211,7 +225,7 @@ class ContactTerm:
         self.gap_radius = R[fp] + R[fm]
         self.kappa = hertz_kappa(effective_radius(R[fp], R[fm]), self.params.penalty, self.E_star)
         if self.curve:
-            self.passes = HalfPasses.build(cmap, mesh, self.params.n_gp, element_neighbours(mesh, self.wrap))
+            self.passes = HalfPasses.build(cmap, mesh, self.params.n_gp, element_neighbours(mesh, self.wrap), stencil)
             self.weight = self.passes.weight
             self.row_pair = np.tile(np.arange(cmap.n_pairs), 2)
         else:
@@ -374,9 +388,12 @@ class ContactTerm:
         Newton projection and forms run on these only."""
         cmap, mesh = self.map, self.mesh
         r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
-        conn = mesh.conn
-        X = r[conn]
-        dev = chord_deviation(mesh.order, X)
+        if self.smooth:
+            Y = self.passes.stencil.control(r)
+            X, dev = Y[:, :2], hermite_deviation(Y)  # the chords run between the end nodes
+        else:
+            X = r[mesh.conn]
+            dev = chord_deviation(mesh.order, X)
         S = cmap.shifts
         d, _, _ = segment_distance(X[cmap.e_plus, 0], X[cmap.e_plus, -1], X[cmap.e_minus, 0] + S,
                                    X[cmap.e_minus, -1] + S)
@@ -485,7 +502,8 @@ class ContactTerm:
     def _forms_curve(self, x, w, jacobian: bool):
         """``forms`` on the centroid curves: both half passes of every active pair, folded
         into the pair's (e+ nodes, e- nodes) layout."""
-        ps, nn = self.passes, self.mesh.order + 1
+        ps = self.passes
+        nn = ps.width(self.mesh.order + 1)
         cand = self.curve_candidates(x)
         if cand.size == 0:
             return np.zeros(0, np.int64), np.zeros(0), None, None
@@ -519,7 +537,7 @@ class ContactTerm:
             c = 3 + ic
             u = wn[:, self.layout.offset[f]]
             k, dk = self.conductance_law(geo.g, f, kap)
-            ua, ub = u[conn[ps.a_elem[rows]]], u[conn[ps.b_elem[rows]]]
+            ua, ub = u[ps.side_nodes(conn, ps.a_elem[rows])], u[ps.side_nodes(conn, ps.b_elem[rows])]
             if f in self.field_jumps:
                 ua = ua + (ps.a_shift[rows] @ self.field_jumps[f])[:, None]
                 ub = ub + (ps.b_shift[rows] @ self.field_jumps[f])[:, None]
@@ -541,11 +559,23 @@ class ContactTerm:
         ps, order = self.passes, self.mesh.order
         rows = ps.rows(cand)
         r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
-        Xa, Xb, has_next, t_next, has_prev = ps.inputs(order, self.mesh.conn, r, rows)
         gr = self.row_gap_radius(rows)
+        if self.smooth:
+            from ...kernels.contact_curve import smooth_penalty_rows
+
+            Ha = hermite_basis(ps.s)[0]
+            active, Rr, Kr = smooth_penalty_rows(Ha, END_SNAP, *ps.smooth_inputs(r, rows), gr, self.weight[rows],
+                                                 float(self.params.penalty), self.onset, jacobian)
+            return self._compiled_rows(cand, active, Rr, Kr, jacobian)
+        Xa, Xb, has_next, t_next, has_prev = ps.inputs(order, self.mesh.conn, r, rows)
         active, Rr, Kr = curve_penalty_rows(order, lagrange_monomials(order), curve_basis(order, ps.s)[0], END_SNAP,
                                             Xa, Xb, t_next, has_next, has_prev, ps.s, gr, self.weight[rows],
                                             float(self.params.penalty), self.onset, jacobian)
+        return self._compiled_rows(cand, active, Rr, Kr, jacobian)
+
+    @staticmethod
+    def _compiled_rows(cand, active, Rr, Kr, jacobian: bool):
+        """``forms``' return of a compiled curve kernel's pairs ``cand`` (flags ``active``)."""
         act = cand[active]
         if act.size == 0:
             return np.zeros(0, np.int64), np.zeros(0), None, None

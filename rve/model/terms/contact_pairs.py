@@ -12,7 +12,9 @@ with the weight ``l_a W_k / 2`` (``l_a`` the element's length in the reference p
 them, so no side is the master. ``rows(sel)`` are the oriented rows of the map pairs ``sel``;
 ``geometry(order, conn, r, gap_radius, rows)`` the ``CurveGeometry`` of those rows at positions
 ``r`` (n_nodes, 3); ``fold`` adds a pair's two rows into the pair's
-local layout (e+ nodes, then e- nodes).
+local layout (e+ nodes, then e- nodes). With a ``SmoothStencil`` (``geometry: smooth``,
+``rve.physics.contact_smooth``) the rows are on the elements' C¹ Hermite curves and a side's
+local nodes are its element's stencil (prev's, own, next's nodes): ``width`` slots per side.
 
 ``point_keys(...)`` names every contact point by what it is physically: (the element that
 carries the point, the point's index, the fibril it touches, the translation of that fibril
@@ -23,10 +25,12 @@ neighbour element, and survives a rebuild of the map.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
 from ...physics.contact_curve import CurveGeometry, curve_basis, curve_geometry, gauss_legendre_01
+from ...physics.contact_smooth import SmoothStencil, smooth_geometry
 
 __all__ = ["HalfPasses", "point_keys", "gather_by_key"]
 
@@ -49,9 +53,11 @@ class HalfPasses:
     has_prev: np.ndarray
     weight: np.ndarray
     s: np.ndarray
+    #: the C¹ contact curve's stencils (None: the elements' Lagrange curves)
+    stencil: Optional[SmoothStencil] = None
 
     @classmethod
-    def build(cls, cmap, mesh, n_gp: int, neighbours) -> "HalfPasses":
+    def build(cls, cmap, mesh, n_gp: int, neighbours, stencil: Optional[SmoothStencil] = None) -> "HalfPasses":
         P = cmap.n_pairs
         S = cmap.shifts
         zero = np.zeros((P, 3))
@@ -61,7 +67,15 @@ class HalfPasses:
         weight = 0.5 * np.asarray(mesh.elem_length, float)[a_elem][:, None] * W[None, :]
         return cls(n_pairs=P, a_elem=a_elem, b_elem=b_elem, a_shift=np.concatenate([zero, S]),
                    b_shift=np.concatenate([S, zero]), next_elem=np.asarray(neighbours.next)[b_elem],
-                   has_prev=np.asarray(neighbours.prev)[b_elem] >= 0, weight=weight, s=s)
+                   has_prev=np.asarray(neighbours.prev)[b_elem] >= 0, weight=weight, s=s, stencil=stencil)
+
+    def width(self, nn: int) -> int:
+        """Local nodes per side of a row: the element's nn, or its stencil's."""
+        return nn if self.stencil is None else self.stencil.width
+
+    def side_nodes(self, conn, elems) -> np.ndarray:
+        """Local nodes (n, width) of the sides on elements ``elems``."""
+        return conn[elems] if self.stencil is None else self.stencil.nodes[elems]
 
     def rows(self, sel=None) -> np.ndarray:
         """Oriented rows of the map pairs ``sel`` (all by default): ``sel`` then ``P + sel``."""
@@ -80,16 +94,33 @@ class HalfPasses:
         t_next = np.einsum("b,pbi->pi", dN0[0], r[conn[np.where(has_next, nx, 0)]])
         return Xa, Xb, has_next, t_next, self.has_prev[rows]
 
+    def smooth_inputs(self, r, rows):
+        """``(Ya, Sa, Yb, Sb, has_next, t_next, has_prev)`` of the oriented ``rows`` on the
+        Hermite curves (``SmoothStencil``): their data (shifts applied) and stencil matrices,
+        and b's next element's start tangent m_0."""
+        st = self.stencil
+        ea, eb, nx = self.a_elem[rows], self.b_elem[rows], self.next_elem[rows]
+        Y = st.control(r)
+        Ya, Yb = Y[ea], Y[eb]
+        Ya[:, :2] += self.a_shift[rows][:, None, :]
+        Yb[:, :2] += self.b_shift[rows][:, None, :]
+        has_next = nx >= 0
+        return Ya, st.S[ea], Yb, st.S[eb], has_next, Y[np.where(has_next, nx, 0), 2], self.has_prev[rows]
+
     def geometry(self, order: int, conn, r, gap_radius, rows) -> CurveGeometry:
         """``CurveGeometry`` of the oriented ``rows`` at positions ``r`` (n_nodes, 3);
         ``gap_radius`` (len(rows),) or (len(rows), G)."""
+        if self.stencil is not None:
+            Ya, Sa, Yb, Sb, has_next, t_next, has_prev = self.smooth_inputs(r, rows)
+            return smooth_geometry(order, Ya, Sa, Yb, Sb, self.s, gap_radius, has_next, t_next, has_prev)
         Xa, Xb, has_next, t_next, has_prev = self.inputs(order, conn, r, rows)
         return curve_geometry(order, Xa, Xb, self.s, gap_radius, has_next, t_next, has_prev)
 
     @staticmethod
     def fold(R, nn: int, axes=(1,)) -> np.ndarray:
         """(2Ps, ...) oriented local arrays -> (Ps, ...) in the pairs' (e+ nodes, e- nodes)
-        layout: the second half's node ``axes`` (each of length 2 nn) are swapped."""
+        layout: the second half's node ``axes`` (each of length 2 nn; nn the local nodes
+        per side) are swapped."""
         half = R.shape[0] // 2
         perm = np.r_[nn:2 * nn, 0:nn]
         B = R[half:]

@@ -1,0 +1,193 @@
+"""Contact on a C¹ contact curve through the element end nodes (docs/contact.md "The smooth
+contact curve"): per element a cubic Hermite curve whose end tangents are the averaged
+tangents of the Lagrange elements meeting at each node, its closest point, and the
+kinematics that the penalty and jump forms of ``rve.physics.contact_curve`` read.
+
+Contract
+--------
+* **The curve of an element** e (parameter s in [0, 1], nn = p + 1 Lagrange nodes) is
+  ``C(s) = h00(s) x_0 + h01(s) x_1 + h10(s) m_0 + h11(s) m_1`` with the cubic Hermite basis
+  ``H = (h00, h01, h10, h11)``, ``x_0``, ``x_1`` the element's end nodes and the end
+  tangents (d/ds of e)::
+
+      m_0 = (l_e / 2) (t_prev(1) / l_prev + t_e(0) / l_e)     (t_e(0) at a free start)
+      m_1 = (l_e / 2) (t_e(1) / l_e + t_next(0) / l_next)     (t_e(1) at a free end)
+
+  where ``t_f(s) = sum_B dN_B/ds x_B`` is the Lagrange tangent of element f and ``l`` the
+  elements' reference lengths: the two elements meeting at a node share the tangent
+  ``dC/dX`` there, so the contact curve is C¹ along the fibril (for p = 1 and equal
+  lengths ``m = (x_{N+1} - x_{N-1}) / 2``, the Catmull-Rom spline). Straight, evenly
+  meshed fibrils give the chord exactly.
+* **Linear in the nodes, over a stencil.** ``C(s) = H(s) S_e X_e`` with the stencil
+  ``X_e`` (3 nn, 3): the nodes of prev(e), of e, of next(e) (``SmoothStencil.nodes``; at a
+  free end the element's own nodes stand in with zero weight), and the constant (4, 3 nn)
+  matrix ``S_e`` (rows: x_0, x_1, m_0, m_1). The tangents are differences inside one
+  element (``sum_B dN_B = 0``), so a neighbour across a periodic wrap enters with its own
+  positions, unshifted: the curve depends on node positions and on the pair's shift only.
+* ``smooth_geometry`` gives the ``CurveGeometry`` of points of oriented rows on these
+  curves, with the conventions of ``rve.physics.contact_curve`` (closest point by Newton
+  from the chord's, snapped within ``END_SNAP`` of an end, owned as there; ``c`` (P, G, M)
+  and ``ds`` (P, G, M, 3) over the M = 2 (3 nn) stencil slots of the row: a's stencil, then
+  b's), so ``curve_penalty_forces`` and ``curve_scalar_jump`` apply unchanged. ``Na``,
+  ``Nb``, ``dNb`` are the Lagrange basis of the scalar fields (T, V) at s_a, s_b, placed in
+  the element's own slots of the stencil layout (zero on the neighbours' slots).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .contact_curve import END_SNAP, CurveGeometry, curve_basis
+
+__all__ = ["SmoothStencil", "hermite_basis", "smooth_stencil", "hermite_deviation", "project_to_hermite",
+           "smooth_geometry", "HERMITE_BOUND"]
+
+_TINY = 1e-300
+#: max over [0, 1] of |h10| and of |h11| (4/27 at s = 1/3, 2/3)
+HERMITE_BOUND = 4.0 / 27.0
+
+
+def hermite_basis(s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cubic Hermite basis (h00, h01, h10, h11) and its first and second s-derivatives at
+    ``s`` (any shape) -> three arrays (..., 4)."""
+    s = np.asarray(s, float)
+    s2, s3 = s * s, s * s * s
+    one = np.ones_like(s)
+    H = np.stack([2 * s3 - 3 * s2 + 1, -2 * s3 + 3 * s2, s3 - 2 * s2 + s, s3 - s2], axis=-1)
+    dH = np.stack([6 * s2 - 6 * s, -6 * s2 + 6 * s, 3 * s2 - 4 * s + one, 3 * s2 - 2 * s], axis=-1)
+    d2H = np.stack([12 * s - 6, -12 * s + 6, 6 * s - 4, 6 * s - 2], axis=-1)
+    return H, dH, d2H
+
+
+@dataclass(frozen=True)
+class SmoothStencil:
+    """Per element (E elements, nn nodes): ``nodes`` (E, 3 nn) the stencil (prev's nodes,
+    own, next's; own nodes in place of a missing neighbour) and ``S`` (E, 4, 3 nn) the
+    Hermite data (x_0, x_1, m_0, m_1) in terms of the stencil's positions."""
+
+    nodes: np.ndarray
+    S: np.ndarray
+
+    @property
+    def width(self) -> int:
+        return self.nodes.shape[1]
+
+    def control(self, r, elems=None, shift=None) -> np.ndarray:
+        """Hermite data Y (n, 4, 3) of the elements ``elems`` (all by default) at positions
+        ``r`` (n_nodes, 3), translated by ``shift`` (n, 3) if given."""
+        nodes, S = (self.nodes, self.S) if elems is None else (self.nodes[elems], self.S[elems])
+        Y = np.matmul(S, r[nodes])
+        if shift is not None:
+            Y[:, :2] += shift[:, None, :]  # the tangents are differences: no shift
+        return Y
+
+
+def smooth_stencil(order: int, conn, prev, nxt, length) -> SmoothStencil:
+    """``SmoothStencil`` of the elements ``conn`` (E, nn) with neighbours ``prev``/``nxt``
+    (E,) (-1 at a free end) and reference lengths ``length`` (E,)."""
+    conn = np.asarray(conn, np.int64)
+    E, nn = conn.shape
+    prev, nxt = np.asarray(prev, np.int64), np.asarray(nxt, np.int64)
+    length = np.asarray(length, float)
+    _, dN, _ = curve_basis(order, np.array([0.0, 1.0]))
+    dN0, dN1 = dN[0], dN[1]
+    hp, hn = prev >= 0, nxt >= 0
+    own = np.arange(E)
+    ip, inx = np.where(hp, prev, own), np.where(hn, nxt, own)
+    S = np.zeros((E, 4, 3 * nn))
+    S[:, 0, nn] = 1.0
+    S[:, 1, 2 * nn - 1] = 1.0
+    S[:, 2, nn:2 * nn] = np.where(hp, 0.5, 1.0)[:, None] * dN0
+    S[:, 2, 0:nn] = np.where(hp, 0.5 * length / length[ip], 0.0)[:, None] * dN1
+    S[:, 3, nn:2 * nn] = np.where(hn, 0.5, 1.0)[:, None] * dN1
+    S[:, 3, 2 * nn:] = np.where(hn, 0.5 * length / length[inx], 0.0)[:, None] * dN0
+    nodes = np.concatenate([conn[ip], conn, conn[inx]], axis=1)
+    return SmoothStencil(nodes=nodes, S=S)
+
+
+def hermite_deviation(Y) -> np.ndarray:
+    """Bound on the distance between each Hermite curve ``Y`` (E, 4, 3) and its chord at the
+    same parameter: ``C(s) - chord(s) = h10 (m_0 - d) + h11 (m_1 - d)``, d = x_1 - x_0
+    (the basis reproduces the chord when m_0 = m_1 = d), so at most 4/27 (|m_0 - d| + |m_1 - d|)."""
+    Y = np.asarray(Y, float)
+    d = Y[:, 1] - Y[:, 0]
+    return HERMITE_BOUND * (np.linalg.norm(Y[:, 2] - d, axis=-1) + np.linalg.norm(Y[:, 3] - d, axis=-1))
+
+
+def project_to_hermite(Yb, p, iterations: int = 12):
+    """Closest point parameter on the Hermite curves ``Yb`` (P, 4, 3) of the points ``p``
+    (P, G, 3): Newton on ``(C(s) - p).C'(s)`` from the chord's closest point, each iterate
+    clamped to [0, 1] (a descent step where the distance is not convex in s), parameters
+    within ``END_SNAP`` of an end snapped to it. Returns ``s`` (P, G)."""
+    Yb = np.asarray(Yb, float)
+    a, b = Yb[:, 0], Yb[:, 1]
+    d = b - a
+    dd = np.einsum("pi,pi->p", d, d)
+    s = np.einsum("pgi,pi->pg", p - a[:, None, :], d) / np.where(dd > 0, dd, 1.0)[:, None]
+    s = np.clip(s, 0.0, 1.0)
+    for _ in range(iterations):
+        H, dH, d2H = hermite_basis(s)
+        e = np.matmul(H, Yb) - p
+        t = np.matmul(dH, Yb)
+        f = np.einsum("pgi,pgi->pg", e, t)
+        tt = np.einsum("pgi,pgi->pg", t, t)
+        fp = np.maximum(tt + np.einsum("pgi,pgi->pg", e, np.matmul(d2H, Yb)), 0.1 * tt)
+        s_new = np.clip(s - f / np.where(fp > 0, fp, 1.0), 0.0, 1.0)
+        done = np.abs(s_new - s).max() <= 1e-15
+        s = s_new
+        if done:
+            break
+    return np.where(s < END_SNAP, 0.0, np.where(s > 1.0 - END_SNAP, 1.0, s))
+
+
+def _lagrange_in_stencil(order: int, s) -> tuple[np.ndarray, np.ndarray]:
+    """Lagrange values and d/ds at ``s`` (P, G) in the stencil layout (P, G, 3 nn): the
+    element's own slots nn..2nn-1, zero elsewhere."""
+    N, dN, _ = curve_basis(order, s)
+    nn = order + 1
+    pad = [(0, 0)] * (N.ndim - 1) + [(nn, nn)]
+    return np.pad(N, pad), np.pad(dN, pad)
+
+
+def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_next, has_prev) -> CurveGeometry:
+    """Contact kinematics of points ``s_a`` (G,) on the Hermite curves ``Ya`` (P, 4, 3)
+    (stencil matrices ``Sa`` (P, 4, Ms)) against the curves ``Yb``, ``Sb`` (shifts applied by
+    the caller). ``gap_radius`` (P,) or (P, G); ``has_next`` / ``has_prev`` (P,) whether b
+    has a next / previous element; ``t_next`` (P, 3) the next element's start tangent (its
+    m_0; only its sign against ``C_b(1) - p`` is used, as in ``curve_geometry``)."""
+    Ya, Yb = np.asarray(Ya, float), np.asarray(Yb, float)
+    Sa, Sb = np.asarray(Sa, float), np.asarray(Sb, float)
+    P = Ya.shape[0]
+    s_a = np.asarray(s_a, float)
+    G = s_a.shape[-1]
+    Ha = np.broadcast_to(hermite_basis(s_a)[0], (P, G, 4))
+    p = np.matmul(Ha, Ya)
+    s_b = project_to_hermite(Yb, p)
+    Hb, dHb, d2Hb = hermite_basis(s_b)
+    q, t, t2 = np.matmul(Hb, Yb), np.matmul(dHb, Yb), np.matmul(d2Hb, Yb)
+    j = p - q
+    rho = np.sqrt(np.einsum("pgi,pgi->pg", j, j))
+    n = j / np.maximum(rho, _TINY)[..., None]
+    gr = np.asarray(gap_radius, float)
+    g = (gr[:, None] if gr.ndim == 1 else gr) - rho
+    interior = (s_b > 0.0) & (s_b < 1.0)
+    tn = np.asarray(t_next, float)
+    tt_next = np.einsum("pi,pi->p", tn, tn)[:, None]
+    grows = np.einsum("pgi,pi->pg", Yb[:, 1][:, None, :] - p, tn) >= -2.0 * END_SNAP * tt_next
+    hn = np.asarray(has_next, bool)[:, None]
+    hp = np.asarray(has_prev, bool)[:, None]
+    owned = interior | ((s_b >= 1.0) & (~hn | grows)) | ((s_b <= 0.0) & ~hp)
+    ca = np.matmul(Ha, Sa)  # (P, G, Ms): the point's weights on a's stencil
+    cb = np.matmul(Hb, Sb)
+    c = np.concatenate([ca, -cb], axis=-1)
+    m = np.concatenate([np.zeros_like(cb), np.matmul(dHb, Sb)], axis=-1)
+    A = np.einsum("pgi,pgi->pg", t, t) - np.einsum("pgi,pgi->pg", j, t2)
+    Asafe = np.where(interior & (A > 0), A, 1.0)
+    ds = (c[..., None] * t[:, :, None, :] + m[..., None] * j[:, :, None, :]) / Asafe[..., None, None]
+    ds *= interior[..., None, None]
+    active = owned & (g > 0.0) & (rho > _TINY)
+    Na, _ = _lagrange_in_stencil(order, np.broadcast_to(s_a, (P, G)))
+    Nb, dNb = _lagrange_in_stencil(order, s_b)
+    return CurveGeometry(s_a=np.broadcast_to(s_a, (P, G)), s_b=s_b, j=j, rho=rho, n=n, g=g, c=c, ds=ds,
+                         A=A, owned=owned, active=active, Na=Na, Nb=Nb, dNb=dNb)
