@@ -1,15 +1,19 @@
-"""The plain-weave relaxation (configs/scenes/plain_weave_relax.yaml) with the chord and the
-curve contact geometry: wall time, whether every stage converged (and why not), the relaxed
+"""The plain-weave relaxation (configs/scenes/plain_weave_relax.yaml) with the chord, the
+curve and the smooth contact geometry: wall time, whether every stage converged (and why not), the relaxed
 energy, the final residual and contact statistics (docs/contact.md "Contact on the centroid
 curve"). One run per geometry; minutes at 30 el/fibril.
 
-Usage: nice -n 10 python benchmarks/contact_relax_compare.py [elements ...]   (default 12)
+Usage: nice -n 10 python benchmarks/contact_relax_compare.py [elements ...] [--geometry G ...]
+(default 12 elements; every geometry). The final state of each run is saved to
+/tmp/contact_relax_<geometry>_<elements>.npy (benchmarks/contact_kink_diagnosis.py reads it).
 """
 from __future__ import annotations
 
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 from rve.config.loader import load_config
 from rve.scenes.fabric_relax import solve
@@ -27,7 +31,8 @@ def run(geometry: str, elements: int) -> None:
     stages = [(h.get("mesh_elements"), h.get("onset_over_R"), h.get("converged"), h.get("newton_iterations"),
                h.get("reason") or "") for h in sm.get("history", [])]
     st = res.model.contact_state(res.state["x"])
-    print(f"{geometry:5s} {elements} el: wall {wall:.1f} s, energy {sm.get('energy_mJ'):.6f} mJ, final |F| "
+    np.save(f"/tmp/contact_relax_{geometry}_{elements}.npy", np.asarray(res.state["x"], float).reshape(-1))
+    print(f"{geometry:6s} {elements} el: wall {wall:.1f} s, energy {sm.get('energy_mJ'):.6f} mJ, final |F| "
           f"{sm['static_residuals'][-1]:.2e} N, stable {sm.get('stable')}, total normal force "
           f"{st['total_normal_force']:.3f} N, max overlap {st['max_overlap_over_R']:.4f} R", flush=True)
     for el, onset, conv, its, why in stages:
@@ -36,9 +41,14 @@ def run(geometry: str, elements: int) -> None:
 
 
 def main(argv=None) -> None:
-    els = [int(a) for a in (argv if argv is not None else sys.argv[1:])] or [12]
+    args = list(argv if argv is not None else sys.argv[1:])
+    geometries = ["chord", "curve", "smooth"]
+    if "--geometry" in args:
+        k = args.index("--geometry")
+        geometries, args = args[k + 1:], args[:k]
+    els = [int(a) for a in args] or [12]
     for el in els:
-        for geometry in ("chord", "curve"):
+        for geometry in geometries:
             run(geometry, el)
 
 

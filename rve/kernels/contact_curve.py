@@ -299,7 +299,8 @@ def _project_hermite(end_snap, Yb, r, p, H, dH, d2H):
 @njit(cache=True, nogil=True)
 def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g, gr, H, dH, d2H, p, c, m, j, t, t2):
     """One point of row r on the Hermite curves: fills c, m, j, t, t2; returns
-    ``(gap, rho, interior, counted)`` (counted: owned, overlapping, rho > 0)."""
+    ``(gap, rho, free, counted)`` (counted: owned, overlapping, rho > 0; free: the closest
+    point moves with the nodes, i.e. not clamped at a free end)."""
     Ms = Sa.shape[2]
     for ii in range(3):
         v = 0.0
@@ -329,6 +330,7 @@ def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g
     grows = grow >= -2.0 * end_snap * tn2
     owned = interior or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
     counted = owned and gap > 0.0 and rho > _TINY
+    free = interior or (s >= 1.0 and has_next[r]) or (s <= 0.0 and has_prev[r])  # ds = 0 only at a free end
     if counted:
         for k in range(Ms):
             ca = 0.0
@@ -342,7 +344,7 @@ def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g
             c[Ms + k] = -cb
             m[k] = 0.0
             m[Ms + k] = mb
-    return gap, rho, interior, counted
+    return gap, rho, free, counted
 
 
 @njit(cache=True, nogil=True)
@@ -371,14 +373,14 @@ def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, 
             for k in range(M):
                 slot[k] = k if side == 0 else (k + Ms) % M
             for g in range(G):
-                gap, rho, interior, counted = _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev,
+                gap, rho, free, counted = _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev,
                                                             Ha, r, g, gr, H, dH, d2H, p, c, m, j, t, t2)
                 if not counted:
                     continue
                 active[o] = True
                 nv = (j[0] / rho, j[1] / rho, j[2] / rho)
                 f1, f2 = _law(gap, Pstar, eps)
-                _accumulate(R[o], K[o if jacobian else 0], jacobian, slot, c, m, nv, j, t, t2, rho, interior,
+                _accumulate(R[o], K[o if jacobian else 0], jacobian, slot, c, m, nv, j, t, t2, rho, free,
                             w[r, g] * f1, w[r, g] * f2, ds)
 
 

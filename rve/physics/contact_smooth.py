@@ -26,7 +26,9 @@ Contract
   positions, unshifted: the curve depends on node positions and on the pair's shift only.
 * ``smooth_geometry`` gives the ``CurveGeometry`` of points of oriented rows on these
   curves, with the conventions of ``rve.physics.contact_curve`` (closest point by Newton
-  from the chord's, snapped within ``END_SNAP`` of an end, owned as there; ``c`` (P, G, M)
+  from the chord's, snapped within ``END_SNAP`` of an end, owned as there; ``ds`` zero only
+  at a free end: at an end that continues into a neighbour the curve is C¹ and the closest
+  point moves with the nodes, so the interior formula applies; ``c`` (P, G, M)
   and ``ds`` (P, G, M, 3) over the M = 2 (3 nn) stencil slots of the row: a's stencil, then
   b's), so ``curve_penalty_forces`` and ``curve_scalar_jump`` apply unchanged. ``Na``,
   ``Nb``, ``dNb`` are the Lagrange basis of the scalar fields (T, V) at s_a, s_b, placed in
@@ -183,9 +185,12 @@ def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_nex
     c = np.concatenate([ca, -cb], axis=-1)
     m = np.concatenate([np.zeros_like(cb), np.matmul(dHb, Sb)], axis=-1)
     A = np.einsum("pgi,pgi->pg", t, t) - np.einsum("pgi,pgi->pg", j, t2)
-    Asafe = np.where(interior & (A > 0), A, 1.0)
+    # a closest point snapped to an end that continues into a neighbour still moves with the
+    # nodes (the curve is C1 there: its limit from inside b); only a free end clamps it
+    free = interior | ((s_b >= 1.0) & hn) | ((s_b <= 0.0) & hp)
+    Asafe = np.where(free & (A > 0), A, 1.0)
     ds = (c[..., None] * t[:, :, None, :] + m[..., None] * j[:, :, None, :]) / Asafe[..., None, None]
-    ds *= interior[..., None, None]
+    ds *= free[..., None, None]
     active = owned & (g > 0.0) & (rho > _TINY)
     Na, _ = _lagrange_in_stencil(order, np.broadcast_to(s_a, (P, G)))
     Nb, dNb = _lagrange_in_stencil(order, s_b)

@@ -1,0 +1,382 @@
+"""The C¹ contact curve (``geometry: smooth``, rve.physics.contact_smooth): the Hermite curve
+is C¹ at every interior node, the Catmull-Rom spline at p = 1 and the chord on straight,
+evenly meshed fibrils; its closest point against a brute-force search; the penalty residual
+as the gradient of the energy and the tangent and the jump terms against central
+differences over the stencil nodes (points near element ends, free ends), the compiled
+kernel against the numpy forms; the assembled system's tangents (p = 1, 2, 3, with T and V,
+with multipliers, across a periodic wrap); and no contact point counted twice at a concave
+kink, where the Lagrange curve counts them."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rve.fem.mesh import Fibril, fibril_mesh, orthonormal_directors, straight_fibril
+from rve.physics.contact_curve import curve_penalty_forces, curve_scalar_jump, gauss_legendre_01
+from rve.physics.contact_forms import penalty_law
+from rve.physics.contact_smooth import (
+    hermite_basis, hermite_deviation, project_to_hermite, smooth_geometry, smooth_stencil,
+)
+from rve.testing import fd_jacobian, fd_nodes, rel_err
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_contact_curve_system import _check_tangents, _crossed  # noqa: E402
+
+R = 0.15
+R2 = 2 * R
+
+
+def _arc_fibril(radius_of_curvature=1.0, length=2.0, z=0.0, name="arc"):
+    """A circular arc in the x-z plane, bowed towards -z."""
+    def frame(s):
+        s = np.asarray(s, float)
+        phi = (s - 0.5 * length) / radius_of_curvature
+        r0 = np.stack([radius_of_curvature * np.sin(phi), np.zeros_like(s),
+                       z - radius_of_curvature * (1 - np.cos(phi))], 1)
+        t = np.stack([np.cos(phi), np.zeros_like(s), -np.sin(phi)], 1)
+        g1, g2 = orthonormal_directors(t)
+        return r0, g1, g2
+
+    return Fibril(length=length, radius=R, frame=frame, name=name)
+
+
+def _stencil(mesh):
+    from rve.contact import element_neighbours
+
+    nb = element_neighbours(mesh)
+    return smooth_stencil(mesh.order, mesh.conn, nb.prev, nb.next, mesh.elem_length), nb
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_hermite_curve_is_c1_and_the_chord_when_straight(order):
+    mesh = fibril_mesh([_arc_fibril()], 5, order)
+    st, nb = _stencil(mesh)
+    rng = np.random.default_rng(order)
+    r = mesh.X0[:, :3] + rng.normal(scale=0.02, size=(mesh.X0.shape[0], 3))
+    Y = st.control(r)
+    H1, dH1, _ = hermite_basis(np.array([1.0]))
+    H0, dH0, _ = hermite_basis(np.array([0.0]))
+    e = np.flatnonzero(nb.next >= 0)
+    l = mesh.elem_length
+    np.testing.assert_allclose(H1 @ Y[e], H0 @ Y[nb.next[e]], atol=1e-15)  # C0 (the nodes)
+    np.testing.assert_allclose((dH1 @ Y[e]) / l[e, None, None], (dH0 @ Y[nb.next[e]]) / l[nb.next[e], None, None],
+                               rtol=1e-13, atol=1e-14)  # C1 in the reference arc length
+    assert hermite_deviation(Y).max() > 1e-3  # bent: not its chord
+    if order == 1:  # Catmull-Rom inside, one-sided at the free ends
+        x = r
+        np.testing.assert_allclose(Y[1:, 2], 0.5 * (x[2:6] - x[0:4]), atol=1e-15)
+        np.testing.assert_allclose(Y[0, 2], x[1] - x[0], atol=1e-15)
+        np.testing.assert_allclose(Y[-1, 3], x[-1] - x[-2], atol=1e-15)
+    straight = fibril_mesh([straight_fibril([0, 0, 0], [2, 0.3, -0.1], R)], 5, order)
+    st2, _ = _stencil(straight)
+    Y2 = st2.control(straight.X0[:, :3])
+    s = np.linspace(0, 1, 11)
+    chord = Y2[:, :1] + s[None, :, None] * (Y2[:, 1:2] - Y2[:, :1])
+    np.testing.assert_allclose(np.matmul(hermite_basis(s)[0], Y2), chord, atol=1e-14)
+    np.testing.assert_allclose(hermite_deviation(Y2), 0.0, atol=1e-14)
+
+
+def _rows(order, P=6, seed=3, shift_b=(0.0, 0.0, 0.0), kinds=("mid", "start", "end")):
+    """P oriented rows: a's points along x, b crossing along y, both bowed and perturbed; each
+    side an element of a 3-element fibril (middle, first or last: neighbours or free ends).
+    Returns (Xa (P, Ms, 3), Xb, Sa, Sb, has_next, has_prev)."""
+    rng = np.random.default_rng(seed)
+    nn = order + 1
+    fib = fibril_mesh([straight_fibril([-1.05, 0, 0], [1.05, 0, 0], R)], 3, order)
+    st, nb = _stencil(fib)
+    pick = {"mid": 1, "start": 0, "end": 2}
+    ea = np.array([pick[kinds[i % len(kinds)]] for i in range(P)])
+    eb = np.array([pick[kinds[(i + 1) % len(kinds)]] for i in range(P)])
+    Xa = fib.X0[st.nodes[ea], :3].copy()
+    Xa[..., 0] -= 0.7 * (ea - 1)[:, None]  # the element under test at the crossing
+    Xb = fib.X0[st.nodes[eb], :3][..., [1, 0, 2]].copy()
+    Xb[..., 1] -= 0.7 * (eb - 1)[:, None]
+    Xa[..., 2] += -0.05 * Xa[..., 0] ** 2
+    Xb[..., 2] += -(R2 - 0.04) + 0.05 * Xb[..., 1] ** 2
+    Xa += rng.normal(size=Xa.shape) * 0.015
+    Xb += rng.normal(size=Xb.shape) * 0.015 + np.asarray(shift_b)
+    return Xa, Xb, st.S[ea], st.S[eb], nb.next[eb] >= 0, nb.prev[eb] >= 0
+
+
+def _geo(order, X, Sa, Sb, hn, hp, Ms, G=4):
+    Xa, Xb = X[:, :Ms], X[:, Ms:]
+    Ya, Yb = np.matmul(Sa, Xa), np.matmul(Sb, Xb)
+    s, _ = gauss_legendre_01(G)
+    # the next element's start tangent: b's own end tangent (the curve is C1 there)
+    return smooth_geometry(order, Ya, Sa, Yb, Sb, s, np.full(X.shape[0], R2), hn, Yb[:, 3], hp)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+@pytest.mark.parametrize("shift", [(0.0, 0.0, 0.0), (0.0, -0.4, 0.0)])
+def test_smooth_penalty_gradient_and_tangent(order, shift):
+    """Residual = gradient of the energy, tangent = FD of the residual, over every stencil
+    node of both sides; shifted: the points' closest points pass b's ends (handed on or
+    clamped at a free end)."""
+    Xa, Xb, Sa, Sb, hn, hp = _rows(order, P=12, shift_b=shift)
+    Ms = Sa.shape[-1]
+    X = np.concatenate([Xa, Xb], axis=1)
+    w = np.full((X.shape[0], 4), 0.05)
+    Ps = 50.0
+
+    def energy(Y):
+        geo = _geo(order, Y, Sa, Sb, hn, hp, Ms)
+        e, _, _ = penalty_law(np.where(geo.active, geo.g, 0.0), Ps)
+        return (w * e).sum(axis=1)
+
+    def resid(Y):
+        return curve_penalty_forces(_geo(order, Y, Sa, Sb, hn, hp, Ms), w, Ps, False)[0]
+
+    geo = _geo(order, X, Sa, Sb, hn, hp, Ms)
+    if shift[1] != 0.0:  # clamped at a free end (owned) and handed on to a next element
+        assert np.any(geo.active & (geo.s_b >= 1)) and np.any(~geo.owned & (geo.g > 0))
+    else:
+        assert geo.active.sum() > 4 and np.any((geo.s_b > 0) & (geo.s_b < 1) & geo.active)
+    R_, K = curve_penalty_forces(geo, w, Ps, True)
+    np.testing.assert_allclose(R_, fd_nodes(energy, X), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(K, fd_nodes(resid, X), rtol=1e-5, atol=1e-6 * np.abs(K).max())
+    Km = K.reshape(X.shape[0], 6 * Ms, 6 * Ms)
+    np.testing.assert_allclose(Km, np.swapaxes(Km, 1, 2), atol=1e-10 * np.abs(K).max())
+    np.testing.assert_allclose(R_[:, :Ms].sum(1), -R_[:, Ms:].sum(1), atol=1e-14)  # action = reaction
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_smooth_scalar_jump_tangents(order):
+    Xa, Xb, Sa, Sb, hn, hp = _rows(order)
+    Ms = Sa.shape[-1]
+    X = np.concatenate([Xa, Xb], axis=1)
+    rng = np.random.default_rng(1)
+    ua, ub = rng.normal(size=(X.shape[0], Ms)), rng.normal(size=(X.shape[0], Ms))
+
+    def law(geo):  # a smooth conductance of the gap, w kappa g^2
+        g = np.where(geo.active, geo.g, 0.0)
+        return 0.04 * g * g, 0.08 * g
+
+    def res(Y):
+        geo = _geo(order, Y, Sa, Sb, hn, hp, Ms)
+        return curve_scalar_jump(geo, ua, ub, *law(geo), False)[0]
+
+    geo = _geo(order, X, Sa, Sb, hn, hp, Ms)
+    Rs, Ju, JX = curve_scalar_jump(geo, ua, ub, *law(geo))
+    np.testing.assert_allclose(JX, fd_nodes(res, X), rtol=1e-5, atol=1e-7 * np.abs(JX).max())
+    np.testing.assert_allclose(np.einsum("pAB,pB->pA", Ju, np.concatenate([ua, ub], 1)), Rs, atol=1e-15)
+    np.testing.assert_allclose(Rs.sum(axis=1), 0.0, atol=1e-14)
+    # only the elements' own nodes carry T and V
+    nn = order + 1
+    own = np.r_[nn:2 * nn, Ms + nn:Ms + 2 * nn]
+    assert np.abs(np.delete(Rs, own, axis=1)).max() == 0.0
+
+
+@pytest.mark.parametrize("order", [1, 3])
+def test_projection_is_the_closest_point(order):
+    Xa, Xb, Sa, Sb, hn, hp = _rows(order)
+    Ms = Sa.shape[-1]
+    Ya, Yb = np.matmul(Sa, Xa), np.matmul(Sb, Xb)
+    s_a, _ = gauss_legendre_01(4)
+    p = np.matmul(hermite_basis(s_a)[0], Ya)
+    s = project_to_hermite(Yb, p)
+    grid = np.linspace(0.0, 1.0, 20001)
+    Q = np.matmul(hermite_basis(grid)[0], Yb)  # (P, K, 3)
+    d2 = ((p[:, :, None, :] - Q[:, None, :, :]) ** 2).sum(-1)
+    np.testing.assert_allclose(s, grid[np.argmin(d2, axis=-1)], atol=1e-4)
+    q = np.matmul(hermite_basis(s)[0], Yb)
+    assert np.all(np.linalg.norm(p - q, axis=-1) <= np.sqrt(d2.min(axis=-1)) + 1e-12)
+    assert Ms == 3 * (order + 1)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+@pytest.mark.parametrize("onset", [0.0, 0.01])
+def test_smooth_kernel_matches_reference(order, onset):
+    pytest.importorskip("numba")
+    from rve.kernels.contact_curve import smooth_penalty_rows
+    from rve.model.terms.contact_pairs import HalfPasses
+    from rve.physics.contact_curve import END_SNAP
+
+    Xa, Xb, Sa, Sb, hn, hp = _rows(order, P=1100, seed=order, shift_b=(0.0, -0.3, 0.0))
+    Xb[: 550, :, 1] += np.random.default_rng(2).uniform(-0.4, 0.4, 550)[:, None]
+    Ms = Sa.shape[-1]
+    P = Xa.shape[0]
+    s, W = gauss_legendre_01(4)
+    gr = R2 + np.random.default_rng(7).uniform(0.0, 0.01, (P, 4))  # per-point radii: multipliers
+    w = np.broadcast_to(0.1 * W, (P, 4))
+    Ya, Yb = np.matmul(Sa, Xa), np.matmul(Sb, Xb)
+    geo = smooth_geometry(order, Ya, Sa, Yb, Sb, s, gr, hn, Yb[:, 3], hp)
+    R0, K0 = curve_penalty_forces(geo, w, 50.0, True, onset)
+    R0, K0 = HalfPasses.fold(R0, Ms), HalfPasses.fold(K0, Ms, axes=(1, 3))
+    act, R1, K1 = smooth_penalty_rows(hermite_basis(s)[0], END_SNAP, Ya, Sa, Yb, Sb, hn, Yb[:, 3], hp, gr, w, 50.0,
+                                      onset, True)
+    assert act.sum() > P // 8 and np.any(geo.active & (geo.s_b >= 1.0))
+    np.testing.assert_array_equal(act, geo.active.any(axis=1).reshape(2, -1).any(axis=0))
+    np.testing.assert_allclose(R1, R0, rtol=0, atol=1e-12 * np.abs(R0).max())
+    np.testing.assert_allclose(K1, K0, rtol=0, atol=1e-12 * np.abs(K0).max())
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_smooth_system_tangents(order, monkeypatch):
+    """Assembled system with mech, T, V (numpy forms): the crossing lies 0.03 / 0.05 mm from
+    an element end of each fibril (h = 0.5 mm), so points' closest points pass element ends;
+    mechanics only: the compiled kernel's forms equal the numpy ones, F = grad of the energy."""
+    monkeypatch.setenv("RVE_KERNELS", "numpy")
+    sysm, x, w = _crossed(order, geometry="smooth")
+    assert sysm.term.smooth and sysm.term.m == 2 * 3 * (order + 1)
+    _check_tangents(sysm, x, w)
+    sysm, x, w = _crossed(order, fields=("mech",), geometry="smooth")
+    ref = sysm.term.forms(x, w, True)
+    F = sysm.evaluate(x, np.zeros(sysm.n), 0.0, jacobian=False)[0]
+    d = np.random.default_rng(4).normal(size=sysm.n) * 1e-2
+    fd = (sysm.energy(x + 1e-6 * d) - sysm.energy(x - 1e-6 * d)) / 2e-6
+    assert abs(fd - F @ d) <= 1e-6 * max(1.0, abs(F @ d))
+    pytest.importorskip("numba")
+    monkeypatch.setenv("RVE_KERNELS", "numba")
+    out = sysm.term.forms(x, w, True)
+    np.testing.assert_array_equal(out[0], ref[0])
+    for k in (1, 2):
+        np.testing.assert_allclose(out[k], ref[k], rtol=0, atol=1e-12 * np.abs(ref[k]).max())
+
+
+def test_smooth_multiplier_tangents():
+    sysm, x, w = _crossed(2, geometry="smooth", enforcement="augmented_lagrangian")
+    sysm.update_multipliers(x)
+    assert sysm.multipliers.max() > 0
+    _check_tangents(sysm, x, w)
+
+
+def test_free_end_under_a_fibril_tangents():
+    """Fibril b ends under fibril a: the points of a near b's free end project onto it
+    (clamped, owned), the rest onto b's last element; full-system FD of every centroid."""
+    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+
+    fibs = [straight_fibril([-1, 0.02, 0], [1, 0.02, 0], R, "a"),
+            straight_fibril([0.1, -1.5, -(R2 - 0.03)], [0.1, 0.04, -(R2 - 0.03)], R, "b")]
+    mesh = fibril_mesh(fibs, 4, 2)
+    base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
+    x = np.zeros(base.n)
+    xn = base.nodal(x)
+    xn[:, :9] = mesh.X0
+    xn[:, :3] += np.random.default_rng(0).normal(scale=0.01, size=(xn.shape[0], 3))
+    sysm = ContactSystem(base, ContactParams(penalty=50.0, geometry="smooth"), x)
+    geo = sysm.term.geometry(x)
+    assert np.any(geo.active & (geo.s_b >= 1.0) & (sysm.term.passes.next_elem < 0)[:, None])
+    _check_tangents(sysm, x, np.zeros(base.n))
+
+
+def _wrapped_pair(order=1, ne=6, L=2.0, x_cross=0.04):
+    """Fibril a along x over one period [0, L] (wrapping into its image at +-L), fibril b
+    along y crossing it at x = x_cross, just after a's wrap node x = 0 (and off b's nodes)."""
+    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+
+    fibs = [straight_fibril([0, 0.013, 0], [L, 0.013, 0], R, "a"),
+            straight_fibril([x_cross, -1, -(R2 - 0.03)], [x_cross, 1, -(R2 - 0.03)], R, "b")]
+    mesh = fibril_mesh(fibs, ne, order)
+    base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
+    x = np.zeros(base.n)
+    xn = base.nodal(x)
+    xn[:, :9] = mesh.X0
+    # a bent in z with the period: positions stay periodic (the last node is the first + L)
+    xa = mesh.node_fibril == 0
+    xn[xa, 2] += 0.02 * np.cos(2 * np.pi * mesh.X0[xa, 0] / L)
+    sysm = ContactSystem(base, ContactParams(penalty=50.0, geometry="smooth"), x)
+    T = np.array([L, 0.0, 0.0])
+    sysm.set_periodic(images=[T, -T], wrap={0: T}, x=x)
+    return sysm, x, mesh, T
+
+
+def test_periodic_wrap_is_c1_and_exact():
+    """Across a's wrap the Hermite curve is C¹ (the last element's end is the first's start
+    plus the period, with the same tangent), and the contact across it has the exact
+    tangent (the wrapped neighbour's nodes enter the stencil unshifted)."""
+    sysm, x, mesh, T = _wrapped_pair()
+    st = sysm.term.passes.stencil
+    Y = st.control(sysm.nodal(x)[:, :3])
+    first, last = mesh.elem_offsets[0], mesh.elem_offsets[1] - 1
+    np.testing.assert_allclose(Y[last, 1], Y[first, 0] + T, atol=1e-15)
+    np.testing.assert_allclose(Y[last, 3], Y[first, 2], atol=1e-15)
+    assert np.abs(Y[first, 2] - (Y[first, 1] - Y[first, 0])).max() > 1e-6  # not the one-sided tangent
+    assert set(st.nodes[first, :mesh.order + 1]) == set(mesh.conn[last])  # the wrapped neighbour
+    geo = sysm.term.geometry(x)
+    assert geo.active.any()
+    _check_tangents(sysm, x, np.zeros(sysm.n))
+
+
+def test_image_pair_equals_the_pair_in_place():
+    """b one period away: only its image touches a; forms, fibril forces and tangent are those
+    of b placed in contact."""
+    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+
+    Ty = np.array([0.0, 3.0, 0.0])
+    out = []
+    for off in (np.zeros(3), -Ty):
+        fibs = [straight_fibril([-1, 0.1, R - 0.01], [1, 0.1, R - 0.01], R, "a"),
+                straight_fibril(np.array([0.2, -1, -R]) + off, np.array([0.2, 1, -R]) + off, R, "b")]
+        mesh = fibril_mesh(fibs, 6, 2)
+        base = BeamModel(mesh, BeamMaterial(126.0, density=1e-3))
+        x = np.zeros(base.n)
+        base.nodal(x)[:, :9] = mesh.X0
+        y_own = mesh.X0[:, 1] - off[1] * (mesh.node_fibril == 1)  # the same bend in both placements
+        base.nodal(x)[:, 2] += 0.01 * np.sin(3 * mesh.X0[:, 0] + 2 * y_own)
+        sysm = ContactSystem(base, ContactParams(penalty=50.0, geometry="smooth"), x)
+        if off.any():
+            sysm.set_periodic(images=[Ty, -Ty], x=x)
+        out.append((sysm.contact_terms(x, np.zeros(base.n))[0], sysm.fibril_contact_forces(x)))
+    (F0, f0), (F1, f1) = out
+    assert np.abs(F0).max() > 1e-4
+    np.testing.assert_allclose(F1, F0, atol=1e-12 * np.abs(F0).max())
+    np.testing.assert_allclose(f1, f0, atol=1e-12 * np.abs(F0).max())
+
+
+def _kinked_pair(geometry, x_b=0.0):
+    """Fibril a (p = 1) bent into a V with its kink at the node x = 0, opening towards fibril
+    b, which crosses it above the kink at x = x_b: b's points above the kink lie between the
+    normal planes of a's two kink elements, where the Lagrange polyline has an interior
+    closest point on both."""
+    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+
+    fibs = [straight_fibril([-1, 0, 0], [1, 0, 0], R, "a"),
+            straight_fibril([x_b, -1, R2 - 0.02], [x_b, 1, R2 - 0.02], R, "b")]
+    mesh = fibril_mesh(fibs, 8, 1)
+    base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
+    x = np.zeros(base.n)
+    xn = base.nodal(x)
+    xn[:, :9] = mesh.X0
+    a = np.flatnonzero(mesh.node_fibril == 0)
+    xn[a, 2] += 0.12 * np.abs(mesh.X0[a, 0])
+    sysm = ContactSystem(base, ContactParams(penalty=50.0, geometry=geometry, n_gp=8, margin=0.3), x)
+    return sysm, x
+
+
+def _counted_twice(sysm, x) -> int:
+    term = sysm.term
+    ps = term.passes
+    geo = term.geometry(x)
+    G = term.params.n_gp
+    keys = np.column_stack([np.repeat(ps.a_elem, G), np.tile(np.arange(G), ps.a_elem.size),
+                            np.repeat(sysm.mesh.elem_fibril[ps.b_elem], G)])[geo.active.reshape(-1)]
+    _, counts = np.unique(keys, axis=0, return_counts=True)
+    return int((counts > 1).sum())
+
+
+def test_no_double_count_at_a_concave_kink():
+    sysm, x = _kinked_pair("curve")
+    assert _counted_twice(sysm, x) > 0  # the Lagrange polyline counts the wedge twice
+    sysm, x = _kinked_pair("smooth")
+    assert sysm.term.geometry(x).active.sum() > 8
+    assert _counted_twice(sysm, x) == 0
+
+
+def test_energy_has_no_step_when_sliding_over_a_kink():
+    """b slid across a's kink (rigid, along x): the smooth geometry's energy history is
+    continuous (its largest change per step halves with the step), the Lagrange curve's has
+    steps (points entering and leaving the doubly counted wedge) that do not."""
+    jumps = {}
+    for geometry in ("curve", "smooth"):
+        sysm, x = _kinked_pair(geometry)
+        b = np.flatnonzero(sysm.mesh.node_fibril == 1)
+        for n in (40, 80):
+            E = []
+            for t in np.linspace(-0.1, 0.1, n + 1):
+                y = x.copy()
+                sysm.nodal(y)[b, 0] += t
+                E.append(sysm.energy(y))
+            jumps[geometry, n] = np.abs(np.diff(E)).max()
+    assert jumps["smooth", 80] < 0.6 * jumps["smooth", 40]
+    assert jumps["curve", 80] > 0.8 * jumps["curve", 40]
