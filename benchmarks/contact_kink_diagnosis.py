@@ -1,7 +1,7 @@
 """Where the curve geometry's energy is not smooth at the weave relaxation's stalled state
 (docs/contact.md "Kinks between C0 elements"): runs the plain-weave relaxation
-(configs/scenes/plain_weave_relax.yaml) with ``contact.geometry=curve``, then at the final
-state prints
+(configs/scenes/plain_weave_relax.yaml) with ``contact.geometry=curve`` (or the geometry
+given), then at the final state prints
 
 * the contact points counted by two oriented rows at once (the same point of element a,
   the same fibril b, two adjacent elements of b both holding an interior closest point:
@@ -11,8 +11,9 @@ state prints
   not account for is a discontinuity; per such interval, how many points changed their
   set of owning rows and the energy those points carried.
 
-Usage: nice -n 10 python benchmarks/contact_kink_diagnosis.py [elements] [state.npy]
-(default 30; with a saved state the relaxation is skipped).
+Usage: nice -n 10 python benchmarks/contact_kink_diagnosis.py [elements] [state.npy] [--geometry G]
+(default 30 elements, curve; with a saved state, e.g. benchmarks/contact_relax_compare.py's,
+the relaxation is skipped).
 """
 from __future__ import annotations
 
@@ -69,10 +70,15 @@ def newton_direction(system, x):
 
 
 def main(argv=None) -> None:
-    args = argv if argv is not None else sys.argv[1:]
+    args = list(argv if argv is not None else sys.argv[1:])
+    geometry = "curve"
+    if "--geometry" in args:
+        k = args.index("--geometry")
+        geometry = args[k + 1]
+        del args[k:k + 2]
     elements = int(args[0]) if args else 30
     cfg = load_config(ROOT / "configs/scenes/plain_weave_relax.yaml",
-                      [f"mesh.elements={elements}", "contact.geometry=curve"])
+                      [f"mesh.elements={elements}", f"contact.geometry={geometry}"])
     if len(args) > 1:
         from rve.fabrics.relaxation import relaxation_system
 

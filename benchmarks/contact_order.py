@@ -1,5 +1,6 @@
-"""Contact on the chord vs on the centroid curve: analytic cases at p = 1, 2, 3
-(docs/contact.md "Contact on the centroid curve"). Prints:
+"""Contact on the chord vs on the centroid curve vs on the smooth (C¹ Hermite) contact curve:
+analytic cases at p = 1, 2, 3 (docs/contact.md "Contact on the centroid curve", "The smooth
+contact curve"). Prints:
 
 (a) two straight crossed fibrils (rigid, held at a centre distance d = R+ + R- - delta):
     the contact force against the closed form of the linear penalty law,
@@ -15,10 +16,14 @@
 (e) a curved fibril (circular arc) crossing a straight one: the force against the continuous
     limit of the two half passes (adaptive quadrature), chord vs curve at p = 1, 2, 3: the
     order of the geometry;
-(f) two parallel fibrils at a uniform overlap (the neighbours in a yarn): F = P* delta L.
+(f) two parallel fibrils at a uniform overlap (the neighbours in a yarn): F = P* delta L;
+(g) a straight fibril slid along the concave side of a circular arc (inside its circle, at a
+    constant distance from the centre) over the arc's element ends: the exact force is
+    constant in magnitude; the spread of |F| and the largest jump of the history when the
+    step halves (the Lagrange curve's kinks count points twice on that side).
 
-Usage: nice -n 10 python benchmarks/contact_order.py [--quick]
-       nice -n 10 python benchmarks/contact_order.py --cost   (chord vs curve on the weave)
+Usage: nice -n 10 python benchmarks/contact_order.py [--quick] [--cases a,b,...] [--geometries chord,curve,smooth]
+       nice -n 10 python benchmarks/contact_order.py --cost   (the geometries on the weave)
 """
 from __future__ import annotations
 
@@ -52,21 +57,24 @@ def crossed_force(order, ne, geometry, delta, x0=0.0, y0=0.0, n_gp=4):
     return float(sysm.fibril_contact_forces(x)[0, 2])
 
 
-def case_a(quick: bool):
+GEOMETRIES = ("chord", "curve", "smooth")
+
+
+def case_a(quick: bool, geometries=GEOMETRIES):
     delta = 0.02
     F = closed_form_force(delta)
     nes = (4, 8, 16, 32) if quick else (4, 8, 16, 32, 64)
     print(f"(a) crossed fibrils, R = {R}, P* = {PSTAR}, approach delta = {delta} mm: closed form F = {F:.6f} N")
     print("    crossing at (0.0137, 0.0291) (inside elements); relative error of F, n_gp = 4")
-    for geometry in ("chord", "curve"):
+    for geometry in geometries:
         for order in (1, 2, 3):
             errs = [crossed_force(order, ne, geometry, delta, 0.0137, 0.0291) / F - 1 for ne in nes]
             rates = [np.log2(abs(errs[k] / errs[k + 1])) if errs[k + 1] != 0 else np.nan for k in range(len(errs) - 1)]
-            print(f"    {geometry:5s} p={order}: " + " ".join(f"{ne}:{e:+.2e}" for ne, e in zip(nes, errs))
+            print(f"    {geometry:6s} p={order}: " + " ".join(f"{ne}:{e:+.2e}" for ne, e in zip(nes, errs))
                   + "   orders " + " ".join(f"{r:.2f}" for r in rates))
 
 
-def case_b(quick: bool):
+def case_b(quick: bool, geometries=GEOMETRIES):
     delta = 0.02
     F = closed_form_force(delta)
     ne = 8
@@ -79,14 +87,14 @@ def case_b(quick: bool):
           " a continuous history gives ratio ~2")
     fine = np.linspace(0.0, 2.5 * h, 2 * steps - 1)
     for order in (1, 2, 3):
-        for geometry in ("chord", "curve"):
+        for geometry in geometries:
             hist = np.array([crossed_force(order, ne, geometry, delta, -0.3 + t, -0.3 + t) for t in s])
             hist2 = np.array([crossed_force(order, ne, geometry, delta, -0.3 + t, -0.3 + t) for t in fine])
             jump = np.abs(np.diff(hist)).max() / F
             jump2 = np.abs(np.diff(hist2)).max() / F
             slope = np.diff(hist) / np.diff(s)
             djump = np.abs(np.diff(slope)).max() * np.diff(s)[0] / F  # slope change per step, relative
-            print(f"    p={order} {geometry:5s}: F/F_exact in [{hist.min() / F:.4f}, {hist.max() / F:.4f}], "
+            print(f"    p={order} {geometry:6s}: F/F_exact in [{hist.min() / F:.4f}, {hist.max() / F:.4f}], "
                   f"max |dF| per step {jump:.2e} F (half step {jump2:.2e} F, ratio {jump / jump2:.2f}), "
                   f"max |d(dF/ds)| per step x ds {djump:.2e} F")
 
@@ -172,14 +180,15 @@ def arc_reference_force(rc, delta, x0, radius_sum=2 * R, penalty=PSTAR):
     return 0.5 * penalty * (Ia + Ib)
 
 
-def case_e(quick: bool):
+def case_e(quick: bool, geometries=GEOMETRIES):
     rc, delta, x0 = 1.0, 0.02, 0.0137
     Fref = arc_reference_force(rc, delta, x0)
     nes = (4, 8, 16) if quick else (4, 8, 16, 32)
     print(f"(e) a circular arc (curvature radius {rc} mm, 2 mm long) crossing a straight fibril, approach "
           f"{delta} mm: reference F = {Fref:.6f} N (adaptive quadrature of the two half passes); "
           "relative error of F (n_gp = 64 isolates the geometry; n_gp = 4 is the default quadrature)")
-    for geometry, n_gp in (("chord", 64), ("curve", 64), ("curve", 4)):
+    runs = [(g, n) for g in geometries for n in ((64,) if g == "chord" else (64, 4))]
+    for geometry, n_gp in runs:
         for order in (1, 2, 3):
             errs = []
             for ne in nes:
@@ -192,11 +201,11 @@ def case_e(quick: bool):
                 sysm = ContactSystem(base, ContactParams(penalty=PSTAR, n_gp=n_gp, geometry=geometry), x)
                 errs.append(sysm.fibril_contact_forces(x)[0, 2] / Fref - 1)
             rates = [np.log2(abs(errs[k] / errs[k + 1])) for k in range(len(errs) - 1)]
-            print(f"    {geometry:5s} n_gp={n_gp:2d} p={order}: " + " ".join(f"{ne}:{e:+.2e}" for ne, e in zip(nes, errs))
+            print(f"    {geometry:6s} n_gp={n_gp:2d} p={order}: " + " ".join(f"{ne}:{e:+.2e}" for ne, e in zip(nes, errs))
                   + "   orders " + " ".join(f"{r:.2f}" for r in rates))
 
 
-def case_f():
+def case_f(geometries=GEOMETRIES):
     """Two straight parallel fibrils (8 mm, a yarn's neighbours) at a uniform overlap: the
     exact force is P* delta times the length."""
     print("(f) parallel fibrils, 8 mm long, uniform overlap delta: relative error of F against P* delta L "
@@ -204,7 +213,7 @@ def case_f():
     for delta in (0.0075, 0.0015):
         for ne in (8, 16, 32, 64):
             errs = {}
-            for geometry in ("chord", "curve"):
+            for geometry in geometries:
                 fibs = [straight_fibril([0, 0, 0], [8, 0, 0], R, "a"),
                         straight_fibril([0, 0, -(2 * R - delta)], [8, 0, -(2 * R - delta)], R, "b")]
                 mesh = fibril_mesh(fibs, ne, 1)
@@ -213,8 +222,43 @@ def case_f():
                 base.nodal(x)[:, :9] = mesh.X0
                 sysm = ContactSystem(base, ContactParams(penalty=PSTAR, geometry=geometry), x)
                 errs[geometry] = sysm.fibril_contact_forces(x)[0, 2] / (PSTAR * delta * 8.0) - 1
-            print(f"    delta {delta / R:.3f} R, {ne:2d} el (h = {8 / ne:.3f} mm): chord {errs['chord']:+.3f}, "
-                  f"curve {errs['curve']:+.1e}")
+            print(f"    delta {delta / R:.3f} R, {ne:2d} el (h = {8 / ne:.3f} mm): "
+                  + ", ".join(f"{g} {e:+.1e}" for g, e in errs.items()))
+
+
+def arc_slide_force(order, ne, geometry, theta, rc=1.0, delta=0.02, n_gp=4):
+    """|contact force| on an arc (curvature radius ``rc``, 2 mm) from a straight fibril along
+    y inside its circle, at the distance rc - (2R - delta) from the centre in the direction
+    ``theta`` from the apex."""
+    d = rc - (2 * R - delta)
+    cx, cz = d * np.sin(theta), rc - d * np.cos(theta)
+    fibs = [arc_fibril(rc, 2.0, 0.0, R), straight_fibril([cx, -1, cz], [cx, 1, cz], R, "b")]
+    mesh = fibril_mesh(fibs, ne, order)
+    base = BeamModel(mesh, BeamMaterial(126.0))
+    x = np.zeros(base.n)
+    base.nodal(x)[:, :9] = mesh.X0
+    sysm = ContactSystem(base, ContactParams(penalty=PSTAR, n_gp=n_gp, geometry=geometry, margin=0.2), x)
+    return float(np.linalg.norm(sysm.fibril_contact_forces(x)[0]))
+
+
+def case_g(quick: bool, geometries=GEOMETRIES):
+    ne = 8
+    steps = 61 if quick else 121
+    th = np.linspace(-0.3, 0.3, steps)  # over 1.2 arc elements (0.25 rad each)
+    fine = np.linspace(-0.3, 0.3, 2 * steps - 1)
+    print(f"(g) a straight fibril slid along the concave side of an arc (curvature radius 1 mm, {ne} el/fibril, "
+          f"approach 0.02 mm), {steps} positions over the arc's element ends: |F| is constant in the continuum")
+    for order in (1, 2, 3):
+        for geometry in geometries:
+            if geometry == "chord":
+                continue
+            hist = np.array([arc_slide_force(order, ne, geometry, t) for t in th])
+            hist2 = np.array([arc_slide_force(order, ne, geometry, t) for t in fine])
+            mean = hist.mean()
+            jump, jump2 = np.abs(np.diff(hist)).max() / mean, np.abs(np.diff(hist2)).max() / mean
+            print(f"    p={order} {geometry:6s}: mean |F| {mean:.6f} N, |F|/mean in [{hist.min() / mean:.4f}, "
+                  f"{hist.max() / mean:.4f}], max |dF| per step {jump:.2e} (half step {jump2:.2e}, ratio "
+                  f"{jump / jump2:.2f})")
 
 
 def case_d():
@@ -265,7 +309,7 @@ def case_cost(repeat: int = 3):
         cfg = load_config(root / "configs/scenes/plain_weave_relax.yaml", [f"mesh.elements={el}"])
         _, system, x = setup(cfg)
         w = np.zeros(system.n)
-        for geometry in ("chord", "curve"):
+        for geometry in GEOMETRIES:
             sysm = ContactSystem(system.base, replace(system.params, geometry=geometry), x)
             sysm.evaluate(x, w, 0.0)
 
@@ -281,7 +325,7 @@ def case_cost(repeat: int = 3):
             te = med(lambda: sysm.evaluate(x, w, 0.0))
             tr = med(lambda: sysm.rebuild(x))
             st = sysm.contact_state(x)
-            print(f"    {el} el {geometry:5s}: pairs {sysm.map.n_pairs}, active {st['active_pairs']}, forms + tangent "
+            print(f"    {el} el {geometry:6s}: pairs {sysm.map.n_pairs}, active {st['active_pairs']}, forms + tangent "
                   f"{tf:.1f} ms, evaluate {te:.1f} ms, rebuild {tr:.1f} ms; total normal force "
                   f"{st['total_normal_force']:.2f} N, max overlap {st['max_overlap_over_R']:.4f} R")
 
@@ -290,16 +334,28 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--cost", action="store_true", help="only the cost on the plain-weave scene")
+    ap.add_argument("--cases", default="a,b,c,d,e,f,g", help="comma-separated cases to run")
+    ap.add_argument("--geometries", default=",".join(GEOMETRIES), help="geometries of cases a, b, e, f")
     args = ap.parse_args()
     if args.cost:
         case_cost()
         return
-    case_a(args.quick)
-    case_b(args.quick)
-    case_c()
-    case_d()
-    case_e(args.quick)
-    case_f()
+    cases = set(args.cases.split(","))
+    geoms = tuple(args.geometries.split(","))
+    if "a" in cases:
+        case_a(args.quick, geoms)
+    if "b" in cases:
+        case_b(args.quick, geoms)
+    if "c" in cases:
+        case_c()
+    if "d" in cases:
+        case_d()
+    if "e" in cases:
+        case_e(args.quick, geoms)
+    if "f" in cases:
+        case_f(geoms)
+    if "g" in cases:
+        case_g(args.quick, geoms)
 
 
 if __name__ == "__main__":
