@@ -380,3 +380,55 @@ def test_energy_has_no_step_when_sliding_over_a_kink():
             jumps[geometry, n] = np.abs(np.diff(E)).max()
     assert jumps["smooth", 80] < 0.6 * jumps["smooth", 40]
     assert jumps["curve", 80] > 0.8 * jumps["curve", 40]
+
+
+def test_gaps_pass_equals_the_geometry():
+    """The cheap overlap pass (numpy and compiled) gives the full geometry's owned overlaps,
+    and the chord prefilter keeps every pair with an active point on bowed elements."""
+    from rve.physics.contact_smooth import smooth_gaps
+
+    Xa, Xb, Sa, Sb, hn, hp = _rows(2, P=40, shift_b=(0.0, -0.3, 0.0))
+    Ya, Yb = np.matmul(Sa, Xa), np.matmul(Sb, Xb)
+    s, _ = gauss_legendre_01(4)
+    geo = smooth_geometry(2, Ya, Sa, Yb, Sb, s, np.full(40, R2), hn, Yb[:, 3], hp)
+    g = smooth_gaps(Ya, Yb, s, np.full(40, R2), hn, Yb[:, 3], hp)
+    np.testing.assert_array_equal(g, np.where(geo.owned, geo.g, -np.inf))
+    try:
+        from rve.kernels.contact_curve import smooth_gap_rows
+        from rve.physics.contact_curve import END_SNAP
+    except ImportError:
+        return
+    gk = smooth_gap_rows(hermite_basis(s)[0], END_SNAP, Ya, Yb, hn, Yb[:, 3], hp, np.full(40, R2))
+    np.testing.assert_array_equal(np.isfinite(gk), geo.owned)
+    np.testing.assert_allclose(gk[geo.owned], geo.g[geo.owned], rtol=0, atol=1e-14)
+
+
+def test_candidates_hold_every_active_pair():
+    sysm, x, w = _crossed(2, ne=6, fields=("mech",), geometry="smooth", seed=5)
+    xn = sysm.nodal(x)
+    xn[:, :3] += np.random.default_rng(9).normal(scale=0.03, size=(xn.shape[0], 3))
+    # uneven node spacing along the fibrils: the tangents' part along the chord
+    xn[:, 0] += 0.05 * np.sin(7 * sysm.mesh.X0[:, 1])
+    term = sysm.term
+    full = term.geometry(x)
+    act_full = term._pairs_of_rows(full.active)
+    cand = term.curve_candidates(x)
+    assert act_full.size > 0 and set(act_full) <= set(cand)
+    act, _, _, _ = term.forms(x, w, False)
+    np.testing.assert_array_equal(np.sort(act), np.sort(act_full))
+
+
+def test_hermite_deviation_bounds_the_distance_to_the_chord():
+    from rve.contact.search import segment_distance
+
+    rng = np.random.default_rng(11)
+    Y = rng.normal(size=(300, 4, 3))
+    Y[:, 2:] = (Y[:, 1:2] - Y[:, :1]) * rng.uniform(-0.5, 2.5, (300, 2, 1)) + 0.3 * Y[:, 2:]
+    s = np.linspace(0, 1, 401)
+    C = np.matmul(hermite_basis(s)[0], Y)  # (300, 401, 3)
+    d, _, _ = segment_distance(C.reshape(-1, 3), C.reshape(-1, 3), np.repeat(Y[:, 0], 401, 0),
+                               np.repeat(Y[:, 1], 401, 0))
+    dist = d.reshape(300, 401).max(axis=1)
+    bound = hermite_deviation(Y)
+    assert np.all(dist <= bound + 1e-12)
+    assert np.median(dist / bound) > 0.3  # not a vacuous bound

@@ -18,7 +18,9 @@ the two agree to rounding (tests/test_kernels_contact_curve.py).
 weight, penalty, onset, jacobian)``: the same on the C¹ Hermite contact curves
 (``rve.physics.contact_smooth``: ``smooth_geometry`` + ``curve_penalty_forces``): Hermite data
 ``Y`` (Pr, 4, 3) and stencil matrices ``S`` (Pr, 4, Ms) of each row's two sides, ``Ha`` (G, 4)
-the Hermite basis at the points; M = 2 Ms local nodes per pair.
+the Hermite basis at the points; M = 2 Ms local nodes per pair. ``smooth_gap_rows(Ha,
+end_snap, Ya, Yb, has_next, t_next, has_prev, gap_radius)`` -> (Pr, G): the overlaps alone,
+-inf where a point is not owned (``rve.physics.contact_smooth.smooth_gaps``).
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ from numba import njit
 
 from ..threads import run_chunked
 
-__all__ = ["curve_penalty_rows", "smooth_penalty_rows"]
+__all__ = ["curve_penalty_rows", "smooth_penalty_rows", "smooth_gap_rows"]
 
 #: rows per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
 MIN_CHUNK = 512
@@ -411,3 +413,52 @@ def smooth_penalty_rows(Ha, end_snap: float, Ya, Sa, Yb, Sb, has_next, t_next, h
                                                  float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
                 MIN_CHUNK)
     return active, R, (K if jacobian else None)
+
+
+@njit(cache=True, nogil=True)
+def _smooth_gaps(end_snap, Ya, Yb, t_next, has_next, has_prev, Ha, gr, lo, hi, out):
+    G = Ha.shape[0]
+    H = np.empty(4)
+    dH = np.empty(4)
+    d2H = np.empty(4)
+    p = np.empty(3)
+    for r in range(lo, hi):
+        for g in range(G):
+            for ii in range(3):
+                v = 0.0
+                for a in range(4):
+                    v += Ha[g, a] * Ya[r, a, ii]
+                p[ii] = v
+            s = _project_hermite(end_snap, Yb, r, p, H, dH, d2H)
+            _hermite(s, H, dH, d2H)
+            rr = 0.0
+            grow = 0.0
+            tn2 = 0.0
+            for ii in range(3):
+                q = 0.0
+                for b in range(4):
+                    q += H[b] * Yb[r, b, ii]
+                rr += (p[ii] - q) ** 2
+                grow += (Yb[r, 1, ii] - p[ii]) * t_next[r, ii]
+                tn2 += t_next[r, ii] ** 2
+            interior = (s > 0.0) and (s < 1.0)
+            grows = grow >= -2.0 * end_snap * tn2
+            owned = interior or (s >= 1.0 and ((not has_next[r]) or grows)) or (s <= 0.0 and not has_prev[r])
+            out[r - lo, g] = gr[r, g] - np.sqrt(rr) if owned else -np.inf
+
+
+def smooth_gap_rows(Ha, end_snap: float, Ya, Yb, has_next, t_next, has_prev, gap_radius):
+    """Overlaps (Pr, G) of the oriented rows on the Hermite curves, -inf where not owned."""
+    Ya = np.ascontiguousarray(Ya, dtype=np.float64)
+    Yb = np.ascontiguousarray(Yb, dtype=np.float64)
+    Pr = Ya.shape[0]
+    Ha = np.ascontiguousarray(Ha, dtype=np.float64).reshape(-1, 4)
+    G = Ha.shape[0]
+    gr = np.ascontiguousarray(np.broadcast_to(np.asarray(gap_radius, float).reshape(Pr, -1), (Pr, G)))
+    tn = np.ascontiguousarray(t_next, dtype=np.float64)
+    hn = np.ascontiguousarray(has_next, dtype=np.bool_)
+    hp = np.ascontiguousarray(has_prev, dtype=np.bool_)
+    out = np.empty((Pr, G))
+    snap = float(end_snap)
+    run_chunked(Pr, lambda a, b: _smooth_gaps(snap, Ya, Yb, tn, hn, hp, Ha, gr, a, b, out[a:b]), MIN_CHUNK)
+    return out

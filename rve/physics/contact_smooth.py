@@ -43,7 +43,7 @@ import numpy as np
 from .contact_curve import END_SNAP, CurveGeometry, curve_basis
 
 __all__ = ["SmoothStencil", "hermite_basis", "smooth_stencil", "hermite_deviation", "project_to_hermite",
-           "smooth_geometry", "HERMITE_BOUND"]
+           "smooth_geometry", "smooth_gaps", "HERMITE_BOUND"]
 
 _TINY = 1e-300
 #: max over [0, 1] of |h10| and of |h11| (4/27 at s = 1/3, 2/3)
@@ -109,12 +109,30 @@ def smooth_stencil(order: int, conn, prev, nxt, length) -> SmoothStencil:
 
 
 def hermite_deviation(Y) -> np.ndarray:
-    """Bound on the distance between each Hermite curve ``Y`` (E, 4, 3) and its chord at the
-    same parameter: ``C(s) - chord(s) = h10 (m_0 - d) + h11 (m_1 - d)``, d = x_1 - x_0
-    (the basis reproduces the chord when m_0 = m_1 = d), so at most 4/27 (|m_0 - d| + |m_1 - d|)."""
+    """Bound on the distance of every point of each Hermite curve ``Y`` (E, 4, 3) from its
+    chord segment [x_0, x_1]. With d = x_1 - x_0 and ``m_k - d = a_k d + q_k`` (q_k normal to
+    d), ``C(s) = x_0 + u(s) d + h10 q_0 + h11 q_1`` with the cubic ``u = s + a_0 h10 + a_1 h11``
+    (the basis reproduces the chord when m_0 = m_1 = d): the distance is at most
+    4/27 (|q_0| + |q_1|) plus |d| times how far u leaves [0, 1] (its extremes at s = 0, 1 and
+    at the roots of u'). Uneven node spacing (a_k != 0) only moves points along the chord."""
     Y = np.asarray(Y, float)
     d = Y[:, 1] - Y[:, 0]
-    return HERMITE_BOUND * (np.linalg.norm(Y[:, 2] - d, axis=-1) + np.linalg.norm(Y[:, 3] - d, axis=-1))
+    dd = np.einsum("ei,ei->e", d, d)
+    ddsafe = np.where(dd > 0, dd, 1.0)
+    a = np.stack([np.einsum("ei,ei->e", Y[:, k] - d, d) / ddsafe for k in (2, 3)], axis=1)  # (E, 2)
+    q = [np.linalg.norm(Y[:, k] - d - a[:, k - 2, None] * d, axis=-1) for k in (2, 3)]
+    # u' = 3 (a0 + a1) s^2 - (4 a0 + 2 a1) s + (1 + a0): its roots in (0, 1)
+    A, B, C = 3.0 * (a[:, 0] + a[:, 1]), -(4.0 * a[:, 0] + 2.0 * a[:, 1]), 1.0 + a[:, 0]
+    disc = np.maximum(B * B - 4.0 * A * C, 0.0)
+    lin = np.abs(A) < 1e-14
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1 = np.where(lin, np.where(B != 0, -C / np.where(B != 0, B, 1.0), 0.0), (-B + np.sqrt(disc)) / (2 * A))
+        r2 = np.where(lin, 0.0, (-B - np.sqrt(disc)) / (2 * A))
+    s = np.clip(np.nan_to_num(np.stack([np.zeros_like(A), np.ones_like(A), r1, r2], axis=1)), 0.0, 1.0)
+    H, _, _ = hermite_basis(s)
+    u = s + a[:, :1] * H[..., 2] + a[:, 1:] * H[..., 3]
+    out = np.maximum(np.maximum(u.max(axis=1) - 1.0, -u.min(axis=1)), 0.0)
+    return HERMITE_BOUND * (q[0] + q[1]) + np.sqrt(dd) * out
 
 
 def project_to_hermite(Yb, p, iterations: int = 12):
@@ -152,6 +170,39 @@ def _lagrange_in_stencil(order: int, s) -> tuple[np.ndarray, np.ndarray]:
     return np.pad(N, pad), np.pad(dN, pad)
 
 
+def _closest(Ya, Yb, s_a):
+    """The points on a, their Hermite basis and their closest points on b: ``(Ha, p, s_b)``."""
+    P = Ya.shape[0]
+    G = s_a.shape[-1]
+    Ha = np.broadcast_to(hermite_basis(s_a)[0], (P, G, 4))
+    p = np.matmul(Ha, Ya)
+    s_b = project_to_hermite(Yb, p)
+    return Ha, p, s_b
+
+
+def _owned(Yb, p, s_b, has_next, t_next, has_prev):
+    """``(interior, has_next, has_prev, owned)`` of the closest points (P, G)."""
+    interior = (s_b > 0.0) & (s_b < 1.0)
+    tn = np.asarray(t_next, float)
+    tt_next = np.einsum("pi,pi->p", tn, tn)[:, None]
+    grows = np.einsum("pgi,pi->pg", Yb[:, 1][:, None, :] - p, tn) >= -2.0 * END_SNAP * tt_next
+    hn = np.asarray(has_next, bool)[:, None]
+    hp = np.asarray(has_prev, bool)[:, None]
+    return interior, hn, hp, interior | ((s_b >= 1.0) & (~hn | grows)) | ((s_b <= 0.0) & ~hp)
+
+
+def smooth_gaps(Ya, Yb, s_a, gap_radius, has_next, t_next, has_prev) -> np.ndarray:
+    """Overlaps (P, G) of ``smooth_geometry``'s points, -inf where not owned (no tangent
+    data: the cheap pass of the energy and of the active set)."""
+    Ya, Yb = np.asarray(Ya, float), np.asarray(Yb, float)
+    _, p, s_b = _closest(Ya, Yb, np.asarray(s_a, float))
+    j = p - np.matmul(hermite_basis(s_b)[0], Yb)
+    rho = np.sqrt(np.einsum("pgi,pgi->pg", j, j))
+    gr = np.asarray(gap_radius, float)
+    g = (gr[:, None] if gr.ndim == 1 else gr) - rho
+    return np.where(_owned(Yb, p, s_b, has_next, t_next, has_prev)[3], g, -np.inf)
+
+
 def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_next, has_prev) -> CurveGeometry:
     """Contact kinematics of points ``s_a`` (G,) on the Hermite curves ``Ya`` (P, 4, 3)
     (stencil matrices ``Sa`` (P, 4, Ms)) against the curves ``Yb``, ``Sb`` (shifts applied by
@@ -163,9 +214,7 @@ def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_nex
     P = Ya.shape[0]
     s_a = np.asarray(s_a, float)
     G = s_a.shape[-1]
-    Ha = np.broadcast_to(hermite_basis(s_a)[0], (P, G, 4))
-    p = np.matmul(Ha, Ya)
-    s_b = project_to_hermite(Yb, p)
+    Ha, p, s_b = _closest(Ya, Yb, s_a)
     Hb, dHb, d2Hb = hermite_basis(s_b)
     q, t, t2 = np.matmul(Hb, Yb), np.matmul(dHb, Yb), np.matmul(d2Hb, Yb)
     j = p - q
@@ -173,13 +222,7 @@ def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_nex
     n = j / np.maximum(rho, _TINY)[..., None]
     gr = np.asarray(gap_radius, float)
     g = (gr[:, None] if gr.ndim == 1 else gr) - rho
-    interior = (s_b > 0.0) & (s_b < 1.0)
-    tn = np.asarray(t_next, float)
-    tt_next = np.einsum("pi,pi->p", tn, tn)[:, None]
-    grows = np.einsum("pgi,pi->pg", Yb[:, 1][:, None, :] - p, tn) >= -2.0 * END_SNAP * tt_next
-    hn = np.asarray(has_next, bool)[:, None]
-    hp = np.asarray(has_prev, bool)[:, None]
-    owned = interior | ((s_b >= 1.0) & (~hn | grows)) | ((s_b <= 0.0) & ~hp)
+    interior, hn, hp, owned = _owned(Yb, p, s_b, has_next, t_next, has_prev)
     ca = np.matmul(Ha, Sa)  # (P, G, Ms): the point's weights on a's stencil
     cb = np.matmul(Hb, Sb)
     c = np.concatenate([ca, -cb], axis=-1)

@@ -368,7 +368,11 @@ class ContactTerm:
         if self.curve:
             out = np.full((self.row_pair.size, self.params.n_gp), -np.inf)
             cand = self.curve_candidates(x)
-            if cand.size:
+            if cand.size and self.smooth:
+                rows = self.passes.rows(cand)
+                r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+                out[rows] = self.passes.smooth_gaps(r, self.row_gap_radius(rows), rows, use_numba())
+            elif cand.size:
                 geo = self.geometry(x, cand)
                 out[self.passes.rows(cand)] = np.where(geo.owned, geo.g, -np.inf)
             return out

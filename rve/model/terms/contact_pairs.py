@@ -29,8 +29,8 @@ from typing import Optional
 
 import numpy as np
 
-from ...physics.contact_curve import CurveGeometry, curve_basis, curve_geometry, gauss_legendre_01
-from ...physics.contact_smooth import SmoothStencil, smooth_geometry
+from ...physics.contact_curve import END_SNAP, CurveGeometry, curve_basis, curve_geometry, gauss_legendre_01
+from ...physics.contact_smooth import SmoothStencil, hermite_basis, smooth_gaps, smooth_geometry
 
 __all__ = ["HalfPasses", "point_keys", "gather_by_key"]
 
@@ -106,6 +106,16 @@ class HalfPasses:
         Yb[:, :2] += self.b_shift[rows][:, None, :]
         has_next = nx >= 0
         return Ya, st.S[ea], Yb, st.S[eb], has_next, Y[np.where(has_next, nx, 0), 2], self.has_prev[rows]
+
+    def smooth_gaps(self, r, gap_radius, rows, compiled: bool = False) -> np.ndarray:
+        """Overlaps (len(rows), G) on the Hermite curves, -inf where a point is not owned
+        (``contact_smooth.smooth_gaps``, or its compiled kernel)."""
+        Ya, _, Yb, _, has_next, t_next, has_prev = self.smooth_inputs(r, rows)
+        if compiled:
+            from ...kernels.contact_curve import smooth_gap_rows
+
+            return smooth_gap_rows(hermite_basis(self.s)[0], END_SNAP, Ya, Yb, has_next, t_next, has_prev, gap_radius)
+        return smooth_gaps(Ya, Yb, self.s, gap_radius, has_next, t_next, has_prev)
 
     def geometry(self, order: int, conn, r, gap_radius, rows) -> CurveGeometry:
         """``CurveGeometry`` of the oriented ``rows`` at positions ``r`` (n_nodes, 3);
