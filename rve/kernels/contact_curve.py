@@ -18,7 +18,9 @@ the two agree to rounding (tests/test_kernels_contact_curve.py).
 weight, penalty, onset, jacobian)``: the same on the C¹ Hermite contact curves
 (``rve.physics.contact_smooth``: ``smooth_geometry`` + ``curve_penalty_forces``): Hermite data
 ``Y`` (Pr, 4, 3) and stencil matrices ``S`` (Pr, 4, Ms) of each row's two sides, ``Ha`` (G, 4)
-the Hermite basis at the points; M = 2 Ms local nodes per pair. ``smooth_gap_rows(Ha,
+the Hermite basis at the points; M = 2 Ms local nodes per pair. It returns ``R``, ``K`` of
+the active pairs only (a first pass of overlaps finds them, so no (P, M, 3, M, 3) block is
+filled for the inactive candidates). ``smooth_gap_rows(Ha,
 end_snap, Ya, Yb, has_next, t_next, has_prev, gap_radius)`` -> (Pr, G): the overlaps alone,
 -inf where a point is not owned (``rve.physics.contact_smooth.smooth_gaps``).
 """
@@ -350,6 +352,37 @@ def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g
 
 
 @njit(cache=True, nogil=True)
+def _accumulate_point(Ro, Ko, jacobian, slot, c, m, nv, j, t, t2, rho, free, f, kk, ds, B):
+    """``_accumulate`` with the point stiffness B (3, 3) formed once per point (the larger
+    stencils of the Hermite curve make the (M, M) loop the cost)."""
+    M = c.shape[0]
+    for k in range(M):
+        for ii in range(3):
+            Ro[slot[k], ii] -= f * c[k] * nv[ii]
+    if not jacobian:
+        return
+    A = t[0] * t[0] + t[1] * t[1] + t[2] * t[2] - (j[0] * t2[0] + j[1] * t2[1] + j[2] * t2[2])
+    Asafe = A if (free and A > 0) else 1.0
+    for k in range(M):
+        for ii in range(3):
+            ds[k, ii] = (c[k] * t[ii] + m[k] * j[ii]) / Asafe if free else 0.0
+    fr = f / rho
+    beta = fr * A if free else 0.0
+    for ii in range(3):
+        for jj in range(3):
+            B[ii, jj] = (kk + fr) * nv[ii] * nv[jj] - (fr if ii == jj else 0.0)
+    for k in range(M):
+        sk = slot[k]
+        for l in range(M):
+            sl = slot[l]
+            ckl = c[k] * c[l]
+            for ii in range(3):
+                bk = beta * ds[k, ii]
+                for jj in range(3):
+                    Ko[sk, ii, sl, jj] += ckl * B[ii, jj] + bk * ds[l, jj]
+
+
+@njit(cache=True, nogil=True)
 def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, w, Pstar, eps, jacobian, lo, hi,
                   active, R, K):
     """Pairs lo..hi-1 on the Hermite curves (as ``_pairs``)."""
@@ -368,6 +401,7 @@ def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, 
     t = np.empty(3)
     t2 = np.empty(3)
     slot = np.empty(M, np.int64)
+    B = np.empty((3, 3))
     for i in range(lo, hi):
         o = i - lo
         for side in range(2):
@@ -382,15 +416,15 @@ def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, 
                 active[o] = True
                 nv = (j[0] / rho, j[1] / rho, j[2] / rho)
                 f1, f2 = _law(gap, Pstar, eps)
-                _accumulate(R[o], K[o if jacobian else 0], jacobian, slot, c, m, nv, j, t, t2, rho, free,
-                            w[r, g] * f1, w[r, g] * f2, ds)
+                _accumulate_point(R[o], K[o if jacobian else 0], jacobian, slot, c, m, nv, j, t, t2, rho, free,
+                                  w[r, g] * f1, w[r, g] * f2, ds, B)
 
 
 def smooth_penalty_rows(Ha, end_snap: float, Ya, Sa, Yb, Sb, has_next, t_next, has_prev, gap_radius, weight,
                         penalty: float, onset: float = 0.0, jacobian: bool = True):
-    """``(active, R, K)`` of the oriented rows on the Hermite curves (module docstring);
-    ``Ha`` (G, 4) from ``rve.physics.contact_smooth.hermite_basis``, ``end_snap`` its
-    ``END_SNAP``."""
+    """``(active (P,), R, K)`` of the oriented rows on the Hermite curves (module docstring;
+    ``R``, ``K`` of the active pairs, in their order); ``Ha`` (G, 4) from
+    ``rve.physics.contact_smooth.hermite_basis``, ``end_snap`` its ``END_SNAP``."""
     Ya = np.ascontiguousarray(Ya, dtype=np.float64)
     Yb = np.ascontiguousarray(Yb, dtype=np.float64)
     Sa = np.ascontiguousarray(Sa, dtype=np.float64)
@@ -405,14 +439,24 @@ def smooth_penalty_rows(Ha, end_snap: float, Ya, Sa, Yb, Sb, has_next, t_next, h
     hp = np.ascontiguousarray(has_prev, dtype=np.bool_)
     M = 2 * Ms
     half = Pr // 2
-    active = np.zeros(half, np.bool_)
-    R = np.zeros((half, M, 3))
-    K = np.zeros((half, M, 3, M, 3)) if jacobian else np.zeros((1, M, 3, M, 3))
     jac, snap = bool(jacobian), float(end_snap)
-    run_chunked(half, lambda a, b: _smooth_pairs(snap, Ya, Sa, Yb, Sb, tn, hn, hp, Ha, gr, w, float(penalty),
-                                                 float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
+    g = np.empty((Pr, G))
+    run_chunked(Pr, lambda a, b: _smooth_gaps(snap, Ya, Yb, tn, hn, hp, Ha, gr, a, b, g[a:b]), MIN_CHUNK)
+    hit = (g > 0.0).any(axis=1)
+    sel = np.flatnonzero(hit[:half] | hit[half:])
+    rows = np.concatenate([sel, half + sel])
+    Ya, Sa, Yb, Sb = Ya[rows], Sa[rows], Yb[rows], Sb[rows]
+    tn, hn, hp, gr, w = tn[rows], hn[rows], hp[rows], gr[rows], w[rows]
+    n = sel.size
+    active = np.zeros(n, np.bool_)
+    R = np.zeros((n, M, 3))
+    K = np.zeros((n, M, 3, M, 3)) if jacobian else np.zeros((1, M, 3, M, 3))
+    run_chunked(n, lambda a, b: _smooth_pairs(snap, Ya, Sa, Yb, Sb, tn, hn, hp, Ha, gr, w, float(penalty),
+                                              float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
                 MIN_CHUNK)
-    return active, R, (K if jacobian else None)
+    out = np.zeros(half, np.bool_)
+    out[sel] = active
+    return out, R[active], (K[active] if jacobian else None)
 
 
 @njit(cache=True, nogil=True)

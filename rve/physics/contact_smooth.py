@@ -19,11 +19,13 @@ Contract
   lengths ``m = (x_{N+1} - x_{N-1}) / 2``, the Catmull-Rom spline). Straight, evenly
   meshed fibrils give the chord exactly.
 * **Linear in the nodes, over a stencil.** ``C(s) = H(s) S_e X_e`` with the stencil
-  ``X_e`` (3 nn, 3): the nodes of prev(e), of e, of next(e) (``SmoothStencil.nodes``; at a
-  free end the element's own nodes stand in with zero weight), and the constant (4, 3 nn)
-  matrix ``S_e`` (rows: x_0, x_1, m_0, m_1). The tangents are differences inside one
-  element (``sum_B dN_B = 0``), so a neighbour across a periodic wrap enters with its own
-  positions, unshifted: the curve depends on node positions and on the pair's shift only.
+  ``X_e`` (Ms, 3): the distinct nodes of prev(e), e and next(e) (``SmoothStencil.nodes``;
+  Ms = 3 nn - 2 where neighbours share their end nodes, one more for an element next to a
+  periodic wrap, whose neighbour's end node is the tied image node; shorter lists padded
+  with an own node of zero weight), and the constant (4, Ms) matrix ``S_e`` (rows: x_0,
+  x_1, m_0, m_1). The tangents are differences inside one element (``sum_B dN_B = 0``), so
+  a neighbour across a periodic wrap enters with its own positions, unshifted: the curve
+  depends on node positions and on the pair's shift only.
 * ``smooth_geometry`` gives the ``CurveGeometry`` of points of oriented rows on these
   curves, with the conventions of ``rve.physics.contact_curve`` (closest point by Newton
   from the chord's, snapped within ``END_SNAP`` of an end, owned as there; ``ds`` zero only
@@ -32,7 +34,7 @@ Contract
   and ``ds`` (P, G, M, 3) over the M = 2 (3 nn) stencil slots of the row: a's stencil, then
   b's), so ``curve_penalty_forces`` and ``curve_scalar_jump`` apply unchanged. ``Na``,
   ``Nb``, ``dNb`` are the Lagrange basis of the scalar fields (T, V) at s_a, s_b, placed in
-  the element's own slots of the stencil layout (zero on the neighbours' slots).
+  the element's own slots of the stencil (``SmoothStencil.own``; zero elsewhere).
 """
 from __future__ import annotations
 
@@ -64,12 +66,13 @@ def hermite_basis(s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class SmoothStencil:
-    """Per element (E elements, nn nodes): ``nodes`` (E, 3 nn) the stencil (prev's nodes,
-    own, next's; own nodes in place of a missing neighbour) and ``S`` (E, 4, 3 nn) the
-    Hermite data (x_0, x_1, m_0, m_1) in terms of the stencil's positions."""
+    """Per element (E elements, nn nodes): ``nodes`` (E, Ms) the stencil's distinct nodes
+    (module docstring), ``S`` (E, 4, Ms) the Hermite data (x_0, x_1, m_0, m_1) in terms of
+    their positions, ``own`` (E, nn) the slots of the element's own nodes."""
 
     nodes: np.ndarray
     S: np.ndarray
+    own: np.ndarray
 
     @property
     def width(self) -> int:
@@ -104,8 +107,19 @@ def smooth_stencil(order: int, conn, prev, nxt, length) -> SmoothStencil:
     S[:, 2, 0:nn] = np.where(hp, 0.5 * length / length[ip], 0.0)[:, None] * dN1
     S[:, 3, nn:2 * nn] = np.where(hn, 0.5, 1.0)[:, None] * dN1
     S[:, 3, 2 * nn:] = np.where(hn, 0.5 * length / length[inx], 0.0)[:, None] * dN0
-    nodes = np.concatenate([conn[ip], conn, conn[inx]], axis=1)
-    return SmoothStencil(nodes=nodes, S=S)
+    raw = np.concatenate([conn[ip], conn, conn[inx]], axis=1)
+    # one slot per distinct node (first occurrence; a shared end node appears twice in raw)
+    first = np.argmax(raw[:, :, None] == raw[:, None, :], axis=2)
+    is_first = first == np.arange(raw.shape[1])[None, :]
+    slot = np.take_along_axis(np.cumsum(is_first, axis=1) - 1, first, axis=1)  # (E, 3 nn)
+    Ms = int(is_first.sum(axis=1).max())
+    nodes = np.repeat(conn[:, :1], Ms, axis=1)  # padding: an own node, zero weight
+    Sc = np.zeros((E, 4, Ms))
+    rows = np.arange(E)
+    for k in range(raw.shape[1]):
+        nodes[rows, slot[:, k]] = raw[:, k]
+        Sc[rows, :, slot[:, k]] += S[:, :, k]
+    return SmoothStencil(nodes=nodes, S=Sc, own=slot[:, nn:2 * nn])
 
 
 def hermite_deviation(Y) -> np.ndarray:
@@ -161,13 +175,16 @@ def project_to_hermite(Yb, p, iterations: int = 12):
     return np.where(s < END_SNAP, 0.0, np.where(s > 1.0 - END_SNAP, 1.0, s))
 
 
-def _lagrange_in_stencil(order: int, s) -> tuple[np.ndarray, np.ndarray]:
-    """Lagrange values and d/ds at ``s`` (P, G) in the stencil layout (P, G, 3 nn): the
-    element's own slots nn..2nn-1, zero elsewhere."""
+def _lagrange_in_stencil(order: int, s, own, Ms: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lagrange values and d/ds at ``s`` (P, G) in the stencil layout (P, G, Ms): on the
+    element's own slots ``own`` (P, nn), zero elsewhere."""
     N, dN, _ = curve_basis(order, s)
-    nn = order + 1
-    pad = [(0, 0)] * (N.ndim - 1) + [(nn, nn)]
-    return np.pad(N, pad), np.pad(dN, pad)
+    P, G, nn = N.shape
+    Ns, dNs = np.zeros((P, G, Ms)), np.zeros((P, G, Ms))
+    idx = np.broadcast_to(np.asarray(own)[:, None, :], (P, G, nn))
+    np.put_along_axis(Ns, idx, N, axis=2)
+    np.put_along_axis(dNs, idx, dN, axis=2)
+    return Ns, dNs
 
 
 def _closest(Ya, Yb, s_a):
@@ -203,12 +220,14 @@ def smooth_gaps(Ya, Yb, s_a, gap_radius, has_next, t_next, has_prev) -> np.ndarr
     return np.where(_owned(Yb, p, s_b, has_next, t_next, has_prev)[3], g, -np.inf)
 
 
-def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_next, has_prev) -> CurveGeometry:
+def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_next, has_prev, own_a,
+                    own_b) -> CurveGeometry:
     """Contact kinematics of points ``s_a`` (G,) on the Hermite curves ``Ya`` (P, 4, 3)
     (stencil matrices ``Sa`` (P, 4, Ms)) against the curves ``Yb``, ``Sb`` (shifts applied by
     the caller). ``gap_radius`` (P,) or (P, G); ``has_next`` / ``has_prev`` (P,) whether b
     has a next / previous element; ``t_next`` (P, 3) the next element's start tangent (its
-    m_0; only its sign against ``C_b(1) - p`` is used, as in ``curve_geometry``)."""
+    m_0; only its sign against ``C_b(1) - p`` is used, as in ``curve_geometry``); ``own_a``,
+    ``own_b`` (P, nn) the stencil slots of the elements' own nodes (``SmoothStencil.own``)."""
     Ya, Yb = np.asarray(Ya, float), np.asarray(Yb, float)
     Sa, Sb = np.asarray(Sa, float), np.asarray(Sb, float)
     P = Ya.shape[0]
@@ -235,7 +254,8 @@ def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_nex
     ds = (c[..., None] * t[:, :, None, :] + m[..., None] * j[:, :, None, :]) / Asafe[..., None, None]
     ds *= free[..., None, None]
     active = owned & (g > 0.0) & (rho > _TINY)
-    Na, _ = _lagrange_in_stencil(order, np.broadcast_to(s_a, (P, G)))
-    Nb, dNb = _lagrange_in_stencil(order, s_b)
+    Ms = Sa.shape[-1]
+    Na, _ = _lagrange_in_stencil(order, np.broadcast_to(s_a, (P, G)), own_a, Ms)
+    Nb, dNb = _lagrange_in_stencil(order, s_b, own_b, Ms)
     return CurveGeometry(s_a=np.broadcast_to(s_a, (P, G)), s_b=s_b, j=j, rho=rho, n=n, g=g, c=c, ds=ds,
                          A=A, owned=owned, active=active, Na=Na, Nb=Nb, dNb=dNb)

@@ -568,9 +568,12 @@ class ContactTerm:
             from ...kernels.contact_curve import smooth_penalty_rows
 
             Ha = hermite_basis(ps.s)[0]
-            active, Rr, Kr = smooth_penalty_rows(Ha, END_SNAP, *ps.smooth_inputs(r, rows), gr, self.weight[rows],
+            active, Ra, Ka = smooth_penalty_rows(Ha, END_SNAP, *ps.smooth_inputs(r, rows), gr, self.weight[rows],
                                                  float(self.params.penalty), self.onset, jacobian)
-            return self._compiled_rows(cand, active, Rr, Kr, jacobian)
+            act = cand[active]
+            if act.size == 0:
+                return np.zeros(0, np.int64), np.zeros(0), None, None
+            return act, Ra, (Ka.reshape(act.size, -1) if jacobian else None), None
         Xa, Xb, has_next, t_next, has_prev = ps.inputs(order, self.mesh.conn, r, rows)
         active, Rr, Kr = curve_penalty_rows(order, lagrange_monomials(order), curve_basis(order, ps.s)[0], END_SNAP,
                                             Xa, Xb, t_next, has_next, has_prev, ps.s, gr, self.weight[rows],

@@ -122,7 +122,9 @@ class HalfPasses:
         ``gap_radius`` (len(rows),) or (len(rows), G)."""
         if self.stencil is not None:
             Ya, Sa, Yb, Sb, has_next, t_next, has_prev = self.smooth_inputs(r, rows)
-            return smooth_geometry(order, Ya, Sa, Yb, Sb, self.s, gap_radius, has_next, t_next, has_prev)
+            own = self.stencil.own
+            return smooth_geometry(order, Ya, Sa, Yb, Sb, self.s, gap_radius, has_next, t_next, has_prev,
+                                   own[self.a_elem[rows]], own[self.b_elem[rows]])
         Xa, Xb, has_next, t_next, has_prev = self.inputs(order, conn, r, rows)
         return curve_geometry(order, Xa, Xb, self.s, gap_radius, has_next, t_next, has_prev)
 
