@@ -293,8 +293,9 @@ def case_d():
 
 def case_cost(repeat: int = 3):
     """Wall time of the contact forms (mechanics only, residual + tangent), of a whole
-    evaluate and of a rebuild on the plain-weave relaxation scene's designed state, chord
-    (compiled kernel when numba is available) vs curve (numpy), 12 and 30 el/fibril."""
+    evaluate and of a rebuild on the plain-weave relaxation scene's designed state, chord vs
+    curve vs smooth (compiled kernels when numba is available), 12 and 30 el/fibril, and the
+    entries of the union pattern."""
     import time
     from dataclasses import replace
     from pathlib import Path
@@ -325,7 +326,9 @@ def case_cost(repeat: int = 3):
             te = med(lambda: sysm.evaluate(x, w, 0.0))
             tr = med(lambda: sysm.rebuild(x))
             st = sysm.contact_state(x)
-            print(f"    {el} el {geometry:6s}: pairs {sysm.map.n_pairs}, active {st['active_pairs']}, forms + tangent "
+            nnz = sysm.evaluate(x, w, 0.0)[1].nnz
+            print(f"    {el} el {geometry:6s}: pairs {sysm.map.n_pairs}, active {st['active_pairs']}, union nnz {nnz}, "
+                  f"forms + tangent "
                   f"{tf:.1f} ms, evaluate {te:.1f} ms, rebuild {tr:.1f} ms; total normal force "
                   f"{st['total_normal_force']:.2f} N, max overlap {st['max_overlap_over_R']:.4f} R")
 
