@@ -4,8 +4,9 @@ evenly meshed fibrils; its closest point against a brute-force search; the penal
 as the gradient of the energy and the tangent and the jump terms against central
 differences over the stencil nodes (points near element ends, free ends), the compiled
 kernel against the numpy forms; the assembled system's tangents (p = 1, 2, 3, with T and V,
-with multipliers, across a periodic wrap); and no contact point counted twice at a concave
-kink, where the Lagrange curve counts them."""
+with multipliers, across a periodic wrap, a relaxed periodic woven cell with its Hill-Mandel
+stress); and no contact point counted twice at a concave kink, where the Lagrange curve
+counts them."""
 import sys
 from pathlib import Path
 
@@ -434,3 +435,54 @@ def test_hermite_deviation_bounds_the_distance_to_the_chord():
     bound = hermite_deviation(Y)
     assert np.all(dist <= bound + 1e-12)
     assert np.median(dist / bound) > 0.3  # not a vacuous bound
+
+
+def test_config_takes_the_smooth_geometry():
+    from rve.config.fabric import FabricContact
+    from rve.fabrics.setup import contact_params
+
+    assert contact_params(FabricContact(geometry="smooth"), 5).geometry == "smooth"
+    with pytest.raises(ValueError):
+        FabricContact(geometry="hermite")
+
+
+def test_periodic_woven_cell_tangent_and_hill_mandel():
+    """A relaxed periodic 1x1 plain-weave cell with the smooth geometry (every fibril wraps,
+    so the stencils cross the wraps): the reduced tangent against FD, and the Hill-Mandel
+    stress against the derivative of the equilibrium energy in F (Richardson, 1e-8)."""
+    from rve.config.rve import RVEConfig
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.periodic import macro_gradient, periodic_system
+    from rve.homogenisation.strain import relax_fabric, static_minimize
+
+    cfg = RVEConfig(scene="rve", boundary="periodic", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 6},
+                    contact={"onset": 0.05, "geometry": "smooth"}, strain={"total": 0.1, "steps": 2})
+    fab, mesh = fabric_and_mesh(cfg)
+    x, _, info = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    assert info["converged"]
+    F = macro_gradient("shear", 0.05) @ macro_gradient("uniaxial", 0.03)
+    psys = periodic_system(cfg, fab, mesh, x, F)
+    assert psys.full.term.smooth and psys.full.term.passes.stencil.width == 3 * (mesh.order + 1) - 1
+    xr = psys.restrict(x.reshape(-1)) + 1e-3 * np.random.default_rng(2).standard_normal(psys.n)
+    psys.rebuild(xr)
+    assert len(psys.active_pairs(xr)) > 0
+    w = np.zeros(psys.n)
+    R_, K, _ = psys.evaluate(xr, w, 0.0)
+    cols = np.arange(0, psys.n, 7)
+    fd = fd_jacobian(lambda u: psys.evaluate(u, w, 0.0, jacobian=False)[0], xr, cols, eps=1e-7)
+    assert rel_err(K.toarray()[:, cols], fd) < 1e-6
+    F0 = macro_gradient("uniaxial", 0.04)
+    dF = np.array([[0.3, 0.1, 0.0], [0.5, -0.2, 0.0], [0.0, 0.0, 0.0]])
+
+    def equilibrium(t):
+        ps = periodic_system(cfg, fab, mesh, x, F0 + t * dF)
+        xs, inf = static_minimize(ps, ps.restrict(x.reshape(-1)), 1e-12, 200)
+        assert inf["converged"]
+        return ps, xs
+
+    ps, xs = equilibrium(0.0)
+    macro = ps.ties.area * float(np.sum(ps.macro_stress(xs) * dF))
+    e = {t: p_.energy(x_) for t in (-2e-4, -1e-4, 1e-4, 2e-4) for p_, x_ in [equilibrium(t)]}
+    micro = (4.0 * (e[1e-4] - e[-1e-4]) / 2e-4 - (e[2e-4] - e[-2e-4]) / 4e-4) / 3.0
+    assert abs(macro) > 1e-4
+    assert micro == pytest.approx(macro, rel=1e-8)
