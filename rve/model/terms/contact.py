@@ -27,7 +27,8 @@ the thesis): ``geometry="curve"`` evaluates the contact on the elements' Lagrang
 with two half passes (``rve.model.terms.contact_pairs.HalfPasses``; every pair has m = 2nn
 local nodes, its rows are the oriented pairs); ``geometry="smooth"`` the same on the C¹
 Hermite contact curve through the end nodes (``rve.physics.contact_smooth``; a side's local
-nodes are its element's stencil, 3nn); ``enforcement="augmented_lagrangian"`` carries
+nodes are its element's stencil, the 3nn - 2 distinct nodes of the element and its two
+neighbours); ``enforcement="augmented_lagrangian"`` carries
 multipliers per point (``multipliers`` (rows, n_gp), kept by point key over rebuilds) that
 shift the penalty law's overlap to ``g + lambda/P*``, updated by ``update_multipliers(x)``
 (driven by ``rve.solvers.augmented``), ``penetration`` / ``max_penetration`` the true
@@ -45,11 +46,11 @@ from ...kernels import use_numba
 from ...physics.contact_curve import (
     END_SNAP, chord_deviation, curve_basis, curve_penalty_forces, curve_scalar_jump, lagrange_monomials,
 )
-from ...physics.contact_smooth import hermite_basis, hermite_deviation, smooth_stencil
 from ...physics.contact_forms import (
     chord_gaps, chord_geometry, effective_radius, hertz_kappa, hertz_width, penalty_energy,
     penalty_forces, penalty_law, scalar_jump,
 )
+from ...physics.contact_smooth import hermite_basis, hermite_deviation, smooth_stencil
 from .contact_pairs import HalfPasses, gather_by_key, point_keys
 
 __all__ = ["ContactParams", "ContactTerm", "GEOMETRIES", "ENFORCEMENTS", "CONDUCTANCE_LAWS"]
@@ -208,10 +209,10 @@ class ContactTerm:
         nn = conn.shape[1]
         ep, em = cmap.e_plus, cmap.e_minus
         stencil = None
+        nb = element_neighbours(mesh, self.wrap) if self.curve else None
         if self.smooth:
-            nb = element_neighbours(mesh, self.wrap)
             stencil = smooth_stencil(mesh.order, conn, nb.prev, nb.next, mesh.elem_length)
-            local = np.concatenate([stencil.nodes[ep], stencil.nodes[em]], axis=1)  # (P, 2 (3nn))
+            local = np.concatenate([stencil.nodes[ep], stencil.nodes[em]], axis=1)  # (P, 2 Ms)
             self.endpos = None
         elif self.scalar or self.curve:
             local = np.concatenate([conn[ep], conn[em]], axis=1)  # (P, 2nn)
@@ -225,7 +226,7 @@ class ContactTerm:
         self.gap_radius = R[fp] + R[fm]
         self.kappa = hertz_kappa(effective_radius(R[fp], R[fm]), self.params.penalty, self.E_star)
         if self.curve:
-            self.passes = HalfPasses.build(cmap, mesh, self.params.n_gp, element_neighbours(mesh, self.wrap), stencil)
+            self.passes = HalfPasses.build(cmap, mesh, self.params.n_gp, nb, stencil)
             self.weight = self.passes.weight
             self.row_pair = np.tile(np.arange(cmap.n_pairs), 2)
         else:
