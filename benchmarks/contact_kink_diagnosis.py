@@ -6,6 +6,8 @@ given), then at the final state prints
 * the contact points counted by two oriented rows at once (the same point of element a,
   the same fibril b, two adjacent elements of b both holding an interior closest point:
   the concave side of a kink), their number and their share of the penalty energy;
+* the points that overlap another fibril's contact curve by more than 1e-3 R (brute force:
+  the distance to 41 samples per element of that fibril's curve) but are owned by no row;
 * the energy along the Newton direction of the final state, E(t) for t on a fine grid,
   against the trapezoid integral of its gradient F(t).dx: a step of E that the gradient does
   not account for is a discontinuity; per such interval, how many points changed their
@@ -47,6 +49,37 @@ def point_rows(system, x):
     e, _, _ = penalty_law(np.where(geo.active, geo.g, 0.0), term.params.penalty, term.onset)
     energy = (term.weight[rows] * e).reshape(-1)
     return keys, np.repeat(rows, G) * G + np.tile(np.arange(G), rows.size), act, energy
+
+
+def unowned_points(system, x, owned_keys) -> tuple[int, int]:
+    """(points overlapping another fibril's curve by > 1e-3 R by brute force, of them not in
+    ``owned_keys``) over every element's contact points (a cell without periodic images)."""
+    from scipy.spatial import cKDTree
+
+    from rve.physics.contact_curve import curve_basis
+    from rve.physics.contact_smooth import hermite_basis
+
+    term, mesh = system.term, system.mesh
+    ps = term.passes
+    r = system.nodal(np.asarray(x, float))[:, :3]
+    grid = np.linspace(0.0, 1.0, 41)
+    if term.smooth:
+        Y = ps.stencil.control(r)
+        C, P = np.matmul(hermite_basis(grid)[0], Y), np.matmul(hermite_basis(ps.s)[0], Y)
+    else:
+        X = r[mesh.conn]
+        C = np.einsum("ka,eai->eki", curve_basis(mesh.order, grid)[0], X)
+        P = np.einsum("ga,eai->egi", curve_basis(mesh.order, ps.s)[0], X)
+    fib, G, reach = mesh.elem_fibril, ps.s.size, 2.0 * float(mesh.radius.max())
+    found = missing = 0
+    for fb in range(mesh.n_fibrils):
+        d, _ = cKDTree(C[fib == fb].reshape(-1, 3)).query(P.reshape(-1, 3), distance_upper_bound=reach)
+        hit = np.flatnonzero(np.isfinite(d) & (reach - d > 1e-3 * float(mesh.radius.min())))
+        e, g = np.divmod(hit, G)
+        other = fib[e] != fb
+        found += int(other.sum())
+        missing += sum(1 for ee, gg in zip(e[other], g[other]) if (int(ee), int(gg), fb) not in owned_keys)
+    return found, missing
 
 
 def owners(system, x) -> dict:
@@ -100,6 +133,8 @@ def main(argv=None) -> None:
     e_twice = sum(e for v in twice.values() for _, e in v)
     print(f"active points {len(own)}, counted by two rows {len(twice)} ({e_twice / max(e_all, 1e-300):.2%} of the "
           f"contact energy {e_all:.4e} N mm)", flush=True)
+    found, missing = unowned_points(system, x, {k[:3] for k in own})
+    print(f"points overlapping another fibril by > 1e-3 R (brute force) {found}, owned by no row {missing}", flush=True)
     dx, F0 = newton_direction(system, x)
     print(f"|F| {np.linalg.norm(F0):.3e} N, |dx| {np.abs(dx).max():.3e} mm, F.dx {F0 @ dx:.3e} N mm", flush=True)
     ts = np.concatenate([[0.0], np.geomspace(1e-6, 1.0, 121)])
