@@ -12,6 +12,8 @@ contact curve"). Prints:
     between two steps and the largest jump of its slope;
 (c) an augmented Lagrangian solve of two pressed fibrils (pinned ends): the largest overlap
     and the contact force for P* = 50 and 500, with each Newton solve's residuals;
+(c2) the same augmented Lagrangian loop with the crossing placed at or next to element ends
+    (P* = 50, p = 1, 2): the updates it takes and the largest overlap it ends with;
 (d) the width and Holm conductance laws on the crossed pair against the contact force;
 (e) a curved fibril (circular arc) crossing a straight one: the force against the continuous
     limit of the two half passes (adaptive quadrature), chord vs curve at p = 1, 2, 3: the
@@ -137,6 +139,50 @@ def case_c():
                       f"{sysm.max_penetration(xs):.2e} R, updates {loop.updates}")
                 for res in log:
                     print("        Newton residuals " + " ".join(f"{r:.1e}" for r in res.residuals))
+
+
+def pressed_pair(order, penalty, ya, xb, **kw):
+    """Fibril a along x at y = ya, fibril b along y at x = xb, pinned ends moved 0.08 mm
+    towards each other (case (c)); returns (system, x)."""
+    from rve.model import DirichletBC
+
+    fibs = [straight_fibril([-1, ya, R], [1, ya, R], R, "a"), straight_fibril([xb, -1, -R], [xb, 1, -R], R, "b")]
+    mesh = fibril_mesh(fibs, 8, order)
+    ends = [n for f in (0, 1) for n in mesh.end_nodes(f)]
+    pinned = np.array([n * 9 + k for n in ends for k in range(3)])
+    gauge = np.array([mesh.end_nodes(0)[0] * 9 + 5, mesh.end_nodes(1)[0] * 9 + 5])
+    base = BeamModel(mesh, BeamMaterial(126.0, density=1e-3), bcs=[DirichletBC(pinned, 0.0), DirichletBC(gauge, 0.0)])
+    x = np.zeros(base.n)
+    xn = base.nodal(x)
+    xn[:, :9] = mesh.X0
+    xn[list(mesh.end_nodes(0)), 2] -= 0.08
+    xn[list(mesh.end_nodes(1)), 2] += 0.08
+    return ContactSystem(base, ContactParams(penalty=penalty, **kw), x), x
+
+
+def case_c2(geometries=GEOMETRIES):
+    from rve.solvers.augmented import solve_with_multipliers
+    from rve.solvers.static import static_solve
+
+    print("(c2) augmented Lagrangian (P* = 50, tolerance 1e-4 R, at most 20 updates), the crossing (x_b, y_a) "
+          "at / next to element ends (h = 0.25 mm): updates, last largest overlap / R")
+    for geometry in geometries:
+        for order in (1, 2):
+            out = []
+            for ya, xb in ((0.0, 0.0), (0.0, 0.03), (0.07, 0.03), (0.07, 0.11)):
+                sysm, x = pressed_pair(order, 50.0, ya, xb, geometry=geometry, enforcement="augmented_lagrangian")
+                ok = []
+
+                def solve(y):
+                    xs, _, res = static_solve(sysm, y, np.zeros(sysm.n), 0.0, {"atol": 1e-11, "rtol": 1e-13,
+                                                                                "max_iter": 40})
+                    ok.append(res.converged)
+                    return xs
+
+                _, loop = solve_with_multipliers(sysm, solve, x)
+                tag = "" if all(ok) else " (a Newton solve failed)"
+                out.append(f"({xb}, {ya}): {loop.updates}{'+' if loop.exhausted else ''} {loop.history[-1][1]:.1e}{tag}")
+            print(f"    {geometry:6s} p={order}: " + "; ".join(out))
 
 
 def arc_fibril(curvature_radius, length, y0, radius, name="arc"):
@@ -337,7 +383,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--cost", action="store_true", help="only the cost on the plain-weave scene")
-    ap.add_argument("--cases", default="a,b,c,d,e,f,g", help="comma-separated cases to run")
+    ap.add_argument("--cases", default="a,b,c,c2,d,e,f,g", help="comma-separated cases to run")
     ap.add_argument("--geometries", default=",".join(GEOMETRIES), help="geometries of cases a, b, e, f")
     args = ap.parse_args()
     if args.cost:
@@ -351,6 +397,8 @@ def main():
         case_b(args.quick, geoms)
     if "c" in cases:
         case_c()
+    if "c2" in cases:
+        case_c2(tuple(g for g in geoms if g != "chord"))
     if "d" in cases:
         case_d()
     if "e" in cases:
