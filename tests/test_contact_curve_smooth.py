@@ -5,8 +5,8 @@ as the gradient of the energy and the tangent and the jump terms against central
 differences over the stencil nodes (points near element ends, free ends), the compiled
 kernel against the numpy forms; the assembled system's tangents (p = 1, 2, 3, with T and V,
 with multipliers, across a periodic wrap, a relaxed periodic woven cell with its Hill-Mandel
-stress); and no contact point counted twice at a concave kink, where the Lagrange curve
-counts them."""
+stress); the augmented Lagrangian loop on a pressed pair; and no contact point counted
+twice at a concave kink, where the Lagrange curve counts them."""
 import sys
 from pathlib import Path
 
