@@ -301,6 +301,33 @@ def test_periodic_wrap_is_c1_and_exact():
     _check_tangents(sysm, x, np.zeros(sysm.n))
 
 
+def test_tangent_with_the_crossing_on_a_node():
+    """a's points project exactly onto b's node (y = 0): the closest points sit at the end of
+    one element of b and the start of the next, and the tangent is still exact (a 1e-6 step:
+    the end snap of 1e-9 moves the load between the nodes by that fraction, a residual step
+    that a 1e-7 central difference would amplify)."""
+    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+
+    fibs = [straight_fibril([-1, 0, 0], [1, 0, 0], R, "a"),
+            straight_fibril([0.04, -1, -(R2 - 0.03)], [0.04, 1, -(R2 - 0.03)], R, "b")]
+    mesh = fibril_mesh(fibs, 6, 1)
+    base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
+    x = np.zeros(base.n)
+    xn = base.nodal(x)
+    xn[:, :9] = mesh.X0
+    a = mesh.node_fibril == 0
+    xn[a, 2] += 0.02 * np.cos(np.pi * mesh.X0[a, 0])
+    sysm = ContactSystem(base, ContactParams(penalty=50.0, geometry="smooth"), x)
+    geo = sysm.term.geometry(x)
+    assert np.any(geo.active & (geo.s_b >= 1.0) & (sysm.term.passes.next_elem >= 0)[:, None])
+    w = np.zeros(sysm.n)
+    _, Fx, _ = sysm.evaluate(x, w, 0.0)
+    cols = np.flatnonzero(sysm.mech)
+    cols = cols[np.isin(cols % sysm.layout.block, [0, 1, 2])]
+    Jx = fd_jacobian(lambda y: sysm.evaluate(y, w, 0.0, False)[0], x, cols, eps=1e-6)
+    assert rel_err(Fx.toarray()[:, cols], Jx) < 1e-6
+
+
 def test_image_pair_equals_the_pair_in_place():
     """b one period away: only its image touches a; forms, fibril forces and tangent are those
     of b placed in contact."""
