@@ -8,7 +8,8 @@ Contract
 * ``ThermalOperators(system, h_C)``: for a ``ContactSystem`` (mech + V, or mech + T + V):
   ``M`` (capacity, W... mJ/K), ``K`` (conduction, W/K) on the nodes, ``contact(x)`` the
   contact heat-transfer matrix ``h_C a [[T]]`` of the map's active pairs at x (exactly the
-  monolithic contact term's T block: ``rve.physics.contact_forms.scalar_jump``), ``joule(x,
+  monolithic contact term's T block: ``rve.physics.contact_forms.scalar_jump`` on the
+  chords, ``rve.physics.contact_curve.curve_scalar_jump`` on the curves), ``joule(x,
   w, t)`` the nodal Joule heat (W), ``fixed`` the T = 0 end nodes; ``active_pairs``,
   ``contact_triplets``, ``contact_apply`` and ``joule`` memoised for the last state (and
   contact map).
@@ -22,7 +23,10 @@ Contract
   ``rve.scenes.thermal_post.ThermalPostSolver``.
 * ``StageHeatSystem(ops, T_fixed)``: the same heat equation as a ``DynamicSystem`` (all dofs
   T), ``drive(stages, t0, h, tableau)`` giving it the stage states of one step.
-* ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone.
+* ``heat_transfer_block(geo, order, weight, coef, kappa, g_eps)``: scalar_jump's ``Ju`` alone
+  (the chords); ``contact_heat_block(term, mesh, x, act, coef)`` the local nodes and the
+  matrix on the term's geometry (chord, curve or smooth: on the curves the two half passes'
+  ``curve_scalar_jump`` ``Ju``, each side's nodes the element's or its smooth stencil's).
 """
 from __future__ import annotations
 
@@ -30,10 +34,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..physics.contact_curve import curve_scalar_jump
 from ..physics.contact_forms import hertz_width, lagrange_at, scalar_jump
 from ..physics.thermal_forms import capacity_matrix, conduction
+from .terms.contact_pairs import HalfPasses
 
-__all__ = ["ThermalOperators", "KeptFactorStages", "FreshStages", "StageHeatSystem", "heat_transfer_block"]
+__all__ = ["ThermalOperators", "KeptFactorStages", "FreshStages", "StageHeatSystem", "heat_transfer_block",
+           "contact_heat_block"]
 
 
 class ThermalOperators:
@@ -98,11 +105,7 @@ class ThermalOperators:
             act = self.active_pairs(x) if self.h_C > 0 else ()
             if len(act) == 0:
                 return e
-            geo = term.geometry(x, act)
-            conn, cmap = self.base.mesh.conn, term.map
-            Ju = heat_transfer_block(geo, self.base.mesh.order, term.weight[act], self.h_C, term.kappa[act],
-                                     term.g_eps)
-            loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)  # (Pa, 2nn)
+            loc, Ju = contact_heat_block(term, self.base.mesh, x, act, self.h_C)
             m = loc.shape[1]
             return np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel(), Ju.ravel()
         return self._memoised("contact", (x,), 0.0, compute, (self.system.term.map,))
@@ -178,6 +181,39 @@ def heat_transfer_block(geo, order: int, weight, coef, kappa, g_eps: float = 0.0
     k = np.where(geo.active, w * coef, 0.0)
     phi = np.concatenate([Np, -Nm], axis=-1)  # (P, G, 2nn)
     return np.einsum("pgA,pgB->pAB", (k * a)[..., None] * phi, phi)
+
+
+def contact_heat_block(term, mesh, x, act, coef):
+    """``(loc (Pa, m), Ju (Pa, m, m))``: the local nodes of the contact pairs ``act`` and
+    their contact heat-transfer matrix at x, on the term's geometry (the chords:
+    ``heat_transfer_block``; the curves: ``ContactTerm.curve_heat_transfer_block``)."""
+    if term.curve:
+        return term.curve_heat_transfer_block(x, act, coef)
+    geo = term.geometry(x, act)
+    conn, cmap = mesh.conn, term.map
+    Ju = heat_transfer_block(geo, mesh.order, term.weight[act], coef, term.kappa[act], term.g_eps)
+    return np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1), Ju
+
+
+def _reference_heat_block(term, mesh, x, act, coef):
+    """``contact_heat_block`` by the monolithic term's own jump forms (``scalar_jump``,
+    ``curve_scalar_jump`` at zero field; their ``Ju``), the plain reference."""
+    conn, cmap = mesh.conn, term.map
+    if term.curve:
+        ps = term.passes
+        rows = ps.rows(act)
+        geo = term.geometry(x, act)
+        a, da = hertz_width(np.where(geo.active, geo.g, 0.0), term.kappa[term.row_pair[rows]][:, None], term.g_eps)
+        z = np.zeros(geo.Na.shape[::2])
+        wgt = term.weight[rows]
+        Ju = curve_scalar_jump(geo, z, z, wgt * coef * a, wgt * coef * da, True)[1]
+        nn = ps.width(conn.shape[1])
+        loc = np.concatenate([ps.side_nodes(conn, cmap.e_plus[act]), ps.side_nodes(conn, cmap.e_minus[act])], axis=1)
+        return loc, HalfPasses.fold(Ju, nn, axes=(1, 2))
+    geo = term.geometry(x, act)
+    z = np.zeros((act.size, conn.shape[1]))
+    Ju = scalar_jump(geo, mesh.order, z, z, term.weight[act], coef, term.kappa[act], term.g_eps, True)[1]
+    return np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1), Ju
 
 
 class KeptFactorStages:
@@ -330,12 +366,7 @@ class FreshStages(KeptFactorStages):
         if op.h_C > 0 and term.map is not None and term.map.n_pairs > 0:
             act = term.active_pairs(x)
             if act.size:
-                geo = term.geometry(x, act)
-                conn, cmap = op.base.mesh.conn, term.map
-                z = np.zeros((act.size, conn.shape[1]))
-                _, Ju, _ = scalar_jump(geo, op.base.mesh.order, z, z, term.weight[act], op.h_C, term.kappa[act],
-                                       term.g_eps, True)
-                loc = np.concatenate([conn[cmap.e_plus[act]], conn[cmap.e_minus[act]]], axis=1)
+                loc, Ju = _reference_heat_block(term, op.base.mesh, x, act, op.h_C)
                 m = loc.shape[1]
                 K = sp.csr_matrix((Ju.ravel(), (np.repeat(loc, m, axis=1).ravel(), np.tile(loc, (1, m)).ravel())),
                                   shape=(n, n))

@@ -19,8 +19,9 @@ params, E_star)``: a term of *pair elements*, not of beam elements:
   ``rve.physics.contact_forms`` otherwise (the reference; T/V terms always; docs/kernels.md);
 * diagnostics: ``geometry(x)``, ``gaps(x)``, ``active_pairs(x)``, ``energy(x)`` (penalty
   energy, the potential of the mechanical residual), ``contact_state(x)``,
-  ``conductance_by_pair(x, field)``; ``onset`` / ``set_onset`` (C² onset of the penalty
-  law).
+  ``conductance_by_pair(x, field)``; ``curve_heat_transfer_block(x, act, coef)`` (the
+  width-law jump matrix of a field on the curve geometries, for the temperature post-solve);
+  ``onset`` / ``set_onset`` (C² onset of the penalty law).
 
 Options (``ContactParams``; the defaults are the chord, the penalty and the width law, as in
 the thesis): ``geometry="curve"`` evaluates the contact on the elements' Lagrange curves
@@ -631,6 +632,28 @@ class ContactTerm:
                    max_width=float(a.max()),
                    total_normal_force=float((w * penalty_law(g, self.params.penalty, self.onset)[1]).sum()))
         return out
+
+    def curve_heat_transfer_block(self, x, act, coef: float):
+        """``(loc (Pa, m), Ju (Pa, m, m))`` on the curve geometries: the local nodes of the map
+        pairs ``act`` (e+ side, then e- side: each side's element nodes, or its stencil on the
+        smooth curve) and the Jacobian of ``sum_points [[dT]] coef a(g) [[T]]`` (the width
+        law with the conductance ``coef``) in their nodal values, both half passes folded.
+        The term is linear in the field, so ``Ju`` is its whole matrix: the same expression
+        as ``curve_scalar_jump``'s ``Ju`` without its residual and its dX tangents."""
+        if not self.curve:
+            raise ValueError("curve_heat_transfer_block needs geometry 'curve' or 'smooth'")
+        ps, conn = self.passes, self.mesh.conn
+        act = np.asarray(act, np.int64)
+        rows = ps.rows(act)
+        geo = self.geometry(x, act)
+        a, _ = hertz_width(np.where(geo.active, geo.g, 0.0), self.kappa[self.row_pair[rows]][:, None], self.g_eps)
+        k = np.where(geo.active, self.weight[rows] * float(coef) * a, 0.0)
+        phi = np.concatenate([geo.Na, -geo.Nb], axis=-1)  # (2Pa, G, 2 width)
+        Ju = HalfPasses.fold(np.einsum("pgA,pgB->pAB", k[..., None] * phi, phi), ps.width(conn.shape[1]),
+                             axes=(1, 2))
+        loc = np.concatenate([ps.side_nodes(conn, self.map.e_plus[act]),
+                              ps.side_nodes(conn, self.map.e_minus[act])], axis=1)
+        return loc, Ju
 
     def conductance_by_pair(self, x, field: str = "V") -> dict:
         """Discrete contact conductance between every pair of fibrils in contact:
