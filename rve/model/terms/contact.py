@@ -369,11 +369,11 @@ class ContactTerm:
         cmap = self.map
         if self.curve:
             out = np.full((self.row_pair.size, self.params.n_gp), -np.inf)
-            cand = self.curve_candidates(x)
+            r, Y = self._curve_data(x)
+            cand = self._candidates(r, Y)
             if cand.size and self.smooth:
                 rows = self.passes.rows(cand)
-                r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
-                out[rows] = self.passes.smooth_gaps(r, self.row_gap_radius(rows), rows, use_numba())
+                out[rows] = self.passes.smooth_gaps(r, self.row_gap_radius(rows), rows, use_numba(), Y)
             elif cand.size:
                 geo = self.geometry(x, cand)
                 out[self.passes.rows(cand)] = np.where(geo.owned, geo.g, -np.inf)
@@ -392,10 +392,19 @@ class ContactTerm:
         curves' deviation bounds (``chord_deviation``) below the largest gap radius of the
         pair (with its multipliers). The others have no active point, so the curve's
         Newton projection and forms run on these only."""
-        cmap, mesh = self.map, self.mesh
+        return self._candidates(*self._curve_data(x))
+
+    def _curve_data(self, x):
+        """``(r, Y)``: the node positions at ``x`` and, on the smooth curve, the elements'
+        Hermite data (None on the Lagrange curve), computed once per evaluation for the
+        candidate test and the kernels."""
         r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
+        return r, (self.passes.stencil.control(r) if self.smooth else None)
+
+    def _candidates(self, r, Y) -> np.ndarray:
+        """``curve_candidates`` at positions ``r`` (and Hermite data ``Y``)."""
+        cmap, mesh = self.map, self.mesh
         if self.smooth:
-            Y = self.passes.stencil.control(r)
             X, dev = Y[:, :2], hermite_deviation(Y)  # the chords run between the end nodes
         else:
             X = r[mesh.conn]
@@ -510,11 +519,12 @@ class ContactTerm:
         into the pair's (e+ nodes, e- nodes) layout."""
         ps = self.passes
         nn = ps.width(self.mesh.order + 1)
-        cand = self.curve_candidates(x)
+        r, Y = self._curve_data(x)
+        cand = self._candidates(r, Y)
         if cand.size == 0:
             return np.zeros(0, np.int64), np.zeros(0), None, None
         if not self.scalar and use_numba():
-            return self._forms_curve_compiled(x, cand, jacobian)
+            return self._forms_curve_compiled(r, Y, cand, jacobian)
         geo_c = self.geometry(x, cand)
         hit = geo_c.active.any(axis=1).reshape(2, -1).any(axis=0)
         act = cand[hit]
@@ -557,20 +567,19 @@ class ContactTerm:
             return act, Rl, None, None
         return act, Rl, Kx.reshape(Pa, -1), Kw.reshape(Pa, -1)
 
-    def _forms_curve_compiled(self, x, cand, jacobian: bool):
+    def _forms_curve_compiled(self, r, Y, cand, jacobian: bool):
         """Mechanics-only curve ``forms`` on the candidate pairs by the compiled kernel
-        (``rve.kernels.contact_curve``)."""
+        (``rve.kernels.contact_curve``), at positions ``r`` (Hermite data ``Y``)."""
         from ...kernels.contact_curve import curve_penalty_rows
 
         ps, order = self.passes, self.mesh.order
         rows = ps.rows(cand)
-        r = self.layout.as_nodal(np.asarray(x, float))[:, :3]
         gr = self.row_gap_radius(rows)
         if self.smooth:
             from ...kernels.contact_curve import smooth_penalty_rows
 
             Ha = hermite_basis(ps.s)[0]
-            active, Ra, Ka = smooth_penalty_rows(Ha, END_SNAP, *ps.smooth_inputs(r, rows), gr, self.weight[rows],
+            active, Ra, Ka = smooth_penalty_rows(Ha, END_SNAP, *ps.smooth_inputs(r, rows, Y), gr, self.weight[rows],
                                                  float(self.params.penalty), self.onset, jacobian)
             act = cand[active]
             if act.size == 0:

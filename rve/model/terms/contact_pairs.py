@@ -94,23 +94,24 @@ class HalfPasses:
         t_next = np.einsum("b,pbi->pi", dN0[0], r[conn[np.where(has_next, nx, 0)]])
         return Xa, Xb, has_next, t_next, self.has_prev[rows]
 
-    def smooth_inputs(self, r, rows):
+    def smooth_inputs(self, r, rows, Y=None):
         """``(Ya, Sa, Yb, Sb, has_next, t_next, has_prev)`` of the oriented ``rows`` on the
         Hermite curves (``SmoothStencil``): their data (shifts applied) and stencil matrices,
-        and b's next element's start tangent m_0."""
+        and b's next element's start tangent m_0. ``Y``: the elements' Hermite data at ``r``
+        if the caller has them (``SmoothStencil.control(r)``)."""
         st = self.stencil
         ea, eb, nx = self.a_elem[rows], self.b_elem[rows], self.next_elem[rows]
-        Y = st.control(r)
+        Y = st.control(r) if Y is None else Y
         Ya, Yb = Y[ea], Y[eb]
         Ya[:, :2] += self.a_shift[rows][:, None, :]
         Yb[:, :2] += self.b_shift[rows][:, None, :]
         has_next = nx >= 0
         return Ya, st.S[ea], Yb, st.S[eb], has_next, Y[np.where(has_next, nx, 0), 2], self.has_prev[rows]
 
-    def smooth_gaps(self, r, gap_radius, rows, compiled: bool = False) -> np.ndarray:
+    def smooth_gaps(self, r, gap_radius, rows, compiled: bool = False, Y=None) -> np.ndarray:
         """Overlaps (len(rows), G) on the Hermite curves, -inf where a point is not owned
-        (``contact_smooth.smooth_gaps``, or its compiled kernel)."""
-        Ya, _, Yb, _, has_next, t_next, has_prev = self.smooth_inputs(r, rows)
+        (``contact_smooth.smooth_gaps``, or its compiled kernel); ``Y`` as ``smooth_inputs``."""
+        Ya, _, Yb, _, has_next, t_next, has_prev = self.smooth_inputs(r, rows, Y)
         if compiled:
             from ...kernels.contact_curve import smooth_gap_rows
 
