@@ -301,17 +301,19 @@ def _project_hermite(end_snap, Yb, r, p, H, dH, d2H):
 
 
 @njit(cache=True, nogil=True)
-def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g, gr, H, dH, d2H, p, c, m, j, t, t2):
-    """One point of row r on the Hermite curves: fills c, m, j, t, t2; returns
-    ``(gap, rho, free, counted)`` (counted: owned, overlapping, rho > 0; free: the closest
-    point moves with the nodes, i.e. not clamped at a free end)."""
+def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g, gr, s_b, H, dH, d2H, p, c, m, j,
+                  t, t2):
+    """One point of row r on the Hermite curves, its closest point ``s_b[r, g]`` already
+    projected (``_smooth_gaps``): fills c, m, j, t, t2; returns ``(gap, rho, free, counted)``
+    (counted: owned, overlapping, rho > 0; free: the closest point moves with the nodes, i.e.
+    not clamped at a free end)."""
     Ms = Sa.shape[2]
     for ii in range(3):
         v = 0.0
         for a in range(4):
             v += Ha[g, a] * Ya[r, a, ii]
         p[ii] = v
-    s = _project_hermite(end_snap, Yb, r, p, H, dH, d2H)
+    s = s_b[r, g]
     _hermite(s, H, dH, d2H)
     for ii in range(3):
         q = 0.0
@@ -354,7 +356,9 @@ def _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, r, g
 @njit(cache=True, nogil=True)
 def _accumulate_point(Ro, Ko, jacobian, slot, c, m, nv, j, t, t2, rho, free, f, kk, ds, B):
     """``_accumulate`` with the point stiffness B (3, 3) formed once per point (the larger
-    stencils of the Hermite curve make the (M, M) loop the cost)."""
+    stencils of the Hermite curve make the (M, M) loop the cost). The point's stiffness
+    ``c_k c_l B + beta ds_k ds_l`` is symmetric: only the blocks on and above the diagonal of
+    ``Ko`` (in slot order) are added; ``_mirror_blocks`` fills the rest once per pair."""
     M = c.shape[0]
     for k in range(M):
         for ii in range(3):
@@ -373,19 +377,37 @@ def _accumulate_point(Ro, Ko, jacobian, slot, c, m, nv, j, t, t2, rho, free, f, 
             B[ii, jj] = (kk + fr) * nv[ii] * nv[jj] - (fr if ii == jj else 0.0)
     for k in range(M):
         sk = slot[k]
-        for l in range(M):
+        for l in range(k, M):
             sl = slot[l]
             ckl = c[k] * c[l]
-            for ii in range(3):
-                bk = beta * ds[k, ii]
-                for jj in range(3):
-                    Ko[sk, ii, sl, jj] += ckl * B[ii, jj] + bk * ds[l, jj]
+            if sk <= sl:
+                for ii in range(3):
+                    bk = beta * ds[k, ii]
+                    for jj in range(3):
+                        Ko[sk, ii, sl, jj] += ckl * B[ii, jj] + bk * ds[l, jj]
+            else:  # the same entries, transposed into the upper block
+                for ii in range(3):
+                    bk = beta * ds[k, ii]
+                    for jj in range(3):
+                        Ko[sl, jj, sk, ii] += ckl * B[ii, jj] + bk * ds[l, jj]
 
 
 @njit(cache=True, nogil=True)
-def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, w, Pstar, eps, jacobian, lo, hi,
-                  active, R, K):
-    """Pairs lo..hi-1 on the Hermite curves (as ``_pairs``)."""
+def _mirror_blocks(Ko):
+    """The blocks below the diagonal of a pair's symmetric (M, 3, M, 3) stiffness from those
+    above it (``_accumulate_point``)."""
+    M = Ko.shape[0]
+    for a in range(M):
+        for b in range(a + 1, M):
+            for ii in range(3):
+                for jj in range(3):
+                    Ko[b, jj, a, ii] = Ko[a, ii, b, jj]
+
+
+@njit(cache=True, nogil=True)
+def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, s_b, w, Pstar, eps, jacobian, lo,
+                  hi, active, R, K):
+    """Pairs lo..hi-1 on the Hermite curves (as ``_pairs``), the closest points ``s_b``."""
     half = Ya.shape[0] // 2
     Ms = Sa.shape[2]
     M = 2 * Ms
@@ -410,7 +432,7 @@ def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, 
                 slot[k] = k if side == 0 else (k + Ms) % M
             for g in range(G):
                 gap, rho, free, counted = _smooth_point(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev,
-                                                            Ha, r, g, gr, H, dH, d2H, p, c, m, j, t, t2)
+                                                            Ha, r, g, gr, s_b, H, dH, d2H, p, c, m, j, t, t2)
                 if not counted:
                     continue
                 active[o] = True
@@ -418,6 +440,8 @@ def _smooth_pairs(end_snap, Ya, Sa, Yb, Sb, t_next, has_next, has_prev, Ha, gr, 
                 f1, f2 = _law(gap, Pstar, eps)
                 _accumulate_point(R[o], K[o if jacobian else 0], jacobian, slot, c, m, nv, j, t, t2, rho, free,
                                   w[r, g] * f1, w[r, g] * f2, ds, B)
+        if jacobian and active[o]:
+            _mirror_blocks(K[o])
 
 
 def smooth_penalty_rows(Ha, end_snap: float, Ya, Sa, Yb, Sb, has_next, t_next, has_prev, gap_radius, weight,
@@ -441,17 +465,18 @@ def smooth_penalty_rows(Ha, end_snap: float, Ya, Sa, Yb, Sb, has_next, t_next, h
     half = Pr // 2
     jac, snap = bool(jacobian), float(end_snap)
     g = np.empty((Pr, G))
-    run_chunked(Pr, lambda a, b: _smooth_gaps(snap, Ya, Yb, tn, hn, hp, Ha, gr, a, b, g[a:b]), MIN_CHUNK)
+    sb = np.empty((Pr, G))  # the closest points, projected once (the pass over the pairs reuses them)
+    run_chunked(Pr, lambda a, b: _smooth_gaps(snap, Ya, Yb, tn, hn, hp, Ha, gr, a, b, g[a:b], sb[a:b]), MIN_CHUNK)
     hit = (g > 0.0).any(axis=1)
     sel = np.flatnonzero(hit[:half] | hit[half:])
     rows = np.concatenate([sel, half + sel])
     Ya, Sa, Yb, Sb = Ya[rows], Sa[rows], Yb[rows], Sb[rows]
-    tn, hn, hp, gr, w = tn[rows], hn[rows], hp[rows], gr[rows], w[rows]
+    tn, hn, hp, gr, w, sb = tn[rows], hn[rows], hp[rows], gr[rows], w[rows], sb[rows]
     n = sel.size
     active = np.zeros(n, np.bool_)
     R = np.zeros((n, M, 3))
     K = np.zeros((n, M, 3, M, 3)) if jacobian else np.zeros((1, M, 3, M, 3))
-    run_chunked(n, lambda a, b: _smooth_pairs(snap, Ya, Sa, Yb, Sb, tn, hn, hp, Ha, gr, w, float(penalty),
+    run_chunked(n, lambda a, b: _smooth_pairs(snap, Ya, Sa, Yb, Sb, tn, hn, hp, Ha, gr, sb, w, float(penalty),
                                               float(onset), jac, a, b, active[a:b], R[a:b], K[a:b] if jac else K),
                 MIN_CHUNK)
     out = np.zeros(half, np.bool_)
@@ -460,7 +485,8 @@ def smooth_penalty_rows(Ha, end_snap: float, Ya, Sa, Yb, Sb, has_next, t_next, h
 
 
 @njit(cache=True, nogil=True)
-def _smooth_gaps(end_snap, Ya, Yb, t_next, has_next, has_prev, Ha, gr, lo, hi, out):
+def _smooth_gaps(end_snap, Ya, Yb, t_next, has_next, has_prev, Ha, gr, lo, hi, out, s_out):
+    """Overlaps ``out`` and closest points ``s_out`` of the rows lo..hi-1 (local rows)."""
     G = Ha.shape[0]
     H = np.empty(4)
     dH = np.empty(4)
@@ -474,6 +500,7 @@ def _smooth_gaps(end_snap, Ya, Yb, t_next, has_next, has_prev, Ha, gr, lo, hi, o
                     v += Ha[g, a] * Ya[r, a, ii]
                 p[ii] = v
             s = _project_hermite(end_snap, Yb, r, p, H, dH, d2H)
+            s_out[r - lo, g] = s
             _hermite(s, H, dH, d2H)
             rr = 0.0
             grow = 0.0
@@ -503,6 +530,7 @@ def smooth_gap_rows(Ha, end_snap: float, Ya, Yb, has_next, t_next, has_prev, gap
     hn = np.ascontiguousarray(has_next, dtype=np.bool_)
     hp = np.ascontiguousarray(has_prev, dtype=np.bool_)
     out = np.empty((Pr, G))
+    s_b = np.empty((Pr, G))
     snap = float(end_snap)
-    run_chunked(Pr, lambda a, b: _smooth_gaps(snap, Ya, Yb, tn, hn, hp, Ha, gr, a, b, out[a:b]), MIN_CHUNK)
+    run_chunked(Pr, lambda a, b: _smooth_gaps(snap, Ya, Yb, tn, hn, hp, Ha, gr, a, b, out[a:b], s_b[a:b]), MIN_CHUNK)
     return out
