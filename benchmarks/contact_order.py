@@ -337,7 +337,7 @@ def case_d():
         print(line)
 
 
-def case_cost(repeat: int = 3):
+def case_cost(repeat: int = 9):
     """Wall time of the contact forms (mechanics only, residual + tangent), of a whole
     evaluate and of a rebuild on the plain-weave relaxation scene's designed state, chord vs
     curve vs smooth (compiled kernels when numba is available), 12 and 30 el/fibril, and the
