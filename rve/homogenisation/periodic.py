@@ -139,10 +139,12 @@ def cell_gradient(fab, mesh, x_full) -> np.ndarray:
     return out
 
 
-def periodic_free_residual(cfg, fab, mesh, x_full, F=None) -> float:
-    """|F| on the free reduced dofs (N) of a full state (its own gradient unless given)."""
+def periodic_free_residual(cfg, fab, mesh, x_full, F=None, multipliers=None) -> float:
+    """|F| on the free reduced dofs (N) of a full state (its own gradient unless given), at
+    its contact ``multipliers`` (a record, augmented Lagrangian; None: none)."""
     F = cell_gradient(fab, mesh, x_full) if F is None else F
     psys = periodic_system(cfg, fab, mesh, x_full, F)
+    seed_multipliers(psys, multipliers)
     return free_residual(psys, psys.restrict(np.asarray(x_full, float).reshape(-1)))
 
 

@@ -157,6 +157,9 @@ class ContactTerm:
         self.comps = np.array([0, 1, 2] + [layout.offset[f] for f in self.scalar], dtype=np.int64)
         self.nC = len(self.comps)
         self.g_eps = float(params.g_eps) * float(mesh.radius.min())
+        #: with multipliers, the width regularisation as a line load (N/mm): E* g_eps R, the
+        #: load whose Hertz width is ~ sqrt(g_eps) R (independent of P*)
+        self.load_eps = self.g_eps * self.E_star
         self.onset = float(params.onset) * float(mesh.radius.min())
         self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
         self.map: Optional[ContactMap] = None
@@ -416,13 +419,27 @@ class ContactTerm:
     def conductance_law(self, g, field: str, kappa):
         """Conductance per unit length and its derivative in g, ``(k, dk/dg)``, of the
         field's contact law at the law's overlaps ``g``: ``c_C a(g)`` (Hertz width) or the
-        Holm a-spot law ``c_H φ'(g)`` (line load φ'). Zero where g <= 0."""
+        Holm a-spot law ``c_H φ'(g)`` (line load φ'). Zero where g <= 0. With multipliers
+        the width is ``line_load_width`` (Hertz's width of the line load)."""
         coef = self.law_coef[field]
         if self.holm:
             _, f1, f2 = penalty_law(g, self.params.penalty, self.onset)
             return coef * f1, coef * f2
+        if self.augmented:
+            a, da = self.line_load_width(g, kappa)
+            return coef * a, coef * da
         a, da = hertz_width(np.where(g > 0.0, g, 0.0), kappa, self.g_eps)
         return coef * a, coef * da
+
+    def line_load_width(self, g, kappa):
+        """``(a, da/dg)``: Hertz's width ``sqrt(4 R* p / (pi E*))`` of the line load
+        ``p = φ'(g)`` (with multipliers ``λ + P* g_true``), regularised in the load,
+        ``a = c p / sqrt(p + load_eps)`` (``hertz_width`` of p), c = kappa / sqrt(P*). A
+        function of the load alone, so the impenetrable limit's width does not depend on P*
+        (for the linear law and ``g_eps = 0`` it is ``kappa sqrt(g)``, the penalty's)."""
+        _, p, dp = penalty_law(g, self.params.penalty, self.onset)
+        a, da = hertz_width(p, np.asarray(kappa, float) / np.sqrt(float(self.params.penalty)), self.load_eps)
+        return a, da * dp
 
     # ------------------------------------------------------------------ forms
     def forms(self, x, w, jacobian: bool = True):
@@ -466,8 +483,8 @@ class ContactTerm:
             u_minus = u[conn[mpair]]
             if f in self.field_jumps and self.map.shift is not None:
                 u_minus = u_minus + (self.map.shift[act] @ self.field_jumps[f])[:, None]
-            if self.holm:
-                width = self.conductance_law(geo.g, f, None)
+            if self.holm or self.augmented:
+                width = self.conductance_law(geo.g, f, self.kappa[act][:, None])
                 R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u_minus, wgt, 1.0,
                                         self.kappa[act], self.g_eps, jacobian, width=width)
             else:
@@ -586,7 +603,8 @@ class ContactTerm:
         pen = np.where(active, pen, 0.0)
         R = self.mesh.radius
         rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])[self.row_pair]
-        a, _ = hertz_width(g, self.kappa[self.row_pair][:, None], self.g_eps)
+        kap = self.kappa[self.row_pair][:, None]
+        a = self.line_load_width(g, kap)[0] if self.augmented else hertz_width(g, kap, self.g_eps)[0]
         w = np.broadcast_to(np.asarray(self.weight, float).reshape(g.shape[0], -1), g.shape)
         out.update(active_pairs=int(self._pairs_of_rows(active).size), active_points=int(active.sum()),
                    max_overlap=float(max(pen.max(), 0.0)), max_overlap_over_R=float(max((pen / rmin[:, None]).max(), 0.0)),
@@ -607,7 +625,7 @@ class ContactTerm:
         if self.holm:
             Gp = (w * self.conductance_law(g, field, kap)[0]).sum(axis=1)
         else:
-            a, _ = hertz_width(g, kap, self.g_eps)
+            a = self.line_load_width(g, kap)[0] if self.augmented else hertz_width(g, kap, self.g_eps)[0]
             Gp = (w * self.law_coef[field] * a).sum(axis=1)
         nf = self.mesh.n_fibrils
         pr = self.row_pair
