@@ -67,11 +67,13 @@ def equilibrium(system, solve, x):
             break
         if loop.update(x) or loop.exhausted:
             break
+    loop.finish(x)
     pen = float(system.max_penetration(x))
     info = dict(info)
     info["augmented_lagrangian"] = {
         "updates": int(loop.updates), "solves": solves, "tolerance": float(loop.tolerance),
         "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
+        "penalties": [float(p) for p in loop.penalties],
         "history": [[int(k), float(p)] for k, p in loop.history]}
     if pen > loop.tolerance:   # an equilibrium at these multipliers, not yet the impenetrable limit
         log.warning("augmented Lagrangian: largest overlap %.2e R above al_tolerance %.1e R after %d updates%s",

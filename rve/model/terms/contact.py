@@ -29,7 +29,7 @@ local nodes, its rows are the oriented pairs); ``enforcement="augmented_lagrangi
 multipliers per point (``multipliers`` (rows, n_gp), kept by point key over rebuilds) that
 shift the penalty law's overlap to ``g + lambda/P*``, updated by ``update_multipliers(x)``
 (driven by ``rve.solvers.augmented``), ``penetration`` / ``max_penetration`` the true
-overlaps; ``conductance_law="holm"`` the a-spot law (``conductance_law``).
+overlaps, ``set_penalty`` the penalty increase of the loop; ``conductance_law="holm"`` the a-spot law (``conductance_law``).
 """
 from __future__ import annotations
 
@@ -79,7 +79,8 @@ class ContactParams:
     docs/contact.md "Contact on the centroid curve"). ``enforcement``: ``"penalty"`` or
     ``"augmented_lagrangian"`` (Uzawa multipliers driven by ``rve.solvers.augmented``
     until the largest overlap is below ``al_tolerance`` x R, at most ``al_max_iter``
-    updates). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
+    updates, P* multiplied by ``al_penalty_growth`` after an update that did not reduce the
+    overlap enough; ``rve.solvers.augmented``). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
     line load) or ``"holm"`` (the a-spot constriction conductance of the line load with the
     hardness ``hardness`` (MPa) and a-spot radius ``spot_radius`` (mm): per unit length
     ``2 k0 p / (pi H a_s)``, k0 the material's ``electrical_conductivity`` (V) or
@@ -101,6 +102,7 @@ class ContactParams:
     enforcement: str = "penalty"
     al_tolerance: float = 1e-4
     al_max_iter: int = 20
+    al_penalty_growth: float = 4.0
     conductance_law: str = "width"
     hardness: float = 0.0
     spot_radius: float = 0.0
@@ -126,6 +128,8 @@ class ContactParams:
             raise ValueError(f"al_tolerance must be > 0, got {self.al_tolerance}")
         if int(self.al_max_iter) < 1:
             raise ValueError(f"al_max_iter must be >= 1, got {self.al_max_iter}")
+        if not self.al_penalty_growth >= 1:
+            raise ValueError(f"al_penalty_growth must be >= 1, got {self.al_penalty_growth}")
         if self.conductance_law not in CONDUCTANCE_LAWS:
             raise ValueError(f"conductance_law must be one of {CONDUCTANCE_LAWS}, got {self.conductance_law!r}")
         if self.conductance_law == "holm" and not (self.hardness > 0 and self.spot_radius > 0):
@@ -303,6 +307,38 @@ class ContactTerm:
         g = self.penetration(x)
         new = np.maximum(0.0, self.multipliers + float(self.params.penalty) * np.where(np.isfinite(g), g, -np.inf))
         self.multipliers = gather_by_key(self._keys, self._keys, new).reshape(self.multipliers.shape)
+
+    def set_penalty(self, penalty: float, x=None) -> None:
+        """P* of the law (and so the Uzawa step) to ``penalty``. Without ``x`` the
+        multipliers are kept (the method of multipliers' penalty increase: the line load at
+        zero overlap is unchanged); with ``x`` they are re-expressed so that every point's
+        line load ``φ'(g + lambda/P*)`` at ``x`` is unchanged: x stays the equilibrium it was
+        (used to return to the configured P* at the end of a loop)."""
+        if self.multipliers is None:
+            raise ValueError("set_penalty needs enforcement 'augmented_lagrangian'")
+        P0, P1 = float(self.params.penalty), float(penalty)
+        if not P1 > 0:
+            raise ValueError(f"contact penalty must be > 0, got {P1}")
+        if x is not None and self.map.n_pairs:
+            lam = self.multipliers
+            gt = self.gaps(x) - lam / P0                     # true overlaps (-inf: a curve point not owned)
+            load = penalty_law(np.where(np.isfinite(gt), gt + lam / P0, 0.0), P0, self.onset)[1]
+            eps = self.onset
+            # the shifted overlap that carries the same load at P1 (the inverse of φ')
+            g1 = load / P1 + 0.5 * eps if eps > 0 else load / P1
+            if eps > 0:
+                g1 = np.where(load < 0.5 * P1 * eps, np.sqrt(2.0 * eps * load / P1), g1)
+            fin = np.isfinite(gt)
+            new = np.where(fin, np.where(load > 0, P1 * (g1 - np.where(fin, gt, 0.0)), lam * (P1 / P0)), 0.0)
+            # a point's rows share its multiplier (those where it is not owned take the owner's)
+            self.multipliers = gather_by_key(self._keys, self._keys, new).reshape(lam.shape)
+        from dataclasses import replace
+
+        self.params = replace(self.params, penalty=P1)
+        if self.map is not None and self.map.n_pairs:
+            R = self.mesh.radius
+            self.kappa = hertz_kappa(effective_radius(R[self.map.fibril_plus], R[self.map.fibril_minus]), P1,
+                                     self.E_star)
 
     # ------------------------------------------------------------------ geometry
     def set_onset(self, fraction: float) -> None:
