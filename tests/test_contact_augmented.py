@@ -137,3 +137,31 @@ def test_width_is_hertz_width_of_the_line_load():
             widths[onset, P] = term.line_load_width(np.array([gl]), kap)[0][0]
     for onset in (0.0, 0.05):
         assert widths[onset, 50.0] == pytest.approx(widths[onset, 500.0], rel=1e-12)
+
+
+@pytest.mark.parametrize("geometry", ["chord", "curve"])
+def test_penalty_increase_takes_fewer_updates_and_ends_at_the_configured_penalty(geometry):
+    """P* = 5, far below the pressed beams' contact stiffness: the plain Uzawa loop closes the
+    overlap by a small fraction per update; the penalty increase reaches the tolerance in
+    fewer updates, every solve Newton-quadratic, and returns to P* = 5 with the line loads
+    kept: the final state is an equilibrium of the configured law (residual at the solve
+    tolerance) with the same contact force."""
+    runs = {}
+    for growth in (1.0, 4.0):
+        sysm, x = _pressed(2, 5.0, geometry=geometry, enforcement="augmented_lagrangian", al_penalty_growth=growth,
+                           al_max_iter=60)
+        log = []
+        xs, loop = _solve(sysm, x, log)
+        assert not loop.exhausted and sysm.max_penetration(xs) <= loop.tolerance
+        assert sysm.penalty == 5.0
+        F = sysm.evaluate(xs, np.zeros(sysm.n), 0.0, False)[0]
+        idx, _ = sysm.constraints(0.0)
+        F[np.asarray(idx, np.int64)] = 0.0
+        assert np.linalg.norm(F) <= 1e-9
+        for res in log:
+            r = np.asarray(res.residuals)
+            near = (r[:-1] < 1e-3) & (r[1:] > 1e-12)
+            assert np.all(r[1:][near] <= 1e3 * r[:-1][near] ** 2), res.residuals
+        runs[growth] = loop.updates, sysm.fibril_contact_forces(xs)[0, 2], max(loop.penalties, default=5.0)
+    assert runs[4.0][0] < runs[1.0][0] and runs[4.0][2] > 5.0 and runs[1.0][2] == 5.0
+    assert runs[4.0][1] == pytest.approx(runs[1.0][1], rel=1e-3)
