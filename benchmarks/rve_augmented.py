@@ -15,6 +15,14 @@ Lagrangian of the plain Uzawa loop (``al_penalty_growth: 1``) and with the penal
 (default), each ``repeats`` times; the median CPU time, its ratio to the penalty's, the Uzawa
 updates, the minimiser iterations and the largest overlap.
 
+(c) ``bits``: the penalty default's states (2x2 cell, pinned and periodic, static method
+energy and newton: the relaxed state and two 5 % steps of uniaxial and shear) written to an
+npz; run it under two trees and compare array by array:
+
+    PYTHONPATH=/work/main python benchmarks/rve_augmented.py bits /tmp/a.npz
+    PYTHONPATH=. python benchmarks/rve_augmented.py bits /tmp/b.npz
+    python benchmarks/rve_augmented.py compare /tmp/a.npz /tmp/b.npz
+
 Usage: nice -n 10 python benchmarks/rve_augmented.py [penalty|cost|all] [elements] [repeats]
        (default: all 6 3)
 """
@@ -112,9 +120,38 @@ def cost(elements: int, repeats: int) -> None:
                   f"max overlap {_overlap(system, x):.2e} R, met {al.get('met', '-')}", flush=True)
 
 
+def penalty_bits(path: str) -> None:
+    out = {}
+    for boundary in ("pinned", "periodic"):
+        for method in ("energy", "newton"):
+            cfg = RVEConfig(scene="rve", boundary=boundary, fabric={"kind": "plain", "rows": [1]},
+                            mesh={"elements": 6}, contact={"onset": 0.05},
+                            strain={"total": 0.1, "steps": 2, "static_method": method, "modes": ["uniaxial", "shear"]})
+            fab, mesh = fabric_and_mesh(cfg)
+            x0, _, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+            out[f"{boundary}_{method}_relaxed"] = x0
+            for mode in ("uniaxial", "shear"):
+                x = x0
+                for step in (1, 2):
+                    x, _, _ = strain_step(cfg, fab, mesh, x, x0, mode, step)
+                    out[f"{boundary}_{method}_{mode}_{step}"] = x
+    np.savez(path, **out)
+
+
+def compare_bits(a_path: str, b_path: str) -> None:
+    a, b = np.load(a_path), np.load(b_path)
+    same = [k for k in a.files if k in b.files and np.array_equal(a[k], b[k])]
+    print(f"{len(same)} of {len(a.files)} state arrays bit-identical" +
+          ("" if len(same) == len(a.files) else f"; differ: {sorted(set(a.files) - set(same))}"))
+
+
 def main(argv=None) -> None:
     args = argv if argv is not None else sys.argv[1:]
     what = args[0] if args else "all"
+    if what == "bits":
+        return penalty_bits(args[1])
+    if what == "compare":
+        return compare_bits(args[1], args[2])
     elements = int(args[1]) if len(args) > 1 else 6
     repeats = int(args[2]) if len(args) > 2 else 3
     if what in ("penalty", "all"):

@@ -29,7 +29,8 @@ The system needs (the protocol, no model imported here): ``augmented`` (bool),
 ``augmented`` False is converged at once (no update), so a caller can wrap every solve
 unconditionally.
 
-* ``AugmentedLagrangian(system, tolerance=None, max_updates=None)``: ``update(x) -> bool``
+* ``AugmentedLagrangian(system, tolerance=None, max_updates=None, growth=None, decrease=0.25,
+  max_growth=1e3)``: ``update(x) -> bool``
   at a converged solve's state: True when the penetration is below the tolerance (the
   multipliers are left as they are), else one Uzawa update and False (solve again from
   ``x``). ``history`` lists ``(updates, max_penetration)`` of every check;
@@ -95,7 +96,8 @@ class AugmentedLagrangian:
             return False
         self.system.update_multipliers(x)
         self.updates += 1
-        if self.penalty0 is not None and len(self.history) > 1 and pen > self.decrease * self.history[-2][1]:
+        if (self.penalty0 is not None and self.growth > 1 and len(self.history) > 1
+                and pen > self.decrease * self.history[-2][1]):
             P = float(self.system.penalty) * self.growth
             if P <= self.max_growth * self.penalty0 * (1 + 1e-12):
                 self.system.set_penalty(P)
