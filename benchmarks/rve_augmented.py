@@ -12,7 +12,7 @@ table quantities from P* = 50 to 150 (the penalty part).
 P* = 150, ``elements`` el/fibril), one uniaxial and one shear step (2.5 %) from the relaxed
 state of each enforcement: CPU time of the step with the penalty, with the augmented
 Lagrangian of the plain Uzawa loop (``al_penalty_growth: 1``) and with the penalty increase
-(default), each ``repeats`` times; the median CPU time, its ratio to the penalty's, the Uzawa
+(default 4; other ``growths`` on the command line), each ``repeats`` times; the median CPU time, its ratio to the penalty's, the Uzawa
 updates, the minimiser iterations and the largest overlap.
 
 (c) ``bits``: the penalty default's states (2x2 cell, pinned and periodic, static method
@@ -23,8 +23,8 @@ npz; run it under two trees and compare array by array:
     PYTHONPATH=. python benchmarks/rve_augmented.py bits /tmp/b.npz
     python benchmarks/rve_augmented.py compare /tmp/a.npz /tmp/b.npz
 
-Usage: nice -n 10 python benchmarks/rve_augmented.py [penalty|cost|all] [elements] [repeats]
-       (default: all 6 3)
+Usage: nice -n 10 python benchmarks/rve_augmented.py [penalty|cost|all] [elements] [repeats] [growths]
+       (default: all 6 3 1,4; growths: the al_penalty_growth values of the AL rows)
 """
 from __future__ import annotations
 
@@ -85,9 +85,9 @@ def _candidate(elements: int, enforcement: str, growth: float = 4.0):
     return load_run_config(spec)
 
 
-def cost(elements: int, repeats: int) -> None:
-    schemes = (("penalty", "penalty", 4.0), ("AL plain Uzawa", "augmented_lagrangian", 1.0),
-               ("AL penalty increase", "augmented_lagrangian", 4.0))
+def cost(elements: int, repeats: int, growths=(1.0, 4.0)) -> None:
+    schemes = [("penalty", "penalty", 4.0)] + [
+        ("AL plain Uzawa" if g == 1 else f"AL P* growth x{g:g}", "augmented_lagrangian", g) for g in growths]
     relaxed = {}
     for enforcement in ("penalty", "augmented_lagrangian"):
         cfg = _candidate(elements, enforcement)
@@ -157,7 +157,7 @@ def main(argv=None) -> None:
     if what in ("penalty", "all"):
         penalty_part()
     if what in ("cost", "all"):
-        cost(elements, repeats)
+        cost(elements, repeats, tuple(float(g) for g in args[3].split(",")) if len(args) > 3 else (1.0, 4.0))
 
 
 if __name__ == "__main__":
