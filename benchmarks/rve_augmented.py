@@ -116,7 +116,8 @@ def cost(elements: int, repeats: int, growths=(1.0, 4.0)) -> None:
             ratio = med / medians[mode, "penalty"]
             print(f"{mode:8s} {label:20s}: CPU median {med:7.2f} s of {repeats} (x{ratio:5.1f} the penalty's), "
                   f"converged {info['converged']}, updates {al.get('updates', '-')}, solves {al.get('solves', 1)}, "
-                  f"P* {al.get('penalties', '-')}, minimiser iterations (last solve) {st.get('iterations')}, "
+                  f"P* {al.get('penalties', '-')}, minimiser iterations per solve "
+                  f"{al.get('solve_iterations', [st.get('iterations')])}, "
                   f"max overlap {_overlap(system, x):.2e} R, met {al.get('met', '-')}", flush=True)
 
 
