@@ -98,3 +98,70 @@ def test_multipliers_survive_a_rebuild():
             assert new[k] == v
     F2 = sysm.evaluate(xs, np.zeros(sysm.n), 0.0, False)[0]
     np.testing.assert_allclose(F2, F0, atol=1e-12)
+
+
+@pytest.mark.parametrize("geometry", ["chord", "curve"])
+def test_multiplier_tangents_with_the_onset_law(geometry):
+    """The width of the line load through the C² onset (p = φ'(g), dp/dg = φ''(g)): every
+    tangent block against central differences of the residual."""
+    from test_contact_curve_system import _check_tangents, _crossed
+
+    sysm, x, w = _crossed(2, geometry=geometry, enforcement="augmented_lagrangian", onset=0.05)
+    sysm.update_multipliers(x)
+    assert sysm.multipliers.max() > 0
+    _check_tangents(sysm, x, w)
+
+
+def test_width_is_hertz_width_of_the_line_load():
+    """With multipliers the width is sqrt(4 R* p / (pi E*)) of the line load p = φ'(g) (closed
+    form, g_eps = 0), for the onset law as well; for the linear law it is the penalty's
+    kappa sqrt(g); the same load at another P* gives the same width."""
+    from rve.physics.contact_forms import effective_radius, hertz_width, penalty_law
+
+    g = np.linspace(-1e-3, 2e-2, 41)
+    widths = {}
+    for onset in (0.0, 0.05):
+        for P in (50.0, 500.0):
+            sysm, _ = _pressed(1, P, enforcement="augmented_lagrangian", onset=onset, g_eps=0.0)
+            term = sysm.term
+            kap = term.kappa[0]
+            a, _ = term.line_load_width(g, kap)
+            p = penalty_law(g, P, term.onset)[1]
+            Rs = effective_radius(R, R)
+            np.testing.assert_allclose(a, np.sqrt(4 * Rs * p / (np.pi * term.E_star)), rtol=1e-12, atol=1e-15)
+            if onset == 0.0:
+                np.testing.assert_allclose(a, hertz_width(g, kap, 0.0)[0], rtol=1e-12, atol=1e-15)
+            # the overlap that carries the load p = 3 N/mm at this P* (past the onset)
+            pl = 3.0
+            gl = pl / P if onset == 0.0 else pl / P + 0.5 * term.onset
+            widths[onset, P] = term.line_load_width(np.array([gl]), kap)[0][0]
+    for onset in (0.0, 0.05):
+        assert widths[onset, 50.0] == pytest.approx(widths[onset, 500.0], rel=1e-12)
+
+
+@pytest.mark.parametrize("geometry", ["chord", "curve"])
+def test_penalty_increase_takes_fewer_updates_and_ends_at_the_configured_penalty(geometry):
+    """P* = 5, far below the pressed beams' contact stiffness: the plain Uzawa loop closes the
+    overlap by a small fraction per update; the penalty increase reaches the tolerance in
+    fewer updates, every solve Newton-quadratic, and returns to P* = 5 with the line loads
+    kept: the final state is an equilibrium of the configured law (residual at the solve
+    tolerance) with the same contact force."""
+    runs = {}
+    for growth in (1.0, 4.0):
+        sysm, x = _pressed(2, 5.0, geometry=geometry, enforcement="augmented_lagrangian", al_penalty_growth=growth,
+                           al_max_iter=60)
+        log = []
+        xs, loop = _solve(sysm, x, log)
+        assert not loop.exhausted and sysm.max_penetration(xs) <= loop.tolerance
+        assert sysm.penalty == 5.0
+        F = sysm.evaluate(xs, np.zeros(sysm.n), 0.0, False)[0]
+        idx, _ = sysm.constraints(0.0)
+        F[np.asarray(idx, np.int64)] = 0.0
+        assert np.linalg.norm(F) <= 1e-9
+        for res in log:
+            r = np.asarray(res.residuals)
+            near = (r[:-1] < 1e-3) & (r[1:] > 1e-12)
+            assert np.all(r[1:][near] <= 1e3 * r[:-1][near] ** 2), res.residuals
+        runs[growth] = loop.updates, sysm.fibril_contact_forces(xs)[0, 2], max(loop.penalties, default=5.0)
+    assert runs[4.0][0] < runs[1.0][0] and runs[4.0][2] > 5.0 and runs[1.0][2] == 5.0
+    assert runs[4.0][1] == pytest.approx(runs[1.0][1], rel=1e-3)

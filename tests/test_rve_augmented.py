@@ -85,3 +85,64 @@ def test_penalty_state_has_no_multipliers(tmp_path):
                                                   multipliers=multiplier_record(sys0)), fab, mesh)
     with xr.open_dataset(path) as ds:
         assert "contact_multiplier" not in ds and "contact_multiplier_key" not in ds
+
+
+def _relaxed_probes(boundary, enforcement, penalty):
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.probes import solve_probes
+    from rve.homogenisation.strain import relax_fabric
+
+    cfg = _cfg(boundary, enforcement, penalty)
+    fab, mesh = fabric_and_mesh(cfg)
+    x0, sys0, info0 = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    assert info0["converged"]
+    rec = multiplier_record(sys0)
+    return cfg, fab, mesh, x0, rec, solve_probes(cfg, fab, mesh, x0, multipliers=rec)
+
+
+def _probe_figures(results):
+    return np.array([[r.resistance, r.temperature_max] for _, r in sorted(results.items())])
+
+
+@pytest.mark.parametrize("boundary", BOUNDARIES)
+def test_probes_of_an_augmented_state_do_not_depend_on_the_penalty(boundary):
+    """The probes' contact widths and conductances come from the multipliers' line load: the
+    resistances and Joule temperatures of the relaxed cell at P* = 50 and 150 agree to
+    10 al_tolerance (the overlap left), while the penalty's differ by more."""
+    figs = {(e, p): _probe_figures(_relaxed_probes(boundary, e, p)[-1])
+            for e in ("penalty", "augmented_lagrangian") for p in (50.0, 150.0)}
+    al = np.abs(figs["augmented_lagrangian", 150.0] / figs["augmented_lagrangian", 50.0] - 1.0).max()
+    pen = np.abs(figs["penalty", 150.0] / figs["penalty", 50.0] - 1.0).max()
+    assert al <= 10 * TOL
+    assert pen > 10 * TOL
+
+
+@pytest.mark.parametrize("boundary", BOUNDARIES)
+def test_probe_job_of_a_stored_augmented_state(boundary, tmp_path):
+    """The probe job on the written state: its residual check and probes use the stored
+    multipliers (bit-identical to the probes of the state in memory); without them the
+    residual of the same state is far above the tolerance and the probes differ."""
+    from rve.config import config_as_dict
+    from rve.homogenisation.checkpoint import State, write_state
+    from rve.homogenisation.jobs import probe_record, recomputed_residual
+    from rve.homogenisation.probes import solve_probes
+
+    cfg, fab, mesh, x0, rec, results = _relaxed_probes(boundary, "augmented_lagrangian", 50.0)
+    assert rec is not None and np.any(rec[1] > 0)
+    res = recomputed_residual(cfg, fab, mesh, x0, rec)
+    assert res <= cfg.relaxation.static_atol
+    assert recomputed_residual(cfg, fab, mesh, x0) > 1e3 * cfg.relaxation.static_atol
+    path = write_state(tmp_path / "s0.nc", State(x=x0, w=np.zeros_like(x0), origin=x0, kind="relaxed",
+                                                  solver={"residual_N": res, "converged": True},
+                                                  multipliers=rec), fab, mesh)
+    out = probe_record(path, {"scene": config_as_dict(cfg)})
+    for name, r in results.items():
+        got, want = dict(out["probes"][name]), r.record()
+        got.pop("wall_s"), want.pop("wall_s")
+        assert got == want
+    # (the resistances only: the bare Joule solve of the onset law's weak contacts is at its
+    # round-off floor, above the probes' 1e-12 tolerance)
+    no_heat = cfg.model_copy(update={"probe_solver": cfg.probe_solver.model_copy(update={"temperature": False})})
+    bare = _probe_figures(solve_probes(no_heat, fab, mesh, x0))[:, 0]
+    assert not np.array_equal(bare, _probe_figures(results)[:, 0])

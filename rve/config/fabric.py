@@ -72,6 +72,9 @@ class FabricContact(Section):
                                "largest overlap is below al_tolerance R)")
     al_tolerance: Dimensionless = Field(1e-4, gt=0, description="augmented Lagrangian: largest overlap, fraction of R")
     al_max_iter: Integer = Field(20, ge=1, description="augmented Lagrangian: most multiplier updates per solve")
+    al_penalty_growth: Dimensionless = Field(
+        4.0, ge=1, description="augmented Lagrangian: factor on P* after an update that left more than 1/4 of the "
+                               "largest overlap (1: the plain Uzawa loop; docs/contact.md)")
     conductance_law: Literal["width", "holm"] = Field(
         "width", description="width: h_C, sigma_C times the Hertz width (thesis); holm: Holm a-spots of radius "
                              "spot_radius carrying the line load at the hardness")

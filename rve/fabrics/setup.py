@@ -99,7 +99,7 @@ def contact_params(contact, rebuild_every: int, conduction: bool = True) -> Cont
 
 
 #: ContactParams options a contact section may carry (a section without them: the defaults)
-_CONTACT_OPTIONS = ("geometry", "enforcement", "al_tolerance", "al_max_iter", "conductance_law", "hardness",
+_CONTACT_OPTIONS = ("geometry", "enforcement", "al_tolerance", "al_max_iter", "al_penalty_growth", "conductance_law", "hardness",
                     "spot_radius")
 
 

@@ -199,18 +199,22 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
     return st
 
 
-def recomputed_residual(cfg, fab, mesh, x) -> float:
+def recomputed_residual(cfg, fab, mesh, x, multipliers=None) -> float:
     """|F(x, 0)| on the free dofs (N) of a stored state, from scratch: the strain path's
     mechanics system (``strain.mech_system``, contact map built at ``x``; a periodic cell's
-    reduced system at the macro gradient the state carries)."""
+    reduced system at the macro gradient the state carries), with the state's contact
+    ``multipliers`` (augmented Lagrangian: the equilibrium is one at those multipliers)."""
+    from .multipliers import seed_multipliers
     from .strain import free_residual, mech_system
 
     if cfg.boundary == "periodic":
         from .periodic import periodic_free_residual
 
-        return periodic_free_residual(cfg, fab, mesh, x)
+        return periodic_free_residual(cfg, fab, mesh, x, multipliers=multipliers)
     xf = np.asarray(x, float).reshape(-1)
-    return free_residual(mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf), xf)
+    system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
+    seed_multipliers(system, multipliers)
+    return free_residual(system, xf)
 
 
 def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
@@ -220,7 +224,7 @@ def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
     recorded = st.solver.get("residual_N")
     recorded = float("nan") if recorded is None else float(recorded)
     tol = _stage_tolerance(cfg, st.kind)
-    residual = recomputed_residual(cfg, fab, mesh, st.x)
+    residual = recomputed_residual(cfg, fab, mesh, st.x, st.multipliers)
     factor = float(cfg.checks.residual_refuse_factor)
     limit = factor * max(recorded if np.isfinite(recorded) else 0.0, tol)
     log.info("%s: equilibrium residual recomputed %.3e N (recorded %.3e N, limit %.3e N)", path, residual,
@@ -241,6 +245,18 @@ def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
     return residual, recorded
 
 
+def _check_multipliers(cfg, st, path) -> None:
+    """An augmented Lagrangian state must carry its multipliers: without them its probes would
+    take the contact width from the penalty overlap, which the multipliers drove to zero."""
+    augmented = cfg.contact.enforcement == "augmented_lagrangian"
+    if augmented and st.multipliers is None and st.kind != "initial":
+        raise ValueError(f"{path}: contact.enforcement = 'augmented_lagrangian' but the state has no contact "
+                         "multipliers (contact_multiplier): it was not written by an augmented Lagrangian run")
+    if not augmented and st.multipliers is not None:
+        raise ValueError(f"{path}: the state carries contact multipliers but contact.enforcement = "
+                         f"{cfg.contact.enforcement!r}: it was written by an augmented Lagrangian run")
+
+
 def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
                  tubes_path: Optional[PathLike] = None) -> dict:
     """The probe solves on one stored state -> its table record (rve.tables format,
@@ -252,18 +268,13 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
 
     t0 = time.perf_counter()
     cfg = load_run_config(spec, combo)
-    if cfg.contact.enforcement != "penalty":
-        # the probe systems and the residual check are built without the state's multipliers:
-        # their contact width would be the penalty overlap's, not the multipliers' line load
-        raise ValueError(f"{state_file}: contact.enforcement = {cfg.contact.enforcement!r}: the probe solves of a "
-                         "table support only 'penalty' (the augmented Lagrangian runs in the relaxation and strain "
-                         "steps; docs/contact.md 'Augmented Lagrangian in the RVE pipeline')")
     fab, mesh = _fabric_mesh(cfg)
     st = load_state(state_file, quarantine=True)
     _check_state(st, mesh, state_file)
+    _check_multipliers(cfg, st, state_file)
     residual, recorded = verify_equilibrium(cfg, fab, mesh, st, state_file)
     pictures = tubes_path is not None and cfg.output.pictures
-    results = solve_probes(cfg, fab, mesh, st.x, with_fields=pictures)
+    results = solve_probes(cfg, fab, mesh, st.x, with_fields=pictures, multipliers=st.multipliers)
     if pictures:
         from .pictures import write_state_tubes
 

@@ -18,7 +18,7 @@ record untouched, so the penalty path is bit-identical.
   solve) wrapped in the Uzawa loop ``rve.solvers.augmented.solve_with_multipliers`` until the
   largest true overlap is below ``contact.al_tolerance`` R. The info of the last solve, plus
   ``info["augmented_lagrangian"]`` (updates, the overlap history, whether the tolerance was
-  met); with the penalty, one call of ``solve`` and its info as it is. A solve that did not
+  met, the P* of every re-solve, every solve's iterations and wall time); with the penalty, one call of ``solve`` and its info as it is. A solve that did not
   converge ends the loop (the multipliers of an unconverged state are not updated). The
   step's ``converged`` stays the solve's (an equilibrium at the current multipliers); an
   overlap still above the tolerance (``al_max_iter`` reached) is ``met: false`` and a warning.
@@ -26,6 +26,7 @@ record untouched, so the penalty path is bit-identical.
 from __future__ import annotations
 
 import logging
+import time
 
 from ..solvers.augmented import AugmentedLagrangian
 
@@ -59,19 +60,25 @@ def equilibrium(system, solve, x):
     if not getattr(system, "augmented", False):
         return solve(x)
     loop = AugmentedLagrangian(system)
-    solves = 0
+    solves, iterations, walls = 0, [], []
     while True:
+        t0 = time.perf_counter()
         x, info = solve(x)
         solves += 1
+        iterations.append(info.get("iterations"))
+        walls.append(time.perf_counter() - t0)
         if not info.get("converged", False):
             break
         if loop.update(x) or loop.exhausted:
             break
+    loop.finish(x)
     pen = float(system.max_penetration(x))
     info = dict(info)
     info["augmented_lagrangian"] = {
         "updates": int(loop.updates), "solves": solves, "tolerance": float(loop.tolerance),
         "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
+        "penalties": [float(p) for p in loop.penalties], "solve_iterations": iterations,
+        "solve_wall_s": [float(t) for t in walls],
         "history": [[int(k), float(p)] for k, p in loop.history]}
     if pen > loop.tolerance:   # an equilibrium at these multipliers, not yet the impenetrable limit
         log.warning("augmented Lagrangian: largest overlap %.2e R above al_tolerance %.1e R after %d updates%s",

@@ -139,10 +139,12 @@ def cell_gradient(fab, mesh, x_full) -> np.ndarray:
     return out
 
 
-def periodic_free_residual(cfg, fab, mesh, x_full, F=None) -> float:
-    """|F| on the free reduced dofs (N) of a full state (its own gradient unless given)."""
+def periodic_free_residual(cfg, fab, mesh, x_full, F=None, multipliers=None) -> float:
+    """|F| on the free reduced dofs (N) of a full state (its own gradient unless given), at
+    its contact ``multipliers`` (a record, augmented Lagrangian; None: none)."""
     F = cell_gradient(fab, mesh, x_full) if F is None else F
     psys = periodic_system(cfg, fab, mesh, x_full, F)
+    seed_multipliers(psys, multipliers)
     return free_residual(psys, psys.restrict(np.asarray(x_full, float).reshape(-1)))
 
 
@@ -253,15 +255,22 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     return full_state(psys, xs), psys.full, info
 
 
-def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float) -> tuple:
+def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float, multipliers=None) -> tuple:
     """``(Pi, dPi/deps)`` of an equilibrium of the cell at strain ``eps`` (the one-path test
     of ``rve.homogenisation.branch``): the potential of the reduced system at the mode's
     macro gradient (N mm) and its load derivative, the Hill-Mandel work rate A P : dF/deps
-    (``PeriodicSystem.macro_stress`` is dPi/dF / A at an equilibrium)."""
+    (``PeriodicSystem.macro_stress`` is dPi/dF / A at an equilibrium). With the contact
+    ``multipliers`` of the state (augmented Lagrangian) the stress includes their line loads,
+    while the potential stays that of the true overlaps: the impenetrable limit's contact
+    forces do no work, so its potential is the elastic energy (plus the penalty energy of
+    the overlap left below al_tolerance), and the multiplier shift's constant terms, which
+    differ from state to state, are no part of it."""
     F = macro_gradient(mode, eps)
     psys = periodic_system(cfg, fab, mesh, x_full, F)
     xr = psys.restrict(np.asarray(x_full, float).reshape(-1))
+    energy = float(psys.energy(xr))
+    seed_multipliers(psys, multipliers)
     h = 1e-6   # dF/deps: exact for the linear modes, the trellis gradient's central difference
     dF = (macro_gradient(mode, eps + h) - macro_gradient(mode, eps - h)) / (2.0 * h)
-    return float(psys.energy(xr)), float(psys.ties.area * np.sum(psys.macro_stress(xr) * dF))
+    return energy, float(psys.ties.area * np.sum(psys.macro_stress(xr) * dF))
 

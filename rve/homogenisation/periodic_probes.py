@@ -23,6 +23,10 @@ reference. Out:
   a uniformly heated fabric), ``temperature_mean`` = 0 (the reference), and the Joule
   power per unit area ``joule_power_per_area`` = j . E (W/mm^2).
 
+With ``contact.enforcement: augmented_lagrangian`` the frozen systems carry the stored
+state's contact multipliers (seeded by point key after every map build), so the contact
+conductances come from the line load ``lambda + P* g``, not from the penalty overlap.
+
 Charge conservation: the residual left at the V reference node (the net current the
 ties fail to carry; one reference per conduction component, so a fibril that touches
 nothing keeps a defined potential) over I_face, ``conservation_error``.
@@ -37,6 +41,7 @@ from ..fabrics.setup import contact_params
 from ..model import BeamModel, ContactSystem, Couplings
 from ..model.periodic import PeriodicSystem
 from ..solvers.static import static_solve
+from .multipliers import seed_multipliers
 from .periodic import cell_gradient, cell_ties
 from .probe_result import ProbeResult, _length_weights, conduction_material
 
@@ -45,12 +50,14 @@ __all__ = ["field_solve", "solve_field_probe"]
 _NO_COUPLING = dict(lorentz=False, back_emf=False, seebeck=False, thermal_softening=False)
 
 
-def _frozen(mesh, material, fields, joule, cparams, xn, disk_points, axial_points):
+def _frozen(mesh, material, fields, joule, cparams, xn, disk_points, axial_points, multipliers=None):
     base = BeamModel(mesh, material, fields=fields, couplings=Couplings(joule=joule, **_NO_COUPLING),
                      disk_points=disk_points, axial_points=axial_points)
     x = np.zeros(base.n)
     base.nodal(x)[:, :9] = xn
-    return (ContactSystem(base, cparams, x) if cparams is not None else base), x
+    system = ContactSystem(base, cparams, x) if cparams is not None else base
+    seed_multipliers(system, multipliers)
+    return system, x
 
 
 def _components(full, mesh, x) -> np.ndarray:
@@ -82,29 +89,32 @@ def _solve(psys, x_full, w_red, opts, what):
     return xs, ws, res
 
 
-def _periodic(full, ties, x, held, values, F, E, contact_images):
+def _periodic(full, ties, x, held, values, F, E, contact_images, multipliers=None):
     """The reduced system of a frozen state; with ``contact_images`` the contact map sees
-    the periodic images (their potential jumps by E over the lattice vector)."""
+    the periodic images (their potential jumps by E over the lattice vector). The
+    ``multipliers`` are seeded on the map it ends with."""
     psys = PeriodicSystem(full, ties, held, values, F=F, E=E, contact_images=contact_images)
     if psys.contact_images:
         psys.rebuild(psys.restrict(x))
+    seed_multipliers(psys, multipliers)
     return psys
 
 
 def field_solve(mesh, ties, xn, F, material, cparams, E, temperature=True, disk_points=4, axial_points=None,
-                newton_opts=None, contact_images: bool = True) -> dict:
+                newton_opts=None, contact_images: bool = True, multipliers=None) -> dict:
     """Potential (and Joule temperature) of the frozen periodic state ``xn`` (n_nodes, 9) at
     macro gradient ``F`` under the macro field ``E`` (3,), V/mm per reference length.
     Returns ``{"V", "T" (nodal, full mesh), "tie_currents" (n_ties,), "macro_current" (3,)
     (A per mm of reference width: the ties' and the image contacts' currents), "conservation",
-    "iterations", "joule_power"}``."""
+    "iterations", "joule_power"}``. ``multipliers``: the state's contact multipliers (a record)
+    or None."""
     opts = {"atol": 1e-12, "rtol": 1e-12, **(newton_opts or {})}
-    full, x = _frozen(mesh, material, ("mech", "V"), False, cparams, xn, disk_points, axial_points)
-    lay = _periodic(full, ties, x, (), 0.0, F, None, contact_images).layout
+    full, x = _frozen(mesh, material, ("mech", "V"), False, cparams, xn, disk_points, axial_points, multipliers)
+    lay = _periodic(full, ties, x, (), 0.0, F, None, contact_images, multipliers).layout
     comp = _components(full, mesh, x)
     refs = _reference_nodes(ties, mesh, comp)
     held = np.concatenate([lay.dofs("mech"), lay.dofs("V", refs)])
-    psys = _periodic(full, ties, x, held, 0.0, F, E, contact_images)
+    psys = _periodic(full, ties, x, held, 0.0, F, E, contact_images, multipliers)
     xs, ws, res = _solve(psys, x, np.zeros(psys.n), opts, "voltage")
     R_red = psys.evaluate(xs, ws, 0.0, jacobian=False)[0]
     out = {"tie_currents": psys.tie_currents(xs, ws), "macro_current": psys.macro_current(xs, ws),
@@ -115,23 +125,23 @@ def field_solve(mesh, ties, xn, F, material, cparams, E, temperature=True, disk_
     out["T"] = None
     if temperature:
         out.update(_joule_temperature(mesh, ties, xn, F, material, cparams, E, ws, lay, comp, disk_points,
-                                      axial_points, opts, contact_images))
+                                      axial_points, opts, contact_images, multipliers))
     return out
 
 
 def _joule_temperature(mesh, ties, xn, F, material, cparams, E, V_ws, vlay, comp, disk_points, axial_points,
-                       opts, contact_images):
+                       opts, contact_images, multipliers=None):
     """The periodic Joule temperature with the uniform sink of each conduction component
     (module docstring)."""
 
-    full, x = _frozen(mesh, material, ("mech", "T", "V"), True, cparams, xn, disk_points, axial_points)
+    full, x = _frozen(mesh, material, ("mech", "T", "V"), True, cparams, xn, disk_points, axial_points, multipliers)
     flay = full.layout
     lay = PeriodicSystem(full, ties, F=F).layout
     V_red = V_ws[vlay.dofs("V")]
     refs = _reference_nodes(ties, mesh, comp)
     held = np.concatenate([lay.dofs("mech"), lay.dofs("V"), lay.dofs("T", refs)])
     values = np.concatenate([np.zeros(lay.dofs("mech").size), V_red, np.zeros(refs.size)])
-    psys = _periodic(full, ties, x, held, values, F, E, contact_images)
+    psys = _periodic(full, ties, x, held, values, F, E, contact_images, multipliers)
     w0 = np.zeros(psys.n)
     w0[lay.dofs("V")] = V_red
     # the Joule heat the fibrils make (the T rows at T = 0), removed again by the sink
@@ -149,9 +159,10 @@ def _joule_temperature(mesh, ties, xn, F, material, cparams, E, V_ws, vlay, comp
     return {"T": T, "joule_power": float(-q.sum()), "iterations_T": int(res.iterations)}
 
 
-def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False):
-    """One field probe (``ProbeSpec`` with ``field``) on the stored full state ``xn``: a
-    ``probes.ProbeResult`` whose resistance is the sheet resistance (module docstring)."""
+def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False, multipliers=None):
+    """One field probe (``ProbeSpec`` with ``field``) on the stored full state ``xn`` with its
+    contact ``multipliers``: a ``probes.ProbeResult`` whose resistance is the sheet
+    resistance (module docstring)."""
 
     ps = cfg.probe_solver
     t0 = time.perf_counter()
@@ -163,7 +174,7 @@ def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False):
     cparams = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=True)
     sol = field_solve(mesh, ties, xn, cell_gradient(fab, mesh, xn), conduction_material(cfg), cparams, E,
                       ps.temperature, cfg.mesh.disk_points, cfg.mesh.axial_points,
-                      {"atol": ps.newton_atol, "rtol": ps.newton_rtol}, cfg.cell.contact_images)
+                      {"atol": ps.newton_atol, "rtol": ps.newton_rtol}, cfg.cell.contact_images, multipliers)
     j, j_side = (float(v) for v in sol["macro_current"][[axis, 1 - axis]])
     I_face = j * L[1 - axis]  # leaving through the + face (its ties and the contacts across it)
     I_sq = j * L[axis]

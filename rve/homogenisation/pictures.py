@@ -179,7 +179,7 @@ def ensure_tubes(tubes: PathLike, state_file: PathLike, spec: Mapping, combo: st
     cfg = load_run_config(spec, combo)
     fab, mesh = fabric_and_mesh(cfg)
     st = load_state(state_file)
-    res = solve_probes(cfg, fab, mesh, st.x, with_fields=True)
+    res = solve_probes(cfg, fab, mesh, st.x, with_fields=True, multipliers=st.multipliers)
     return write_state_tubes(tubes, cfg, fab, mesh, st, res)
 
 

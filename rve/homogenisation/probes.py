@@ -22,6 +22,12 @@ Mechanics frozen (every mechanical dof constrained at the stored state), for eac
    heat transfer ``h_C a(g)``, T = 0 (the boundary temperature) at every fibril end.
    Recorded: the maximum and the mean (over the fibril length) temperature rise.
 
+With ``contact.enforcement: augmented_lagrangian`` every probe system carries the stored
+state's contact multipliers (``multipliers``: the record of ``multipliers.multiplier_record``,
+seeded by point key), so the contact width and conductance come from the line load
+``lambda + P* g`` of the impenetrable limit, not from the penalty overlap (which the
+multipliers drive to zero). With the penalty (``multipliers`` None) nothing is seeded.
+
 Both problems are linear; they go through ``rve.solvers.static.static_solve`` (Newton
 converges in one iteration). Charge conservation is checked and reported
 (``conservation_error`` = |I(+) + I(-) + I_leak| / |I(+)|).
@@ -44,6 +50,7 @@ from ..fabrics.setup import contact_params, end_nodes
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, Couplings, DirichletBC
 from ..solvers.static import static_solve
+from .multipliers import seed_multipliers
 from .probe_result import ProbeResult, _length_weights, conduction_material
 
 __all__ = ["ProbeResult", "ElectricSolution", "terminal_nodes", "electric_solve", "temperature_solve",
@@ -89,11 +96,14 @@ def _full_state(model, xn, V=None):
     return x, w
 
 
-def _frozen_solve(base, contact: Optional[ContactParams], x, w, what: str, newton_opts: Optional[dict]):
+def _frozen_solve(base, contact: Optional[ContactParams], x, w, what: str, newton_opts: Optional[dict],
+                  multipliers=None):
     """The linear probe problem on the frozen state (mechanics constrained): the model with
-    the contact terms of ``contact`` (None: none), one tight Newton solve. Returns
-    ``(system, x, w, NewtonResult)``; raises RuntimeError naming ``what`` if it fails."""
+    the contact terms of ``contact`` (None: none) and the state's contact ``multipliers``
+    (a record, or None), one tight Newton solve. Returns ``(system, x, w, NewtonResult)``;
+    raises RuntimeError naming ``what`` if it fails."""
     system = ContactSystem(base, contact, x) if contact is not None else base
+    seed_multipliers(system, multipliers)
     opts = {"atol": 1e-12, "rtol": 1e-12, "max_iter": 5, "label": f"probe {what}"}
     opts.update(newton_opts or {})
     xs, ws, res = static_solve(system, x, w, 0.0, opts)
@@ -104,10 +114,11 @@ def _frozen_solve(base, contact: Optional[ContactParams], x, w, what: str, newto
 
 def electric_solve(mesh, xn, material: BeamMaterial, contact: Optional[ContactParams], groups, values,
                    insulation_factor: float = 1e12, insulation_ends: str = "both", disk_points: int = 4,
-                   axial_points=None, newton_opts: Optional[dict] = None) -> ElectricSolution:
+                   axial_points=None, newton_opts: Optional[dict] = None, multipliers=None) -> ElectricSolution:
     """Potential on the frozen state ``xn`` (n_nodes, 9) with V = ``values[k]`` on the
     nodes ``groups[k]`` (Dirichlet) and weakened insulation on every fibril with no
-    Dirichlet node. ``contact``: contact law (its ``conductance`` couples V) or None.
+    Dirichlet node. ``contact``: contact law (its ``conductance`` couples V) or None;
+    ``multipliers``: the state's contact multipliers (augmented Lagrangian) or None.
     Returns the nodal V, the current into the fabric through every group, the pull-down
     leak and solver figures."""
     groups = [np.asarray(g, dtype=np.int64) for g in groups]
@@ -121,7 +132,7 @@ def electric_solve(mesh, xn, material: BeamMaterial, contact: Optional[ContactPa
     base = BeamModel(mesh, material, fields=("mech", "V"), couplings=Couplings(joule=False, **_NO_COUPLING),
                      disk_points=disk_points, axial_points=axial_points, bcs=bcs, circuits=circuits)
     x, w = _full_state(base, xn)
-    system, xs, ws, res = _frozen_solve(base, contact, x, w, "voltage", newton_opts)
+    system, xs, ws, res = _frozen_solve(base, contact, x, w, "voltage", newton_opts, multipliers)
     F, _, _ = system.evaluate(xs, ws, 0.0, jacobian=False)
     FV = base.nodal(F)[:, base.oV]
     currents = [float(FV[g].sum()) for g in groups]
@@ -134,9 +145,11 @@ def electric_solve(mesh, xn, material: BeamMaterial, contact: Optional[ContactPa
 
 
 def temperature_solve(mesh, xn, V, material: BeamMaterial, contact: Optional[ContactParams], fixed_nodes,
-                      disk_points: int = 4, axial_points=None, newton_opts: Optional[dict] = None):
+                      disk_points: int = 4, axial_points=None, newton_opts: Optional[dict] = None,
+                      multipliers=None):
     """Joule-heating temperature rise on the frozen state with the potential ``V``
-    (nodal, prescribed everywhere) and T = 0 at ``fixed_nodes``. Returns (T nodal, Newton result)."""
+    (nodal, prescribed everywhere) and T = 0 at ``fixed_nodes`` (``multipliers`` as
+    ``electric_solve``). Returns (T nodal, Newton result)."""
     lay = DofLayout(mesh.n_nodes, ("mech", "T", "V"))
     fixed = np.asarray(fixed_nodes, dtype=np.int64)
     bcs = [DirichletBC(lay.dofs("mech"), 0.0), DirichletBC(lay.dofs("V"), np.asarray(V, float)),
@@ -144,12 +157,13 @@ def temperature_solve(mesh, xn, V, material: BeamMaterial, contact: Optional[Con
     base = BeamModel(mesh, material, fields=("mech", "T", "V"), couplings=Couplings(joule=True, **_NO_COUPLING),
                      disk_points=disk_points, axial_points=axial_points, bcs=bcs)
     x, w = _full_state(base, xn, V)
-    _, _, ws, res = _frozen_solve(base, contact, x, w, "temperature", newton_opts)
+    _, _, ws, res = _frozen_solve(base, contact, x, w, "temperature", newton_opts, multipliers)
     return base.nodal(ws)[:, base.oT].copy(), res
 
 
-def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeResult:
-    """One probe (``ProbeSpec``) on the frozen state ``xn`` (module docstring)."""
+def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False, multipliers=None) -> ProbeResult:
+    """One probe (``ProbeSpec``) on the frozen state ``xn`` with its contact ``multipliers``
+    (module docstring)."""
     ps = cfg.probe_solver
     t0 = time.perf_counter()
     plus, minus = (terminal_nodes(fab, mesh, t) for t in probe.terminals)
@@ -159,7 +173,7 @@ def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeRe
     cparams = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=True)
     opts = {"atol": ps.newton_atol, "rtol": ps.newton_rtol}
     el = electric_solve(mesh, xn, mat, cparams, [plus, minus], [ps.voltage, 0.0], ps.insulation_factor,
-                        ps.insulation_ends, cfg.mesh.disk_points, cfg.mesh.axial_points, opts)
+                        ps.insulation_ends, cfg.mesh.disk_points, cfg.mesh.axial_points, opts, multipliers)
     ip, im = el.currents
     cons = abs(ip + im + el.leak) / max(abs(ip), 1e-300)
     # no conducting path between the terminals: only the pull-downs carry (round-off) current
@@ -181,7 +195,7 @@ def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeRe
         t1 = time.perf_counter()
         ends = end_nodes(fab, mesh)
         T, tres = temperature_solve(mesh, xn, el.V, mat, cparams, ends, cfg.mesh.disk_points, cfg.mesh.axial_points,
-                                    opts)
+                                    opts, multipliers)
         wts = _length_weights(mesh)
         res.temperature_max = float(T.max())
         res.temperature_mean = float((wts * T).sum() / wts.sum())
@@ -194,11 +208,12 @@ def solve_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False) -> ProbeRe
     return res
 
 
-def solve_probes(cfg, fab, mesh, xn, with_fields: bool = False) -> dict:
-    """All probes of ``cfg.probes`` on the frozen state ``xn``: {name: ProbeResult} (a periodic
-    cell's field probes: ``rve.homogenisation.periodic_probes``)."""
+def solve_probes(cfg, fab, mesh, xn, with_fields: bool = False, multipliers=None) -> dict:
+    """All probes of ``cfg.probes`` on the frozen state ``xn`` with the state's contact
+    ``multipliers`` (``State.multipliers``; None for the penalty): {name: ProbeResult} (a
+    periodic cell's field probes: ``rve.homogenisation.periodic_probes``)."""
     if getattr(cfg, "boundary", "pinned") == "periodic":
         from .periodic_probes import solve_field_probe
 
-        return {p.name: solve_field_probe(cfg, fab, mesh, xn, p, with_fields) for p in cfg.probes}
-    return {p.name: solve_probe(cfg, fab, mesh, xn, p, with_fields) for p in cfg.probes}
+        return {p.name: solve_field_probe(cfg, fab, mesh, xn, p, with_fields, multipliers) for p in cfg.probes}
+    return {p.name: solve_probe(cfg, fab, mesh, xn, p, with_fields, multipliers) for p in cfg.probes}

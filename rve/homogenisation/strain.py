@@ -234,7 +234,7 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
                                         multipliers=lam)
 
         def energy(system, x, e):
-            return periodic_energy(cfg, fab, mesh, x, mode, e)
+            return periodic_energy(cfg, fab, mesh, x, mode, e, multipliers if system is None else multiplier_record(system))
     else:
         def part(x, e_from, e_to, whole=False, lam=multipliers):
             return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam)

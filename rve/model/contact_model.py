@@ -183,6 +183,16 @@ class ContactSystem:
         the structure is unchanged."""
         self.term.update_multipliers(x)
 
+    @property
+    def penalty(self) -> float:
+        """The contact law's current P* (the Uzawa loop may raise it; ``set_penalty``)."""
+        return float(self.term.params.penalty)
+
+    def set_penalty(self, penalty: float, x=None) -> None:
+        """P* of the contact law (``ContactTerm.set_penalty``: with ``x`` the line loads at
+        ``x`` are kept); the structure is unchanged."""
+        self.term.set_penalty(penalty, x)
+
     # ------------------------------------------------------------------ DynamicSystem
     def evaluate(self, x, w, t, jacobian: bool = True):
         self.stats["evaluations"] += 1

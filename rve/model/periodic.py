@@ -305,6 +305,13 @@ class PeriodicSystem:
     def update_multipliers(self, x) -> None:
         self.full.update_multipliers(self.expand(x))
 
+    @property
+    def penalty(self) -> float:
+        return self.full.penalty
+
+    def set_penalty(self, penalty: float, x=None) -> None:
+        self.full.set_penalty(penalty, None if x is None else self.expand(x))
+
     # ------------------------------------------------------------------ macro quantities
     def full_residual(self, x, w=None, t: float = 0.0) -> np.ndarray:
         w = np.zeros(self.n) if w is None else w

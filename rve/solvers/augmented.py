@@ -10,17 +10,33 @@ updated, ``lambda <- max(0, lambda + P* g)`` (g the true overlap), until the lar
 overlap is below ``tolerance`` times the radius: the converged state is the impenetrable
 limit up to that tolerance, whatever P* is.
 
+**Penalty increase** (the method of multipliers' rule): the Uzawa step is P*, and a
+contact point much stiffer than P* closes its overlap by only a fraction ~P*/k per update
+(linear convergence, or a limit cycle where the solves switch between neighbouring
+equilibria). So when an update has not reduced the largest overlap below ``decrease``
+(0.25) times the one before, P* is multiplied by ``growth`` (default
+``params.al_penalty_growth``, 4), at most up to
+``max_growth`` (1e3) times the system's P* at the start; the multipliers are kept (the line
+load at zero overlap is unchanged). When the loop ends (converged, exhausted, or stopped by
+the caller: ``finish``) P* returns to its starting value with the multipliers re-expressed
+so that every point's line load at the final state is unchanged: the state stays the
+equilibrium it is, at the configured P*. ``growth=1`` is the plain Uzawa loop.
+
 The system needs (the protocol, no model imported here): ``augmented`` (bool),
 ``max_penetration(x) -> float`` (largest true overlap over min(R+, R-)),
-``update_multipliers(x)``, and ``params.al_tolerance`` / ``params.al_max_iter`` for the
-defaults. A system with ``augmented`` False is converged at once (no update), so a caller
-can wrap every solve unconditionally.
+``update_multipliers(x)``, ``penalty`` / ``set_penalty(P, x=None)`` (for the increase), and
+``params.al_tolerance`` / ``params.al_max_iter`` for the defaults. A system with
+``augmented`` False is converged at once (no update), so a caller can wrap every solve
+unconditionally.
 
-* ``AugmentedLagrangian(system, tolerance=None, max_updates=None)``: ``update(x) -> bool``
+* ``AugmentedLagrangian(system, tolerance=None, max_updates=None, growth=None, decrease=0.25,
+  max_growth=1e3)``: ``update(x) -> bool``
   at a converged solve's state: True when the penetration is below the tolerance (the
   multipliers are left as they are), else one Uzawa update and False (solve again from
   ``x``). ``history`` lists ``(updates, max_penetration)`` of every check;
-  ``exhausted`` is True once ``max_updates`` updates were made without convergence.
+  ``exhausted`` is True once ``max_updates`` updates were made without convergence;
+  ``penalties`` the P* of every solve after an update; ``finish(x)`` returns to the starting
+  P* (called by ``update`` when it ends the loop; idempotent).
 * ``solve_with_multipliers(system, solve, x, tolerance=None, max_updates=None)``: repeats
   ``x = solve(x)`` with updates in between; returns ``(x, loop)``. ``solve`` returns the new
   state (a position vector ``x`` of the system) or a tuple whose first item is it.
@@ -32,17 +48,32 @@ from typing import Callable, Optional
 __all__ = ["AugmentedLagrangian", "solve_with_multipliers"]
 
 
+#: the method of multipliers' penalty increase (module docstring)
+PENALTY_GROWTH = 4.0
+SUFFICIENT_DECREASE = 0.25
+MAX_PENALTY_GROWTH = 1e3
+
+
 class AugmentedLagrangian:
-    def __init__(self, system, tolerance: Optional[float] = None, max_updates: Optional[int] = None):
+    def __init__(self, system, tolerance: Optional[float] = None, max_updates: Optional[int] = None,
+                 growth: Optional[float] = None, decrease: float = SUFFICIENT_DECREASE,
+                 max_growth: float = MAX_PENALTY_GROWTH):
         self.system = system
         params = getattr(system, "params", None)
         self.tolerance = float(tolerance if tolerance is not None else getattr(params, "al_tolerance", 1e-4))
         self.max_updates = int(max_updates if max_updates is not None else getattr(params, "al_max_iter", 20))
         if not self.tolerance > 0:
             raise ValueError(f"tolerance must be > 0, got {self.tolerance}")
+        growth = float(growth if growth is not None else getattr(params, "al_penalty_growth", PENALTY_GROWTH))
+        if not (growth >= 1 and 0 < decrease < 1 and max_growth >= 1):
+            raise ValueError(f"need growth >= 1, 0 < decrease < 1, max_growth >= 1; got {growth}, {decrease}, "
+                             f"{max_growth}")
+        self.growth, self.decrease, self.max_growth = float(growth), float(decrease), float(max_growth)
         self.updates = 0
         self.history: list = []
+        self.penalties: list = []
         self.exhausted = False
+        self.penalty0 = float(system.penalty) if self.active and hasattr(system, "penalty") else None
 
     @property
     def active(self) -> bool:
@@ -50,20 +81,34 @@ class AugmentedLagrangian:
 
     def update(self, x) -> bool:
         """True when the state ``x`` meets the tolerance (or the system has no multipliers);
-        otherwise one Uzawa update and False (False with ``exhausted`` when no update is
-        left: the caller stops and reports)."""
+        otherwise one Uzawa update (and the penalty increase where it is due) and False
+        (False with ``exhausted`` when no update is left: the caller stops and reports)."""
         if not self.active:
             return True
         pen = float(self.system.max_penetration(x))
         self.history.append((self.updates, pen))
         if pen <= self.tolerance:
+            self.finish(x)
             return True
         if self.updates >= self.max_updates:
             self.exhausted = True
+            self.finish(x)
             return False
         self.system.update_multipliers(x)
         self.updates += 1
+        if (self.penalty0 is not None and self.growth > 1 and len(self.history) > 1
+                and pen > self.decrease * self.history[-2][1]):
+            P = float(self.system.penalty) * self.growth
+            if P <= self.max_growth * self.penalty0 * (1 + 1e-12):
+                self.system.set_penalty(P)
+        if self.penalty0 is not None:
+            self.penalties.append(float(self.system.penalty))
         return False
+
+    def finish(self, x) -> None:
+        """P* back to its starting value, the line loads at ``x`` kept (module docstring)."""
+        if self.penalty0 is not None and float(self.system.penalty) != self.penalty0:
+            self.system.set_penalty(self.penalty0, x)
 
 
 def solve_with_multipliers(system, solve: Callable, x, tolerance: Optional[float] = None,

@@ -33,7 +33,7 @@ neighbours); ``enforcement="augmented_lagrangian"`` carries
 multipliers per point (``multipliers`` (rows, n_gp), kept by point key over rebuilds) that
 shift the penalty law's overlap to ``g + lambda/P*``, updated by ``update_multipliers(x)``
 (driven by ``rve.solvers.augmented``), ``penetration`` / ``max_penetration`` the true
-overlaps; ``conductance_law="holm"`` the a-spot law (``conductance_law``).
+overlaps, ``set_penalty`` the penalty increase of the loop; ``conductance_law="holm"`` the a-spot law (``conductance_law``).
 """
 from __future__ import annotations
 
@@ -87,7 +87,8 @@ class ContactParams:
     docs/contact.md "The smooth contact curve"). ``enforcement``: ``"penalty"`` or
     ``"augmented_lagrangian"`` (Uzawa multipliers driven by ``rve.solvers.augmented``
     until the largest overlap is below ``al_tolerance`` x R, at most ``al_max_iter``
-    updates). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
+    updates, P* multiplied by ``al_penalty_growth`` after an update that did not reduce the
+    overlap enough; ``rve.solvers.augmented``). ``conductance_law``: ``"width"`` (h_C, sigma_C times the Hertz width of the
     line load) or ``"holm"`` (the a-spot constriction conductance of the line load with the
     hardness ``hardness`` (MPa) and a-spot radius ``spot_radius`` (mm): per unit length
     ``2 k0 p / (pi H a_s)``, k0 the material's ``electrical_conductivity`` (V) or
@@ -109,6 +110,7 @@ class ContactParams:
     enforcement: str = "penalty"
     al_tolerance: float = 1e-4
     al_max_iter: int = 20
+    al_penalty_growth: float = 4.0
     conductance_law: str = "width"
     hardness: float = 0.0
     spot_radius: float = 0.0
@@ -134,6 +136,8 @@ class ContactParams:
             raise ValueError(f"al_tolerance must be > 0, got {self.al_tolerance}")
         if int(self.al_max_iter) < 1:
             raise ValueError(f"al_max_iter must be >= 1, got {self.al_max_iter}")
+        if not self.al_penalty_growth >= 1:
+            raise ValueError(f"al_penalty_growth must be >= 1, got {self.al_penalty_growth}")
         if self.conductance_law not in CONDUCTANCE_LAWS:
             raise ValueError(f"conductance_law must be one of {CONDUCTANCE_LAWS}, got {self.conductance_law!r}")
         if self.conductance_law == "holm" and not (self.hardness > 0 and self.spot_radius > 0):
@@ -167,6 +171,9 @@ class ContactTerm:
         self.comps = np.array([0, 1, 2] + [layout.offset[f] for f in self.scalar], dtype=np.int64)
         self.nC = len(self.comps)
         self.g_eps = float(params.g_eps) * float(mesh.radius.min())
+        #: with multipliers, the width regularisation as a line load (N/mm): E* g_eps R, the
+        #: load whose Hertz width is ~ sqrt(g_eps) R (independent of P*)
+        self.load_eps = self.g_eps * self.E_star
         self.onset = float(params.onset) * float(mesh.radius.min())
         self.cutoff = 2.0 * float(mesh.radius.max()) + float(params.margin)
         self.map: Optional[ContactMap] = None
@@ -317,6 +324,38 @@ class ContactTerm:
         new = np.maximum(0.0, self.multipliers + float(self.params.penalty) * np.where(np.isfinite(g), g, -np.inf))
         self.multipliers = gather_by_key(self._keys, self._keys, new).reshape(self.multipliers.shape)
 
+    def set_penalty(self, penalty: float, x=None) -> None:
+        """P* of the law (and so the Uzawa step) to ``penalty``. Without ``x`` the
+        multipliers are kept (the method of multipliers' penalty increase: the line load at
+        zero overlap is unchanged); with ``x`` they are re-expressed so that every point's
+        line load ``φ'(g + lambda/P*)`` at ``x`` is unchanged: x stays the equilibrium it was
+        (used to return to the configured P* at the end of a loop)."""
+        if self.multipliers is None:
+            raise ValueError("set_penalty needs enforcement 'augmented_lagrangian'")
+        P0, P1 = float(self.params.penalty), float(penalty)
+        if not P1 > 0:
+            raise ValueError(f"contact penalty must be > 0, got {P1}")
+        if x is not None and self.map.n_pairs:
+            lam = self.multipliers
+            gt = self.gaps(x) - lam / P0                     # true overlaps (-inf: a curve point not owned)
+            load = penalty_law(np.where(np.isfinite(gt), gt + lam / P0, 0.0), P0, self.onset)[1]
+            eps = self.onset
+            # the shifted overlap that carries the same load at P1 (the inverse of φ')
+            g1 = load / P1 + 0.5 * eps if eps > 0 else load / P1
+            if eps > 0:
+                g1 = np.where(load < 0.5 * P1 * eps, np.sqrt(2.0 * eps * load / P1), g1)
+            fin = np.isfinite(gt)
+            new = np.where(fin, np.where(load > 0, P1 * (g1 - np.where(fin, gt, 0.0)), lam * (P1 / P0)), 0.0)
+            # a point's rows share its multiplier (those where it is not owned take the owner's)
+            self.multipliers = gather_by_key(self._keys, self._keys, new).reshape(lam.shape)
+        from dataclasses import replace
+
+        self.params = replace(self.params, penalty=P1)
+        if self.map is not None and self.map.n_pairs:
+            R = self.mesh.radius
+            self.kappa = hertz_kappa(effective_radius(R[self.map.fibril_plus], R[self.map.fibril_minus]), P1,
+                                     self.E_star)
+
     # ------------------------------------------------------------------ geometry
     def set_onset(self, fraction: float) -> None:
         """Onset width of the penalty law as a fraction of the smallest radius (0: linear)."""
@@ -448,13 +487,27 @@ class ContactTerm:
     def conductance_law(self, g, field: str, kappa):
         """Conductance per unit length and its derivative in g, ``(k, dk/dg)``, of the
         field's contact law at the law's overlaps ``g``: ``c_C a(g)`` (Hertz width) or the
-        Holm a-spot law ``c_H φ'(g)`` (line load φ'). Zero where g <= 0."""
+        Holm a-spot law ``c_H φ'(g)`` (line load φ'). Zero where g <= 0. With multipliers
+        the width is ``line_load_width`` (Hertz's width of the line load)."""
         coef = self.law_coef[field]
         if self.holm:
             _, f1, f2 = penalty_law(g, self.params.penalty, self.onset)
             return coef * f1, coef * f2
+        if self.augmented:
+            a, da = self.line_load_width(g, kappa)
+            return coef * a, coef * da
         a, da = hertz_width(np.where(g > 0.0, g, 0.0), kappa, self.g_eps)
         return coef * a, coef * da
+
+    def line_load_width(self, g, kappa):
+        """``(a, da/dg)``: Hertz's width ``sqrt(4 R* p / (pi E*))`` of the line load
+        ``p = φ'(g)`` (with multipliers ``λ + P* g_true``), regularised in the load,
+        ``a = c p / sqrt(p + load_eps)`` (``hertz_width`` of p), c = kappa / sqrt(P*). A
+        function of the load alone, so the impenetrable limit's width does not depend on P*
+        (for the linear law and ``g_eps = 0`` it is ``kappa sqrt(g)``, the penalty's)."""
+        _, p, dp = penalty_law(g, self.params.penalty, self.onset)
+        a, da = hertz_width(p, np.asarray(kappa, float) / np.sqrt(float(self.params.penalty)), self.load_eps)
+        return a, da * dp
 
     # ------------------------------------------------------------------ forms
     def forms(self, x, w, jacobian: bool = True):
@@ -498,8 +551,8 @@ class ContactTerm:
             u_minus = u[conn[mpair]]
             if f in self.field_jumps and self.map.shift is not None:
                 u_minus = u_minus + (self.map.shift[act] @ self.field_jumps[f])[:, None]
-            if self.holm:
-                width = self.conductance_law(geo.g, f, None)
+            if self.holm or self.augmented:
+                width = self.conductance_law(geo.g, f, self.kappa[act][:, None])
                 R, Ju, JX = scalar_jump(geo, self.mesh.order, u[conn[epair]], u_minus, wgt, 1.0,
                                         self.kappa[act], self.g_eps, jacobian, width=width)
             else:
@@ -634,7 +687,8 @@ class ContactTerm:
         pen = np.where(active, pen, 0.0)
         R = self.mesh.radius
         rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])[self.row_pair]
-        a, _ = hertz_width(g, self.kappa[self.row_pair][:, None], self.g_eps)
+        kap = self.kappa[self.row_pair][:, None]
+        a = self.line_load_width(g, kap)[0] if self.augmented else hertz_width(g, kap, self.g_eps)[0]
         w = np.broadcast_to(np.asarray(self.weight, float).reshape(g.shape[0], -1), g.shape)
         out.update(active_pairs=int(self._pairs_of_rows(active).size), active_points=int(active.sum()),
                    max_overlap=float(max(pen.max(), 0.0)), max_overlap_over_R=float(max((pen / rmin[:, None]).max(), 0.0)),
@@ -677,7 +731,7 @@ class ContactTerm:
         if self.holm:
             Gp = (w * self.conductance_law(g, field, kap)[0]).sum(axis=1)
         else:
-            a, _ = hertz_width(g, kap, self.g_eps)
+            a = self.line_load_width(g, kap)[0] if self.augmented else hertz_width(g, kap, self.g_eps)[0]
             Gp = (w * self.law_coef[field] * a).sum(axis=1)
         nf = self.mesh.n_fibrils
         pr = self.row_pair
