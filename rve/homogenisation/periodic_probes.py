@@ -38,6 +38,7 @@ from ..model import BeamModel, ContactSystem, Couplings
 from ..model.periodic import PeriodicSystem
 from ..solvers.static import static_solve
 from .periodic import cell_gradient, cell_ties
+from .periodic_resistances import cell_resistances
 from .probe_result import ProbeResult, _length_weights, conduction_material
 
 __all__ = ["field_solve", "solve_field_probe"]
@@ -175,6 +176,8 @@ def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False):
                  "transverse_current_per_width_A_per_mm": j_side, "sheet_resistance_ohm": res.resistance}
     if sol["T"] is not None:
         res.extra["joule_power_per_area_W_per_mm2"] = sol["joule_power"] / area
+    # the R_y of the yarn family along the field and the cell's R_c (docs/periodic.md)
+    res.extra.update(cell_resistances(cfg, fab, mesh, xn, {"x": "warp", "y": "weft"}[probe.field]))
     if sol["T"] is not None:
         res.temperature_max = float(sol["T"].max())
         res.temperature_mean = 0.0
