@@ -117,3 +117,82 @@ def test_follow_branch_by_continuation():
     out2, info2 = follow_branch(solve, out, 0.2, 0.5, energy, inertia=inertia, settings=s, arc=arc)
     assert info2["kept"] == "naive" and out2.x == naive.x
     assert info2["limit_points_passed"] == 2 and info2["arc"]["converged"]
+
+
+def _ci_periodic_cell():
+    from rve.config.rve import RVEConfig
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.strain import relax_fabric
+
+    cfg = RVEConfig(scene="rve", boundary="periodic", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 6},
+                    contact={"onset": 0.05}, strain={"total": 0.1, "steps": 2, "static_atol": 1e-8})
+    fab, mesh = fabric_and_mesh(cfg)
+    x0, _, info = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    assert info["converged"]
+    return cfg, fab, mesh, x0
+
+
+def test_periodic_weave_continuation_is_one_branch_and_reproducible():
+    """The CI-size periodic plain cell in shear: the naive step (energy minimisation from
+    the affine predictor) drops into a minimum 2e-4 N mm below the branch the relaxed state
+    is on, which has negative pivots. The continuation follows that branch: its energy
+    change is the path integral of the Hill-Mandel work rate (far below the drop), its
+    inertia does not change along it, its end is an equilibrium; being a saddle branch it is
+    no table state, so the naive step is kept (a limit point). Two runs are bit-identical."""
+    from rve.homogenisation.branch import StepSolution
+    from rve.homogenisation.continuation import periodic_arc
+    from rve.homogenisation.strain import strain_step
+
+    cfg, fab, mesh, x0 = _ci_periodic_cell()
+    arc = periodic_arc(cfg, fab, mesh, "shear")
+    sol = arc(StepSolution(x0), 0.0, 0.05)
+    a = sol.info["arc"]
+    assert a["converged"] and sol.info["converged"] and sol.info["residual_N"] <= cfg.strain.static_atol
+    inertia = {p["inertia"] for p in a["path"]}
+    assert len(inertia) == 1 and inertia.pop() > 0
+    x1, _, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1)
+    b = info["branch"]
+    assert b["detections"] == 1 and b["kept"] == "naive" and b["limit_points"] == 1 and b["arc"]["unstable"]
+    e_arc = a["path"][-1]["energy"]
+    assert e_arc - info["energy_mJ"] > 0           # the naive step's minimum is below the branch
+    assert abs(a["energy_mismatch"]) < 1e-2 * (e_arc - info["energy_mJ"])
+    again = arc(StepSolution(x0), 0.0, 0.05)
+    assert np.array_equal(again.x, sol.x)
+    x2, _, _ = strain_step(cfg, fab, mesh, x0, x0, "shear", 1)
+    assert np.array_equal(x2, x1)
+
+
+def test_pinned_load_derivative_is_the_strain_derivative_of_the_residual():
+    """``pinned_arc``'s R_eps (the free rows of the tangent times d(end targets)/d eps) is the
+    central difference of the free residual in eps at fixed free dofs (the CI weave)."""
+    from pathlib import Path
+
+    import yaml
+
+    from rve.fabrics.setup import clamped_ends, fabric_and_mesh
+    from rve.homogenisation.continuation import _free
+    from rve.homogenisation.strain import end_targets, mech_system, relax_fabric
+    from rve.homogenisation.sweeps import load_run_config
+
+    spec = yaml.safe_load((Path(__file__).parents[1] / "configs/tests/pipeline_ci.yaml").read_text())["rve"]["runs"]["ci"]
+    cfg = load_run_config(spec)
+    fab, mesh = fabric_and_mesh(cfg)
+    x, _, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    ends, pinned, _ = clamped_ends(fab, mesh)
+    system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, x.reshape(-1))
+    free = _free(system)
+    zero = np.zeros(system.n)
+    assert np.intersect1d(free, pinned).size == 0
+    for mode in ("uniaxial", "shear", "trellis"):
+        def at(eps):
+            xe = x.reshape(-1).copy()
+            xe[pinned] = end_targets(x[ends, :3], mode, eps).reshape(-1)
+            return xe
+        eps, h = 0.01, 1e-6
+        _, Fx, _ = system.evaluate(at(eps), zero, 0.0, jacobian=True)
+        rate = ((end_targets(x[ends, :3], mode, eps + h) - end_targets(x[ends, :3], mode, eps - h)) / (2 * h)).reshape(-1)
+        R_eps = Fx.tocsr()[free][:, pinned] @ rate
+        fd = (system.evaluate(at(eps + h), zero, 0.0, jacobian=False)[0][free]
+              - system.evaluate(at(eps - h), zero, 0.0, jacobian=False)[0][free]) / (2 * h)
+        assert np.abs(R_eps).max() > 0
+        assert np.abs(R_eps - fd).max() <= 1e-6 * np.abs(fd).max(), mode

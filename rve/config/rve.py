@@ -94,6 +94,11 @@ class StrainPath(Section):
                                                                    "(floor: the step / 2^n)")
     branch_state_tol: Length = Field("1e-4 mm", gt=0, description="naive and followed end states closer than this "
                                                                    "(max centroid distance) are one equilibrium")
+    branch_method: Literal["arc_length", "halving"] = Field(
+        "arc_length", description="how a step with a detected jump is followed: pseudo-arclength continuation of "
+                                  "the static equilibria in (dofs, strain), through limit points "
+                                  "(rve.homogenisation.continuation; halving where it fails), or step halving "
+                                  "from the previous state down to branch_max_halvings")
     static_rounds: Integer = Field(1, ge=1, description="static solves, each after a map rebuild ('newton')")
     static_max_iter: Integer = Field(
         1000, ge=1, description="iterations of the static solve (energy: the minimiser's cap; a step that "

@@ -54,7 +54,9 @@ past eps_b with eps increasing and ends by Newton at eps = eps_b from the chord 
 last two points. The end is the state on the one continuous branch from ``start``: it
 depends on the curve of equilibria, not on a step size (tested: two step sizes land on the
 same equilibrium; two runs are bit-identical). The naive state is kept when it is that
-state (as above); otherwise the arc's. A continuation that fails (its step floor, or
+state (as above), and when the continued branch is not a local minimum at its start or its
+end (a negative pivot: a saddle branch is no state of the table; the naive step's
+minimisation is then the physical exit, a limit point); otherwise the arc's. A continuation that fails (its step floor, or
 ``max_steps``) falls back to the halving.
 
 Contract
@@ -408,6 +410,17 @@ def _by_arc(f: _Follower, arc: Callable, start, naive, e_naive, v, eps_a: float,
         log.warning("branch [%g, %g]: the continuation failed; the step is followed by halving", eps_a, eps_b)
         return None
     f.info["limit_points_passed"] = int(ainfo.get("folds") or 0)
+    path = ainfo.get("path") or [{}]
+    unstable = [k for k in (path[0].get("inertia"), ainfo.get("end_inertia")) if k]
+    if unstable:
+        # the branch from the start is not a local minimum there (or no longer at eps_b): no
+        # stable state to follow; the naive step's is the physical one (a limit point)
+        f.info["limit_points"] += 1
+        f.info["arc"]["unstable"] = True
+        log.warning("branch [%g, %g]: the continued branch is unstable (negative pivots %s at its ends); the naive "
+                    "step's state is kept (a limit point)", eps_a, eps_b,
+                    [path[0].get("inertia"), ainfo.get("end_inertia")])
+        return naive
     e_arc = f.evaluate(sol, eps_b)
     gap = float(f.distance(naive.x, sol.x))
     f.info.update({"naive_to_followed_distance": gap, "naive_to_followed_energy": float(e_arc[0] - e_naive[0])})
