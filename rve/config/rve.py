@@ -94,8 +94,11 @@ class StrainPath(Section):
                                                                    "(floor: the step / 2^n)")
     branch_state_tol: Length = Field("1e-4 mm", gt=0, description="naive and followed end states closer than this "
                                                                    "(max centroid distance) are one equilibrium")
+    branch_persist_ratio: Dimensionless = Field(
+        0.5, ge=0, description="jump test: a failing half that keeps this share of its parent's energy mismatch holds "
+                               "the jump itself (a limit point, not halved further; 0: halve down to the floor)")
     branch_method: Literal["arc_length", "halving"] = Field(
-        "arc_length", description="how a step with a detected jump is followed: pseudo-arclength continuation of "
+        "halving", description="how a step with a detected jump is followed: pseudo-arclength continuation of "
                                   "the static equilibria in (dofs, strain), through limit points "
                                   "(rve.homogenisation.continuation; halving where it fails), or step halving "
                                   "from the previous state down to branch_max_halvings")

@@ -28,7 +28,10 @@ On detection (``follow_branch``) the step is split in two halves, each solved fr
 before it and checked the same way, recursively down to ``max_halvings`` (the floor
 d / 2^max_halvings). A half whose mismatch is at most a quarter of its parent's is resolved
 (``converging``): the trapezoid error of a smooth branch falls as d^3 (1/8 per halving),
-while a jump keeps the energy it releases in the half that holds it. The followed end state is compared with the naive one: when both are
+while a jump keeps the energy it releases in the half that holds it: a failing half whose
+mismatch is at least ``persist_ratio`` (0.5) of its parent's holds the jump itself and is
+accepted as a limit point without halving further (each level would cost two more step
+solves and only narrow where the jump happens; ``persist_ratio = 0``: down to the floor). The followed end state is compared with the naive one: when both are
 the same equilibrium (``distance`` below ``state_tol`` and the energies equal within the
 criterion's tolerance) the naive state is kept, so a false alarm changes no bit of the
 result; otherwise the followed state replaces it (a branch jump was avoided). A sub-step at
@@ -51,7 +54,9 @@ than ``min_turn_cos`` is halved (it could cut across a fold); a sign change of t
 limit point in eps: the path turns back, on the branch whose inertia the factorisation
 counts, and turns forward again at the next). The continuation stops at the first point
 past eps_b with eps increasing and ends by Newton at eps = eps_b from the chord between the
-last two points. The end is the state on the one continuous branch from ``start``: it
+last two points. A sharp turn over a step shorter than ``kink_fraction`` of the first is a
+corner of the curve (the contact law is piecewise smooth), accepted and counted (``kinks``).
+The end is the state on the one continuous branch from ``start``: it
 depends on the curve of equilibria, not on a step size (tested: two step sizes land on the
 same equilibrium; two runs are bit-identical). The naive state is kept when it is that
 state (as above), and when the continued branch is not a local minimum at its start or its
@@ -79,7 +84,7 @@ settings=BranchSettings(), arc=None) -> (StepSolution, info)``, with
 ``ArcProblem`` of callables: ``residual(x, eps)``, ``tangent(x, eps) -> (K, R_eps)``,
 ``factor(K) -> (solve, negative_count)``, ``rebuild(x, eps)`` (between arc steps: the
 contact map), ``energy(x, eps) -> (Pi, Pi_eps)``, and ``atol`` (|R|_inf of an equilibrium).
-Its info: ``converged``, ``arc_steps``, ``folds`` (limit points passed), ``rejected``,
+Its info: ``converged``, ``arc_steps``, ``folds`` (limit points passed), ``kinks``, ``rejected``,
 ``factorizations``, ``path`` (eps, negative count, Pi, Pi_eps of every accepted point),
 ``end_inertia`` and ``energy_mismatch`` (the energy change along the path minus the
 trapezoid work of Pi_eps over it: ~0 on one continuous branch).
@@ -118,6 +123,7 @@ class BranchSettings:
     max_halvings: int = 3           # recursion depth: floor d / 2^max_halvings
     state_tol: float = 1e-6         # distance below which naive and followed states are one
     method: str = "halving"         # "arc_length": a detected step by continuation (with ``arc``)
+    persist_ratio: float = 0.5      # a failing half with this share of its parent's mismatch is the jump
 
 
 @dataclass(frozen=True)
@@ -126,10 +132,13 @@ class ArcSettings:
 
     steps: int = 4                  # first arc step: the interval's scaled length / steps
     max_steps: int = 60             # accepted arc steps at most
-    newton_max_iter: int = 10       # corrector iterations per arc step
+    newton_max_iter: int = 20       # corrector iterations per arc step
+    backtracks: int = 4             # halvings of a corrector step that does not lower |R|
+    path_atol_factor: float = 1.0   # the path's points are equilibria to this x the problem's atol
     grow: float = 1.5               # step growth after an easy corrector (<= 3 iterations)
     min_step_fraction: float = 1e-3  # floor of the arc step, of the first one
-    min_turn_cos: float = 0.95      # a step whose tangent turns further (cos below) is halved
+    min_turn_cos: float = 0.95      # a step whose tangent turns further (cos below) is halved,
+    kink_fraction: float = 0.02     # unless it is this short (of the first): a corner, accepted
 
 
 @dataclass
@@ -219,6 +228,14 @@ class _Follower:
                 # halving; a jump keeps its released energy in the half that holds it)
                 self.info["converging"] += 1
                 self.info["checks"][-1]["converging"] = True
+            elif (v["jump"] and self.s.persist_ratio > 0 and "energy" in v["why"]
+                  and abs(v["mismatch"]) >= self.s.persist_ratio * abs(parent_mismatch)):
+                # the half holds the parent's whole mismatch: the energy a jump releases, which
+                # no shorter step removes; halving further would only narrow where it happens
+                self.info["limit_points"] += 1
+                self.info["checks"][-1]["persists"] = True
+                log.warning("branch: the jump over [%g, %g] keeps its parent's mismatch (%.3e of %.3e N mm): a limit "
+                            "point of the branch (accepted)", lo, hi, v["mismatch"], parent_mismatch)
             elif v["jump"]:
                 if depth < self.s.max_halvings:
                     sol, e_sol = self.follow(out, e_out, lo, hi, depth + 1, v["mismatch"])
@@ -271,7 +288,7 @@ class _Arc:
 
     def __init__(self, problem: ArcProblem, settings: ArcSettings):
         self.p, self.s = problem, settings
-        self.info = {"converged": False, "arc_steps": 0, "folds": 0, "rejected": 0, "factorizations": 0,
+        self.info = {"converged": False, "arc_steps": 0, "folds": 0, "kinks": 0, "rejected": 0, "factorizations": 0,
                      "newton_iterations": 0, "path": []}
 
     def factor(self, x, eps):
@@ -305,30 +322,50 @@ class _Arc:
         ``(x, eps, iterations)`` or None."""
         tx, te = t
         x, eps = xp.copy(), float(ep)
+        atol = self.s.path_atol_factor * self.p.atol
+        history = []
         for it in range(self.s.newton_max_iter + 1):
             R = np.asarray(self.p.residual(x, eps), float)
             g = float(tx @ (x - xp)) + self.xi2 * te * (eps - ep)
             if not np.all(np.isfinite(R)):
                 return None
-            if np.max(np.abs(R)) <= self.p.atol and abs(g) <= 1e-12 * max(1.0, self.scale):
+            r = float(np.max(np.abs(R)))
+            log.debug("arc corrector it=%d |R|=%.3e g=%.3e eps=%.6g", it, r, g, eps)
+            if r <= atol and abs(g) <= 1e-12 * max(1.0, self.scale):
                 return x, eps, it
-            if it == self.s.newton_max_iter:
+            history.append(r)
+            # no progress over 4 iterations: the residual is not smooth here (a contact
+            # point crossing an element end); a shorter arc step may pass it
+            if it == self.s.newton_max_iter or (len(history) > 4 and r > 0.5 * history[-5]):
                 return None
             solve, R_eps, _ = self.factor(x, eps)
             a, b = solve(R), solve(R_eps)
             d_eps = (float(tx @ a) - g) / (self.xi2 * te - float(tx @ b))
-            x = x - a - d_eps * b
-            eps += d_eps
+            dx = -a - d_eps * b
+            x, eps = self.backtrack(x, eps, dx, d_eps, float(np.linalg.norm(R)), xp, ep, t)
             self.info["newton_iterations"] += 1
         return None
 
+    def backtrack(self, x, eps, dx, d_eps, r0, xp, ep, t):
+        """The Newton step, halved (up to ``backtracks`` times) until |R| decreases: the
+        contact law is only piecewise smooth, where a full step can overshoot. The
+        hyperplane is linear, so every fraction of the step keeps its residual as Newton
+        made it."""
+        for k in range(self.s.backtracks + 1):
+            lam = 0.5 ** k
+            xt, et = x + lam * dx, eps + lam * d_eps
+            R = np.asarray(self.p.residual(xt, et), float)
+            if np.all(np.isfinite(R)) and float(np.linalg.norm(R)) < r0:
+                return xt, et
+        return xt, et
+
     def newton_at(self, x, eps):
-        """Newton at fixed eps (the end of the path): x or None."""
+        """Newton at fixed eps (the end of the path, to the path's tolerance): x or None."""
         for _ in range(self.s.newton_max_iter + 1):
             R = np.asarray(self.p.residual(x, eps), float)
             if not np.all(np.isfinite(R)):
                 return None
-            if np.max(np.abs(R)) <= self.p.atol:
+            if np.max(np.abs(R)) <= self.s.path_atol_factor * self.p.atol:
                 return x
             solve, _, _ = self.factor(x, eps)
             x = x - solve(R)
@@ -354,12 +391,14 @@ def continue_arc(problem: ArcProblem, x0, eps0: float, eps1: float, settings: Ar
     arc.record(x, eps, neg)
     t = arc.tangent(solve, R_eps, None)
     ds = float(np.sqrt(2.0 * arc.xi2)) * (eps1 - eps0) / settings.steps
+    ds_first = ds
     ds_min = settings.min_step_fraction * ds
     info = arc.info
     while info["arc_steps"] < settings.max_steps:
         got = arc.correct(x + ds * t[0], eps + ds * t[1], t)
         if got is None:
             info["rejected"] += 1
+            log.info("arc-length: corrector failed from eps %g (ds %.3e): halved", eps, ds)
             ds *= 0.5
             if ds < ds_min:
                 log.warning("arc-length: step floor reached at eps %g", eps)
@@ -368,10 +407,16 @@ def continue_arc(problem: ArcProblem, x0, eps0: float, eps1: float, settings: Ar
         xc, ec, iters = got
         solve, R_eps, neg = arc.factor(xc, ec)
         t_new = arc.tangent(solve, R_eps, t)
-        if float(t_new[0] @ t[0]) + arc.xi2 * t_new[1] * t[1] < settings.min_turn_cos:
+        turn = float(t_new[0] @ t[0]) + arc.xi2 * t_new[1] * t[1]
+        if turn < settings.min_turn_cos and ds <= settings.kink_fraction * ds_first:
+            # a sharp turn over a short step: a corner of the curve (the contact law is only
+            # piecewise smooth), not a fold cut across: accepted
+            info["kinks"] += 1
+        elif turn < settings.min_turn_cos:
             # the tangent turned too far in one step: it may have cut across a fold onto
             # another part of the curve
             info["rejected"] += 1
+            log.info("arc-length: the tangent turned too far from eps %g (ds %.3e): halved", eps, ds)
             ds *= 0.5
             if ds < ds_min:
                 log.warning("arc-length: step floor reached at eps %g (the curve turns sharply)", eps)
@@ -404,7 +449,7 @@ def _by_arc(f: _Follower, arc: Callable, start, naive, e_naive, v, eps_a: float,
     continuation's end, else the continuation's; None when the continuation failed."""
     sol = arc(start, eps_a, eps_b)
     ainfo = (sol.info.get("arc") if sol is not None else None) or {}
-    f.info["arc"] = {k: ainfo.get(k) for k in ("converged", "arc_steps", "folds", "rejected", "factorizations",
+    f.info["arc"] = {k: ainfo.get(k) for k in ("converged", "arc_steps", "folds", "kinks", "rejected", "factorizations",
                                                "newton_iterations", "end_inertia", "energy_mismatch", "path")}
     if sol is None or not ainfo.get("converged"):
         log.warning("branch [%g, %g]: the continuation failed; the step is followed by halving", eps_a, eps_b)

@@ -12,7 +12,9 @@ The load parameter is the macro strain eps of the mode; the unknowns are the fre
   dofs and contact map (step 1e-7: its error is below the corrector's tolerance, and R_eps
   only steers the corrector, whose converged point is R = 0 whatever R_eps is).
 
-Between arc steps the contact map is rebuilt at the accepted point; the end state goes
+Between arc steps the contact map is rebuilt at the accepted point. The path's points are
+equilibria to ``ARC_SETTINGS.path_atol_factor`` x the static tolerance (the chord contact's
+force is not smooth where a contact point crosses an element end); the end state goes
 through the cell's static polish (capped Newton with map rebuilds, ``cell_statics.static_polish``:
 the nearest equilibrium, stable or not) so that it is an equilibrium of the map built at
 it. The negative-pivot count of every factorisation is the inertia of the path's points
@@ -39,7 +41,12 @@ from ..solvers.linear import factor_inertia, factorize
 from .branch import ArcProblem, ArcSettings, StepSolution, continue_arc
 from .cell_statics import free_residual, static_polish
 
-__all__ = ["pinned_arc", "periodic_arc"]
+__all__ = ["pinned_arc", "periodic_arc", "ARC_SETTINGS"]
+
+#: the cells' continuation: the path's points equilibria to 1e4 x the static tolerance (1e-5 N
+#: at the default 1e-9 N: the chord contact's force is not smooth where a contact point
+#: crosses an element end, and Newton stalls there at ~1e-6 N), the end polished to it
+ARC_SETTINGS = ArcSettings(path_atol_factor=1e5)
 
 
 def _factor(K):
@@ -67,7 +74,7 @@ def _finish(system, x, sp_, info, t0, arc_info):
     return xs
 
 
-def pinned_arc(cfg, fab, mesh, origin, mode: str, settings: ArcSettings = ArcSettings()):
+def pinned_arc(cfg, fab, mesh, origin, mode: str, settings: ArcSettings = ARC_SETTINGS):
     """The pinned cell's continuation (module docstring)."""
     from .strain import end_targets, mech_system, pinned_energy
 
@@ -118,7 +125,7 @@ def pinned_arc(cfg, fab, mesh, origin, mode: str, settings: ArcSettings = ArcSet
     return arc
 
 
-def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ArcSettings()):
+def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS):
     """The periodic cell's continuation (module docstring)."""
     from .periodic import cell_reactions, full_state, macro_gradient, periodic_system
 

@@ -45,10 +45,9 @@ centroids, contact included).
 With ``strain.follow_branch`` the step goes through ``rve.homogenisation.branch.follow_branch``
 (one equilibrium path): the energy balance of the step (potential change against the clamps'
 work, ``pinned_energy``) and the minimiser's inertia verdict are tested, and a step that
-jumped to another equilibrium is followed from the previous state by pseudo-arclength
-continuation through its limit points (``strain.branch_method: arc_length``,
-``rve.homogenisation.continuation``) or in halves (``halving``, and where the continuation
-fails); the record is ``info["branch"]`` (docs/table_accuracy.md, "One equilibrium path").
+jumped to another equilibrium is followed from the previous state in halves
+(``strain.branch_method: halving``, the default) or by pseudo-arclength continuation through
+its limit points (``arc_length``, ``rve.homogenisation.continuation``; halving where it fails); the record is ``info["branch"]`` (docs/table_accuracy.md, "One equilibrium path").
 
 If the driven phase fails (step control exhausted), the remaining part of the field is
 applied kinematically (an affine move of every node) and the failure is recorded in
@@ -286,7 +285,8 @@ def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=
         return float(np.abs(np.asarray(xa).reshape(nn, 9)[:, :3] - np.asarray(xb).reshape(nn, 9)[:, :3]).max())
 
     settings = BranchSettings(energy_rtol=float(sp_.branch_energy_rtol), max_halvings=int(sp_.branch_max_halvings),
-                              state_tol=float(sp_.branch_state_tol), method=str(sp_.branch_method))
+                              state_tol=float(sp_.branch_state_tol), method=str(sp_.branch_method),
+                              persist_ratio=float(sp_.branch_persist_ratio))
     start = StepSolution(np.array(x_prev, float).reshape(nn, 9))
     sol, binfo = follow_branch(solve, start, eps_prev, eps, energy, inertia=inertia, distance=distance,
                                settings=settings, arc=arc)
