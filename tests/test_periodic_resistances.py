@@ -17,12 +17,22 @@ import pytest
 
 from rve.config.rve import RVEConfig
 from rve.fem.mesh import fibril_mesh, straight_fibril
-from rve.homogenisation.periodic_resistances import cell_resistances, exchange_resistance, family_mesh
+from rve.homogenisation.periodic_probes import CONDUCTION_GRAPH
+from rve.homogenisation.periodic_resistances import cell_resistances as _cell_resistances, exchange_resistance as _exchange
+from rve.homogenisation.periodic_resistances import family_mesh
 from rve.homogenisation.probes import electric_solve
 from rve.fabrics.setup import contact_params
 from rve.homogenisation.probe_result import conduction_material
 
 RADIUS, SIGMA = 0.15, 10.0
+
+
+def cell_resistances(cfg, fab, mesh, x, family):
+    return _cell_resistances(cfg, fab, mesh, x, family, CONDUCTION_GRAPH)
+
+
+def exchange_resistance(cfg, fab, mesh, x):
+    return _exchange(cfg, fab, mesh, x, CONDUCTION_GRAPH)
 
 
 def _cfg(sigma=SIGMA):

@@ -22,7 +22,8 @@ it. The negative-pivot count of every factorisation is the inertia of the path's
 
 Contract
 --------
-``pinned_arc(cfg, fab, mesh, origin, mode)`` and ``periodic_arc(cfg, fab, mesh, mode)``
+``pinned_arc(cfg, fab, mesh, origin, mode, cell)`` (``cell``: the strain path's system,
+end targets and energy) and ``periodic_arc(cfg, fab, mesh, mode)``
 return ``arc(start, eps_from, eps_to) -> StepSolution | None`` (``branch.follow_branch``'s
 ``arc``): ``start.x`` the full nodal state (n_nodes, 9); the solution's ``x`` likewise,
 ``extra`` its system (pinned: the mechanics system with the clamps; periodic: the full
@@ -74,19 +75,22 @@ def _finish(system, x, sp_, info, t0, arc_info):
     return xs
 
 
-def pinned_arc(cfg, fab, mesh, origin, mode: str, settings: ArcSettings = ARC_SETTINGS):
-    """The pinned cell's continuation (module docstring)."""
-    from .strain import end_targets, mech_system, pinned_energy
-
+def pinned_arc(cfg, fab, mesh, origin, mode: str, cell, settings: ArcSettings = ARC_SETTINGS):
+    """The pinned cell's continuation (module docstring). ``cell``: the strain path's
+    ``system(x)`` (the mechanics system with the clamps at the flat state x),
+    ``targets(origin_ends, mode, eps)`` (the pinned end positions) and ``energy(system, x,
+    eps)`` (``(Pi, dPi/deps)``), i.e. ``strain.mech_system``, ``end_targets`` and
+    ``pinned_energy``."""
     sp_ = cfg.strain
     origin = np.asarray(origin, float)
     ends, pinned, _ = clamped_ends(fab, mesh)
     origin_ends = origin[ends, :3]
+    end_targets = cell.targets
 
     def arc(start, e_from, e_to):
         t0 = time.perf_counter()
         x0 = np.asarray(start.x, float).reshape(-1)
-        system = mech_system(fab, mesh, cfg, sp_.relax_damping, x0)
+        system = cell.system(x0)
         if system.augmented:
             return None
         free = _free(system)
@@ -112,7 +116,7 @@ def pinned_arc(cfg, fab, mesh, origin, mode: str, settings: ArcSettings = ARC_SE
             return rows[:, free], rows[:, pinned] @ rate(eps)
 
         problem = ArcProblem(residual, tangent, _factor, lambda xf, eps: system.rebuild(full(xf, eps)),
-                             lambda xf, eps: pinned_energy(fab, mesh, system, full(xf, eps), origin, mode, eps),
+                             lambda xf, eps: cell.energy(system, full(xf, eps), eps),
                              atol=float(sp_.static_atol))
         system.rebuild(x0)
         xf, ainfo = continue_arc(problem, x0[free], float(e_from), float(e_to), settings)

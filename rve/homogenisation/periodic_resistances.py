@@ -32,9 +32,12 @@ both intensive: a 1 x 1 and a 2 x 2 repeat of one state give the same values (te
 
 Contract
 --------
-``family_sheet_resistance(cfg, fab, mesh, xn, family) -> dict`` (``family`` warp | weft,
-the field along x | y), ``exchange_resistance(cfg, fab, mesh, xn) -> dict``, and
-``cell_resistances(cfg, fab, mesh, xn, family)``: the record a field probe carries
+``family_sheet_resistance(cfg, fab, mesh, xn, family, graph) -> float`` (``family`` warp |
+weft, the field along x | y), ``exchange_resistance(cfg, fab, mesh, xn, graph) -> dict``,
+and ``cell_resistances(cfg, fab, mesh, xn, family, graph)``, with ``graph`` the field
+probes' conduction graph (``components(full, mesh, x)``: the component of every fibril,
+fibrils joined by active contacts; ``references(ties, mesh, comp)``: one reduced potential
+reference node per component; ``periodic_probes.CONDUCTION_GRAPH``): the record a field probe carries
 (``periodic_probes.solve_field_probe``: the field-x probe the warp family, the field-y
 probe the weft family; both the exchange): ``{"yarn_family", "layer_sheet_resistance_ohm",
 "yarn_resistance_ohm", "exchange_resistance_ohm_mm2", "contact_resistance_ohm",
@@ -130,20 +133,7 @@ def _reduced_system(full, ties, x, F, E, load, refs, contact_images):
     return psys, lay
 
 
-def _components(full, mesh, x) -> np.ndarray:
-    """Conduction component of every fibril (fibrils joined by an active contact pair)."""
-    from .periodic_probes import _components as components
-
-    return components(full, mesh, x)
-
-
-def _refs(ties, mesh, comp) -> np.ndarray:
-    from .periodic_probes import _reference_nodes
-
-    return _reference_nodes(ties, mesh, comp)
-
-
-def family_sheet_resistance(cfg, fab, mesh, xn, family: str) -> float:
+def family_sheet_resistance(cfg, fab, mesh, xn, family: str, graph) -> float:
     """r_y (ohm per reference square) of the yarn family ``family`` (module docstring): the
     field probe along the family on its fibrils alone."""
     axis = FAMILY_AXIS[family]
@@ -151,23 +141,23 @@ def family_sheet_resistance(cfg, fab, mesh, xn, family: str) -> float:
     ties = fibril_end_ties(sub, _periods(fab))
     F = cell_gradient(fab, mesh, xn)
     full, x = _conduction_system(cfg, sub, np.asarray(xn, float)[nodes])
-    comp = _components(full, sub, x)
+    comp = graph.components(full, sub, x)
     E = np.zeros(3)
     E[axis] = float(cfg.probe_solver.voltage) / (2.0 * float(fab.half_widths[axis]))
-    psys, _ = _reduced_system(full, ties, x, F, E, None, _refs(ties, sub, comp), cfg.cell.contact_images)
+    psys, _ = _reduced_system(full, ties, x, F, E, None, graph.references(ties, sub, comp), cfg.cell.contact_images)
     ps = cfg.probe_solver
     xs, ws = _solve(psys, x, {"atol": ps.newton_atol, "rtol": ps.newton_rtol}, f"{family} layer")
     j = float(psys.macro_current(xs, ws)[axis])
     return float(E[axis] / j) if j != 0.0 else float("inf")
 
 
-def exchange_resistance(cfg, fab, mesh, xn) -> dict:
+def exchange_resistance(cfg, fab, mesh, xn, graph) -> dict:
     """r_c (ohm mm^2) of the cell (module docstring): ``{"exchange_resistance_ohm_mm2",
     "injected_A", "layer_potential_drop_V", "reference_current_A"}`` (the last: what the
     potential references carry, ~0 as the sources balance)."""
     full, x = _conduction_system(cfg, mesh, xn)
     ties = fibril_end_ties(mesh, _periods(fab))
-    comp = _components(full, mesh, x)
+    comp = graph.components(full, mesh, x)
     direction = np.asarray(fab.fibril_direction)
     warp_f, weft_f = direction == "warp", direction == "weft"
     both = np.array([warp_f[comp == c].any() and weft_f[comp == c].any() for c in range(comp.max() + 1)])
@@ -187,7 +177,7 @@ def exchange_resistance(cfg, fab, mesh, xn) -> dict:
     flay = full.layout
     load = np.zeros(full.n)
     load[flay.dofs("V")] = -(inj - ext)    # the residual is the current leaving a node
-    refs = _refs(ties, mesh, comp)
+    refs = graph.references(ties, mesh, comp)
     psys, lay = _reduced_system(full, ties, x, cell_gradient(fab, mesh, xn), np.zeros(3), load, refs,
                                 cfg.cell.contact_images)
     ps = cfg.probe_solver
@@ -201,12 +191,12 @@ def exchange_resistance(cfg, fab, mesh, xn) -> dict:
             "layer_potential_drop_V": drop, "reference_current_A": float(np.abs(R_red[lay.dofs("V", refs)]).sum())}
 
 
-def cell_resistances(cfg, fab, mesh, xn, family: str) -> dict:
+def cell_resistances(cfg, fab, mesh, xn, family: str, graph) -> dict:
     """The R_y of ``family`` and the R_c of the cell, per width and as network resistors
     (module docstring)."""
     a_x, a_y = pitches(fab)
-    r_y = family_sheet_resistance(cfg, fab, mesh, xn, family)
-    ex = exchange_resistance(cfg, fab, mesh, xn)
+    r_y = family_sheet_resistance(cfg, fab, mesh, xn, family, graph)
+    ex = exchange_resistance(cfg, fab, mesh, xn, graph)
     r_c = ex["exchange_resistance_ohm_mm2"]
     along, across = (a_x, a_y) if family == "warp" else (a_y, a_x)
     return {"yarn_family": family, "layer_sheet_resistance_ohm": r_y, "yarn_resistance_ohm": r_y * along / across,

@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import logging
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -64,6 +65,7 @@ from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .continuation import periodic_arc, pinned_arc
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
@@ -249,9 +251,13 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
     levels = strain_levels(cfg)
     eps_prev, eps = float(levels[step - 1]), float(levels[step])
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
-        from .continuation import periodic_arc, pinned_arc
-
-        arc = periodic_arc(cfg, fab, mesh, mode) if periodic else pinned_arc(cfg, fab, mesh, origin, mode)
+        if periodic:
+            arc = periodic_arc(cfg, fab, mesh, mode)
+        else:
+            cell = SimpleNamespace(system=lambda xf: mech_system(fab, mesh, cfg, sp_.relax_damping, xf),
+                                   targets=end_targets,
+                                   energy=lambda system, xf, e: pinned_energy(fab, mesh, system, xf, origin, mode, e))
+            arc = pinned_arc(cfg, fab, mesh, origin, mode, cell)
         return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy, multipliers, arc)
     return part(x_prev, eps_prev, eps, whole=True)
 
