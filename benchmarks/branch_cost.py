@@ -100,7 +100,8 @@ def _worker(states: Path, run: str, mode: str, step: int, overrides: list) -> in
     a = b.get("arc") or {}
     print(json.dumps({"step_wall_s": time.perf_counter() - t0, "x_sha": hashlib.sha256(np.ascontiguousarray(x)).hexdigest()[:16],
                       "residual_N": info.get("residual_N"), **{k: b.get(k) for k in COUNTS + ("limit_points_passed",)},
-                      "kept": b.get("kept"), "arc_steps": a.get("arc_steps"), "arc_folds": a.get("folds")}))
+                      "kept": b.get("kept"), "arc_steps": a.get("arc_steps"), "arc_folds": a.get("folds"),
+                      "arc_converged": a.get("converged"), "arc_reached": ((a.get("path") or [{}])[-1]).get("eps")}))
     return 0
 
 
@@ -126,6 +127,9 @@ def measure(states: Path, run: str, steps: list, methods: list) -> int:
             if "error" in r:
                 print(f"| {mode} | {step} | {name} | error: {r['error']} |")
                 continue
+            if r.get("arc_converged") is not None:
+                print(f"  continuation ({mode} {step}): converged {r['arc_converged']}, {r['arc_steps']} arc steps, "
+                      f"{r['arc_folds']} folds, last point at eps {r['arc_reached']}")
             print(f"| {mode} | {step} | {name} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r.get('detections')} | "
                   f"{r.get('limit_points')} | {r.get('limit_points_passed')} | {r.get('kept')} | {r['x_sha']} |",
                   flush=True)

@@ -27,8 +27,9 @@ end targets and energy) and ``periodic_arc(cfg, fab, mesh, mode)``
 return ``arc(start, eps_from, eps_to) -> StepSolution | None`` (``branch.follow_branch``'s
 ``arc``): ``start.x`` the full nodal state (n_nodes, 9); the solution's ``x`` likewise,
 ``extra`` its system (pinned: the mechanics system with the clamps; periodic: the full
-system), ``info`` a step record (``converged``, ``residual_N``, ``static``, ``arc``). None when
-the continuation failed or the contact law is the augmented Lagrangian (its multipliers
+system), ``info`` a step record (``converged``, ``residual_N``, ``static``, ``arc``); a failed
+continuation gives ``x`` None and only ``info["arc"]``. None when the contact law is the
+augmented Lagrangian (its multipliers
 would be frozen along the path; the caller falls back to halving).
 """
 from __future__ import annotations
@@ -120,8 +121,8 @@ def pinned_arc(cfg, fab, mesh, origin, mode: str, cell, settings: ArcSettings = 
                              atol=float(sp_.static_atol))
         system.rebuild(x0)
         xf, ainfo = continue_arc(problem, x0[free], float(e_from), float(e_to), settings)
-        if xf is None:
-            return None
+        if xf is None:   # failed: its record only
+            return StepSolution(None, {"arc": ainfo})
         info = {"mode": mode, "strain": float(e_to), "strain_increment": float(e_to - e_from)}
         xs = _finish(system, full(xf, float(e_to)), sp_, info, t0, ainfo)
         return StepSolution(xs.reshape(mesh.n_nodes, 9), info, system)
@@ -180,8 +181,8 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
 
         problem = ArcProblem(residual, tangent, _factor, rebuild, energy, atol=float(sp_.static_atol))
         xf, ainfo = continue_arc(problem, base[free], float(e_from), float(e_to), settings)
-        if xf is None:
-            return None
+        if xf is None:   # failed: its record only
+            return StepSolution(None, {"arc": ainfo})
         load(float(e_to))
         psys.rebuild(red(xf))
         F_end = macro_gradient(mode, float(e_to))
