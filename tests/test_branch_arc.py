@@ -197,3 +197,21 @@ def test_pinned_load_derivative_is_the_strain_derivative_of_the_residual():
               - system.evaluate(at(eps - h), zero, 0.0, jacobian=False)[0][free]) / (2 * h)
         assert np.abs(R_eps).max() > 0
         assert np.abs(R_eps - fd).max() <= 1e-6 * np.abs(fd).max(), mode
+
+
+def test_table_attributes_count_what_the_path_test_found():
+    """The table's branch_* attributes sum the steps' records per mode, the limit points the
+    continuation passed included."""
+    import json
+
+    from rve.tables.build import build_table
+
+    def rec(mode, strain, **b):
+        return {"mode": mode, "strain": strain, "params": {}, "state": {"branch": b}}
+
+    recs = [rec("uniaxial", 0.1, detections=2, limit_points=1, limit_points_passed=2, branch_jumps=1),
+            rec("uniaxial", 0.2, detections=1, limit_points_passed=1), rec("shear", 0.1, detections=0)]
+    ds = build_table(recs, fabric="plain", config={})
+    assert json.loads(ds.attrs["branch_limit_points_passed"]) == {"shear": 0, "uniaxial": 3}
+    assert json.loads(ds.attrs["branch_detections"]) == {"shear": 0, "uniaxial": 3}
+    assert json.loads(ds.attrs["branch_limit_points"]) == {"shear": 0, "uniaxial": 1}

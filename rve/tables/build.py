@@ -285,8 +285,8 @@ PERIODIC_RESISTANCES = (
 
 
 def _branch_attributes(records: Sequence[Mapping]) -> dict:
-    """``branch_jumps``, ``branch_limit_points``, ``branch_detections``, ``branch_false_alarms``:
-    JSON {mode: count summed over the mode's steps} of the records' equilibrium-path tests
+    """``branch_jumps``, ``branch_limit_points``, ``branch_detections``, ``branch_false_alarms``,
+    ``branch_limit_points_passed`` (by the continuation): JSON {mode: count summed over the mode's steps} of the records' equilibrium-path tests
     (``state.branch``, rve.homogenisation.branch); empty when no record carries one."""
     per: dict = {}
     for rec in records:
@@ -294,12 +294,12 @@ def _branch_attributes(records: Sequence[Mapping]) -> dict:
         if not b or not rec.get("mode"):
             continue
         m = per.setdefault(str(rec["mode"]), {})
-        for k in ("branch_jumps", "limit_points", "detections", "false_alarms"):
+        for k in ("branch_jumps", "limit_points", "detections", "false_alarms", "limit_points_passed"):
             m[k] = m.get(k, 0) + int(b.get(k) or 0)
     if not per:
         return {}
     name = {"branch_jumps": "branch_jumps", "limit_points": "branch_limit_points", "detections": "branch_detections",
-            "false_alarms": "branch_false_alarms"}
+            "false_alarms": "branch_false_alarms", "limit_points_passed": "branch_limit_points_passed"}
     return {attr: json.dumps({mode: c[k] for mode, c in sorted(per.items())}, sort_keys=True)
             for k, attr in name.items()}
 
