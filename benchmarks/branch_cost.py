@@ -19,7 +19,8 @@ process, once with ``strain.follow_branch=false`` and once per ``--methods`` wit
 (``halving``: the default; ``halving_floor``: every jump halved down to the floor;
 ``arc_length``: the continuation),
 the sides interleaved; printed per step: wall and CPU seconds, what the test found, and
-per method the median over the steps of the wall ratio on / off.
+per method the median over the steps of the wall and the CPU ratio on / off and the ratio
+of the summed CPU seconds (CPU is the measure on a shared machine).
 """
 from __future__ import annotations
 
@@ -113,6 +114,8 @@ def measure(states: Path, run: str, steps: list, methods: list) -> int:
 
     env = worker_env(RVE_PARDISO_THREADS=1)
     ratios: dict = {m: [] for m in methods}
+    cpu_ratios: dict = {m: [] for m in methods}
+    sum_cpu: dict = {}
     print("| mode | step | side | wall s | CPU s | detections | limit points | passed | kept | x (sha256) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for mode, step in steps:
@@ -133,14 +136,19 @@ def measure(states: Path, run: str, steps: list, methods: list) -> int:
             print(f"| {mode} | {step} | {name} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r.get('detections')} | "
                   f"{r.get('limit_points')} | {r.get('limit_points_passed')} | {r.get('kept')} | {r['x_sha']} |",
                   flush=True)
+        for name, (r,) in recs.items():
+            sum_cpu[name] = sum_cpu.get(name, 0.0) + (r.get("cpu_s", 0.0) if "error" not in r else float("nan"))
         off = recs["off"][0]
         for m in methods:
             on = recs[m][0]
             if "error" not in on and "error" not in off:
                 ratios[m].append(on["wall_s"] / off["wall_s"])
+                cpu_ratios[m].append(on["cpu_s"] / off["cpu_s"])
     for m, r in ratios.items():
-        print(f"{m}: median wall ratio on/off over {len(r)} steps = {np.median(r):.3f} (min {min(r):.3f}, "
-              f"max {max(r):.3f})" if r else f"{m}: no pair measured")
+        c = cpu_ratios[m]
+        print(f"{m}: median ratio on/off over {len(r)} steps: wall {np.median(r):.3f} (min {min(r):.3f}, max "
+              f"{max(r):.3f}), CPU {np.median(c):.3f} (min {min(c):.3f}, max {max(c):.3f}); summed CPU on/off "
+              f"{sum_cpu[m] / sum_cpu['off']:.3f}" if r else f"{m}: no pair measured")
     return 0
 
 
