@@ -14,7 +14,7 @@ The load parameter is the macro strain eps of the mode; the unknowns are the fre
 
 Between arc steps the contact map is rebuilt at the accepted point. The path's points are
 equilibria to ``ARC_SETTINGS.path_atol_factor`` x the static tolerance (the chord contact's
-force is not smooth where a contact point crosses an element end); the end state goes
+force jumps where a contact point crosses an element end); the end state goes
 through the cell's static polish (capped Newton with map rebuilds, ``cell_statics.static_polish``:
 the nearest equilibrium, stable or not) so that it is an equilibrium of the map built at
 it. The negative-pivot count of every factorisation is the inertia of the path's points
@@ -29,8 +29,8 @@ return ``arc(start, eps_from, eps_to) -> StepSolution | None`` (``branch.follow_
 ``extra`` its system (pinned: the mechanics system with the clamps; periodic: the full
 system), ``info`` a step record (``converged``, ``residual_N``, ``static``, ``arc``); a failed
 continuation gives ``x`` None and only ``info["arc"]``. None when the contact law is the
-augmented Lagrangian (its multipliers
-would be frozen along the path; the caller falls back to halving).
+augmented Lagrangian (its multipliers would be frozen along the path; the caller falls back
+to halving).
 """
 from __future__ import annotations
 
@@ -45,9 +45,10 @@ from .cell_statics import free_residual, static_polish
 
 __all__ = ["pinned_arc", "periodic_arc", "ARC_SETTINGS"]
 
-#: the cells' continuation: the path's points equilibria to 1e4 x the static tolerance (1e-5 N
-#: at the default 1e-9 N: the chord contact's force is not smooth where a contact point
-#: crosses an element end, and Newton stalls there at ~1e-6 N), the end polished to it
+#: the cells' continuation: the path's points equilibria to 1e5 x the static tolerance (1e-4 N
+#: at the default 1e-9 N: the chord contact's force jumps where a contact point crosses an
+#: element end, and Newton stalls there at 1e-6 to 1e-4 N on the default weave), the end
+#: polished to the static tolerance
 ARC_SETTINGS = ArcSettings(path_atol_factor=1e5)
 
 
