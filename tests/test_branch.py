@@ -62,7 +62,7 @@ def test_past_the_limit_point_the_jump_is_recorded_and_accepted():
     solve, energy, inertia, roots = _toy(K, -1.0)
     s = StepSolution(float(roots(0.2)[0]))       # on the left branch at 0.2
     s, info = follow_branch(solve, s, 0.2, 0.5, energy, inertia=inertia,
-                            settings=BranchSettings(max_halvings=4))
+                            settings=BranchSettings(max_halvings=4, persist_ratio=0.0))
     assert len(roots(0.5)) == 1 and s.x == pytest.approx(roots(0.5)[0])   # only the right well is left
     assert info["limit_points"] == 1 and info["branch_jumps"] == 0 and info["false_alarms"] == 0
     floor = [c for c in info["checks"] if c["jump"] and c["depth"] == 4]
@@ -169,3 +169,19 @@ def test_periodic_work_rate_is_the_derivative_of_the_energy_along_the_branch():
     x_followed, _, inf = strain_step(cfg, fab, mesh, x0, x0, "uniaxial", 1)
     assert inf["branch"]["detections"] == 0 and inf["branch"]["kept"] == "naive"
     assert np.array_equal(x_followed, x_plain)
+
+
+def test_a_jump_that_keeps_its_parents_mismatch_is_not_halved_further():
+    """The same step with the default ``persist_ratio``: the half that holds the jump keeps
+    the whole mismatch (the energy the snap releases) and is the limit point; the other
+    half passes; 3 solves instead of halving down to the floor, and the same end state."""
+    solve, energy, inertia, roots = _toy(K, -1.0)
+    start = StepSolution(float(roots(0.2)[0]))
+    s, info = follow_branch(solve, start, 0.2, 0.5, energy, inertia=inertia, settings=BranchSettings(max_halvings=4))
+    floor, _ = follow_branch(solve, start, 0.2, 0.5, energy, inertia=inertia,
+                             settings=BranchSettings(max_halvings=4, persist_ratio=0.0))
+    assert info["limit_points"] == 1 and info["solves"] == 3
+    held = [c for c in info["checks"] if c.get("persists")]
+    assert len(held) == 1 and held[0]["eps"][0] <= LIMIT <= held[0]["eps"][1]
+    assert abs(held[0]["mismatch"]) >= 0.5 * abs(info["checks"][0]["mismatch"])
+    assert s.x == pytest.approx(floor.x) == pytest.approx(roots(0.5)[0])

@@ -94,6 +94,14 @@ class StrainPath(Section):
                                                                    "(floor: the step / 2^n)")
     branch_state_tol: Length = Field("1e-4 mm", gt=0, description="naive and followed end states closer than this "
                                                                    "(max centroid distance) are one equilibrium")
+    branch_persist_ratio: Dimensionless = Field(
+        0.5, ge=0, description="jump test: a failing half that keeps this share of its parent's energy mismatch holds "
+                               "the jump itself (a limit point, not halved further; 0: halve down to the floor)")
+    branch_method: Literal["arc_length", "halving"] = Field(
+        "halving", description="how a step with a detected jump is followed: pseudo-arclength continuation of "
+                                  "the static equilibria in (dofs, strain), through limit points "
+                                  "(rve.homogenisation.continuation; halving where it fails), or step halving "
+                                  "from the previous state down to branch_max_halvings")
     static_rounds: Integer = Field(1, ge=1, description="static solves, each after a map rebuild ('newton')")
     static_max_iter: Integer = Field(
         1000, ge=1, description="iterations of the static solve (energy: the minimiser's cap; a step that "

@@ -34,6 +34,7 @@ nothing keeps a defined potential) over I_face, ``conservation_error``.
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -43,6 +44,7 @@ from ..model.periodic import PeriodicSystem
 from ..solvers.static import static_solve
 from .multipliers import seed_multipliers
 from .periodic import cell_gradient, cell_ties
+from .periodic_resistances import cell_resistances
 from .probe_result import ProbeResult, _length_weights, conduction_material
 
 __all__ = ["field_solve", "solve_field_probe"]
@@ -80,6 +82,10 @@ def _reference_nodes(ties, mesh, comp) -> np.ndarray:
     """Reduced node of the first node of the first fibril of every component."""
     first_fibril = np.array([np.flatnonzero(comp == c)[0] for c in range(comp.max() + 1)])
     return np.searchsorted(ties.kept_nodes, mesh.node_offsets[first_fibril])
+
+
+#: the conduction graph of a frozen state, for ``periodic_resistances``
+CONDUCTION_GRAPH = SimpleNamespace(components=_components, references=_reference_nodes)
 
 
 def _solve(psys, x_full, w_red, opts, what):
@@ -186,6 +192,8 @@ def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False, mult
                  "transverse_current_per_width_A_per_mm": j_side, "sheet_resistance_ohm": res.resistance}
     if sol["T"] is not None:
         res.extra["joule_power_per_area_W_per_mm2"] = sol["joule_power"] / area
+    # the R_y of the yarn family along the field and the cell's R_c (docs/periodic.md)
+    res.extra.update(cell_resistances(cfg, fab, mesh, xn, {"x": "warp", "y": "weft"}[probe.field], CONDUCTION_GRAPH))
     if sol["T"] is not None:
         res.temperature_max = float(sol["T"].max())
         res.temperature_mean = 0.0

@@ -45,8 +45,9 @@ centroids, contact included).
 With ``strain.follow_branch`` the step goes through ``rve.homogenisation.branch.follow_branch``
 (one equilibrium path): the energy balance of the step (potential change against the clamps'
 work, ``pinned_energy``) and the minimiser's inertia verdict are tested, and a step that
-jumped to another equilibrium is redone from the previous state in halves; the record is
-``info["branch"]`` (docs/table_accuracy.md, "One equilibrium path").
+jumped to another equilibrium is followed from the previous state in halves
+(``strain.branch_method: halving``, the default) or by pseudo-arclength continuation through
+its limit points (``arc_length``, ``rve.homogenisation.continuation``; halving where it fails); the record is ``info["branch"]`` (docs/table_accuracy.md, "One equilibrium path").
 
 If the driven phase fails (step control exhausted), the remaining part of the field is
 applied kinematically (an affine move of every node) and the failure is recorded in
@@ -56,6 +57,7 @@ from __future__ import annotations
 
 import logging
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -63,6 +65,7 @@ from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .continuation import periodic_arc, pinned_arc
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
@@ -248,17 +251,25 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
     levels = strain_levels(cfg)
     eps_prev, eps = float(levels[step - 1]), float(levels[step])
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
-        return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy, multipliers)
+        if periodic:
+            arc = periodic_arc(cfg, fab, mesh, mode)
+        else:
+            cell = SimpleNamespace(system=lambda xf: mech_system(fab, mesh, cfg, sp_.relax_damping, xf),
+                                   targets=end_targets,
+                                   energy=lambda system, xf, e: pinned_energy(fab, mesh, system, xf, origin, mode, e))
+            arc = pinned_arc(cfg, fab, mesh, origin, mode, cell)
+        return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy, multipliers, arc)
     return part(x_prev, eps_prev, eps, whole=True)
 
 
-def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=None):
+def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=None, arc=None):
     """The step ``part(x, eps_from, eps_to)`` through ``branch.follow_branch``: the potential
     of a state and its load derivative ``energy_of(system, x, eps)`` (pinned: the clamp
     forces times the end velocity per unit strain, ``pinned_energy``; periodic: the
     Hill-Mandel work rate, ``periodic.periodic_energy``); the inertia from the energy
     minimiser's definiteness verdict. A part starts from the multipliers of the state it
-    starts from (``multipliers`` for the step's start)."""
+    starts from (``multipliers`` for the step's start). ``arc``: the continuation of a
+    detected step (``rve.homogenisation.continuation``; ``strain.branch_method``)."""
     from .branch import BranchSettings, StepSolution, follow_branch
 
     t0 = time.perf_counter()
@@ -280,10 +291,11 @@ def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=
         return float(np.abs(np.asarray(xa).reshape(nn, 9)[:, :3] - np.asarray(xb).reshape(nn, 9)[:, :3]).max())
 
     settings = BranchSettings(energy_rtol=float(sp_.branch_energy_rtol), max_halvings=int(sp_.branch_max_halvings),
-                              state_tol=float(sp_.branch_state_tol))
+                              state_tol=float(sp_.branch_state_tol), method=str(sp_.branch_method),
+                              persist_ratio=float(sp_.branch_persist_ratio))
     start = StepSolution(np.array(x_prev, float).reshape(nn, 9))
     sol, binfo = follow_branch(solve, start, eps_prev, eps, energy, inertia=inertia, distance=distance,
-                               settings=settings)
+                               settings=settings, arc=arc)
     info = dict(sol.info)
     info.update({"strain": float(eps), "strain_increment": float(eps - eps_prev), "branch": binfo,
                  "wall_s": time.perf_counter() - t0})

@@ -245,6 +245,11 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
     ds["yarn_resistance"].attrs["comment"] = ds["contact_resistance"].attrs["comment"] = (
         "fitted to the probe resistances under the network model of docs/lookup_tables.md "
         f"({n_warp} x {n_weft} cells, probes {', '.join(usable) or 'none'})")
+    if any(pr.get("yarn_family") for rec in records for pr in (rec.get("probes") or {}).values()):
+        ds.attrs["periodic_resistances"] = PERIODIC_RESISTANCES
+        for v in ("yarn_resistance", "contact_resistance", "yarn_resistance_warp", "yarn_resistance_weft",
+                  "contact_resistance_warp_weft"):
+            ds[v].attrs["comment"] = PERIODIC_RESISTANCES
     ds["probe_resistance"].attrs["comment"] = ("V / I with I = (I(+) - I(-)) / 2; internal "
                                                "units are V and A, so ohm directly")
 
@@ -270,9 +275,18 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
     return add_macro_quantities(ds)
 
 
+#: how a periodic cell's R_y and R_c are defined (no fit: two cell problems per state)
+PERIODIC_RESISTANCES = (
+    "periodic cell (rve.homogenisation.periodic_resistances, docs/periodic.md): R_y = r_y a_x / a_y (warp; weft "
+    "r_y a_y / a_x) with r_y the sheet resistance (ohm per reference square) of the yarn family's fibrils alone "
+    "under a macro field along it; R_c = 4 r_c / (a_x a_y) with r_c (ohm mm2) the warp-weft exchange resistance "
+    "per reference area (uniform injection per length into the warp, out of the weft, no macro field); "
+    "a_x, a_y the reference yarn pitches; yarn_resistance = the mean of the warp and weft R_y")
+
+
 def _branch_attributes(records: Sequence[Mapping]) -> dict:
-    """``branch_jumps``, ``branch_limit_points``, ``branch_detections``, ``branch_false_alarms``:
-    JSON {mode: count summed over the mode's steps} of the records' equilibrium-path tests
+    """``branch_jumps``, ``branch_limit_points``, ``branch_detections``, ``branch_false_alarms``,
+    ``branch_limit_points_passed`` (by the continuation): JSON {mode: count summed over the mode's steps} of the records' equilibrium-path tests
     (``state.branch``, rve.homogenisation.branch); empty when no record carries one."""
     per: dict = {}
     for rec in records:
@@ -280,12 +294,12 @@ def _branch_attributes(records: Sequence[Mapping]) -> dict:
         if not b or not rec.get("mode"):
             continue
         m = per.setdefault(str(rec["mode"]), {})
-        for k in ("branch_jumps", "limit_points", "detections", "false_alarms"):
+        for k in ("branch_jumps", "limit_points", "detections", "false_alarms", "limit_points_passed"):
             m[k] = m.get(k, 0) + int(b.get(k) or 0)
     if not per:
         return {}
     name = {"branch_jumps": "branch_jumps", "limit_points": "branch_limit_points", "detections": "branch_detections",
-            "false_alarms": "branch_false_alarms"}
+            "false_alarms": "branch_false_alarms", "limit_points_passed": "branch_limit_points_passed"}
     return {attr: json.dumps({mode: c[k] for mode, c in sorted(per.items())}, sort_keys=True)
             for k, attr in name.items()}
 
@@ -389,7 +403,21 @@ def _fill(records, pnames, pvalues, mode_coord, strains, strain_coord, probes, s
                 val = pr.get(f"temperature_{key}", pr.get(f"temperature_rise_{key}"))
                 if val is not None:
                     data[f"temperature_rise_{key}"][k] = float(val)
+            _cell_resistances(data, idx, pr)
     return data, filled, pidx
+
+
+def _cell_resistances(data, idx, pr) -> None:
+    """A periodic field probe's R_y of its yarn family and the cell's R_c
+    (``rve.homogenisation.periodic_resistances``), per crossing as the network's resistors;
+    the two-resistor ``yarn_resistance`` is the mean of the families' (docs/periodic.md)."""
+    family = pr.get("yarn_family")
+    if family not in ("warp", "weft") or pr.get("yarn_resistance_ohm") is None:
+        return
+    data[f"yarn_resistance_{family}"][idx] = float(pr["yarn_resistance_ohm"])
+    data["contact_resistance_warp_weft"][idx] = data["contact_resistance"][idx] = float(pr["contact_resistance_ohm"])
+    data["yarn_resistance"][idx] = float(np.nanmean([data["yarn_resistance_warp"][idx],
+                                                     data["yarn_resistance_weft"][idx]]))
 
 
 def _fit_networks(data, filled, pidx, network_probes, n_warp: int, n_weft: int):
