@@ -193,7 +193,8 @@ def solve_field_probe(cfg, fab, mesh, xn, probe, with_fields: bool = False, mult
     if sol["T"] is not None:
         res.extra["joule_power_per_area_W_per_mm2"] = sol["joule_power"] / area
     # the R_y of the yarn family along the field and the cell's R_c (docs/periodic.md)
-    res.extra.update(cell_resistances(cfg, fab, mesh, xn, {"x": "warp", "y": "weft"}[probe.field], CONDUCTION_GRAPH))
+    res.extra.update(cell_resistances(cfg, fab, mesh, xn, {"x": "warp", "y": "weft"}[probe.field], CONDUCTION_GRAPH,
+                                       multipliers))
     if sol["T"] is not None:
         res.temperature_max = float(sol["T"].max())
         res.temperature_mean = 0.0

@@ -34,14 +34,17 @@ Contract
 --------
 ``family_sheet_resistance(cfg, fab, mesh, xn, family, graph) -> float`` (``family`` warp |
 weft, the field along x | y), ``exchange_resistance(cfg, fab, mesh, xn, graph) -> dict``,
-and ``cell_resistances(cfg, fab, mesh, xn, family, graph)``, with ``graph`` the field
+and ``cell_resistances(cfg, fab, mesh, xn, family, graph, multipliers=None)``, with ``graph`` the field
 probes' conduction graph (``components(full, mesh, x)``: the component of every fibril,
 fibrils joined by active contacts; ``references(ties, mesh, comp)``: one reduced potential
 reference node per component; ``periodic_probes.CONDUCTION_GRAPH``): the record a field probe carries
 (``periodic_probes.solve_field_probe``: the field-x probe the warp family, the field-y
 probe the weft family; both the exchange): ``{"yarn_family", "layer_sheet_resistance_ohm",
 "yarn_resistance_ohm", "exchange_resistance_ohm_mm2", "contact_resistance_ohm",
-"pitch_mm"}``. The state ``xn`` is a stored full state (n_nodes, 9), mechanics frozen.
+"pitch_mm"}``. The state ``xn`` is a stored full state (n_nodes, 9), mechanics frozen;
+``multipliers`` its contact multipliers (an augmented-Lagrangian state's ``(keys, values)``
+record, seeded on every map as the field probes do; on a family's own mesh the keys are
+renumbered to its elements and fibrils, and points on the other family are dropped).
 """
 from __future__ import annotations
 
@@ -52,6 +55,7 @@ from ..fem.mesh import FibrilMesh
 from ..model import BeamModel, ContactSystem, Couplings
 from ..model.periodic import PeriodicSystem, fibril_end_ties
 from ..solvers.static import static_solve
+from .multipliers import seed_multipliers
 from .periodic import cell_gradient
 from .probe_result import _length_weights, conduction_material
 
@@ -102,14 +106,41 @@ def pitches(fab) -> tuple:
     return float(L[0] / max(n_weft, 1)), float(L[1] / max(n_warp, 1))
 
 
-def _conduction_system(cfg, mesh, xn):
-    """The frozen (mech, V) contact system of ``mesh`` at the nodal state ``xn``."""
+def family_multipliers(record, mesh, fibrils, geometry: str):
+    """The multiplier record of the full ``mesh`` on the mesh of ``fibrils`` alone
+    (``family_mesh``): element and fibril indices of the point keys renumbered, keys that
+    touch another fibril dropped (``contact_pairs.point_keys``: column 0 the element of the
+    point, column 2 the fibril it touches, or its element for the chord)."""
+    if record is None:
+        return None
+    keys, values = np.asarray(record[0], np.int64), np.asarray(record[1], float)
+    fibrils = np.asarray(fibrils, np.int64)
+    elems = np.concatenate([np.arange(mesh.elem_offsets[f], mesh.elem_offsets[f + 1]) for f in fibrils])
+    new_elem = np.full(int(mesh.elem_offsets[-1]), -1, np.int64)
+    new_elem[elems] = np.arange(elems.size)
+    new_fib = np.full(mesh.n_fibrils, -1, np.int64)
+    new_fib[fibrils] = np.arange(fibrils.size)
+    if keys.shape[0] == 0:
+        return keys, values
+    a = new_elem[keys[:, 0]]
+    b = (new_elem if geometry == "chord" else new_fib)[keys[:, 2]]
+    keep = (a >= 0) & (b >= 0)
+    out = keys[keep].copy()
+    out[:, 0], out[:, 2] = a[keep], b[keep]
+    return out, values.ravel()[keep]
+
+
+def _conduction_system(cfg, mesh, xn, multipliers=None):
+    """The frozen (mech, V) contact system of ``mesh`` at the nodal state ``xn``, with the
+    contact ``multipliers`` seeded."""
     base = BeamModel(mesh, conduction_material(cfg), fields=("mech", "V"), couplings=Couplings(**_NO_COUPLING),
                      disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points)
     x = np.zeros(base.n)
     base.nodal(x)[:, :9] = xn
     cparams = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=True)
-    return ContactSystem(base, cparams, x), x
+    system = ContactSystem(base, cparams, x)
+    seed_multipliers(system, multipliers)
+    return system, x
 
 
 def _solve(psys, x_full, opts, what):
@@ -123,39 +154,43 @@ def _solve(psys, x_full, opts, what):
     return xs, ws
 
 
-def _reduced_system(full, ties, x, F, E, load, refs, contact_images):
-    """The reduced (mech, V) system: mechanics held, V held (0) at the reduced nodes ``refs``."""
+def _reduced_system(full, ties, x, F, E, load, refs, contact_images, multipliers=None):
+    """The reduced (mech, V) system: mechanics held, V held (0) at the reduced nodes ``refs``;
+    the ``multipliers`` seeded on the map it ends with."""
     lay = PeriodicSystem(full, ties, F=F).layout
     held = np.concatenate([lay.dofs("mech"), lay.dofs("V", refs)])
     psys = PeriodicSystem(full, ties, held, 0.0, F=F, E=E, load=load, contact_images=contact_images)
     if psys.contact_images:
         psys.rebuild(psys.restrict(x))
+    seed_multipliers(psys, multipliers)
     return psys, lay
 
 
-def family_sheet_resistance(cfg, fab, mesh, xn, family: str, graph) -> float:
+def family_sheet_resistance(cfg, fab, mesh, xn, family: str, graph, multipliers=None) -> float:
     """r_y (ohm per reference square) of the yarn family ``family`` (module docstring): the
     field probe along the family on its fibrils alone."""
     axis = FAMILY_AXIS[family]
-    sub, nodes = family_mesh(mesh, _family_fibrils(fab, family))
+    fibrils = _family_fibrils(fab, family)
+    sub, nodes = family_mesh(mesh, fibrils)
     ties = fibril_end_ties(sub, _periods(fab))
     F = cell_gradient(fab, mesh, xn)
-    full, x = _conduction_system(cfg, sub, np.asarray(xn, float)[nodes])
+    sub_mult = family_multipliers(multipliers, mesh, fibrils, cfg.contact.geometry)
+    full, x = _conduction_system(cfg, sub, np.asarray(xn, float)[nodes], sub_mult)
     comp = graph.components(full, sub, x)
     E = np.zeros(3)
     E[axis] = float(cfg.probe_solver.voltage) / (2.0 * float(fab.half_widths[axis]))
-    psys, _ = _reduced_system(full, ties, x, F, E, None, graph.references(ties, sub, comp), cfg.cell.contact_images)
+    psys, _ = _reduced_system(full, ties, x, F, E, None, graph.references(ties, sub, comp), cfg.cell.contact_images, sub_mult)
     ps = cfg.probe_solver
     xs, ws = _solve(psys, x, {"atol": ps.newton_atol, "rtol": ps.newton_rtol}, f"{family} layer")
     j = float(psys.macro_current(xs, ws)[axis])
     return float(E[axis] / j) if j != 0.0 else float("inf")
 
 
-def exchange_resistance(cfg, fab, mesh, xn, graph) -> dict:
+def exchange_resistance(cfg, fab, mesh, xn, graph, multipliers=None) -> dict:
     """r_c (ohm mm^2) of the cell (module docstring): ``{"exchange_resistance_ohm_mm2",
     "injected_A", "layer_potential_drop_V", "reference_current_A"}`` (the last: what the
     potential references carry, ~0 as the sources balance)."""
-    full, x = _conduction_system(cfg, mesh, xn)
+    full, x = _conduction_system(cfg, mesh, xn, multipliers)
     ties = fibril_end_ties(mesh, _periods(fab))
     comp = graph.components(full, mesh, x)
     direction = np.asarray(fab.fibril_direction)
@@ -179,7 +214,7 @@ def exchange_resistance(cfg, fab, mesh, xn, graph) -> dict:
     load[flay.dofs("V")] = -(inj - ext)    # the residual is the current leaving a node
     refs = graph.references(ties, mesh, comp)
     psys, lay = _reduced_system(full, ties, x, cell_gradient(fab, mesh, xn), np.zeros(3), load, refs,
-                                cfg.cell.contact_images)
+                                cfg.cell.contact_images, multipliers)
     ps = cfg.probe_solver
     xs, ws = _solve(psys, x, {"atol": ps.newton_atol, "rtol": ps.newton_rtol}, "exchange")
     V = full.nodal(psys.expand_rates(ws))[:, flay.offset["V"]]
@@ -191,12 +226,12 @@ def exchange_resistance(cfg, fab, mesh, xn, graph) -> dict:
             "layer_potential_drop_V": drop, "reference_current_A": float(np.abs(R_red[lay.dofs("V", refs)]).sum())}
 
 
-def cell_resistances(cfg, fab, mesh, xn, family: str, graph) -> dict:
+def cell_resistances(cfg, fab, mesh, xn, family: str, graph, multipliers=None) -> dict:
     """The R_y of ``family`` and the R_c of the cell, per width and as network resistors
     (module docstring)."""
     a_x, a_y = pitches(fab)
-    r_y = family_sheet_resistance(cfg, fab, mesh, xn, family, graph)
-    ex = exchange_resistance(cfg, fab, mesh, xn, graph)
+    r_y = family_sheet_resistance(cfg, fab, mesh, xn, family, graph, multipliers)
+    ex = exchange_resistance(cfg, fab, mesh, xn, graph, multipliers)
     r_c = ex["exchange_resistance_ohm_mm2"]
     along, across = (a_x, a_y) if family == "warp" else (a_y, a_x)
     return {"yarn_family": family, "layer_sheet_resistance_ohm": r_y, "yarn_resistance_ohm": r_y * along / across,
