@@ -99,6 +99,10 @@ class ImpactContact(Section):
                                                        "R_p + R_f + margin)")
     g_eps: Dimensionless = Field(1e-3, ge=0, description="Hertz width regularisation, fraction of R")
     rebuild_every: Integer = Field(5, ge=1, description="contact maps rebuilt every k steps (Appendix A)")
+    rebuild: Literal["every", "skin"] = Field(
+        "every", description="impact phase: every = every rebuild_every steps and when a node moved half the "
+                             "margin; skin = only when a node moved half the margin (Verlet skin; "
+                             "rve.scenes.rebuild)")
 
 
 class ImpactField(Section):

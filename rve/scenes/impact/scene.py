@@ -84,6 +84,7 @@ def config_digest(cfg, sections=("geometry", "warp", "weft", "material", "projec
     # 4e-15 between superlu_pruned and PARDISO): a checkpoint resumes on another backend
     d.get("newton", {}).pop("linear_backend", None)
     if "time" not in sections:  # a relaxed state: B is off, the circuits and the speed do not matter
+        d.get("contact", {}).pop("rebuild", None)   # the impact phase's rule (the relaxation rebuilds every k)
         d.get("projectile", {}).pop("speed", None)
         for y in ("warp", "weft", "projectile"):
             d.get(y, {}).pop("J_bar", None)
@@ -342,7 +343,8 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     rec, ck, scale, (t, x, w, resumed, rebuilds, early) = _impact_start(cfg, problem, x_start, t_end, steps, tab,
                                                                         nopts, checkpoint, record)
     boundary = _Boundary(rec, ck, cfg.time.checkpoint_every, stop_after_steps, t_end, progress)
-    hook = boundary.hook = ChunkedRebuild(sysm, t_end, steps, cfg.contact.rebuild_every,
+    every = cfg.contact.rebuild_every if cfg.contact.rebuild == "every" else None
+    hook = boundary.hook = ChunkedRebuild(sysm, t_end, steps, every,
                                           0.5 * float(cfg.contact.margin), boundary)
     hook.rebuilds, hook.early = rebuilds, early
     ti = time.perf_counter()
