@@ -17,8 +17,9 @@ Contract
   half the margin since, so it cannot touch yet (linear elements: every point of an
   element moves at most as far as its farthest node). ``ChunkedRebuild`` then runs one
   segment to the next guard rebuild (or ``t_end``).
-  ``at_boundary(t, x, w)`` runs before each rebuild; ``rebuild(x)`` is the initial one.
-  Counts ``rebuilds``, ``early``; ``wall`` seconds.
+  ``at_boundary(t, x, w)`` runs before each rebuild and may set ``fresh`` (the restart
+  then carries no factorisation or predictor history over: a checkpoint is written there);
+  ``rebuild(x)`` is the initial one. Counts ``rebuilds``, ``early``; ``wall`` seconds.
 
 ``system``: a contact system with ``rebuild(x)``, ``max_displacement_since_rebuild(x)``
 (and, for ``MapRebuild``, ``assembler.reused``).
@@ -74,6 +75,7 @@ class ChunkedRebuild:
         self.every = None if every is None else max(1, int(every))
         self.guard, self.at_boundary = float(guard), at_boundary
         self.t_stop = None
+        self.fresh = False
         self.rebuilds, self.early, self.wall = 0, 0, 0.0
 
     def horizon(self, t: float):
@@ -92,6 +94,7 @@ class ChunkedRebuild:
         if t >= self.t_end * (1 - 1e-12):
             return False
         early = self.guard > 0 and self.sysm.max_displacement_since_rebuild(x) > self.guard
+        self.fresh = False
         if not (early or t >= self.t_stop):
             return False
         self.early += int(early)

@@ -622,6 +622,9 @@ class StructureHook(Protocol):
     segment that the restarted step control runs on (grid ``t + k (t_stop - t)/n_steps``,
     landing on ``t_stop``); without it a segment runs to ``t_end`` on
     ``max(1, ceil((t_end - t)/h0 - 1e-6))`` steps of about the run's nominal step h0.
+    The optional attribute ``hook.fresh``, read after a call that returned True: the
+    restarted segment carries nothing over (``reuse_across_restarts``,
+    ``predictor_across_restarts``), as a run resumed from a checkpoint there would start.
     """
 
     def __call__(self, t: float, x: np.ndarray, w: np.ndarray) -> bool: ...
@@ -888,7 +891,7 @@ def integrate(
             previous = stepper
             stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian, reuse.mode,
                                   reuse.contraction, reuse.h_rtol, reuse.backend, watch_structure=rebuild is None)
-            if previous is not None:
+            if previous is not None and not getattr(rebuild, "fresh", False):
                 stepper.carry_from(previous, factorisation=reuse.across_restarts,
                                    predictor=predictor_across_restarts)
             if stepper.reuse is not None and all(r is not stepper.reuse for r in reusers):

@@ -193,7 +193,8 @@ def _integrator_options(cfg, sysm=None, extra: dict | None = None) -> dict:
     (rve.solvers.backends.pruned): their names become factories with that border."""
     opts = {"max_cuts": cfg.time.max_cuts, "fixed_step": not cfg.time.step_control,
             "jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
-            "linear_backend": cfg.newton.linear_backend, **(extra or {})}
+            "linear_backend": cfg.newton.linear_backend, "reuse_across_restarts": cfg.newton.reuse_across_restarts,
+            "predictor_across_restarts": cfg.newton.predictor_across_restarts, **(extra or {})}
     pruned = {NAME: PrunedSuperLU, NAME_AUTO: PardisoOrPruned}.get(opts["linear_backend"])
     if pruned is not None:
         opts["linear_backend"] = functools.partial(pruned, border=0 if sysm is None else schur_border(sysm))
@@ -310,9 +311,13 @@ class _Boundary:
         if self.progress:
             log.info("impact t = %.5g ms, steps %d, rejected %d, v_z = %.5g mm/ms", t, c["steps"], c["rejected"],
                      self.rec.series["v_com"][-1][2])
-        if self.ck is not None and c["since_checkpoint"] >= self.every:
+        if c["since_checkpoint"] >= self.every:
+            # a checkpoint boundary (with or without a file): the restart after it starts
+            # afresh, as the run resumed from the checkpoint does, so both give the same bits
             c["since_checkpoint"] = 0
-            self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
+            self.hook.fresh = True
+            if self.ck is not None:
+                self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
         if self.stop_after is not None and c["steps"] >= self.stop_after and t < self.t_end * (1 - 1e-12):
             if self.ck is not None:
                 self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
