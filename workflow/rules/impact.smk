@@ -63,16 +63,14 @@ rule impact_full:
     params:
         overrides=IMPACT["overrides"],
         out=lambda w, output: os.path.dirname(output.summary),
-    # alone on the machine under `snakemake -j2 impact`: the assembly and contact kernels on
-    # both cores (the same bits on 1 or 2 threads; Snakemake scales this down under -j1)
-    threads: 2
+    threads: 1
     resources:
         mem_mb=config["resources"]["impact_mem_mb"],
     run:
         from rve.scenes.impact.jobs import impact_job
 
         impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
-                   relaxed=input.relaxed, threads=threads)
+                   relaxed=input.relaxed)
 
 
 rule impact_sweep_point:
