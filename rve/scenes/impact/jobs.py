@@ -3,10 +3,7 @@
 Contract
 --------
 * ``impact_job(config_path, out_dir, summary_path, log_path, overrides=(), relaxed=None,
-  relax_only=False, threads=None) -> dict``: one run of the scene, its summary written
-  atomically; ``threads``: the job's compute threads (``rve.threads.linear_threads``: the
-  compiled assembly and contact kernels split their elements and pairs over them, the same
-  bits on any count; the stage factorisations stay on one thread; None: unchanged);
+  relax_only=False) -> dict``: one run of the scene, its summary written atomically;
 * ``sweep_curve(summary_paths, currents, out_png, out_json) -> dict``: the current-density
   sweep's figure and table from its runs' summaries.
 """
@@ -18,21 +15,18 @@ from pathlib import Path
 from ...config.loader import load_config
 from ...io.atomic import atomic_path, atomic_write_text
 from ...io.provenance import to_jsonable
-from ...solvers.linear import linear_threads
 from ..protocol import job_log
 from .scene import config_digest, load_or_relax, run
 
 __all__ = ["impact_job", "sweep_curve"]
 
 
-def impact_job(config_path, out_dir, summary_path, log_path, overrides=(), relaxed=None, relax_only=False,
-               threads=None) -> dict:
+def impact_job(config_path, out_dir, summary_path, log_path, overrides=(), relaxed=None, relax_only=False) -> dict:
     """One Snakemake job (workflow/rules/impact.smk): the scene of ``config_path`` (+
     ``overrides``), outputs under ``out_dir``, the summary written atomically to
     ``summary_path``, the log to ``log_path``; ``relaxed`` the relaxed-state file to use
-    (made if missing); ``relax_only``: only the relaxation (the summary is its record);
-    ``threads`` (module docstring)."""
-    with job_log(log_path), linear_threads(threads):
+    (made if missing); ``relax_only``: only the relaxation (the summary is its record)."""
+    with job_log(log_path):
         ov = list(overrides)
         if relaxed is not None:
             ov.append(f"relaxation.state_file={relaxed}")
