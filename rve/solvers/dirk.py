@@ -732,7 +732,10 @@ def _accept(out: IntegrationResult, info: StepInfo, t: float, h_try: float, bar,
         out.contractions.extend(c)
     out.h_min = min(out.h_min, h_try)
     out.history.append((t, h_try, info.newton_iterations))
-    log.info("step %d t=%.6g h=%.3e newton its=%s", out.steps, t, h_try, info.stage_iterations)
+    rates = [q for c in info.stage_contractions for q in c]
+    log.info("step %d t=%.6g h=%.3e newton its=%s factorisations=%d reused=%d max contraction=%s", out.steps, t,
+             h_try, info.stage_iterations, info.factorizations, sum(info.stage_reuses),
+             f"{max(rates):.2e}" if rates else "-")
     if bar is not None:
         bar.n = t - float(t0)
         bar.set_postfix(h=f"{h_try:.2e}", its=info.newton_iterations, refresh=False)
