@@ -99,6 +99,10 @@ class ImpactContact(Section):
                                                        "R_p + R_f + margin)")
     g_eps: Dimensionless = Field(1e-3, ge=0, description="Hertz width regularisation, fraction of R")
     rebuild_every: Integer = Field(5, ge=1, description="contact maps rebuilt every k steps (Appendix A)")
+    rebuild: Literal["every", "skin"] = Field(
+        "every", description="impact phase: every = every rebuild_every steps and when a node moved half the "
+                             "margin; skin = only when a node moved half the margin (Verlet skin; "
+                             "rve.scenes.rebuild)")
 
 
 class ImpactField(Section):
@@ -146,6 +150,14 @@ class ImpactTime(Section):
 
 
 class ImpactNewton(StageNewton):
+    reuse_across_restarts: bool = Field(
+        True, description="the kept stage factorisation (and its PARDISO analysis) survives the restart of the step "
+                           "control after a contact-map rebuild, judged by the contraction test (docs/engine.md "
+                           "'Dynamic scenes: profile and levers'), except after a checkpoint boundary; false: a fresh "
+                           "one after every rebuild")
+    predictor_across_restarts: bool = Field(
+        True, description="the stage predictor keeps its history over those restarts (false: the first step after a "
+                           "rebuild starts its stages from the previous stage value)")
     linear_backend: Literal["superlu_pruned", "superlu", "auto", "auto_pruned"] = Field(
         "auto_pruned", description="stage-matrix factorisation: auto_pruned (PARDISO unsymmetric, mtype 11, where MKL "
                                    "is available, else superlu_pruned), superlu_pruned (SuperLU on the nonzero pattern, "

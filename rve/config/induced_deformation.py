@@ -72,6 +72,9 @@ class InducedContact(Section):
     margin: Length = Field("0.3 mm", ge=0, description="search cutoff = 2 max R + margin (1.5 mm: Appendix A)")
     g_eps: Dimensionless = Field(1e-3, ge=0, description="Hertz width regularisation, fraction of R")
     rebuild_every: Integer = Field(5, ge=1, description="contact map rebuilt every k accepted steps (Appendix A)")
+    rebuild: Literal["every", "skin"] = Field(
+        "every", description="every = every rebuild_every accepted steps and when a centroid moved half the margin; "
+                             "skin = only when a centroid moved half the margin (Verlet skin; rve.scenes.rebuild)")
 
 
 class InducedField(Section):

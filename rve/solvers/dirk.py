@@ -362,6 +362,15 @@ class DirkStepper:
         self.newton_opts = _newton_kwargs(newton_opts)
         self._free_cache: dict = {}
 
+    def carry_from(self, other: "DirkStepper", factorisation: bool, predictor: bool) -> None:
+        """Continue ``other``'s run after a restart at the state it ended on: its held
+        factorisation (``factorisation``; the contraction test of the modified Newton judges
+        it on the new structure) and its stage history for the predictor (``predictor``)."""
+        if factorisation and self.reuse is not None and other.reuse is not None:
+            self.reuse = other.reuse
+        if predictor:
+            self._points = list(other._points)
+
     def free_dofs(self, idx) -> FreeDofs:
         return FreeDofs.cached(self._free_cache, self.n, idx)
 
@@ -613,6 +622,9 @@ class StructureHook(Protocol):
     segment that the restarted step control runs on (grid ``t + k (t_stop - t)/n_steps``,
     landing on ``t_stop``); without it a segment runs to ``t_end`` on
     ``max(1, ceil((t_end - t)/h0 - 1e-6))`` steps of about the run's nominal step h0.
+    The optional attribute ``hook.fresh``, read after a call that returned True: the
+    restarted segment carries nothing over (``reuse_across_restarts``,
+    ``predictor_across_restarts``), as a run resumed from a checkpoint there would start.
     """
 
     def __call__(self, t: float, x: np.ndarray, w: np.ndarray) -> bool: ...
@@ -656,25 +668,29 @@ class ReusePolicy:
     factorisation per Newton iteration), True (keep one while the contraction stays <=
     ``contraction``) or "auto" (also weigh the measured costs); ``h_rtol``: the relative
     change of h a_ii that drops it; ``backend``: a ``rve.solvers.linear.get_backend`` name or
-    a factory ``() -> backend``."""
+    a factory ``() -> backend``; ``across_restarts``: the held factorisation (and its
+    backend's analysis) survives a step-control restart after a structure change
+    (``integrate(rebuild=...)``), judged by the contraction test like any reused one,
+    instead of being dropped with the stepper."""
 
     mode: object = False
     contraction: float = 0.5
     h_rtol: float = 0.1
     backend: object = None
+    across_restarts: bool = False
 
 
 _GROUPS = {StepControl: ("fixed_step", "max_cuts", "grow_after", "min_step_rel", "min_step_t_rel"),
            Budgets: ("max_rejections", "wall_budget_s")}
 _REUSE_KEYS = {"jacobian_reuse": "mode", "reuse_contraction": "contraction", "reuse_h_rtol": "h_rtol",
-               "linear_backend": "backend"}
+               "linear_backend": "backend", "reuse_across_restarts": "across_restarts"}
 
 
 def integrator_options(**flat) -> dict:
     """``integrate`` keywords from a flat mapping of option names (a scene's or a study's
     ``integrator_options``): the ``StepControl`` fields (``fixed_step``, ``max_cuts``, ...),
     the ``Budgets`` fields and ``jacobian_reuse``, ``reuse_contraction``, ``reuse_h_rtol``,
-    ``linear_backend`` become ``control``, ``budgets`` and ``reuse`` objects; every other
+    ``linear_backend``, ``reuse_across_restarts`` become ``control``, ``budgets`` and ``reuse`` objects; every other
     key (``predictor_degree``, ``lazy_jacobian``, ...) is passed through."""
     out = {}
     for cls, keys in _GROUPS.items():
@@ -716,7 +732,10 @@ def _accept(out: IntegrationResult, info: StepInfo, t: float, h_try: float, bar,
         out.contractions.extend(c)
     out.h_min = min(out.h_min, h_try)
     out.history.append((t, h_try, info.newton_iterations))
-    log.info("step %d t=%.6g h=%.3e newton its=%s", out.steps, t, h_try, info.stage_iterations)
+    rates = [q for c in info.stage_contractions for q in c]
+    log.info("step %d t=%.6g h=%.3e newton its=%s factorisations=%d reused=%d max contraction=%s", out.steps, t,
+             h_try, info.stage_iterations, info.factorizations, sum(info.stage_reuses),
+             f"{max(rates):.2e}" if rates else "-")
     if bar is not None:
         bar.n = t - float(t0)
         bar.set_postfix(h=f"{h_try:.2e}", its=info.newton_iterations, refresh=False)
@@ -801,6 +820,7 @@ def integrate(
     tableau: Optional[Tableau] = None,
     predictor_degree: int = 2,
     lazy_jacobian: bool = True,
+    predictor_across_restarts: bool = False,
 ) -> IntegrationResult:
     """Integrate from ``t0`` to ``t_end`` with nominal step ``h0 = (t_end − t0)/n_steps``.
 
@@ -834,7 +854,9 @@ def integrate(
     With ``consistent`` the massless dofs are first solved for at t0
     (``consistent_initialization``). ``predictor_degree`` sets the stage predictor
     (``DirkStepper``; 0 = previous stage value) and ``lazy_jacobian`` skips the Jacobian at
-    converged points (``DirkStepper``).
+    converged points (``DirkStepper``). ``predictor_across_restarts``: the stage values the
+    predictor extrapolates survive a restart (the state is continuous there; off: the first
+    step after a restart starts its stages from the previous stage value).
 
     Factorisation reuse (modified Newton; docs/time_integration.md; ``reuse``, a
     ``ReusePolicy``): ``mode`` False (default: one factorisation per Newton iteration), True
@@ -864,20 +886,21 @@ def integrate(
         from tqdm.auto import tqdm
         bar = tqdm(total=float(t_end) - float(t0), desc=f"SDIRK{tab.stages}",
                    bar_format="{l_bar}{bar}| t-t0 = {n:.6g}/{total:.6g} [{elapsed}<{remaining}{postfix}]")
-    reasons: dict = {}
+    reusers: list = []   # the JacobianReuse objects of the run (one per segment unless carried)
+    stepper = None
     try:
         t_stop, n = (float(t_end), int(n_steps)) if rebuild is None else _horizon(rebuild, t, t_end, h0)
         while True:
+            previous = stepper
             stepper = DirkStepper(system, tab, newton_opts, predictor_degree, lazy_jacobian, reuse.mode,
                                   reuse.contraction, reuse.h_rtol, reuse.backend, watch_structure=rebuild is None)
+            if previous is not None and not getattr(rebuild, "fresh", False):
+                stepper.carry_from(previous, factorisation=reuse.across_restarts,
+                                   predictor=predictor_across_restarts)
+            if stepper.reuse is not None and all(r is not stepper.reuse for r in reusers):
+                reusers.append(stepper.reuse)
             final = t_stop >= float(t_end)
-            try:
-                x, w, t = _segment(stepper, out, x, w, t, t_stop, n, control, budgets, on_step, rebuild, final, bar,
-                                   t0)
-            finally:
-                if stepper.reuse is not None:
-                    for k, v in stepper.reuse.refactor_reasons.items():
-                        reasons[k] = reasons.get(k, 0) + v
+            x, w, t = _segment(stepper, out, x, w, t, t_stop, n, control, budgets, on_step, rebuild, final, bar, t0)
             if t >= float(t_end):
                 break
             out.restarts += 1
@@ -885,7 +908,11 @@ def integrate(
     finally:
         if bar is not None:
             bar.close()
+        if reuse.mode:
+            reasons: dict = {}
+            for r in reusers:
+                for k, v in r.refactor_reasons.items():
+                    reasons[k] = reasons.get(k, 0) + v
+            out.refactor_reasons = reasons
     out.x, out.w, out.t = x, w, t
-    if reuse.mode:
-        out.refactor_reasons = reasons
     return out

@@ -84,6 +84,7 @@ def config_digest(cfg, sections=("geometry", "warp", "weft", "material", "projec
     # 4e-15 between superlu_pruned and PARDISO): a checkpoint resumes on another backend
     d.get("newton", {}).pop("linear_backend", None)
     if "time" not in sections:  # a relaxed state: B is off, the circuits and the speed do not matter
+        d.get("contact", {}).pop("rebuild", None)   # the impact phase's rule (the relaxation rebuilds every k)
         d.get("projectile", {}).pop("speed", None)
         for y in ("warp", "weft", "projectile"):
             d.get(y, {}).pop("J_bar", None)
@@ -192,7 +193,8 @@ def _integrator_options(cfg, sysm=None, extra: dict | None = None) -> dict:
     (rve.solvers.backends.pruned): their names become factories with that border."""
     opts = {"max_cuts": cfg.time.max_cuts, "fixed_step": not cfg.time.step_control,
             "jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
-            "linear_backend": cfg.newton.linear_backend, **(extra or {})}
+            "linear_backend": cfg.newton.linear_backend, "reuse_across_restarts": cfg.newton.reuse_across_restarts,
+            "predictor_across_restarts": cfg.newton.predictor_across_restarts, **(extra or {})}
     pruned = {NAME: PrunedSuperLU, NAME_AUTO: PardisoOrPruned}.get(opts["linear_backend"])
     if pruned is not None:
         opts["linear_backend"] = functools.partial(pruned, border=0 if sysm is None else schur_border(sysm))
@@ -309,9 +311,13 @@ class _Boundary:
         if self.progress:
             log.info("impact t = %.5g ms, steps %d, rejected %d, v_z = %.5g mm/ms", t, c["steps"], c["rejected"],
                      self.rec.series["v_com"][-1][2])
-        if self.ck is not None and c["since_checkpoint"] >= self.every:
+        if c["since_checkpoint"] >= self.every:
+            # a checkpoint boundary (with or without a file): the restart after it starts
+            # afresh, as the run resumed from the checkpoint does, so both give the same bits
             c["since_checkpoint"] = 0
-            self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
+            self.hook.fresh = True
+            if self.ck is not None:
+                self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
         if self.stop_after is not None and c["steps"] >= self.stop_after and t < self.t_end * (1 - 1e-12):
             if self.ck is not None:
                 self.ck.save(self.rec, t, x, w, self.hook.rebuilds, self.hook.early)
@@ -342,7 +348,8 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     rec, ck, scale, (t, x, w, resumed, rebuilds, early) = _impact_start(cfg, problem, x_start, t_end, steps, tab,
                                                                         nopts, checkpoint, record)
     boundary = _Boundary(rec, ck, cfg.time.checkpoint_every, stop_after_steps, t_end, progress)
-    hook = boundary.hook = ChunkedRebuild(sysm, t_end, steps, cfg.contact.rebuild_every,
+    every = cfg.contact.rebuild_every if cfg.contact.rebuild == "every" else None
+    hook = boundary.hook = ChunkedRebuild(sysm, t_end, steps, every,
                                           0.5 * float(cfg.contact.margin), boundary)
     hook.rebuilds, hook.early = rebuilds, early
     ti = time.perf_counter()

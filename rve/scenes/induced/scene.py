@@ -193,7 +193,8 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         linear_backend=None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend,
         **(integrator_options or {}))
     rs, x, w, rec = _induced_start(cfg, problem, t_end / steps, tab, nopts, record, progress, t_end, post_reuse)
-    hook = MapRebuild(sysm, t_end, cfg.contact.rebuild_every, 0.5 * float(sysm.params.margin))
+    every = cfg.contact.rebuild_every if cfg.contact.rebuild == "every" else None
+    hook = MapRebuild(sysm, t_end, every, 0.5 * float(sysm.params.margin))
     sysm.rebuild(x)
     ti = time.perf_counter()
     try:
