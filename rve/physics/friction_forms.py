@@ -63,7 +63,7 @@ class FrictionPoints:
     side gets -t); ``slip`` bool (active and slipping), ``stick`` bool (active and
     sticking); ``e`` (P, G, 3) the trial tangential gap; the committed history at this
     state ``s_bar``, ``anchor``; ``dissipation`` (P, G) the energy of the return map's slip
-    (N mm)."""
+    (N mm); ``normal`` (P, G) the point normal forces."""
 
     t: np.ndarray
     slip: np.ndarray
@@ -72,6 +72,7 @@ class FrictionPoints:
     s_bar: np.ndarray
     anchor: np.ndarray
     dissipation: np.ndarray
+    normal: np.ndarray
 
 
 def _trial(geo, X, s_bar, anchor):
@@ -103,7 +104,7 @@ def friction_state(geo, X, s_bar, anchor, f, kT, mu) -> FrictionPoints:
     el = np.where(active[..., None], t / np.where(kT > 0, kT, 1.0)[..., None], 0.0)
     diss = np.where(slip, np.einsum("pgi,pgi->pg", t, e - el), 0.0)
     return FrictionPoints(t=t, slip=slip, stick=stick, e=e, s_bar=np.array(geo.s_minus, float, copy=True),
-                          anchor=el - geo.j, dissipation=diss)
+                          anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float))
 
 
 def _per_point(mu, shape):

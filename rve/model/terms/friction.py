@@ -25,7 +25,8 @@ the dissipated energy is accumulated in ``dissipated``); ``record()`` / ``seed(r
 carry the history to another system or through a checkpoint (by point key);
 ``set_families(labels)`` names the family of every fibril (default: one family);
 ``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``);
-``points(x)`` a summary (total friction and normal force, stick and slip counts).
+``last`` the return mapping of the last committed state and ``points()`` its summary (total
+friction and normal force, stick and slip counts).
 """
 from __future__ import annotations
 
@@ -112,6 +113,8 @@ class FrictionTerm:
         #: energy dissipated by slip over the committed states (N mm)
         self.dissipated = 0.0
         self.mu_pair = np.zeros(0)
+        #: the return mapping of the last committed state (FrictionPoints), None before
+        self.last = None
 
     # ------------------------------------------------------------------ set-up
     def set_families(self, labels) -> None:
@@ -185,6 +188,7 @@ class FrictionTerm:
         if self.contact.map.n_pairs == 0:
             return 0.0
         st = self.state(x)
+        self.last = st
         self.s_bar, self.anchor = st.s_bar, st.anchor
         d = float(st.dissipation.sum())
         self.dissipated += d
@@ -234,14 +238,11 @@ class FrictionTerm:
                 K5[:, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
         return act, Rl.reshape(R.shape), K5.reshape(Kx.shape), Kw
 
-    def points(self, x) -> dict:
-        """Totals at ``x``: ``friction_force`` (N, the sum of |t|), ``normal_force`` (N),
-        ``stick`` and ``slip`` point counts."""
-        if self.contact.map.n_pairs == 0:
+    def points(self) -> dict:
+        """The last committed state: ``friction_force`` (N, the sum of |t|), ``normal_force``
+        (N), ``stick`` and ``slip`` point counts (zeros before the first commit)."""
+        st = self.last
+        if st is None or st.t.size == 0:
             return {"friction_force": 0.0, "normal_force": 0.0, "stick": 0, "slip": 0}
-        sel = np.arange(self.contact.map.n_pairs)
-        geo = self.contact.geometry(x, sel)
-        f, _, _ = self._loads(geo, sel)
-        st = self.state(x)
-        return {"friction_force": float(np.sqrt((st.t ** 2).sum(-1)).sum()), "normal_force": float(f.sum()),
+        return {"friction_force": float(np.sqrt((st.t ** 2).sum(-1)).sum()), "normal_force": float(st.normal.sum()),
                 "stick": int(st.stick.sum()), "slip": int(st.slip.sum())}
