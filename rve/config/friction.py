@@ -82,8 +82,8 @@ class CapstanLoad(Section):
 
 
 class CapstanMesh(Section):
-    elements_per_radian: Integer = Field(60, ge=4, description="elements of the wrapped fibril per radian of wrap")
-    tail_elements: Integer = Field(10, ge=1, description="elements of each tail")
+    elements_per_radian: Integer = Field(
+        60, ge=4, description="elements of the wrapped fibril per radian of wrap (the tails have the same size)")
     order: Integer = Field(1, ge=1, le=4, description="Lagrange element order")
 
 
