@@ -1,0 +1,130 @@
+"""The friction term in the assembled contact system: mu = 0 adds nothing, the assembled
+tangent is exact and unsymmetric (the LU path), the history follows map rebuilds and
+records by point key, per-family coefficients, and the config's checks."""
+import numpy as np
+import pytest
+
+from rve.config import ConfigError
+from rve.config.loader import load_config
+from rve.model.contact_model import ContactSystem
+from rve.model.terms.contact import ContactParams
+from rve.model.terms.friction import FrictionLaw, match_rows
+from rve.scenes import friction_crossing
+from rve.scenes.frictional import initial_state, step
+from rve.solvers.linear import is_symmetric, sparse_solve
+from rve.testing import fd_jacobian
+
+CFG = "configs/scenes/crossing.yaml"
+
+
+def _slid(overrides=(), cycle_steps=3, u=0.05):
+    """The crossing indented and its slider's ends moved to ``u`` (slip at u = 0.05)."""
+    cfg = load_config(CFG, list(overrides))
+    system, parts = friction_crossing.setup(cfg)
+    x = initial_state(system.mesh, system.layout)
+    z0 = x[parts["z"]].copy()
+    for k in (1, 2):
+        x[parts["z"]] = z0 - cfg.geometry.indentation * k / 2
+        x, _, _ = step(system, x, 0.0, cfg.newton, "t", "indent", k)
+    for k in range(1, cycle_steps + 1):
+        x[parts["x"]] = u * k / cycle_steps
+        x, _, _ = step(system, x, 0.0, cfg.newton, "t", "cycle", k)
+    return cfg, system, parts, x
+
+
+@pytest.mark.parametrize("regime, shift", [("stick", -0.002), ("slip", 0.002)])
+def test_assembled_tangent_exact_and_unsymmetric(regime, shift):
+    cfg, system, parts, x = _slid(cycle_steps=2, u=0.04)   # committed in slip
+    x[parts["contact_x"]] += shift   # a trial state: the contact point moved back (stick) or on (slip)
+    fr = system.term.friction
+    st = fr.state(x)
+    assert (st.stick.sum() if regime == "stick" else st.slip.sum()) == 1
+    w = np.zeros(system.n)
+    F, Fx, _ = system.evaluate(x, w, 0.0)
+    mid = cfg.mesh.elements // 2
+    cols = system.layout.dofs("mech", system.mesh.conn[mid])
+    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], x, cols, eps=1e-7)
+    A = Fx.toarray()[:, cols]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    if regime == "slip":
+        assert not is_symmetric(Fx)
+        b = np.random.default_rng(0).normal(size=system.n)
+        free = np.setdiff1d(np.arange(system.n), system.constraints(0.0)[0])
+        K = Fx[free][:, free]
+        du = sparse_solve(K, b[free])
+        assert np.linalg.norm(K @ du - b[free]) <= 1e-8 * np.linalg.norm(b[free])
+
+
+def test_zero_coefficient_adds_nothing():
+    assert not FrictionLaw(0.0).enabled and not FrictionLaw(0.0, 1.0, (("warp", "weft", 0.0),)).enabled
+    cfg, system, parts, x = _slid(["friction.coefficient=0.0"])
+    assert system.term.friction is None
+    w = np.zeros(system.n)
+    F, Fx, _ = system.evaluate(x, w, 0.0)
+    plain = ContactSystem(system.base, ContactParams(penalty=cfg.contact.penalty, n_gp=cfg.contact.n_gp,
+                                                     margin=0.5 * cfg.geometry.radius), x)
+    system.rebuild(x)
+    F1, Fx1, _ = system.evaluate(x, w, 0.0)
+    F2, Fx2, _ = plain.evaluate(x, w, 0.0)
+    assert np.array_equal(F1, F2) and np.array_equal(Fx1.data, Fx2.data) and np.array_equal(Fx1.indices, Fx2.indices)
+
+
+def test_history_survives_rebuilds_and_records():
+    cfg, system, parts, x = _slid(cycle_steps=1, u=0.004)   # stick with an elastic gap
+    fr = system.term.friction
+    assert fr.last.stick.sum() == 1 and np.abs(fr.last.t).max() > 0
+    w = np.zeros(system.n)
+    x2 = x.copy()
+    x2[parts["x"]] += 0.002
+    F_before = system.evaluate(x2, w, 0.0, jacobian=False)[0]
+    system.rebuild(x)                               # same pairs, history by key
+    assert np.array_equal(system.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
+    rec = fr.record()
+    other = friction_crossing.setup(cfg)[0]
+    other.rebuild(x)
+    assert not np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
+    other.term.friction.seed(rec)
+    assert np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
+    # a map without the pair forgets it; the pair's return starts with no elastic gap
+    far = x.copy()
+    lay = system.layout
+    far.reshape(-1, lay.block)[system.mesh.fibril_nodes(0), 2] += 1.0
+    system.rebuild(far)
+    assert system.term.map.n_pairs == 0 and system.term.friction.keys.shape[0] == 0
+    system.rebuild(x)
+    assert np.abs(system.term.friction.state(x).t).max() == 0.0
+
+
+def test_family_coefficients():
+    cfg, system, parts, x = _slid(["friction.coefficient=0.3"], cycle_steps=1, u=0.004)
+    fr = system.term.friction
+    assert np.allclose(fr.mu_pair, 0.3)
+    fr.law = FrictionLaw(0.3, 1.0, (("weft", "warp", 0.05),))
+    fr.set_families(["warp", "weft"])
+    assert np.allclose(fr.mu_pair, 0.05)
+    fr.set_families(["warp", "warp"])
+    assert np.allclose(fr.mu_pair, 0.3)
+    with pytest.raises(ValueError, match="one label per fibril"):
+        fr.set_families(["warp"])
+
+
+def test_match_rows():
+    a = np.array([[1, 2], [3, 4], [5, 6]])
+    b = np.array([[5, 6], [1, 2]])
+    assert list(match_rows(a, b)) == [1, -1, 0]
+
+
+@pytest.mark.parametrize("override, text", [
+    ("friction.coefficient=2.5", "friction.coefficient"),
+    ("friction.coefficient=-0.1", "friction.coefficient"),
+    ("friction.stiffness=0", "friction.stiffness"),
+    ("friction.pairs={warp-wool: 0.2}", "must be 'a-b' with a, b in ('warp', 'weft', 'loop')"),
+    ("friction.pairs={warp-weft: 3.0}", "must be in [0, 2.0]"),
+    ("friction.pairs={warp-weft: 0.2, weft-warp: 0.3}", "name the same pair"),
+])
+def test_config_errors_name_the_key_and_range(override, text):
+    with pytest.raises(ConfigError) as err:
+        load_config(CFG, [override])
+    assert text in str(err.value), str(err.value)
+    with pytest.raises(ValueError):
+        FrictionLaw(2.5)
