@@ -128,3 +128,23 @@ def test_config_errors_name_the_key_and_range(override, text):
     assert text in str(err.value), str(err.value)
     with pytest.raises(ValueError):
         FrictionLaw(2.5)
+
+
+def test_relaxation_of_a_frictional_system_solves_the_residual():
+    from rve.solvers.frictional import frictional_static_step
+    from rve.solvers.minimize import minimize_energy
+    from rve.solvers.relaxation import RelaxSettings, relax_to_equilibrium
+
+    cfg, system, parts, x = _slid(cycle_steps=1, u=0.004)
+    x[parts["x"]] = 0.03                        # the ends moved on: stick turns into slip
+    with pytest.raises(ValueError, match="friction"):
+        minimize_energy(system, x)
+    rec = system.term.friction.record()
+    ref, _, res, d = frictional_static_step(system, x, np.zeros(system.n), 0.0, {"atol": 1e-11, "max_iter": 30})
+    assert res.converged and d > 0
+    system.term.friction.seed(rec)              # back to the history of the last converged state
+    out = relax_to_equilibrium(system, x, np.zeros(system.n),
+                               RelaxSettings(duration=1.0, steps=1, method="energy", static_atol=1e-11))
+    assert out.static_converged and out.history[0]["method"] == "capped newton (friction)"
+    np.testing.assert_allclose(out.x, ref, rtol=0, atol=1e-9)
+    assert system.term.friction.dissipated == pytest.approx(rec["dissipated"] + d, rel=1e-6)
