@@ -148,3 +148,32 @@ def test_relaxation_of_a_frictional_system_solves_the_residual():
     assert out.static_converged and out.history[0]["method"] == "capped newton (friction)"
     np.testing.assert_allclose(out.x, ref, rtol=0, atol=1e-9)
     assert system.term.friction.dissipated == pytest.approx(rec["dissipated"] + d, rel=1e-6)
+
+
+def test_history_shared_with_the_neighbouring_element():
+    """A point out of contact takes the stick state of the same + point on the neighbouring
+    element of the - fibril: the same material point (collinear chords) and the same
+    elastic gap, so the contact carries it on to the next element."""
+    cfg, system, parts, x = _slid(["geometry.base_elements=2", "geometry.base_offset=0.1 mm"], cycle_steps=2,
+                                  u=0.012)   # stick, elastic gap ~0.01 mm; the base node at x = 0.1
+    fr, term = system.term.friction, system.term
+    geo = term.geometry(x)
+    on = geo.active.ravel()
+    assert on.sum() == 1 and fr.last.stick.sum() == 1
+    keys = fr.keys
+    d = np.flatnonzero(on)[0]
+    r = np.flatnonzero((keys[:, 0] == keys[d, 0]) & (keys[:, 1] == keys[d, 1]) & (np.abs(keys[:, 2] - keys[d, 2]) == 1))
+    assert r.size == 1
+    r = r[0]
+    G = cfg.contact.n_gp
+    X = np.stack(term.ends(x), 1)
+    def q(i):                       # position of the - material point of point i
+        s = fr.s_bar.ravel()[i]
+        return (1 - s) * X[i // G, 2] + s * X[i // G, 3]
+    np.testing.assert_allclose(q(r), q(d), atol=1e-12)
+    from rve.physics.friction_forms import tangential_gap
+    e = tangential_gap(geo, X, fr.s_bar, fr.anchor).reshape(-1, 3)
+    assert np.linalg.norm(e[d]) > 5e-3
+    p = X[r // G, 0] + geo.s_plus.ravel()[r] * (X[r // G, 1] - X[r // G, 0])
+    u_r = fr.anchor.reshape(-1, 3)[r] + p - q(r)   # the receiver's gap before its own projection
+    np.testing.assert_allclose(u_r, e[d], atol=1e-12)

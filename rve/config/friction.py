@@ -113,6 +113,8 @@ class CrossingGeometry(Section):
     radius: Length = Field(0.1, gt=0, description="radius of both fibrils")
     slider_length: Length = Field(4.0, gt=0, description="length of the pressed (sliding) fibril")
     base_length: Length = Field(2.0, gt=0, description="length of the clamped fibril it slides along")
+    base_elements: Integer = Field(1, ge=1, description="elements of the clamped fibril")
+    base_offset: Length = Field(0.0, description="shift of the clamped fibril along its axis (its nodes move with it)")
     indentation: Length = Field(0.02, gt=0, description="how far the slider's clamped ends are lowered")
 
 

@@ -40,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights"]
+__all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
+           "tangential_gap"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -82,6 +83,12 @@ def _trial(geo, X, s_bar, anchor):
     un = np.einsum("pgi,pgi->pg", geo.n, u)
     e = u - un[..., None] * geo.n
     return cb, u, un, e
+
+
+def tangential_gap(geo, X, s_bar, anchor) -> np.ndarray:
+    """The trial tangential gap ``e`` (P, G, 3) at ``X`` from the history: at the state the
+    history was committed at, the elastic gap of every contact point."""
+    return _trial(geo, X, s_bar, anchor)[3]
 
 
 def _return_map(e, f, kT, mu, active):

@@ -13,7 +13,7 @@ Contract (the scene protocol, rve.scenes.protocol)
 * ``run(cfg, out_dir)``: the summary (and ``crossing_path.json``).
 
 Set-up: the *slider* (fibril 0, the + side of the pair) lies along e2 at height 2R above the
-*base* (fibril 1, one element along e1, every dof held); the slider's end nodes are held
+*base* (fibril 1, ``base_elements`` along e1, shifted by ``base_offset``, every dof held); the slider's end nodes are held
 (all 9 dofs), lowered by ``indentation`` and then moved along e1, so the slider slides
 along the base's axis (the closest point on the base follows; the + point is material). The
 slider has an odd number of elements and one contact point per pair (``n_gp = 1``): one
@@ -44,8 +44,9 @@ def setup(cfg):
     g = cfg.geometry
     R, zc = g.radius, 2.0 * g.radius
     slider = straight_fibril([0.0, -g.slider_length / 2, zc], [0.0, g.slider_length / 2, zc], R, "slider")
-    base = straight_fibril([-g.base_length / 2, 0.0, 0.0], [g.base_length / 2, 0.0, 0.0], R, "base")
-    mesh = fibril_mesh([slider, base], [cfg.mesh.elements, 1], cfg.mesh.order)
+    o = g.base_offset
+    base = straight_fibril([o - g.base_length / 2, 0.0, 0.0], [o + g.base_length / 2, 0.0, 0.0], R, "base")
+    mesh = fibril_mesh([slider, base], [cfg.mesh.elements, g.base_elements], cfg.mesh.order)
     a, b = mesh.end_nodes(0)
     model0 = BeamModel(mesh, BeamMaterial(youngs_modulus=cfg.material.youngs_modulus))
     lay = model0.layout

@@ -15,12 +15,15 @@ contact term then carries no friction at all: the frictionless results bit for b
 
 * ``on_rebuild(x)`` after every map rebuild: the history of every point of the new map by
   point key (``ContactTerm._point_keys``: + element, point index, - element, shift); a
-  point whose key was in the old map keeps its history, a new point starts at ``x`` with
-  no elastic gap (its material point the closest point at ``x``);
+  point whose key was in the old map keeps its history, a new point takes the history of
+  the same + point on a neighbouring element of the same - fibril when that one is in
+  contact at ``x`` (``share_along_fibrils``), else it starts at ``x`` with no elastic gap
+  (its material point the closest point at ``x``);
 * ``add_to(x, act, R, Kx, Kw, jacobian)``: the friction residual and tangent of the active
   pairs added to the contact term's local arrays (the mechanical block of the chord ends).
 
-Drivers call ``commit(x)`` at every converged state (the history becomes that state's and
+Drivers call ``commit(x)`` at every converged state (the history becomes that state's, the
+points out of contact take that of a point in contact on the same + point and - fibril, and
 the dissipated energy is accumulated in ``dissipated``); ``record()`` / ``seed(record)``
 carry the history to another system or through a checkpoint (by point key);
 ``set_families(labels)`` names the family of every fibril (default: one family);
@@ -35,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...physics.contact_forms import penalty_law
-from ...physics.friction_forms import friction_forces, friction_state, start_history
+from ...physics.friction_forms import (friction_forces, friction_state, material_weights, start_history,
+                                      tangential_gap)
 
 __all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
 
@@ -154,6 +158,7 @@ class FrictionTerm:
         keys = c._point_keys()
         geo = c.geometry(x)
         s_new, a_new = start_history(self._ends(x), geo.s_plus, geo.s_minus)
+        hit = np.zeros(P * G, bool)
         if self.keys is not None and P:
             idx = match_rows(keys, self.keys)
             hit = idx >= 0
@@ -164,6 +169,8 @@ class FrictionTerm:
         self.keys = keys
         self.s_bar = s_new.reshape(P, G)
         self.anchor = a_new.reshape(P, G, 3)
+        if P and not hit.all():
+            self.share_along_fibrils(x, receivers=~hit.reshape(P, G), geo=geo)
 
     def _loads(self, geo, sel):
         c = self.contact
@@ -190,9 +197,59 @@ class FrictionTerm:
         st = self.state(x)
         self.last = st
         self.s_bar, self.anchor = st.s_bar, st.anchor
+        self.share_along_fibrils(x, receivers=st.normal <= 0.0)
         d = float(st.dissipation.sum())
         self.dissipated += d
         return d
+
+    def share_along_fibrils(self, x, receivers, geo=None) -> None:
+        """The history of the ``receivers`` (P, G) bool points from a *donor*: the point in
+        contact at ``x`` (largest overlap) with the same + point (+ element, point
+        index), - fibril and shift, on a neighbouring - element. The donor's material point is
+        named by its fibril parameter S = S0(e-) + s_bar h(e-) and re-expressed on the
+        receiver's chord, ``s_bar = (S - S0(e-')) / h(e-')`` (outside [0, 1] until the contact
+        reaches that element: the chord continued), and the receiver keeps the donor's
+        elastic gap at ``x``: ``anchor = e - j'(x; s_bar)``. So a contact that moves on to the
+        next element of the - fibril carries its stick state instead of sticking anew."""
+        c, mesh = self.contact, self.contact.mesh
+        P, G = self.s_bar.shape
+        geo = c.geometry(x) if geo is None else geo
+        X = self._ends(x)
+        keys = self.keys
+        group = keys.copy()
+        group[:, 2] = mesh.elem_fibril[keys[:, 2]]
+        _, inv = np.unique(group, axis=0, return_inverse=True)
+        inv = inv.ravel()
+        rec = np.asarray(receivers, bool).reshape(-1)
+        donor_ok = geo.active.reshape(-1) & ~rec & (np.repeat(self.mu_pair, G) > 0)
+        if not donor_ok.any() or not rec.any():
+            return
+        fN = np.where(geo.active, geo.g, -np.inf).reshape(-1)
+        order = np.lexsort((-fN, ~donor_ok, inv))      # per group: donors first, the most loaded first
+        first = np.full(inv.max() + 1, -1, np.int64)
+        grp_sorted = inv[order]
+        starts = np.r_[True, grp_sorted[1:] != grp_sorted[:-1]]
+        lead = order[starts]
+        first[inv[lead]] = np.where(donor_ok[lead], lead, -1)
+        donor = first[inv]
+        # neighbours along the - fibril only (the chord continued over one element)
+        take = rec & (donor >= 0) & (np.abs(keys[:, 2] - keys[np.maximum(donor, 0), 2]) == 1)
+        if not take.any():
+            return
+        r, d = np.flatnonzero(take), donor[take]
+        conn, node_s = mesh.conn, mesh.node_s
+        S0 = node_s[conn[:, 0]]
+        h = node_s[conn[:, -1]] - S0
+        em = keys[:, 2]
+        S = S0[em[d]] + self.s_bar.reshape(-1)[d] * h[em[d]]
+        sb = (S - S0[em[r]]) / h[em[r]]
+        e = tangential_gap(geo, X, self.s_bar, self.anchor).reshape(-1, 3)[d]
+        pr = r // G
+        cb = material_weights(geo.s_plus.reshape(-1)[r], sb)          # (n, 4)
+        jr = np.einsum("nk,nki->ni", cb, X[pr])
+        s_flat, a_flat = self.s_bar.reshape(-1).copy(), self.anchor.reshape(-1, 3).copy()
+        s_flat[r], a_flat[r] = sb, e - jr
+        self.s_bar, self.anchor = s_flat.reshape(P, G), a_flat.reshape(P, G, 3)
 
     def record(self) -> dict:
         """The history by point key (copies): ``keys`` (n, 6), ``s_bar`` (n,), ``anchor``
