@@ -177,3 +177,41 @@ def test_history_shared_with_the_neighbouring_element():
     p = X[r // G, 0] + geo.s_plus.ravel()[r] * (X[r // G, 1] - X[r // G, 0])
     u_r = fr.anchor.reshape(-1, 3)[r] + p - q(r)   # the receiver's gap before its own projection
     np.testing.assert_allclose(u_r, e[d], atol=1e-12)
+
+
+def test_tangent_exact_with_temperature_and_potential_fields():
+    """With T and V on the pairs (local layout: both elements' nodes x (r, T, V)) the friction
+    blocks land on the chord ends' r rows and columns: the assembled Fx against differences."""
+    from rve.model import BeamMaterial, BeamModel, DirichletBC
+
+    cfg, mech, parts, x_m = _slid(cycle_steps=2, u=0.04)
+    mesh = mech.mesh
+    mat = BeamMaterial(youngs_modulus=cfg.material.youngs_modulus, electrical_conductivity=10.0,
+                       thermal_conductivity=1.0)
+    probe = BeamModel(mesh, mat, fields=("mech", "T", "V"))
+    lay = probe.layout
+    a, b = mesh.end_nodes(0)
+    held = np.concatenate([lay.dofs("mech", [a, b]), lay.dofs("mech", mesh.fibril_nodes(1)),
+                           lay.dofs("T", [a]), lay.dofs("V", [a])])
+    base = BeamModel(mesh, mat, fields=("mech", "T", "V"), bcs=[DirichletBC(held, 0.0)])
+    params = ContactParams(penalty=cfg.contact.penalty, n_gp=1, margin=0.05, heat_transfer=0.1, conductance=1.0,
+                           friction=FrictionLaw(0.3, 0.1))
+    x = np.zeros(lay.n)
+    lay.as_nodal(x)[:, :9] = mech.layout.as_nodal(x_m)
+    system = ContactSystem(base, params, x)
+    assert system.term.m == 4 and system.term.nC == 5
+    system.term.friction.seed(mech.term.friction.record())
+    w = np.zeros(lay.n)
+    lay.as_nodal(w)[:, lay.offset["T"]] = np.linspace(0.0, 1.0, mesh.n_nodes)
+    lay.as_nodal(w)[:, lay.offset["V"]] = np.linspace(1.0, 0.0, mesh.n_nodes)
+    x[lay.dofs("r", mesh.conn[cfg.mesh.elements // 2], comp=0)] += 0.002      # slip on
+    assert system.term.friction.state(x).slip.sum() == 1
+    F, Fx, Fw = system.evaluate(x, w, 0.0)
+    cols = lay.dofs("mech", mesh.conn[cfg.mesh.elements // 2])
+    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], x, cols, eps=1e-7)
+    A = Fx.toarray()[:, cols]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    rows = lay.dofs("r", mesh.conn[cfg.mesh.elements // 2], comp=0)
+    fx_plain = ContactSystem(base, ContactParams(penalty=cfg.contact.penalty, n_gp=1, margin=0.05, heat_transfer=0.1,
+                                                 conductance=1.0), x).evaluate(x, w, 0.0)[0]
+    assert np.abs(F[rows] - fx_plain[rows]).max() > 1e-3      # the friction force is in the r rows
