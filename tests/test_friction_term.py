@@ -215,3 +215,32 @@ def test_tangent_exact_with_temperature_and_potential_fields():
     fx_plain = ContactSystem(base, ContactParams(penalty=cfg.contact.penalty, n_gp=1, margin=0.05, heat_transfer=0.1,
                                                  conductance=1.0), x).evaluate(x, w, 0.0)[0]
     assert np.abs(F[rows] - fx_plain[rows]).max() > 1e-3      # the friction force is in the r rows
+
+
+def test_dynamic_relaxation_commits_every_step():
+    """The damped dynamic relaxation of a frictional system commits the history after every
+    accepted step: pushed on from a slipping state, it dissipates, and the static round
+    ends on the Coulomb limit (the supports' tangential force = mu N)."""
+    from rve.model import BeamMaterial, BeamModel
+    from rve.scenes.frictional import reaction
+    from rve.solvers.relaxation import RelaxSettings, relax_to_equilibrium
+
+    cfg, system, parts, x = _slid(cycle_steps=2, u=0.04)
+    base = BeamModel(system.mesh, BeamMaterial(youngs_modulus=cfg.material.youngs_modulus, damping=50.0),
+                     bcs=system.base.bcs)
+    damped = ContactSystem(base, system.params, x)
+    damped.term.friction.seed(system.term.friction.record())
+    d0 = damped.term.friction.dissipated
+    x[parts["x"]] = 0.06
+    commits = []
+    fr = damped.term.friction
+    original = fr.commit
+    fr.commit = lambda xx: commits.append(1) or original(xx)
+    out = relax_to_equilibrium(damped, x, np.zeros(damped.n), RelaxSettings(
+        duration=2.0, steps=10, rebuild_every=5, static_atol=1e-11, static_max_iter=40))
+    assert out.static_converged and len(commits) >= out.dynamic_steps + 1
+    assert fr.dissipated > d0
+    pts = fr.points()
+    F = reaction(damped, out.x, parts["x"]).sum()
+    assert pts["slip"] == 1
+    np.testing.assert_allclose(F, cfg.friction.coefficient * pts["normal_force"], rtol=1e-6)

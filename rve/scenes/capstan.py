@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fem.assembly import DofLayout
 from ..fem.mesh import Fibril, fibril_mesh, orthonormal_directors, straight_fibril
 from ..model import BeamMaterial, BeamModel, DirichletBC
 from ..model.contact_model import ContactSystem
@@ -80,7 +81,6 @@ def setup(cfg):
     straight = straight_fibril([0.0, 0.0, 0.0], [fib.length, 0.0, 0.0], Rf, "wrapped")
     mesh = fibril_mesh([straight, cyl], [n_el, 1], cfg.mesh.order)
     a, b = mesh.end_nodes(0)
-    from ..fem.assembly import DofLayout
     lay = DofLayout(mesh.n_nodes, ("mech",))
     rest = [lay.dofs("mech", [b]), lay.dofs("mech", mesh.fibril_nodes(1))]
     bcs_pull = [DirichletBC(np.concatenate([lay.dofs("r", [a], comp=2)] + rest), 0.0)]

@@ -22,7 +22,9 @@ rebuildable contact map, ``energy(x)``, ``set_onset``, ``params.margin``; e.g.
   Velocities are zero throughout. A system with friction (``rve.solvers.frictional.
   friction_of``) has no potential: ``"energy"`` then solves the static residual by the
   capped Newton below from the friction history of the last converged state, and commits
-  the history at the solution.
+  the history at the solution. ``"dynamic"`` commits the friction history after every
+  accepted time step (each step's stages return-map from the last accepted state) and
+  after every converged static round.
 * ``"dynamic"`` (the previous path):
 
 1. **Dynamic relaxation**: backward Euler (``rve.solvers.dirk.integrate``, step control)
@@ -154,7 +156,11 @@ def _relax_dynamic(system, x, w, t, s: RelaxSettings, out: RelaxResult, on_rebui
     guard = 0.5 * float(system.params.margin)
     extra = [0]
 
+    friction = friction_of(system)
+
     def on_step(t_, x_, w_, info):
+        if friction is not None:      # the accepted step is the history of the next one
+            friction.commit(x_)
         # safety: fibrils moved more than half the search margin since the last rebuild
         # -> rebuild now (the stepper then assembles through its general path for the
         # rest of the chunk, still exact)
@@ -213,6 +219,8 @@ def _relax_static(system, x, w, t, s: RelaxSettings, out: RelaxResult, t_start: 
             xs, ws = xs2, ws2
         out.static_newton_iterations += nres.iterations
         x, w = xs, ws
+        if nres.converged and friction_of(system) is not None:
+            friction_of(system).commit(x)
         out.static_result = nres
         out.static_converged = bool(nres.converged)
         # a rebuild at the solution: did pairs the map missed come into contact?
