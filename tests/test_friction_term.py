@@ -244,3 +244,17 @@ def test_dynamic_relaxation_commits_every_step():
     F = reaction(damped, out.x, parts["x"]).sum()
     assert pts["slip"] == 1
     np.testing.assert_allclose(F, cfg.friction.coefficient * pts["normal_force"], rtol=1e-6)
+
+
+def test_cell_static_step_of_a_frictional_system():
+    from rve.homogenisation.cell_statics import static_minimize
+    from rve.solvers.frictional import frictional_static_step
+
+    cfg, system, parts, x = _slid(cycle_steps=1, u=0.004)
+    x[parts["x"]] = 0.03
+    rec = system.term.friction.record()
+    ref, _, res, _ = frictional_static_step(system, x, np.zeros(system.n), 0.0, {"atol": 1e-11, "max_iter": 30})
+    system.term.friction.seed(rec)
+    xs, info = static_minimize(system, x, 1e-11, 40)
+    assert info["converged"] and info["method"] == "friction"
+    np.testing.assert_allclose(xs, ref, rtol=0, atol=1e-9)
