@@ -11,6 +11,7 @@ from pathlib import Path
 
 from rve.config.loader import load_config
 from rve.scenes import capstan
+from rve.solvers.newton import convergence_rates
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs/scenes/capstan.yaml"
 
@@ -44,6 +45,11 @@ def main(argv):
             cfg, s, last, lam = case([f"friction.coefficient={mu}", f"geometry.wrap_angle={theta}"] + extra)
             worst = max(worst, abs(s["relative_error"]))
             print(line(cfg, s, last, lam))
+            first = s["path"][0]["newton"]
+            print(f"    Newton, first pull step (stick and slip): {' '.join(f'{r:.2e}' for r in first)}; rates "
+                  f"{' '.join(f'{q:.2f}' for q in convergence_rates(first))}")
+            print(f"    Newton, last step (all slip): {' '.join(f'{r:.2e}' for r in last['newton'])}; rates "
+                  f"{' '.join(f'{q:.2f}' for q in convergence_rates(last['newton']))}")
     print(f"largest |error| of the four cases: {100 * worst:.4f} % (acceptance: 1 %)")
     if quick:
         return
