@@ -6,6 +6,8 @@ Newton of ``relax_to_equilibrium``, then the commit). Prints wall times, Newton 
 and the median ratio over the runs (one process, alternating).
 
     nice -n 10 python benchmarks/friction_cost.py RELAXED.nc [--mode shear] [--mu 0.2] [--runs 3]
+    nice -n 10 python benchmarks/friction_cost.py --small [--elements 12]   (a 4x4 plain weave, one
+        fibril per yarn, relaxed here first)
 
 (The strain steps of the pipeline also have the driven and the damped phases, whose
 dynamics are not frictional yet: this measures the static solve only.)
@@ -28,19 +30,31 @@ from rve.solvers.relaxation import RelaxSettings, relax_to_equilibrium
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("state")
+    ap.add_argument("state", nargs="?")
+    ap.add_argument("--small", action="store_true")
+    ap.add_argument("--elements", type=int, default=12)
     ap.add_argument("--mode", default="shear")
     ap.add_argument("--mu", type=float, default=0.2)
     ap.add_argument("--runs", type=int, default=3)
     a = ap.parse_args()
-    st = load_state(a.state)
-    cfg = RVEConfig.model_validate(st.config)
-    fab, mesh = fabric_and_mesh(cfg)
-    x0 = st.x.reshape(-1)
+    if a.small:
+        from rve.fabrics.relaxation import relax
+
+        cfg = RVEConfig(scene="rve", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": a.elements})
+        fab, mesh = fabric_and_mesh(cfg)
+        relaxed = relax(cfg)
+        xr = relaxed.x.reshape(-1, 9)
+        origin, label = xr, f"a relaxed 4x4 plain weave ({a.elements} el/fibril, one fibril per yarn)"
+    else:
+        st = load_state(a.state)
+        cfg = RVEConfig.model_validate(st.config)
+        fab, mesh = fabric_and_mesh(cfg)
+        xr, origin, label = st.x, st.origin, a.state
+    x0 = xr.reshape(-1)
     ends, _, _ = clamped_ends(fab, mesh)
     eps = cfg.strain.total / cfg.strain.steps
-    x1 = st.x + affine_velocity(st.origin, a.mode, eps)   # the driven phase's field over the step
-    x1[ends, :3] = end_targets(st.origin[ends, :3], a.mode, eps)
+    x1 = xr + affine_velocity(origin, a.mode, eps)   # the driven phase's field over the step
+    x1[ends, :3] = end_targets(origin[ends, :3], a.mode, eps)
     x1 = x1.reshape(-1)
     atol, iters = cfg.strain.static_atol, cfg.strain.static_max_iter
     base = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False)
@@ -66,7 +80,7 @@ def main():
                           "stick": pts["stick"], "slip": pts["slip"],
                           "max_centroid_difference_mm": float(np.abs((out.x - xa).reshape(-1, 9)[:, :3]).max())}))
     m0, m1 = np.median(times["frictionless"]), np.median(times["friction"])
-    print(f"{a.mode} step 1 of {a.state}: {mesh.n_elements} elements, mu = {a.mu}: median static solve "
+    print(f"{a.mode} step 1 of {label}: {mesh.n_elements} elements, mu = {a.mu}: median static solve "
           f"{m0:.2f} s frictionless (minimiser), {m1:.2f} s with friction (residual Newton): ratio {m1 / m0:.2f}")
 
 
