@@ -241,8 +241,9 @@ def _relax_static(system, x, w, t, s: RelaxSettings, out: RelaxResult, t_start: 
 
 def _relax_frictional(system, x, s: RelaxSettings, t0) -> RelaxResult:
     """The static residual of a frictional system by the capped Newton (the map rebuilt as
-    the centroids move, the history carried by point key) from the held history; the
-    history is committed at the solution (``RelaxResult.static_converged``)."""
+    the centroids move, the history carried by point key) from the held history, by
+    pseudo-transient continuation where it fails; the history is committed at the solution
+    (``RelaxResult.static_converged``)."""
     t_start = time.perf_counter()
     x = np.array(x, float, copy=True)
     out = RelaxResult(x, np.zeros(system.n), float(t0))
@@ -250,6 +251,13 @@ def _relax_frictional(system, x, s: RelaxSettings, t0) -> RelaxResult:
     system.rebuild(x)
     xs, _, res = capped_newton(system, x, t0, atol=s.static_atol, rtol=s.static_rtol, max_iter=s.static_max_iter,
                                step_cap=cap, backend=s.linear_backend)
+    if not res.converged:
+        log.warning("frictional static Newton failed (%s); pseudo-transient continuation", res.reason)
+        system.rebuild(xs)
+        xs, _, pres = pseudo_transient_solve(system, xs, np.zeros(system.n), t0, atol=s.static_atol,
+                                             rtol=s.static_rtol, max_iter=200, backend=s.linear_backend)
+        res = NewtonResult(pres.u, pres.converged, res.iterations + pres.iterations, res.residuals + pres.residuals,
+                           pres.reason)
     if res.converged:
         friction_of(system).commit(xs)
     st = system.contact_state(xs)
