@@ -10,7 +10,8 @@ from rve.config import ConfigError, SceneConfig, json_schema, load_config, scene
 from rve.scenes.registry import SCENES, get_scene, scene_names
 
 ROOT = Path(__file__).resolve().parents[1]
-EXPECTED = ("static_wire", "dynamic_wire", "fabric_relax", "rve", "induced_deformation", "impact")
+EXPECTED = ("static_wire", "dynamic_wire", "fabric_relax", "rve", "induced_deformation", "impact", "capstan",
+            "friction_crossing")
 
 
 def test_the_registry_names_every_scene():
@@ -49,13 +50,13 @@ def test_unknown_scene_errors_list_the_registry(capsys):
         with pytest.raises(ConfigError) as info:
             load_config(raw)
         assert allowed in str(info.value)
-    with pytest.raises(ConfigError, match=r"\(allowed: static_wire, dynamic_wire, fabric_relax, rve, induced_deformation, impact\)"):
+    with pytest.raises(ConfigError, match=r"\(allowed: static_wire, dynamic_wire, fabric_relax, rve, induced_deformation, impact, capstan, friction_crossing\)"):
         json_schema("nope")
-    with pytest.raises(ConfigError, match=r"\(allowed: static_wire, dynamic_wire, fabric_relax, rve, induced_deformation, impact\)"):
+    with pytest.raises(ConfigError, match=r"\(allowed: static_wire, dynamic_wire, fabric_relax, rve, induced_deformation, impact, capstan, friction_crossing\)"):
         load_config({"mesh": {}}, ["mesh.order=2"])
     assert cli.main(["schema", "nope"]) == 2
     assert allowed in capsys.readouterr().err
-    with pytest.raises(KeyError, match="allowed: static_wire, dynamic_wire, fabric_relax, rve, induced_deformation, impact"):
+    with pytest.raises(KeyError, match="allowed: static_wire, dynamic_wire, fabric_relax, rve, induced_deformation, impact, capstan, friction_crossing"):
         get_scene("nope")
 
 

@@ -4,7 +4,9 @@
 * :func:`strain_levels` -- the strain after step 0..steps of ``cfg.strain``;
 * :func:`static_minimize` -- static equilibrium as a local minimum of the potential
   (trust-region Newton, inertia check, energy as merit), then a map rebuild that must find
-  no newly active pair; ``(x, info)``;
+  no newly active pair; ``(x, info)``; a system with friction has no potential: its static
+  residual is solved from the held friction history and the history committed
+  (``rve.solvers.relaxation``, method ``"energy"``);
 * :func:`static_polish` -- bounded capped-step Newton solves, |F| never increases;
 * :func:`free_residual` -- |F(x, 0)| on the free dofs (N);
 * :func:`trellis_gradient` -- the picture frame's in-plane deformation gradient.
@@ -15,7 +17,9 @@ import logging
 
 import numpy as np
 
+from ..solvers.frictional import friction_of
 from ..solvers.minimize import capped_newton, minimize_energy
+from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 
 __all__ = ["strain_levels", "static_minimize", "static_polish", "free_residual", "trellis_gradient"]
 
@@ -34,6 +38,8 @@ def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
     map rebuilt as fibrils move; docs/relaxation.md), from a state near it (plain Newton
     first), then a map rebuild that must find no newly active pair. Returns ``(x, info)``."""
     x = np.asarray(x, float).reshape(-1)
+    if friction_of(system) is not None:
+        return _static_frictional(system, x, atol, max_iter)
     system.rebuild(x)
     before = set(zip(*_active(system, x)))
     xs, _, res = minimize_energy(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter), sigma0=0.0,
@@ -48,6 +54,15 @@ def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
     if missed:
         log.info("static minimisation: %d active pairs appeared at the final rebuild", missed)
     return xs, info
+
+
+def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
+    out = relax_to_equilibrium(system, x, np.zeros(system.n), RelaxSettings(
+        duration=0.0, steps=1, method="energy", static_atol=atol, static_max_iter=int(max_iter)))
+    res = out.static_result
+    info = {"converged": bool(out.static_converged), "iterations": int(out.static_newton_iterations),
+            "residuals": [float(v) for v in res.residuals][-6:], "reason": res.reason, "method": "friction"}
+    return out.x, info
 
 
 def static_polish(system, x, atol: float, rounds: int, max_iter: int) -> tuple:

@@ -39,6 +39,10 @@ contact_multiplier_key      contact_point, point_key     1        key of each mu
                                                                   point (augmented Lagrangian
                                                                   only; ``point_keys``)
 contact_multiplier          contact_point                N/mm     its multiplier (line load)
+contact_friction_key        friction_point, point_key    1        key of each friction point
+                                                                  (friction only)
+contact_friction_s_bar      friction_point               1        its - side material point
+contact_friction_anchor     friction_point, xyz          mm       elastic gap minus the jump
 ==========================  ===========================  =======  ==========================
 
 Attributes: ``rve_state_format``, ``kind`` (initial | relaxed | strained), ``mode``,
@@ -46,7 +50,7 @@ Attributes: ``rve_state_format``, ``kind`` (initial | relaxed | strained), ``mod
 the swept parameter values), ``config`` (JSON: the validated RVEConfig in internal
 units), ``fabric_kind``, ``elements``, ``order``, ``half_widths``, ``contact_count``
 (overlapping contact points), ``solver`` (JSON: convergence, iterations, wall times),
-``rve_version``.
+``rve_version``; with friction ``friction_dissipated`` (N mm).
 
 ``write_state`` writes through ``rve.io.atomic.atomic_netcdf`` (temporary file in the
 same directory, Fletcher-32 on every variable, the SHA-256 trailer of ``rve.io.checksum``,
@@ -98,6 +102,8 @@ class State:
     reference: Optional[np.ndarray] = None
     #: augmented Lagrangian contact multipliers at x: (keys (n, 6) int64, values (n,)) or None
     multipliers: Optional[tuple] = None
+    #: friction history at x (``FrictionTerm.record()``: keys, s_bar, anchor, dissipated) or None
+    friction: Optional[dict] = None
 
 
 def write_state(path, state: State, fabric, mesh, contact=None, version: Optional[str] = None) -> Path:
@@ -115,8 +121,11 @@ def write_state(path, state: State, fabric, mesh, contact=None, version: Optiona
             raise ValueError(f"state.{name} must be (n_nodes, 9) = ({nn}, 9), got {np.shape(arr)}")
     data = _state_arrays(state, fabric, mesh)
     data.update(_contact_arrays(state, contact))
+    attrs = _state_attributes(state, fabric, mesh, version)
+    if state.friction is not None:
+        attrs["friction_dissipated"] = float(state.friction.get("dissipated", 0.0))
     ds = xr.Dataset(data, coords={"component": list(COMPONENTS), "side": list(SIDES), "xyz": ["x", "y", "z"]},
-                    attrs=_state_attributes(state, fabric, mesh, version))
+                    attrs=attrs)
     atomic_netcdf(ds, path)
     return Path(path)
 
@@ -185,6 +194,16 @@ def _contact_arrays(state: State, contact) -> dict:
         data["contact_multiplier"] = (("contact_point",), np.asarray(values, float),
                                       {"long_name": "augmented Lagrangian contact multiplier (line load)",
                                        "units": "N/mm"})
+    if state.friction is not None:
+        fr = state.friction
+        data["contact_friction_key"] = (("friction_point", "point_key"), np.asarray(fr["keys"], np.int64),
+                                        {"long_name": "contact point of each friction history: element +, point "
+                                                      "index, element -, shift of - (1e-6 mm units, 3)"})
+        data["contact_friction_s_bar"] = (("friction_point",), np.asarray(fr["s_bar"], float),
+                                          {"long_name": "material point of the - chord in contact at the state"})
+        data["contact_friction_anchor"] = (("friction_point", "xyz"), np.asarray(fr["anchor"], float),
+                                           {"long_name": "elastic tangential gap minus the jump of the material "
+                                                         "points", "units": "mm"})
     return data
 
 
@@ -277,7 +296,17 @@ def _build_state(ds) -> State:
         reference=np.asarray(ds["reference"].values, float),
         multipliers=(np.asarray(ds["contact_multiplier_key"].values, np.int64),
                      np.asarray(ds["contact_multiplier"].values, float)) if "contact_multiplier" in ds else None,
+        friction=_friction_record(ds),
     )
+
+
+def _friction_record(ds):
+    if "contact_friction_key" not in ds:
+        return None
+    return {"keys": np.asarray(ds["contact_friction_key"].values, np.int64),
+            "s_bar": np.asarray(ds["contact_friction_s_bar"].values, float),
+            "anchor": np.asarray(ds["contact_friction_anchor"].values, float),
+            "dissipated": float(ds.attrs.get("friction_dissipated", 0.0))}
 
 
 def non_final_path(path) -> Path:

@@ -74,6 +74,8 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
     Scene("induced_deformation", "rve.config.induced_deformation:InducedDeformationConfig",
           "rve.scenes.induced"),
     Scene("impact", "rve.config.impact:ImpactConfig", "rve.scenes.impact"),
+    Scene("capstan", "rve.config.friction:CapstanConfig", "rve.scenes.capstan"),
+    Scene("friction_crossing", "rve.config.friction:FrictionCrossingConfig", "rve.scenes.friction_crossing"),
 )}
 
 

@@ -39,6 +39,7 @@ import numpy as np
 
 from .backends.registry import run_backend
 from .linear import factor_inertia, factor_positive_definite, shifted, sparse_solve
+from .frictional import friction_of
 from .newton import NewtonResult, convergence_rates
 from .static import StaticProblem
 
@@ -249,7 +250,12 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     is the history and ``x`` the last accepted iterate.
 
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
+    A system with friction (``rve.solvers.frictional.friction_of``) is a ValueError: it has
+    no potential.
     """
+    if friction_of(system) is not None:
+        raise ValueError("minimize_energy: the system has friction, which has no potential; solve its residual "
+                         "(rve.solvers.frictional.frictional_static_step, or relax_to_equilibrium)")
     budget = max(200, 2 * int(max_iter)) if max_rejections is None else int(max_rejections)
     with options.run_backend(backend) as solver, _long_lived_objects_frozen():
         return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,

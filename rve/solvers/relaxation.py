@@ -19,7 +19,12 @@ rebuildable contact map, ``energy(x)``, ``set_onset``, ``params.margin``; e.g.
   penalty onset (``onset_schedule``, fractions of R, the C² onset of
   ``contact_forms.penalty_law``; the last entry is the law of the result) smooths the
   first stages; the last stage ends with sigma = 0, i.e. plain Newton, quadratically.
-  Velocities are zero throughout.
+  Velocities are zero throughout. A system with friction (``rve.solvers.frictional.
+  friction_of``) has no potential: ``"energy"`` then solves the static residual by the
+  capped Newton below from the friction history of the last converged state, and commits
+  the history at the solution. ``"dynamic"`` commits the friction history after every
+  accepted time step (each step's stages return-map from the last accepted state) and
+  after every converged static round.
 * ``"dynamic"`` (the previous path):
 
 1. **Dynamic relaxation**: backward Euler (``rve.solvers.dirk.integrate``, step control)
@@ -60,6 +65,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .dirk import IntegrationFailure, integrate, integrator_options
+from .frictional import friction_of
 from .minimize import active_pair_keys, capped_newton, minimize_energy
 from .newton import NewtonResult
 from .static import pseudo_transient_solve
@@ -114,6 +120,8 @@ class RelaxResult:
 
 def relax_to_equilibrium(system, x, w, settings: RelaxSettings, on_rebuild: Optional[Callable] = None,
                          t0: float = 0.0) -> RelaxResult:
+    if settings.method == "energy" and friction_of(system) is not None:
+        return _relax_frictional(system, x, settings, t0)
     if settings.method == "energy":
         return _relax_energy(system, x, settings, on_rebuild, t0)
     if settings.method != "dynamic":
@@ -148,7 +156,11 @@ def _relax_dynamic(system, x, w, t, s: RelaxSettings, out: RelaxResult, on_rebui
     guard = 0.5 * float(system.params.margin)
     extra = [0]
 
+    friction = friction_of(system)
+
     def on_step(t_, x_, w_, info):
+        if friction is not None:      # the accepted step is the history of the next one
+            friction.commit(x_)
         # safety: fibrils moved more than half the search margin since the last rebuild
         # -> rebuild now (the stepper then assembles through its general path for the
         # rest of the chunk, still exact)
@@ -207,6 +219,8 @@ def _relax_static(system, x, w, t, s: RelaxSettings, out: RelaxResult, t_start: 
             xs, ws = xs2, ws2
         out.static_newton_iterations += nres.iterations
         x, w = xs, ws
+        if nres.converged and friction_of(system) is not None:
+            friction_of(system).commit(x)
         out.static_result = nres
         out.static_converged = bool(nres.converged)
         # a rebuild at the solution: did pairs the map missed come into contact?
@@ -223,6 +237,41 @@ def _relax_static(system, x, w, t, s: RelaxSettings, out: RelaxResult, t_start: 
         if nres.converged and after <= before:
             break
     return x, w
+
+
+def _relax_frictional(system, x, s: RelaxSettings, t0) -> RelaxResult:
+    """The static residual of a frictional system by the capped Newton (the map rebuilt as
+    the centroids move, the history carried by point key) from the held history, by
+    pseudo-transient continuation where it fails; the history is committed at the solution
+    (``RelaxResult.static_converged``)."""
+    t_start = time.perf_counter()
+    x = np.array(x, float, copy=True)
+    out = RelaxResult(x, np.zeros(system.n), float(t0))
+    cap = s.step_cap if s.step_cap is not None else 0.5 * float(system.params.margin)
+    system.rebuild(x)
+    xs, _, res = capped_newton(system, x, t0, atol=s.static_atol, rtol=s.static_rtol, max_iter=s.static_max_iter,
+                               step_cap=cap, backend=s.linear_backend)
+    if not res.converged:
+        log.warning("frictional static Newton failed (%s); pseudo-transient continuation", res.reason)
+        system.rebuild(xs)
+        xs, _, pres = pseudo_transient_solve(system, xs, np.zeros(system.n), t0, atol=s.static_atol,
+                                             rtol=s.static_rtol, max_iter=200, backend=s.linear_backend)
+        res = NewtonResult(pres.u, pres.converged, res.iterations + pres.iterations, res.residuals + pres.residuals,
+                           pres.reason)
+    if res.converged:
+        friction_of(system).commit(xs)
+    st = system.contact_state(xs)
+    out.history.append({"phase": "static", "method": "capped newton (friction)", "converged": bool(res.converged),
+                        "newton_iterations": int(res.iterations), "residuals": [float(r) for r in res.residuals],
+                        "pairs": st["pairs"], "active_pairs": st["active_pairs"],
+                        "max_overlap_over_R": st["max_overlap_over_R"], "wall_s": time.perf_counter() - t_start})
+    out.static_newton_iterations = int(res.iterations)
+    out.static_result = res
+    out.static_converged = bool(res.converged)
+    out.timings["dynamic"] = 0.0
+    out.timings["static"] = out.timings["total"] = time.perf_counter() - t_start
+    out.x, out.w = xs, np.zeros(system.n)
+    return out
 
 
 def _relax_energy(system, x, s: RelaxSettings, on_rebuild, t0) -> RelaxResult:

@@ -33,7 +33,11 @@ neighbours); ``enforcement="augmented_lagrangian"`` carries
 multipliers per point (``multipliers`` (rows, n_gp), kept by point key over rebuilds) that
 shift the penalty law's overlap to ``g + lambda/P*``, updated by ``update_multipliers(x)``
 (driven by ``rve.solvers.augmented``), ``penetration`` / ``max_penetration`` the true
-overlaps, ``set_penalty`` the penalty increase of the loop; ``conductance_law="holm"`` the a-spot law (``conductance_law``).
+overlaps, ``set_penalty`` the penalty increase of the loop; ``conductance_law="holm"`` the
+a-spot law (``conductance_law``); ``friction`` a ``FrictionLaw``
+(``rve.model.terms.friction``): when it is enabled the term owns a ``FrictionTerm``
+(``friction``) whose forces are added to ``forms`` and whose history follows every
+``rebuild`` (None, the default, or a law with every mu = 0: no friction at all).
 """
 from __future__ import annotations
 
@@ -53,6 +57,7 @@ from ...physics.contact_forms import (
 )
 from ...physics.contact_smooth import hermite_basis, hermite_deviation, smooth_stencil
 from .contact_pairs import HalfPasses, gather_by_key, point_keys
+from .friction import FrictionLaw, FrictionTerm
 
 __all__ = ["ContactParams", "ContactTerm", "GEOMETRIES", "ENFORCEMENTS", "CONDUCTANCE_LAWS"]
 
@@ -114,6 +119,7 @@ class ContactParams:
     conductance_law: str = "width"
     hardness: float = 0.0
     spot_radius: float = 0.0
+    friction: Optional[FrictionLaw] = None
 
     def __post_init__(self):
         if not self.penalty > 0:
@@ -190,6 +196,9 @@ class ContactTerm:
         #: every row (map pair for the chords, oriented row for the curve); None: penalty
         self.multipliers: Optional[np.ndarray] = None
         self._keys = None
+        law = params.friction
+        #: the friction of the contact points (None: frictionless)
+        self.friction: Optional[FrictionTerm] = FrictionTerm(self, law) if law is not None and law.enabled else None
 
     def set_periodic(self, images=None, wrap=None, field_jumps=None) -> None:
         """Periodic images for the next ``rebuild``: ``images`` (K, 3) lattice translations
@@ -243,6 +252,8 @@ class ContactTerm:
             self.row_pair = np.arange(cmap.n_pairs)
         if self.augmented:
             self._carry_multipliers()
+        if self.friction is not None:
+            self.friction.on_rebuild(x)
         return local
 
     # ------------------------------------------------------------------ multipliers
@@ -513,7 +524,14 @@ class ContactTerm:
     def forms(self, x, w, jacobian: bool = True):
         """Local residuals and tangents of the active pairs: ``(act, R, Kx, Kw)``, ``act`` the
         active pair indices, ``R`` (len(act), m*nC) laid out as the pair dofs, ``Kx``/``Kw``
-        (len(act), (m*nC)^2) (None without jacobian; Kw None for mechanics only)."""
+        (len(act), (m*nC)^2) (None without jacobian; Kw None for mechanics only); with
+        friction, its forces on the same pairs are added."""
+        out = self._normal_forms(x, w, jacobian)
+        if self.friction is None:
+            return out
+        return self.friction.add_to(x, *out, jacobian)
+
+    def _normal_forms(self, x, w, jacobian: bool):
         none = np.zeros(0, np.int64), np.zeros(0), None, None
         if self.map.n_pairs == 0:
             return none

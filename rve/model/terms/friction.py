@@ -1,0 +1,305 @@
+"""Friction between fibrils: regularised Coulomb at the contact points of a ``ContactTerm``,
+with the stick history carried across steps and map rebuilds (law and tangent:
+``rve.physics.friction_forms``; choices: docs/contact.md "Friction").
+
+Contract
+--------
+``FrictionLaw(coefficient, stiffness, pairs)``: the validated law. ``coefficient`` mu of
+every pair of fibrils, ``pairs`` ``((family_a, family_b, mu), ...)`` overrides it for the
+pairs of those fibril families (unordered), ``stiffness`` eps_T / P*: the tangential penalty
+per unit length relative to the normal one. ``enabled`` is False when every mu is 0 (the
+contact term then carries no friction at all: the frictionless results bit for bit).
+
+``FrictionTerm(contact, law)`` is owned by a ``ContactTerm`` of the chord geometry
+(``contact.friction``); the contact term calls
+
+* ``on_rebuild(x)`` after every map rebuild: the history of every point of the new map by
+  point key (``ContactTerm._point_keys``: + element, point index, - element, shift); a
+  point whose key was in the old map keeps its history, a new point takes the history of
+  the same + point on a neighbouring element of the same - fibril when that one is in
+  contact at ``x`` (``share_along_fibrils``), else it starts at ``x`` with no elastic gap
+  (its material point the closest point at ``x``);
+* ``add_to(x, act, R, Kx, Kw, jacobian)``: the friction residual and tangent of the active
+  pairs added to the contact term's local arrays (the mechanical block of the chord ends).
+
+Drivers call ``commit(x)`` at every converged state (the history becomes that state's, the
+points out of contact take that of a point in contact on the same + point and - fibril, and
+the dissipated energy is accumulated in ``dissipated``); ``record()`` / ``seed(record)``
+carry the history to another system or through a checkpoint (by point key);
+``set_families(labels)`` names the family of every fibril (default: one family);
+``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``);
+``last`` the return mapping of the last committed state and ``points()`` its summary (total
+friction and normal force, stick and slip counts).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...physics.contact_forms import penalty_law
+from ...physics.friction_forms import (friction_forces, friction_state, material_weights, start_history,
+                                      tangential_gap)
+
+__all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
+
+#: largest accepted friction coefficient (dry polymer and rubber contacts stay below it)
+MAX_FRICTION_COEFFICIENT = 2.0
+
+
+@dataclass(frozen=True)
+class FrictionLaw:
+    """Regularised Coulomb law (module docstring); ``stiffness`` eps_T / P* > 0."""
+
+    coefficient: float = 0.0
+    stiffness: float = 1.0
+    pairs: tuple = ()
+
+    def __post_init__(self):
+        _check_mu("friction coefficient", self.coefficient)
+        if not self.stiffness > 0:
+            raise ValueError(f"friction stiffness (eps_T / P*) must be > 0, got {self.stiffness}")
+        for item in self.pairs:
+            if len(item) != 3:
+                raise ValueError(f"friction pairs are (family_a, family_b, mu), got {item!r}")
+            _check_mu(f"friction coefficient of the pair {item[0]}-{item[1]}", item[2])
+
+    @property
+    def enabled(self) -> bool:
+        return self.coefficient > 0 or any(float(m) > 0 for _, _, m in self.pairs)
+
+    def matrix(self, families) -> np.ndarray:
+        """mu of every pair of the ``families`` (names, in order): (n, n), symmetric."""
+        names = list(families)
+        M = np.full((len(names), len(names)), float(self.coefficient))
+        for a, b, m in self.pairs:
+            if a in names and b in names:
+                i, j = names.index(a), names.index(b)
+                M[i, j] = M[j, i] = float(m)
+        return M
+
+
+def _check_mu(what, value):
+    if not 0.0 <= float(value) <= MAX_FRICTION_COEFFICIENT:
+        raise ValueError(f"{what} must be in [0, {MAX_FRICTION_COEFFICIENT}], got {value}")
+
+
+def match_rows(keys_to, keys_from) -> np.ndarray:
+    """For every row of ``keys_to`` (n, k) the index of the equal row of ``keys_from``
+    (m, k), -1 where there is none (rows of ``keys_from`` are unique)."""
+    keys_to = np.asarray(keys_to, np.int64)
+    keys_from = np.asarray(keys_from, np.int64)
+    out = np.full(keys_to.shape[0], -1, np.int64)
+    if keys_to.shape[0] == 0 or keys_from.shape[0] == 0:
+        return out
+    both = np.concatenate([keys_from, keys_to])
+    _, inv = np.unique(both, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    owner = np.full(inv.max() + 1, -1, np.int64)
+    owner[inv[:keys_from.shape[0]]] = np.arange(keys_from.shape[0])
+    return owner[inv[keys_from.shape[0]:]]
+
+
+class FrictionTerm:
+    name = "friction"
+
+    def __init__(self, contact, law: FrictionLaw):
+        if contact.curve:
+            raise ValueError("friction is implemented on the chord contact geometry (contact geometry 'chord')")
+        self.contact, self.law = contact, law
+        self.family_names = ("fibril",)
+        self.fibril_family = np.zeros(contact.mesh.n_fibrils, np.int64)
+        self._mu_matrix = law.matrix(self.family_names)
+        #: history of the map's points: keys (P*G, 6), s_bar (P, G), anchor (P, G, 3)
+        self.keys = None
+        self.s_bar = None
+        self.anchor = None
+        #: energy dissipated by slip over the committed states (N mm)
+        self.dissipated = 0.0
+        self.mu_pair = np.zeros(0)
+        #: the return mapping of the last committed state (FrictionPoints), None before
+        self.last = None
+
+    # ------------------------------------------------------------------ set-up
+    def set_families(self, labels) -> None:
+        """The family of every fibril (n_fibrils labels, e.g. the yarn directions); the
+        pair coefficients of the law apply to their pairs (takes effect at once)."""
+        labels = [str(v) for v in labels]
+        if len(labels) != self.contact.mesh.n_fibrils:
+            raise ValueError(f"set_families needs one label per fibril ({self.contact.mesh.n_fibrils}), "
+                             f"got {len(labels)}")
+        self.family_names = tuple(dict.fromkeys(labels))
+        self.fibril_family = np.array([self.family_names.index(v) for v in labels], np.int64)
+        self._mu_matrix = self.law.matrix(self.family_names)
+        self._pair_coefficients()
+
+    def set_coefficient(self, mu: float) -> None:
+        """One coefficient for every pair from now on (the history is kept)."""
+        self.law = FrictionLaw(float(mu), self.law.stiffness, ())
+        self._mu_matrix = self.law.matrix(self.family_names)
+        self._pair_coefficients()
+
+    def _pair_coefficients(self) -> None:
+        cmap = self.contact.map
+        if cmap is None:
+            return
+        F = self.fibril_family
+        self.mu_pair = self._mu_matrix[F[cmap.fibril_plus], F[cmap.fibril_minus]]
+
+    # ------------------------------------------------------------------ history
+    def _ends(self, x, sel=None) -> np.ndarray:
+        return np.stack(self.contact.ends(x, sel), axis=1)
+
+    def on_rebuild(self, x) -> None:
+        """History of the new map's points (module docstring)."""
+        c = self.contact
+        self._pair_coefficients()
+        P, G = c.map.n_pairs, c.params.n_gp
+        keys = c._point_keys()
+        geo = c.geometry(x)
+        s_new, a_new = start_history(self._ends(x), geo.s_plus, geo.s_minus)
+        hit = np.zeros(P * G, bool)
+        if self.keys is not None and P:
+            idx = match_rows(keys, self.keys)
+            hit = idx >= 0
+            s_new = s_new.reshape(-1)
+            a_new = a_new.reshape(-1, 3)
+            s_new[hit] = self.s_bar.reshape(-1)[idx[hit]]
+            a_new[hit] = self.anchor.reshape(-1, 3)[idx[hit]]
+        self.keys = keys
+        self.s_bar = s_new.reshape(P, G)
+        self.anchor = a_new.reshape(P, G, 3)
+        if P and not hit.all():
+            self.share_along_fibrils(x, receivers=~hit.reshape(P, G), geo=geo)
+
+    def _loads(self, geo, sel):
+        c = self.contact
+        w = np.broadcast_to(np.asarray(c.weight[sel], float)[:, None], geo.g.shape)
+        _, phi1, phi2 = penalty_law(np.where(geo.active, geo.g, 0.0), float(c.params.penalty), c.onset)
+        f = np.where(geo.active, w * phi1, 0.0)
+        kN = np.where(geo.active, w * phi2, 0.0)
+        kT = w * float(self.law.stiffness) * float(c.params.penalty)
+        return f, kN, kT
+
+    def state(self, x, sel=None):
+        """``FrictionPoints`` of the map pairs ``sel`` (all by default) at ``x`` from the held
+        history."""
+        sel = np.arange(self.contact.map.n_pairs) if sel is None else np.asarray(sel, np.int64)
+        geo = self.contact.geometry(x, sel)
+        f, _, kT = self._loads(geo, sel)
+        return friction_state(geo, self._ends(x, sel), self.s_bar[sel], self.anchor[sel], f, kT, self.mu_pair[sel])
+
+    def commit(self, x) -> float:
+        """Make ``x`` (a converged state) the history; returns the energy dissipated since the
+        last commit (N mm), added to ``dissipated``."""
+        if self.contact.map.n_pairs == 0:
+            return 0.0
+        st = self.state(x)
+        self.last = st
+        self.s_bar, self.anchor = st.s_bar, st.anchor
+        self.share_along_fibrils(x, receivers=st.normal <= 0.0)
+        d = float(st.dissipation.sum())
+        self.dissipated += d
+        return d
+
+    def share_along_fibrils(self, x, receivers, geo=None) -> None:
+        """The history of the ``receivers`` (P, G) bool points from a *donor*: the point in
+        contact at ``x`` (largest overlap) with the same + point (+ element, point
+        index), - fibril and shift, on a neighbouring - element. The donor's material point is
+        named by its fibril parameter S = S0(e-) + s_bar h(e-) and re-expressed on the
+        receiver's chord, ``s_bar = (S - S0(e-')) / h(e-')`` (outside [0, 1] until the contact
+        reaches that element: the chord continued), and the receiver keeps the donor's
+        elastic gap at ``x``: ``anchor = e - j'(x; s_bar)``. So a contact that moves on to the
+        next element of the - fibril carries its stick state instead of sticking anew."""
+        c, mesh = self.contact, self.contact.mesh
+        P, G = self.s_bar.shape
+        geo = c.geometry(x) if geo is None else geo
+        X = self._ends(x)
+        keys = self.keys
+        group = keys.copy()
+        group[:, 2] = mesh.elem_fibril[keys[:, 2]]
+        _, inv = np.unique(group, axis=0, return_inverse=True)
+        inv = inv.ravel()
+        rec = np.asarray(receivers, bool).reshape(-1)
+        donor_ok = geo.active.reshape(-1) & ~rec & (np.repeat(self.mu_pair, G) > 0)
+        if not donor_ok.any() or not rec.any():
+            return
+        fN = np.where(geo.active, geo.g, -np.inf).reshape(-1)
+        order = np.lexsort((-fN, ~donor_ok, inv))      # per group: donors first, the most loaded first
+        first = np.full(inv.max() + 1, -1, np.int64)
+        grp_sorted = inv[order]
+        starts = np.r_[True, grp_sorted[1:] != grp_sorted[:-1]]
+        lead = order[starts]
+        first[inv[lead]] = np.where(donor_ok[lead], lead, -1)
+        donor = first[inv]
+        # neighbours along the - fibril only (the chord continued over one element)
+        take = rec & (donor >= 0) & (np.abs(keys[:, 2] - keys[np.maximum(donor, 0), 2]) == 1)
+        if not take.any():
+            return
+        r, d = np.flatnonzero(take), donor[take]
+        conn, node_s = mesh.conn, mesh.node_s
+        S0 = node_s[conn[:, 0]]
+        h = node_s[conn[:, -1]] - S0
+        em = keys[:, 2]
+        S = S0[em[d]] + self.s_bar.reshape(-1)[d] * h[em[d]]
+        sb = (S - S0[em[r]]) / h[em[r]]
+        e = tangential_gap(geo, X, self.s_bar, self.anchor).reshape(-1, 3)[d]
+        pr = r // G
+        cb = material_weights(geo.s_plus.reshape(-1)[r], sb)          # (n, 4)
+        jr = np.einsum("nk,nki->ni", cb, X[pr])
+        s_flat, a_flat = self.s_bar.reshape(-1).copy(), self.anchor.reshape(-1, 3).copy()
+        s_flat[r], a_flat[r] = sb, e - jr
+        self.s_bar, self.anchor = s_flat.reshape(P, G), a_flat.reshape(P, G, 3)
+
+    def record(self) -> dict:
+        """The history by point key (copies): ``keys`` (n, 6), ``s_bar`` (n,), ``anchor``
+        (n, 3), ``dissipated``."""
+        return {"keys": np.array(self.keys, np.int64), "s_bar": np.array(self.s_bar, float).reshape(-1),
+                "anchor": np.array(self.anchor, float).reshape(-1, 3), "dissipated": float(self.dissipated)}
+
+    def seed(self, record) -> None:
+        """The history of the current map from a ``record`` (by point key; a point not in the
+        record keeps the history it has)."""
+        idx = match_rows(self.keys, record["keys"])
+        hit = idx >= 0
+        s = self.s_bar.reshape(-1).copy()
+        a = self.anchor.reshape(-1, 3).copy()
+        s[hit] = np.asarray(record["s_bar"], float)[idx[hit]]
+        a[hit] = np.asarray(record["anchor"], float).reshape(-1, 3)[idx[hit]]
+        self.s_bar, self.anchor = s.reshape(self.s_bar.shape), a.reshape(self.anchor.shape)
+        self.dissipated = float(record.get("dissipated", 0.0))
+
+    # ------------------------------------------------------------------ forms
+    def forces(self, x, sel, jacobian: bool):
+        """Friction residual (len(sel), 4, 3) and tangent (len(sel), 4, 3, 4, 3) of map pairs
+        ``sel`` at ``x`` (chord ends a+, b+, a-, b-)."""
+        geo = self.contact.geometry(x, sel)
+        f, kN, kT = self._loads(geo, sel)
+        return friction_forces(geo, self._ends(x, sel), self.s_bar[sel], self.anchor[sel], f, kN, kT,
+                               self.mu_pair[sel], jacobian)
+
+    def add_to(self, x, act, R, Kx, Kw, jacobian: bool):
+        """The contact term's ``forms`` output with the friction of its active pairs added."""
+        if act.size == 0:
+            return act, R, Kx, Kw
+        c = self.contact
+        Rf, Kf = self.forces(x, act, jacobian)
+        m, nC, Pa, ep = c.m, c.nC, act.size, c.endpos
+        Rl = np.array(R, float).reshape(Pa, m, nC)
+        Rl[:, ep, 0:3] += Rf
+        if not jacobian:
+            return act, Rl.reshape(R.shape), None, Kw
+        K5 = np.array(Kx, float).reshape(Pa, m, nC, m, nC)
+        for k in range(4):
+            for l in range(4):
+                K5[:, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
+        return act, Rl.reshape(R.shape), K5.reshape(Kx.shape), Kw
+
+    def points(self) -> dict:
+        """The last committed state: ``friction_force`` (N, the sum of |t|), ``normal_force``
+        (N), ``stick`` and ``slip`` point counts (zeros before the first commit)."""
+        st = self.last
+        if st is None or st.t.size == 0:
+            return {"friction_force": 0.0, "normal_force": 0.0, "stick": 0, "slip": 0}
+        return {"friction_force": float(np.sqrt((st.t ** 2).sum(-1)).sum()), "normal_force": float(st.normal.sum()),
+                "stick": int(st.stick.sum()), "slip": int(st.slip.sum())}

@@ -1,0 +1,160 @@
+"""Regularised Coulomb friction at the beam-beam contact points: the elastic tangential
+penalty with slip by return mapping, and its exact (unsymmetric) consistent tangent
+(choices and derivation: docs/contact.md "Friction").
+
+Contract
+--------
+Pure, vectorised functions over ALL contact points of the chord geometry at once (P pairs,
+G points; conventions of ``rve.physics.contact_forms``: chord ends ``X = (a+, b+, a-, b-)``,
+points at ``s+`` on the + chord, current closest points ``s-`` on the - chord, normal ``n``
+from - to +, distance ``rho``).
+
+* **History** of a point (from the last converged state): ``s_bar``, the *material* point
+  of the - chord that was in contact then, and ``anchor`` (3,) = ``e_n - j_n``, its elastic
+  tangential gap minus the jump ``j_n = p - q(s_bar)`` of the two material points then.
+  ``start_history(X, s_minus)`` is the history of points with no elastic gap.
+* **Trial gap**: ``u = anchor + j(X; s_bar)`` with ``j(X; s_bar) = sum_k cb_k X_k``,
+  ``cb = (1 - s+, s+, -(1 - s_bar), -s_bar)``: the elastic gap of the last converged state
+  plus the relative displacement of the two material points since then.
+  ``e = (I - n n^T) u`` its part in the current tangent plane (so the friction force is
+  tangent to the contact at every state).
+* **Return mapping**: with the point stiffness ``kT = w eps_T`` (N/mm) and the point normal
+  force ``f = w phi'(g)`` (N), the trial force ``kT e`` sticks where ``kT |e| <= mu f``,
+  else it slips: ``t = mu f e / |e|``. Inactive points (g <= 0): ``t = 0``.
+* **Residual** (internal-force sign, the - side gets the opposite force): the force on the
+  + material point is ``-t``, on the - material point ``+t``, distributed with ``cb``:
+  ``R_k = cb_k t``.
+* **Tangent** ``K_kl = cb_k dt/dX_l`` with, per point, ``Q_l = c_l I - d ds_l^T``
+  (``dj/dX_l`` of the current jump, ``d = b- - a-``, ``c`` the current weights),
+  ``de/dX_l = cb_l P - (n.u / rho) P Q_l - (1/rho) n e^T Q_l`` (``P = I - n n^T``),
+  stick: ``dt/dX_l = kT de/dX_l``; slip: ``dt/dX_l = mu e_hat df/dX_l + (mu f/|e|)
+  (I - e_hat e_hat^T) de/dX_l`` with ``df/dX_l = -w phi''(g) c_l n^T``. Unsymmetric in
+  slip (the ``df`` column and the projection).
+* ``friction_state`` also returns what a step commits: the new history at the state
+  (``s_bar`` = the current closest point, ``anchor = t/kT - j``) and the dissipated energy
+  ``t . (e - t/kT)`` of every point (the work of the force on the slip of the return map).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
+           "tangential_gap"]
+
+
+def material_weights(s_plus, s_bar) -> np.ndarray:
+    """``cb`` (P, G, 4): the weights of the chord ends in the jump of the material points."""
+    sp_ = np.asarray(s_plus, float)
+    sb = np.asarray(s_bar, float)
+    return np.stack([1.0 - sp_, sp_, -(1.0 - sb), -sb], axis=-1)
+
+
+def start_history(X, s_plus, s_minus):
+    """``(s_bar, anchor)`` of points with no elastic gap at chord ends ``X`` (P, 4, 3): the
+    material point is the closest point ``s_minus`` (P, G), ``anchor = -j(X; s_minus)``."""
+    cb = material_weights(s_plus, s_minus)
+    return np.array(s_minus, float, copy=True), -np.einsum("pgk,pki->pgi", cb, X)
+
+
+@dataclass
+class FrictionPoints:
+    """Per point (P, G): ``t`` (P, G, 3) the friction force (on the - material point; the +
+    side gets -t); ``slip`` bool (active and slipping), ``stick`` bool (active and
+    sticking); ``e`` (P, G, 3) the trial tangential gap; the committed history at this
+    state ``s_bar``, ``anchor``; ``dissipation`` (P, G) the energy of the return map's slip
+    (N mm); ``normal`` (P, G) the point normal forces."""
+
+    t: np.ndarray
+    slip: np.ndarray
+    stick: np.ndarray
+    e: np.ndarray
+    s_bar: np.ndarray
+    anchor: np.ndarray
+    dissipation: np.ndarray
+    normal: np.ndarray
+
+
+def _trial(geo, X, s_bar, anchor):
+    cb = material_weights(geo.s_plus, s_bar)
+    jb = np.einsum("pgk,pki->pgi", cb, X)
+    u = anchor + jb
+    un = np.einsum("pgi,pgi->pg", geo.n, u)
+    e = u - un[..., None] * geo.n
+    return cb, u, un, e
+
+
+def tangential_gap(geo, X, s_bar, anchor) -> np.ndarray:
+    """The trial tangential gap ``e`` (P, G, 3) at ``X`` from the history: at the state the
+    history was committed at, the elastic gap of every contact point."""
+    return _trial(geo, X, s_bar, anchor)[3]
+
+
+def _return_map(e, f, kT, mu, active):
+    en = np.sqrt(np.einsum("pgi,pgi->pg", e, e))
+    limit = mu * f
+    stick = active & (kT * en <= limit)
+    slip = active & ~stick
+    scale = np.where(stick, kT, np.where(slip, limit / np.where(en > 0, en, 1.0), 0.0))
+    return en, stick, slip, scale[..., None] * e
+
+
+def friction_state(geo, X, s_bar, anchor, f, kT, mu) -> FrictionPoints:
+    """Return mapping at chord ends ``X`` (P, 4, 3) from the history (``s_bar`` (P, G),
+    ``anchor`` (P, G, 3)); ``f`` (P, G) the point normal forces (zero where inactive),
+    ``kT`` (P, G) the point tangential stiffnesses, ``mu`` (P,) or (P, G)."""
+    mu = _per_point(mu, f.shape)
+    active = geo.active & (f > 0.0) & (mu > 0.0)
+    _, _, _, e = _trial(geo, X, s_bar, anchor)
+    _, stick, slip, t = _return_map(e, f, kT, mu, active)
+    el = np.where(active[..., None], t / np.where(kT > 0, kT, 1.0)[..., None], 0.0)
+    diss = np.where(slip, np.einsum("pgi,pgi->pg", t, e - el), 0.0)
+    return FrictionPoints(t=t, slip=slip, stick=stick, e=e, s_bar=np.array(geo.s_minus, float, copy=True),
+                          anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float))
+
+
+def _per_point(mu, shape):
+    mu = np.asarray(mu, float)
+    return np.broadcast_to(mu[:, None] if mu.ndim == 1 else mu, shape)
+
+
+def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True):
+    """Friction residual (P, 4, 3) and tangent (P, 4, 3, 4, 3) (None without jacobian).
+
+    ``geo`` the ``ChordGeometry`` of the pairs at ``X`` (P, 4, 3); history ``s_bar``,
+    ``anchor``; per point ``f`` the normal force and ``kN`` its stiffness ``w phi''(g)``
+    (zero where inactive), ``kT`` the tangential stiffness; ``mu`` (P,) or (P, G)."""
+    mu = _per_point(mu, f.shape)
+    active = geo.active & (f > 0.0) & (mu > 0.0)
+    cb, u, un, e = _trial(geo, X, s_bar, anchor)
+    en, stick, slip, t = _return_map(e, f, kT, mu, active)
+    R = np.einsum("pgk,pgi->pki", cb, t)
+    if not jacobian:
+        return R, None
+    P_, G_ = f.shape
+    I3 = np.eye(3)
+    n = geo.n
+    rho = np.where(active, geo.rho, 1.0)
+    d = X[:, 3] - X[:, 2]
+    # Q_l = c_l I - d ds_l^T: (P, G, 4, 3, 3)
+    Q = geo.c[..., None, None] * I3 - d[:, None, None, :, None] * geo.ds[:, :, :, None, :]
+    Pn = I3 - n[..., :, None] * n[..., None, :]
+    PQ = np.einsum("pgij,pgljk->pglik", Pn, Q)
+    eQ = np.einsum("pgi,pglij->pglj", e, Q)
+    dE = (cb[..., None, None] * Pn[:, :, None]
+          - (un / rho)[..., None, None, None] * PQ
+          - n[:, :, None, :, None] * eQ[:, :, :, None, :] / rho[..., None, None, None])
+    # stick: kT dE; slip: mu e_hat df^T + (mu f/|e|)(I - e_hat e_hat^T) dE
+    ehat = e / np.where(en > 0, en, 1.0)[..., None]
+    proj = I3 - ehat[..., :, None] * ehat[..., None, :]
+    a_slip = np.where(slip, mu * f / np.where(en > 0, en, 1.0), 0.0)
+    dT = np.where(stick[..., None, None, None], kT[..., None, None, None] * dE, 0.0)
+    slip_dE = a_slip[..., None, None, None] * np.einsum("pgij,pgljk->pglik", proj, dE)
+    # df/dX_l = -kN c_l n^T
+    df = -(kN * mu)[..., None, None] * geo.c[..., None] * n[:, :, None, :]  # (P, G, 4, 3) = mu df/dX_l
+    slip_df = np.where(slip[..., None, None, None], ehat[:, :, None, :, None] * df[:, :, :, None, :], 0.0)
+    dT = dT + np.where(slip[..., None, None, None], slip_dE + slip_df, 0.0)
+    # K_kilj = sum_g cb_gk dT_g,l,i,j
+    K = np.einsum("pgk,pglij->pkilj", cb, dT, optimize=True)
+    return R, K
