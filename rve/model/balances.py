@@ -11,8 +11,10 @@ Contract
 * ``balance_errors(series)``: time integrals (trapezoid over the accepted steps) and the
   relative errors of the charge, electrical, mechanical, thermal and total balances.
 
-``ImpactBalances(problem, thermal)``: ``__call__(x, w, t, T)`` -> dict of one state: the
-fabric terms of ``StateBalances`` (fabric slice of the state),
+``ImpactBalances(problem, thermal)``: ``__call__(x, w, t, T, F=None)`` -> dict of one state
+(``F``: the unscaled residual of the whole ``ImpactSystem`` at (x, w, t) when the caller has
+it, e.g. ``RowScaledSystem.residual_at`` after the last stage's Newton; else the fabric's is
+evaluated here): the fabric terms of ``StateBalances`` (fabric slice of the state),
 plus ``energy_kinetic``/``energy_strain``/``energy_contact`` including the projectile and
 the sphere contact, the projectile's circuit, Joule and Lorentz power, ``heat_sink`` (W into
 the projectile through the sphere contact, ``rve.scenes.impact.thermal``), and the momentum
@@ -189,13 +191,18 @@ class ImpactBalances:
         self.pmech = np.asarray(proj.mech, bool)
         self.Mpm = self.Mp[self.pmech][:, self.pmech]
 
-    def __call__(self, x, w, t, T) -> dict:
+    def __call__(self, x, w, t, T, F=None) -> dict:
         sysm = self.sysm
         xf, xp = sysm.split(x)
         wf, wp = sysm.split(w)
         if hasattr(self.thermal, "set_state"):
             self.thermal.set_state(x)
-        b = self.fab(xf, wf, t, T)
+        Fs, _, _ = sysm.sphere_terms(x, jacobian=False)
+        # the whole residual's fabric rows are the fabric's plus the sphere contact's
+        # (ImpactSystem.evaluate); the sphere term has no V rows, so the fabric's currents
+        # read the same entries either way
+        Ff = None if F is None else np.asarray(F, float)[: sysm.nf] - Fs[: sysm.nf]
+        b = self.fab(xf, wf, t, T, Ff)
         b["heat_sink"] = self.thermal.sink_heat(T, xf) if hasattr(self.thermal, "sink_heat") else 0.0
         # projectile: kinetic, strain, circuits, EM
         vm = np.asarray(wp, float)[self.pmech]
@@ -222,12 +229,11 @@ class ImpactBalances:
         P_f = Mw_f[self.rf].sum(axis=0)
         fS = sysm.sphere_forces(x).sum(axis=0)
         fL_f, _, _ = _em_force_and_power(sysm.fabric.base, xf, wf, t)
-        Fs, _, _ = sysm.sphere_terms(x, jacobian=False)
-        F = self.fab.last_F + Fs[: sysm.nf]  # fabric rows of the whole residual
+        F_rows = self.fab.last_F + Fs[: sysm.nf] if F is None else np.asarray(F, float)[: sysm.nf]
         b.update({
             "momentum_projectile": P_p, "momentum_total": P_f + P_p, "momentum_pinned": Mw_f[self.pinned].sum(axis=0),
             "force_sphere_on_projectile": fS, "force_lorentz_projectile": fL_p, "force_lorentz": fL_f + fL_p,
-            "force_damping": -self.damp * P_f, "force_clamp_static": F[self.pinned].sum(axis=0),
+            "force_damping": -self.damp * P_f, "force_clamp_static": F_rows[self.pinned].sum(axis=0),
         })
         return b
 

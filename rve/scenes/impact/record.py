@@ -9,8 +9,10 @@ Contract
   appends the fabric / projectile nodal states and T to ``stored``; ``on_step(t, x, w, info)``
   is the integrator's callback: the counters, the thermal post-solve on the step's
   converged stage states (``info.stage_states``), ``record_state`` and, every
-  ``store_every`` steps and at ``t_end``, ``store``. ``wall`` holds the seconds of the
-  balances and of the post-solve.
+  ``store_every`` steps and at ``t_end``, ``store``. ``system``: the row-scaled system the
+  integrator solves, if set; its ``residual_at`` hands the balances the residual of the
+  last stage's Newton at the step's end state (counted in ``residual_reused``), so they do
+  not evaluate it again. ``wall`` holds the seconds of the balances and of the post-solve.
 * ``ImpactCheckpoint(path, digest, t_end, steps)``: ``save(rec, t, x, w, rebuilds, early)``
   writes an npz of plain arrays (no pickle: every series is stacked, the counters are
   integers, the run's identity is the digest, ``t_end`` and ``steps``); ``load(rec)`` fills a
@@ -35,7 +37,8 @@ log = logging.getLogger("rve.scenes.impact")
 
 SERIES = ("t", "v_com", "v_bottom", "v_top", "omega", "com", "yarn_currents", "max_T", "mean_T",
           "sphere_pairs_active", "contact_active_pairs")
-COUNTERS = ("steps", "rejected", "factorizations", "linear_solves", "since_store", "since_checkpoint")
+COUNTERS = ("steps", "rejected", "factorizations", "linear_solves", "since_store", "since_checkpoint",
+            "residual_reused")
 
 
 def angular_velocity(q_top, q_bot, v_top, v_bot, L):
@@ -77,11 +80,13 @@ class ImpactRecorder:
         self.stage_its: list = []
         self.counters = dict.fromkeys(COUNTERS, 0)
         self.wall = {"balances": 0.0, "thermal_post": 0.0}
+        self.system = None
 
-    def record_state(self, t, x, w) -> None:
+    def record_state(self, t, x, w, F=None) -> None:
+        """``F``: the unscaled residual of the whole system at (x, w, t), if known."""
         tb = time.perf_counter()
         sysm = self.problem.system
-        b = self.balances(x, w, t, self.T)
+        b = self.balances(x, w, t, self.T, F)
         c, r = sysm.positions(x)
         b["contact_active_pairs"] = float(sysm.fabric.active_pairs(sysm.split(x)[0]).size)
         for k, v in b.items():
@@ -117,7 +122,9 @@ class ImpactRecorder:
         tp = time.perf_counter()
         self.T = self.post.step(self.T, info.stage_states, info.t, info.h)
         self.wall["thermal_post"] += time.perf_counter() - tp
-        self.record_state(t, x, w)
+        F_end = None if self.system is None else self.system.residual_at(x, w, t)
+        c["residual_reused"] += int(F_end is not None)
+        self.record_state(t, x, w, F_end)
         c["since_store"] += 1
         c["since_checkpoint"] += 1
         if self.record and (c["since_store"] >= self.store_every or t >= self.t_end * (1 - 1e-12)):
@@ -164,7 +171,7 @@ class ImpactCheckpoint:
                 log.warning("checkpoint %s is for another run: starting afresh", self.path)
                 return None
             rec.T = d["T"].copy()
-            rec.counters.update({k: int(d[f"counter/{k}"]) for k in COUNTERS})
+            rec.counters.update({k: int(d[f"counter/{k}"]) for k in COUNTERS if f"counter/{k}" in d.files})
             rec.stage_its = [list(map(int, row)) for row in d["stage_iterations"]]
             _lists(rec.series, "series/", d)
             _lists(rec.bal, "bal/", d)
@@ -190,7 +197,7 @@ def impact_summary(problem, rec: ImpactRecorder, tab, t_end, h0, dt_rule, hook, 
         "steps_accepted": c["steps"], "steps_rejected": c["rejected"],
         "newton_iterations": newton_acc, "newton_iterations_per_stage": newton_acc / n_st,
         "factorizations": c["factorizations"], "factorizations_per_stage": c["factorizations"] / n_st,
-        "linear_solves": c["linear_solves"],
+        "linear_solves": c["linear_solves"], "balance_residuals_reused": c["residual_reused"],
         "contact_rebuilds": hook.rebuilds, "extra_rebuilds": hook.early,
         "dofs": {**fab.base.dof_counts(), "projectile": int(proj.n), "total": int(sysm.n),
                  "thermal_post_solve": int(fab.mesh.n_nodes)},

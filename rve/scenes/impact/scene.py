@@ -17,7 +17,8 @@ present and at rest; ``load_or_relax(cfg, path)`` reuses a saved relaxed state
 of ``contact.rebuild_every`` nominal steps (both contact maps rebuilt before every chunk,
 and early when a centroid or an end node moved half the margin); the temperature is
 post-solved on the fabric after every accepted step (S = alpha_mu = 0); balances every
-accepted step; ``checkpoint`` (path) written every ``time.checkpoint_every`` steps at a
+accepted step, from the residual the last stage's Newton left at the step's end state
+(``RowScaledSystem.residual_at``; evaluated again only when that is not at the state); ``checkpoint`` (path) written every ``time.checkpoint_every`` steps at a
 chunk boundary and resumed from when present (same config digest).
 ``run(cfg, out_dir) -> dict``: load_or_relax + solve + outputs (``rve.scenes.impact.outputs``)
 + the summary (docs/impact.md).
@@ -356,7 +357,8 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     try:
         if t < t_end * (1 - 1e-12):
             hook.rebuild(x)
-            res = integrate(RowScaledSystem(sysm, scale), x, w, t, t_end, steps, stages=tab.stages,
+            rec.system = RowScaledSystem(sysm, scale)
+            res = integrate(rec.system, x, w, t, t_end, steps, stages=tab.stages,
                             newton_opts=nopts, on_step=rec.on_step, consistent=False, rebuild=hook, **iopts)
             x, w, t = res.x, res.w, res.t
             boundary(t, x, w)
