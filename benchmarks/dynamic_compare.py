@@ -129,6 +129,9 @@ def do_diff(a):
                   f"{np.round(np.atleast_1d(hist[k][ib[-1]]), 7).tolist()}")
         print("  balances: " + ", ".join(f"{k} {ref_meta['balances'][k]:.3g} -> {v:.3g}"
                                          for k, v in meta["balances"].items()))
+        print("  balances, relative difference: " + ", ".join(
+            f"{k} {abs(v - ref_meta['balances'][k]) / max(abs(ref_meta['balances'][k]), 1e-300):.1e}"
+            for k, v in meta["balances"].items()))
         ra, rb = float(np.mean(ref["step_wall"])), float(np.mean(hist["step_wall"]))
         print(f"  wall per step {1e3 * ra:.0f} -> {1e3 * rb:.0f} ms (x {rb / ra:.2f}); Newton its/stage "
               f"{ref_meta['newton_iterations_per_stage']:.2f} -> {meta['newton_iterations_per_stage']:.2f}; "

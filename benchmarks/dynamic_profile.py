@@ -12,6 +12,10 @@ projectile is on the fabric there: the gap of 0.2 mm closes after about 14 steps
 ``induced``: configs/scenes/induced_deformation.yaml, one orientation, the first ``--steps``
 of its 3000 steps of 5 µs.
 
+``--baseline TREE``: the same profile run first in a fresh process on another source tree
+(``PYTHONPATH=TREE``, e.g. today's main), then on this one; printed as the ratio of the CPU
+per step and of each phase (this tree / baseline).
+
 ``--opt KEY=VALUE``: scene integrator options (``rve.solvers.dirk.integrator_options`` flat
 names, e.g. ``jacobian_reuse=false``, ``predictor_degree=0``); ``--set``: config overrides.
 
@@ -34,6 +38,9 @@ for _k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "RVE_PA
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from collections import Counter  # noqa: E402
 
@@ -207,6 +214,30 @@ def _report(tag, s, phases, newton_rest, probe, clock, cpu, wall, skip) -> dict:
     return out
 
 
+def run_baseline(tree: str) -> dict:
+    """The figures of this script's run (same arguments, without ``--baseline``) on ``tree``."""
+    argv = list(sys.argv[1:])
+    i = argv.index("--baseline")
+    del argv[i:i + 2]
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "baseline.json")
+        env = dict(os.environ, PYTHONPATH=os.path.abspath(tree))
+        print(f"[baseline] PYTHONPATH={env['PYTHONPATH']}", flush=True)
+        subprocess.run([sys.executable, os.path.abspath(__file__)] + argv + ["--json", path], env=env, check=True)
+        with open(path) as fh:
+            return json.load(fh)
+
+
+def _print_ratio(base: dict, out: dict) -> None:
+    print(f"[ratio] this tree / baseline: CPU per step {out['cpu_per_step_ms']:.0f} / "
+          f"{base['cpu_per_step_ms']:.0f} ms = {out['cpu_per_step_ms'] / base['cpu_per_step_ms']:.3f}; wall per "
+          f"step {out['wall_per_step_ms']:.0f} / {base['wall_per_step_ms']:.0f} ms = "
+          f"{out['wall_per_step_ms'] / base['wall_per_step_ms']:.3f}")
+    print("[ratio] phases (wall s, this tree / baseline): " + ", ".join(
+        f"{k} {v:.2f} / {base['phases_s'][k]:.2f} = {v / max(base['phases_s'][k], 1e-300):.2f}"
+        for k, v in out["phases_s"].items() if k in base["phases_s"]))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scene", choices=["impact", "induced"])
@@ -218,12 +249,18 @@ def main():
     ap.add_argument("--set", nargs="*", default=[], help="config overrides KEY=VALUE")
     ap.add_argument("--opt", nargs="*", default=[], help="integrator options KEY=VALUE")
     ap.add_argument("--json", default=None, help="also write the figures to this file")
+    ap.add_argument("--baseline", default=None, help="another source tree profiled first (ratio printed)")
     a = ap.parse_args()
     if a.steps is None:
         a.steps = 30 if a.scene == "impact" else 100
     opts = parse_opts(a.opt)
+    base = run_baseline(a.baseline) if a.baseline else None
+    print(f"[this tree] {os.path.dirname(os.path.dirname(os.path.abspath(__import__('rve').__file__)))}", flush=True)
     out = (run_impact if a.scene == "impact" else run_induced)(a, opts)
     out["options"] = opts
+    if base is not None:
+        _print_ratio(base, out)
+        out["baseline"] = base
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(out, fh, indent=1, default=float)
