@@ -129,3 +129,13 @@ def test_report_on_synthetic_runs(tmp_path):
     pinned.attrs["config"] = json.dumps({"scene": {"mesh": {"order": 1}, "contact": {"n_gp": 4}, "boundary": "periodic",
                                                    "cell": {"repeat": 2}}})
     assert annotate_accuracy(pinned, periodic, 6, 50.0) == []
+    # a study of another contact geometry or enforcement does not annotate a chord penalty table
+    for key, value in (("contact_geometry", "smooth"), ("contact_enforcement", "augmented_lagrangian")):
+        smooth = json.loads(out["json"].read_text())
+        smooth["default"][key] = value
+        chord = _table()
+        chord.attrs["config"] = json.dumps({"scene": {"mesh": {"order": 1}, "contact": {"n_gp": 4}}})
+        assert annotate_accuracy(chord, smooth, 6, 50.0) == []
+        chord.attrs["config"] = json.dumps({"scene": {"mesh": {"order": 1}, "contact": {
+            "n_gp": 4, key.removeprefix("contact_"): value}}})
+        assert annotate_accuracy(chord, smooth, 6, 50.0) != []

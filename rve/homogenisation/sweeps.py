@@ -201,9 +201,10 @@ def load_run_config(spec: Mapping, combo_id: str = BASE_COMBO):
 def lever_values(spec: Mapping) -> dict:
     """The method levers of a run's base combination, as a work-precision study names them
     (``rve.studies.work_precision``): elements per fibril, P*, p, contact points, boundary,
-    cell repeat."""
+    cell repeat, contact geometry and enforcement."""
     cfg = load_run_config(spec)
     return {"mesh_elements": float(cfg.mesh.elements), "contact_penalty": float(cfg.contact.penalty),
             "mesh_order": int(cfg.mesh.order), "contact_n_gp": int(cfg.contact.n_gp),
-            "boundary": str(cfg.boundary), "cell_repeat": int(cfg.cell.repeat)}
+            "boundary": str(cfg.boundary), "cell_repeat": int(cfg.cell.repeat),
+            "contact_geometry": str(cfg.contact.geometry), "contact_enforcement": str(cfg.contact.enforcement)}
 

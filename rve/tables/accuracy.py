@@ -141,9 +141,12 @@ def _same_default(accuracy: dict, ds: xr.Dataset, mesh_elements: int, contact_pe
         have = (scene.get(path[0]) or {}).get(path[1])
         if key in d and have is not None and int(have) != int(d[key]):
             return f"{key} = {d[key]}, this table's run has {have}"
-    have = scene.get("boundary", "pinned")
-    if "boundary" in d and str(have) != str(d["boundary"]):
-        return f"boundary = {d['boundary']}, this table's run has {have}"
+    # a key the table's config does not spell out has the config's default
+    for key, have in (("boundary", scene.get("boundary", "pinned")),
+                      ("contact_geometry", (scene.get("contact") or {}).get("geometry", "chord")),
+                      ("contact_enforcement", (scene.get("contact") or {}).get("enforcement", "penalty"))):
+        if key in d and str(have) != str(d[key]):
+            return f"{key} = {d[key]}, this table's run has {have}"
     return None
 
 
