@@ -570,3 +570,64 @@ def test_augmented_lagrangian_with_the_smooth_curve():
     sysm.rebuild(xs)
     np.testing.assert_array_equal(sysm.multipliers, lam)
     np.testing.assert_allclose(sysm.evaluate(xs, np.zeros(sysm.n), 0.0, False)[0], F0, atol=1e-14)
+
+
+def _seam_energies(step, L=2.0, span=0.06):
+    """Contact energies (at fixed multipliers) of fibril b slid along x across the periodic
+    seam of fibril a (a along x over [0, L], wrapping at x = 0 = L), in steps of ``step``;
+    the multipliers are those of one Uzawa update at the start, carried by key over a map
+    rebuild at every position. Also the point keys of the two pairs that hold b's points
+    when their closest points on a sit just before and just after the seam."""
+    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+
+    fibs = [straight_fibril([0, 0.013, 0], [L, 0.013, 0], R, "a"),
+            straight_fibril([-span / 2, -1, -(R2 - 0.03)], [-span / 2, 1, -(R2 - 0.03)], R, "b")]
+    mesh = fibril_mesh(fibs, 6, 2)
+    base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
+    x = np.zeros(base.n)
+    xn = base.nodal(x)
+    xn[:, :9] = mesh.X0
+    xa = mesh.node_fibril == 0
+    xn[xa, 2] += 0.02 * np.cos(2 * np.pi * mesh.X0[xa, 0] / L)
+    sysm = ContactSystem(base, ContactParams(penalty=50.0, geometry="smooth", enforcement="augmented_lagrangian"), x)
+    T, W = np.array([L, 0.0, 0.0]), np.array([0.0, 4.0, 0.0])
+    sysm.set_periodic(images=[T, -T], wrap={0: T}, x=x, lattice=[T, W])
+    sysm.term.update_multipliers(x)
+    assert sysm.multipliers.max() > 0.0
+    xb = mesh.node_fibril == 1
+    energies = []
+    for k in range(int(round(span / step)) + 1):
+        y = x.copy()
+        yn = base.nodal(y)
+        yn[xb, 0] += k * step
+        sysm.rebuild(y)
+        energies.append(sysm.term.energy(y))
+    return np.array(energies)
+
+
+def test_multiplier_is_one_across_the_periodic_seam():
+    """A contact point whose closest point passes the seam of a fibril that wraps into its
+    own image (from the pair with its last element to the pair with the image of its first)
+    keeps its multiplier: the two pairs name the point alike (``lattice_translation``: the
+    translation modulo the fibril's period), so the energy at fixed multipliers has no step
+    there -- its largest change per slide step halves with the step. With the translation in
+    millimetres the point changed its name at the seam, lost its multiplier, and the energy
+    jumped by the multiplier's share (the stalled strain steps of the periodic reference)."""
+    coarse = np.abs(np.diff(_seam_energies(0.004))).max()
+    fine = np.abs(np.diff(_seam_energies(0.002))).max()
+    assert coarse > 0.0
+    assert fine < 0.7 * coarse, (coarse, fine)
+
+
+def test_lattice_translation_names_a_shift_by_its_lattice_coordinates():
+    """Lattice coordinates of deformed translations (a sheared lattice), and reduction modulo
+    the touched fibril's period: T and T + a2 name the same place of a fibril wrapping over a2."""
+    from rve.model.terms.contact_pairs import lattice_translation
+
+    a1, a2 = np.array([4.0, 0.4, 0.0]), np.array([0.3, 4.2, 0.0])
+    shifts = np.array([a1, -a2, a1 + a2, -a1 - a2, [0.0, 0.0, 0.0]])
+    np.testing.assert_array_equal(lattice_translation(shifts, [a1, a2])[:, :2],
+                                  [[1, 0], [0, -1], [1, 1], [-1, -1], [0, 0]])
+    period = np.array([a2, a2, a2, a1, [np.nan] * 3])
+    np.testing.assert_array_equal(lattice_translation(shifts, [a1, a2], period)[:, :2],
+                                  [[1, 0], [0, 0], [1, 0], [0, -1], [0, 0]])

@@ -70,6 +70,7 @@ __all__ = [
     "ElementNeighbours",
     "build_contact_map",
     "element_neighbours",
+    "wrap_vectors",
     "candidate_pairs",
     "candidate_pairs_bruteforce",
     "closest_points",
@@ -486,7 +487,7 @@ def _image_exclusion(i, j, t, efib, idx, mesh, wrap, exclude_neighbours):
     keep = np.ones(i.size, bool)
     if wrap is None or i.size == 0:
         return keep
-    period = _wrap_array(wrap, mesh.n_fibrils)
+    period = wrap_vectors(wrap, mesh.n_fibrils)
     same = efib[i] == efib[j]
     Lf = period[efib[i]]
     has = same & np.all(np.isfinite(Lf), axis=1)
@@ -502,7 +503,7 @@ def _image_exclusion(i, j, t, efib, idx, mesh, wrap, exclude_neighbours):
     return keep & ~(along & near)
 
 
-def _wrap_array(wrap, n_fibrils: int) -> np.ndarray:
+def wrap_vectors(wrap, n_fibrils: int) -> np.ndarray:
     """(n_fibrils, 3) period vectors, NaN rows for fibrils that do not wrap."""
     out = np.full((int(n_fibrils), 3), np.nan)
     if wrap is None:
@@ -542,7 +543,7 @@ def element_neighbours(mesh, wrap=None) -> ElementNeighbours:
     prv[first] = -1
     nsh = np.zeros((E, 3))
     psh = np.zeros((E, 3))
-    period = _wrap_array(wrap, mesh.n_fibrils)
+    period = wrap_vectors(wrap, mesh.n_fibrils)
     wr = np.flatnonzero(np.all(np.isfinite(period), axis=1))
     nxt[last[wr]] = first[wr]
     prv[first[wr]] = last[wr]

@@ -115,10 +115,10 @@ class ContactSystem:
         _timer(self.stats, "rebuild_s", t0)
         return self.term.map
 
-    def set_periodic(self, images=None, wrap=None, x=None, field_jumps=None) -> None:
+    def set_periodic(self, images=None, wrap=None, x=None, field_jumps=None, lattice=None) -> None:
         """Periodic images of the contact search (``ContactTerm.set_periodic``); with ``x``
         the map and the union structure are rebuilt at once."""
-        self.term.set_periodic(images, wrap, field_jumps)
+        self.term.set_periodic(images, wrap, field_jumps, lattice=lattice)
         if x is not None:
             self.rebuild(x)
 

@@ -217,7 +217,8 @@ class PeriodicSystem:
         wrap = np.zeros((self.full.mesh.n_fibrils, 3))
         wrap[self.full.mesh.node_fibril[self.ties.image]] = self.ties.jump @ self.F.T
         Finv_T = np.linalg.inv(self.F).T
-        self.full.set_periodic(np.array(images), wrap, field_jumps={"T": Finv_T @ self.grad_T, "V": -(Finv_T @ self.E)})
+        self.full.set_periodic(np.array(images), wrap, field_jumps={"T": Finv_T @ self.grad_T, "V": -(Finv_T @ self.E)},
+                               lattice=np.array([a1, a2]))
 
     def expand(self, x_red) -> np.ndarray:
         """The full (unrolled) ``x`` of a reduced one: ``T x + s`` on the mechanical dofs (the

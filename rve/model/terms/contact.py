@@ -46,7 +46,7 @@ from typing import Optional
 
 import numpy as np
 
-from ...contact.search import ContactMap, build_contact_map, element_neighbours, segment_distance
+from ...contact.search import ContactMap, build_contact_map, element_neighbours, segment_distance, wrap_vectors
 from ...kernels import use_numba
 from ...physics.contact_curve import (
     END_SNAP, chord_deviation, curve_basis, curve_penalty_forces, curve_scalar_jump, lagrange_monomials,
@@ -56,7 +56,7 @@ from ...physics.contact_forms import (
     penalty_forces, penalty_law, scalar_jump,
 )
 from ...physics.contact_smooth import hermite_basis, hermite_deviation, smooth_stencil
-from .contact_pairs import HalfPasses, gather_by_key, point_keys
+from .contact_pairs import HalfPasses, gather_by_key, lattice_translation, point_keys
 from .friction import FrictionLaw, FrictionTerm
 
 __all__ = ["ContactParams", "ContactTerm", "GEOMETRIES", "ENFORCEMENTS", "CONDUCTANCE_LAWS"]
@@ -187,6 +187,7 @@ class ContactTerm:
         #: fibrils that wrap into their own image (``set_periodic``); None: a plain cell
         self.images = None
         self.wrap = None
+        self.lattice = None
         #: {field: c (3,)}: on a pair with the image at shift T the - side's field value is
         #: its node value + T . c (the macro jump of T or V over the lattice vector)
         self.field_jumps = {}
@@ -200,14 +201,18 @@ class ContactTerm:
         #: the friction of the contact points (None: frictionless)
         self.friction: Optional[FrictionTerm] = FrictionTerm(self, law) if law is not None and law.enabled else None
 
-    def set_periodic(self, images=None, wrap=None, field_jumps=None) -> None:
+    def set_periodic(self, images=None, wrap=None, field_jumps=None, lattice=None) -> None:
         """Periodic images for the next ``rebuild``: ``images`` (K, 3) lattice translations
         (each pair with an image of the - element carries that shift), ``wrap`` the period
         vector of every fibril that continues into its own image (``{fibril: L_f}`` or
         (n_fibrils, 3), zero/NaN rows: no wrap), ``field_jumps`` ``{"T"/"V": c (3,)}``: an
         image at shift T carries the field value + T . c (takes effect at once; a constant
-        of each pair, so no tangent entry). ``set_periodic()`` returns to a plain cell."""
+        of each pair, so no tangent entry), ``lattice`` (2, 3) the deformed lattice vectors
+        the images are made of (then the point keys name a translation by its lattice
+        coordinates, ``contact_pairs.lattice_translation``). ``set_periodic()`` returns to a
+        plain cell."""
         self.images = None if images is None else np.asarray(images, float).reshape(-1, 3)
+        self.lattice = None if lattice is None else np.asarray(lattice, float).reshape(2, 3)
         self.wrap = wrap
         self.field_jumps = {f: np.asarray(c, float).reshape(3) for f, c in (field_jumps or {}).items()}
 
@@ -259,11 +264,17 @@ class ContactTerm:
     # ------------------------------------------------------------------ multipliers
     def _point_keys(self) -> np.ndarray:
         cmap, G = self.map, self.params.n_gp
+        lattice = self.lattice
         if self.curve:
             ps = self.passes
-            return point_keys(ps.a_elem, self.mesh.elem_fibril[ps.b_elem], ps.b_shift - ps.a_shift, G)
+            fib = self.mesh.elem_fibril[ps.b_elem]
+            shift = ps.b_shift - ps.a_shift
+            t = None if lattice is None else lattice_translation(
+                shift, lattice, wrap_vectors(self.wrap, self.mesh.n_fibrils)[fib])
+            return point_keys(ps.a_elem, fib, shift, G, translation=t)
         # the chord's closest point stays on its element (clamped): a point is per pair
-        return point_keys(cmap.e_plus, cmap.e_minus, cmap.shifts, G)
+        t = None if lattice is None else lattice_translation(cmap.shifts, lattice)
+        return point_keys(cmap.e_plus, cmap.e_minus, cmap.shifts, G, translation=t)
 
     def _carry_multipliers(self) -> None:
         keys = self._point_keys()

@@ -32,7 +32,7 @@ import numpy as np
 from ...physics.contact_curve import END_SNAP, CurveGeometry, curve_basis, curve_geometry, gauss_legendre_01
 from ...physics.contact_smooth import SmoothStencil, hermite_basis, smooth_gaps, smooth_geometry
 
-__all__ = ["HalfPasses", "point_keys", "gather_by_key"]
+__all__ = ["HalfPasses", "point_keys", "lattice_translation", "gather_by_key"]
 
 #: resolution of the translations in a point key (mm): lattice vectors are rounded to it
 _SHIFT_RESOLUTION = 1e-6
@@ -147,17 +147,51 @@ class HalfPasses:
         return CurveGeometry(**{k: np.asarray(v)[rows] for k, v in geo.__dict__.items()})
 
 
-def point_keys(a_elem, fibril_b, relative_shift, n_gp: int) -> np.ndarray:
+def point_keys(a_elem, fibril_b, relative_shift, n_gp: int, translation=None) -> np.ndarray:
     """(rows * n_gp, 6) int64 keys of the points of oriented rows: (element a, point index,
-    fibril of b, translation of b relative to a in units of 1e-6 mm). (The chord geometry,
-    whose closest point stays on its element, passes the element of b as ``fibril_b``.)"""
+    fibril of b, translation of b relative to a in units of 1e-6 mm, or ``translation``
+    (rows, 3) int64 when given: the lattice coordinates of ``lattice_translation``). (The
+    chord geometry, whose closest point stays on its element, passes the element of b as
+    ``fibril_b``.)"""
     rows = np.asarray(a_elem).size
-    t = np.round(np.asarray(relative_shift, float) / _SHIFT_RESOLUTION).astype(np.int64)
+    if translation is not None:
+        t = np.asarray(translation, np.int64).reshape(rows, 3)
+    else:
+        t = np.round(np.asarray(relative_shift, float) / _SHIFT_RESOLUTION).astype(np.int64)
     k = np.arange(int(n_gp), dtype=np.int64)
     return np.column_stack([
         np.repeat(np.asarray(a_elem, np.int64), n_gp), np.tile(k, rows),
         np.repeat(np.asarray(fibril_b, np.int64), n_gp), np.repeat(t, n_gp, axis=0),
     ])
+
+
+def lattice_translation(shift, lattice, period=None) -> np.ndarray:
+    """(rows, 3) int64 names of the translations ``shift`` (rows, 3) of a periodic cell's
+    contact pairs: their integer coordinates (i, j, 0) on the deformed ``lattice`` (2, 3),
+    reduced modulo ``period`` (rows, 3), the lattice vector over which the touched fibril
+    continues into its own image (NaN or zero rows: it does not wrap).
+
+    Why lattice coordinates and not millimetres: the lattice turns with the macro gradient
+    from one strain step to the next, and a point keeps its name (and its multiplier) when
+    it does. Why modulo the wrap: a point next to the seam of a fibril that wraps touches the
+    same place of the same infinite periodic fibril from the pair with its last element and
+    from the pair with the image of its first; both must carry one multiplier, or the
+    shifted overlap, and so the energy, jumps where the closest point passes the seam."""
+    A = np.asarray(lattice, float).reshape(2, 3)[:, :2].T
+    c = np.rint(np.linalg.solve(A, np.asarray(shift, float).reshape(-1, 3)[:, :2].T).T).astype(np.int64)
+    if period is not None:
+        w = np.asarray(period, float).reshape(-1, 3)
+        wraps = np.all(np.isfinite(w), axis=1) & np.any(w != 0.0, axis=1)
+        cp = np.zeros_like(c)
+        if wraps.any():
+            cp[wraps] = np.rint(np.linalg.solve(A, w[wraps][:, :2].T).T).astype(np.int64)
+        # the first nonzero coordinate of the period sets how many periods to take off
+        lead = np.where(cp[:, 0] != 0, 0, 1)
+        num = c[np.arange(c.shape[0]), lead]
+        den = cp[np.arange(c.shape[0]), lead]
+        k = np.where(den != 0, np.floor_divide(num, np.where(den != 0, den, 1)), 0)
+        c = c - k[:, None] * cp
+    return np.column_stack([c, np.zeros(c.shape[0], np.int64)])
 
 
 def gather_by_key(keys_to, keys_from, values_from) -> np.ndarray:
