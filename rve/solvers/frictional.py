@@ -1,28 +1,65 @@
-"""Static steps of a system with friction: a residual Newton from the history of the last
-converged step, then the history committed (docs/contact.md "Friction").
+"""Static steps of a system with friction: the equilibrium from the history of the last
+converged step, then the history committed (docs/contact.md "Friction", "Solving with
+friction" and "Cost on a weave").
 
 Contract
 --------
-Friction is path-dependent: its forces are not the gradient of an energy, so a frictional
-static step cannot go through the energy minimiser (``rve.solvers.minimize``); it solves
-the residual ``F(x, 0, t) = 0`` with Newton (``rve.solvers.static.static_solve``, whose
-linear solves send the unsymmetric tangent to the LU path: ``rve.solvers.linear.sparse_solve``
-never hands an unsymmetric matrix to a symmetric factorisation) with the friction history
-of the last converged step held fixed.
+Friction is path-dependent: its forces are not the gradient of an energy, so the exact
+frictional equilibrium is a root of the residual ``F(x, 0, t) = 0`` (the friction history
+of the last converged step held fixed), whose tangent is unsymmetric (the linear solves
+send it to the LU path: ``rve.solvers.linear.sparse_solve`` never hands an unsymmetric
+matrix to a symmetric factorisation).
 
 * ``friction_of(system)`` -> the system's friction (an object with ``commit(x)``: the
   ``FrictionTerm`` of a contact system's term), or None for a frictionless system;
-* ``frictional_static_step(system, x, w, t, newton_opts=None)`` -> ``(x, w, result,
-  dissipated)``: the Newton solve, and on convergence the commit (``dissipated``: the
-  energy dissipated by the step, N mm; 0.0 without convergence, the history unchanged).
+* ``frictional_static_step(system, x, w, t, newton_opts=None, method="newton")`` ->
+  ``(x, w, result, dissipated)``: the solve, and on convergence the commit
+  (``dissipated``: the energy dissipated by the step, N mm; 0.0 without convergence, the
+  history unchanged). ``method="newton"``: Newton on the residual from ``x``
+  (``rve.solvers.static.static_solve``; the single-fibril scenes); ``"potential"``:
+  ``frictional_solve`` below.
+* ``frictional_solve(system, x, t, atol, rtol=1e-14, max_iter=200, ...)`` -> ``(x,
+  FrictionalResult)`` (no commit): the globalised solve of a step that moves many contacts
+  (the weave's strain steps):
+
+  1. **predictor** (rounds ``k = 0, 1, ...``): the loads (normal force and normal of
+     every contact point) frozen — at the last committed state in round 0 (the loads of
+     the step's start; ``freeze="current"``: at ``x``), at the previous round's solution
+     after — the friction is the gradient of a convex incremental potential
+     (``rve.physics.friction_forms.frozen_potential``), so the step is a minimisation of
+     ``Pi(x) + sum psi`` by the energy minimiser (``minimize_energy``: trust region,
+     inertia check, the map rebuilt as fibrils move, the frozen loads carried by point
+     key). A round's solution has the exact residual's friction at the loads it was frozen
+     with; the rounds stop when the loads at the solution differ from the frozen ones by
+     at most ``load_rtol`` of the largest (a fixed point of the loads is the exact
+     equilibrium) or after ``max_rounds``;
+  2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
+     the last round's solution (``static_solve``, line search on |F|; quadratic once the
+     stick/slip set is settled; logged on ``rve.newton``), at most ``corrector_iter``
+     iterations;
+  3. if the corrector fails, the residual path of before from the best state: the capped
+     Newton (``rve.solvers.minimize.capped_newton``), then pseudo-transient continuation.
+
+  ``FrictionalResult`` (a ``NewtonResult``): ``iterations`` all linear-solve iterations
+  (predictor + corrector + fallback), ``residuals`` the exact |F| after every phase and the
+  corrector's iterations, ``rounds``, ``predictor_iterations``, ``corrector_iterations``,
+  ``fallback_iterations``, ``load_changes`` (per round), ``method`` (the path that
+  converged).
 """
 from __future__ import annotations
 
+import logging
+from dataclasses import dataclass, field
 from typing import Optional
 
-from .static import static_solve
+import numpy as np
 
-__all__ = ["friction_of", "frictional_static_step"]
+from .newton import NewtonResult
+from .static import StaticProblem, static_solve
+
+__all__ = ["friction_of", "frictional_static_step", "frictional_solve", "FrictionalResult"]
+
+log = logging.getLogger("rve.solvers.frictional")
 
 
 def friction_of(system):
@@ -31,11 +68,119 @@ def friction_of(system):
     return getattr(term, "friction", None) if term is not None else None
 
 
-def frictional_static_step(system, x, w, t: float, newton_opts: Optional[dict] = None):
+def frictional_static_step(system, x, w, t: float, newton_opts: Optional[dict] = None, method: str = "newton"):
     """One static step from the held friction history; commits it on convergence."""
-    xs, ws, res = static_solve(system, x, w, t, newton_opts)
+    if method == "potential":
+        opts = dict(newton_opts or {})
+        xs, res = frictional_solve(system, x, t, atol=opts.get("atol", 1e-9), rtol=opts.get("rtol", 1e-14),
+                                   max_iter=opts.get("max_iter", 200))
+        ws = np.zeros(system.n)
+    elif method == "newton":
+        xs, ws, res = static_solve(system, x, w, t, newton_opts)
+    else:
+        raise ValueError(f"unknown frictional step method {method!r} (newton, potential)")
     dissipated = 0.0
     fr = friction_of(system)
     if res.converged and fr is not None:
         dissipated = fr.commit(xs)
     return xs, ws, res, dissipated
+
+
+@dataclass
+class FrictionalResult(NewtonResult):
+    """``NewtonResult`` of ``frictional_solve`` with its phases (module docstring)."""
+
+    rounds: int = 0
+    predictor_iterations: int = 0
+    corrector_iterations: int = 0
+    fallback_iterations: int = 0
+    load_changes: list = field(default_factory=list)
+    method: str = ""
+
+
+def _exact_residual(system, x, t) -> float:
+    prob = StaticProblem(system, x, np.zeros(system.n), t)
+    F, _, _ = system.evaluate(prob.x, prob.w, t, jacobian=False)
+    return float(np.linalg.norm(np.asarray(F, float)[prob.free]))
+
+
+def _load_change(fr, x) -> float:
+    """max |f(x) - f0| / max f0 over the map's points (the frozen loads f0 against those at x)."""
+    f0 = fr.frozen_loads()["f0"]
+    sel = np.arange(fr.contact.map.n_pairs)
+    f, _, _ = fr._loads(fr.contact.geometry(x, sel), sel)
+    scale = max(float(f0.max(initial=0.0)), float(np.max(f, initial=0.0)), 1e-300)
+    return float(np.abs(f - f0).max(initial=0.0)) / scale
+
+
+def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
+                     max_rounds: int = 4, load_rtol: float = 0.05, predictor_rtol: float = 1e-6, corrector_iter: int = 12,
+                     freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None):
+    """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
+    from .minimize import capped_newton, minimize_energy
+    from .static import pseudo_transient_solve
+
+    fr = friction_of(system)
+    if fr is None:
+        raise ValueError("frictional_solve: the system has no friction")
+    x = np.array(x, float, copy=True)
+    system.rebuild(x)
+    out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
+    committed = fr._committed_loads is not None and freeze == "committed"
+    for k in range(max_rounds):
+        fr.freeze(None if (k == 0 and committed) else x)
+        try:
+            xs, _, mres = minimize_energy(system, x, t, atol=max(atol, predictor_rtol * out.residuals[0]), rtol=rtol,
+                                          max_iter=max_iter, sigma0=0.0,
+                                          backtrack=3, step_cap=step_cap, label=f"friction predictor {k + 1}",
+                                          backend=backend)
+            change = _load_change(fr, xs)
+        finally:
+            fr.unfreeze()
+        out.rounds += 1
+        out.predictor_iterations += int(mres.iterations)
+        out.load_changes.append(change)
+        rn = _exact_residual(system, xs, t)
+        out.residuals.append(rn)
+        log.info("friction predictor round %d: %s in %d iterations, load change %.3e, exact |F| = %.3e",
+                 k + 1, "converged" if mres.converged else f"not converged ({mres.reason})", mres.iterations,
+                 change, rn)
+        if not np.isfinite(rn):
+            break
+        x = xs
+        if change <= load_rtol or rn <= atol:
+            break
+    out.iterations = out.predictor_iterations
+    system.rebuild(x)
+    xs, _, nres = static_solve(system, x, np.zeros(system.n), t, {
+        "atol": atol, "rtol": rtol, "max_iter": corrector_iter, "label": "friction corrector"})
+    out.corrector_iterations = int(nres.iterations)
+    out.iterations += out.corrector_iterations
+    out.residuals.extend(float(v) for v in nres.residuals[1:])
+    if nres.converged:
+        out.u, out.converged, out.method = nres.u, True, "potential predictor + newton"
+        return xs, out
+    log.warning("friction corrector did not converge (%s)", nres.reason)
+    if not fallback:
+        out.u, out.reason = nres.u, f"corrector: {nres.reason}"
+        return x, out
+    # the residual path of before, from the better of the two states
+    if not (np.isfinite(nres.residuals[-1]) and nres.residuals[-1] < nres.residuals[0]):
+        xs = x
+    system.rebuild(xs)
+    cap = 0.5 * float(system.params.margin) if step_cap is None else float(step_cap)
+    xc, _, cres = capped_newton(system, xs, t, atol=atol, rtol=rtol, max_iter=max_iter, step_cap=cap, backend=backend)
+    its = int(cres.iterations)
+    if not cres.converged:
+        log.warning("frictional capped Newton failed (%s); pseudo-transient continuation", cres.reason)
+        system.rebuild(xc)
+        xc, _, pres = pseudo_transient_solve(system, xc, np.zeros(system.n), t, atol=atol, rtol=rtol, max_iter=200,
+                                             backend=backend)
+        its += int(pres.iterations)
+        cres = NewtonResult(pres.u, pres.converged, its, cres.residuals + pres.residuals, pres.reason)
+    out.fallback_iterations = its
+    out.iterations += its
+    out.residuals.extend(float(v) for v in cres.residuals[1:])
+    out.u, out.converged, out.reason = cres.u, bool(cres.converged), cres.reason
+    out.method = "capped newton (friction)" if cres.converged else ""
+    return xc, out

@@ -251,9 +251,11 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
 
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
     A system with friction (``rve.solvers.frictional.friction_of``) is a ValueError: it has
-    no potential.
+    no potential; unless its loads are frozen (``FrictionTerm.freeze``), when the friction
+    is the convex incremental potential of those loads (``rve.solvers.frictional``).
     """
-    if friction_of(system) is not None:
+    fr = friction_of(system)
+    if fr is not None and not fr.frozen:
         raise ValueError("minimize_energy: the system has friction, which has no potential; solve its residual "
                          "(rve.solvers.frictional.frictional_static_step, or relax_to_equilibrium)")
     budget = max(200, 2 * int(max_iter)) if max_rejections is None else int(max_rejections)
