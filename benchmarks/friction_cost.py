@@ -54,7 +54,14 @@ def main():
     ap.add_argument("--freeze", default="committed", choices=["committed", "current"])
     ap.add_argument("--compare", action="store_true",
                     help="also solve every frictional step with the other method and print the difference")
+    ap.add_argument("--log", action="store_true",
+                    help="log the solvers (rve.newton: the corrector's iterations and rates; the predictor rounds)")
     a = ap.parse_args()
+    if a.log:
+        import logging
+        logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+        for name in ("rve.newton", "rve.solvers.frictional"):
+            logging.getLogger(name).setLevel(logging.INFO)
     if a.small:
         from rve.fabrics.relaxation import relax
 
