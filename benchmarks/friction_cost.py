@@ -52,6 +52,10 @@ def main():
                     help="frictional solve: the potential predictor + Newton corrector (frictional_solve), "
                          "or the capped residual Newton + pseudo-transient of before")
     ap.add_argument("--freeze", default="committed", choices=["committed", "current"])
+    ap.add_argument("--load-rtol", type=float, default=0.05)
+    ap.add_argument("--rounds", type=int, default=4)
+    ap.add_argument("--refreeze", action="store_true", help="loads refrozen at every accepted predictor iterate")
+    ap.add_argument("--predictor-rtol", type=float, default=1e-6)
     ap.add_argument("--compare", action="store_true",
                     help="also solve every frictional step with the other method and print the difference")
     ap.add_argument("--log", action="store_true",
@@ -90,12 +94,14 @@ def main():
             if method == "potential":
                 system.rebuild(x.reshape(-1))
                 xs, res = frictional_solve(system, x.reshape(-1), 0.0, atol=atol, rtol=1e-12, max_iter=iters,
-                                           freeze=a.freeze)
+                                           freeze=a.freeze, load_rtol=a.load_rtol, max_rounds=a.rounds,
+                                           refreeze=a.refreeze, predictor_rtol=a.predictor_rtol)
                 if res.converged:
                     system.term.friction.commit(xs)
                 detail.append({"rounds": res.rounds, "predictor": res.predictor_iterations,
                                "corrector": res.corrector_iterations, "fallback": res.fallback_iterations,
                                "load_changes": [float(f"{v:.3g}") for v in res.load_changes],
+                               "walls_s": [round(v, 2) for v in res.walls],
                                "residuals": _short(res.residuals)})
                 x, its, ok = xs.reshape(xr.shape), its + res.iterations, res.converged
             else:

@@ -49,12 +49,15 @@ matrix to a symmetric factorisation).
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
-from .newton import NewtonResult
+from .backends.registry import run_backend
+from .linear import sparse_solve
+from .newton import NewtonResult, StageFactorisation
 from .static import StaticProblem, static_solve
 
 __all__ = ["friction_of", "frictional_static_step", "frictional_solve", "FrictionalResult"]
@@ -96,6 +99,8 @@ class FrictionalResult(NewtonResult):
     fallback_iterations: int = 0
     load_changes: list = field(default_factory=list)
     method: str = ""
+    #: wall time (s) of every predictor round, then of the corrector, then of the fallback
+    walls: list = field(default_factory=list)
 
 
 def _exact_residual(system, x, t) -> float:
@@ -113,8 +118,36 @@ def _load_change(fr, x) -> float:
     return float(np.abs(f - f0).max(initial=0.0)) / scale
 
 
+def _unsymmetric_solver(solver):
+    """``linear_solve`` of the corrector: the unsymmetric tangent by the run's instance
+    (``StageFactorisation``: a symmetric PARDISO instance hands it to its LU companion,
+    whose analysis is reused while the pattern holds), checked by its residual, else
+    ``sparse_solve``."""
+
+    def solve(J, r):
+        try:
+            du = StageFactorisation(J, solver).solve(r)
+            if np.all(np.isfinite(du)) and np.linalg.norm(J @ du - r) <= 1e-8 * max(np.linalg.norm(r), 1e-300):
+                return du
+        except RuntimeError:
+            pass
+        return sparse_solve(J, r)
+
+    return solve
+
+
+def _refreezer(fr):
+    """``on_accept`` of the minimiser: the loads refrozen at every accepted iterate."""
+
+    def on_accept(x):
+        fr.freeze(x)
+        return True
+
+    return on_accept
+
+
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
-                     max_rounds: int = 4, load_rtol: float = 0.05, predictor_rtol: float = 1e-6, corrector_iter: int = 12,
+                     max_rounds: int = 4, load_rtol: float = 0.05, predictor_rtol: float = 1e-6, refreeze: bool = False, corrector_iter: int = 12,
                      freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None):
     """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
     from .minimize import capped_newton, minimize_energy
@@ -128,16 +161,18 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
     committed = fr._committed_loads is not None and freeze == "committed"
     for k in range(max_rounds):
+        t0 = time.perf_counter()
         fr.freeze(None if (k == 0 and committed) else x)
         try:
             xs, _, mres = minimize_energy(system, x, t, atol=max(atol, predictor_rtol * out.residuals[0]), rtol=rtol,
                                           max_iter=max_iter, sigma0=0.0,
                                           backtrack=3, step_cap=step_cap, label=f"friction predictor {k + 1}",
-                                          backend=backend)
+                                          backend=backend, on_accept=_refreezer(fr) if refreeze else None)
             change = _load_change(fr, xs)
         finally:
             fr.unfreeze()
         out.rounds += 1
+        out.walls.append(time.perf_counter() - t0)
         out.predictor_iterations += int(mres.iterations)
         out.load_changes.append(change)
         rn = _exact_residual(system, xs, t)
@@ -148,13 +183,17 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         if not np.isfinite(rn):
             break
         x = xs
-        if change <= load_rtol or rn <= atol:
+        if change <= load_rtol or rn <= atol or refreeze:
             break
     out.iterations = out.predictor_iterations
+    t0 = time.perf_counter()
     system.rebuild(x)
-    xs, _, nres = static_solve(system, x, np.zeros(system.n), t, {
-        "atol": atol, "rtol": rtol, "max_iter": corrector_iter, "label": "friction corrector"})
+    with run_backend(backend) as solver:
+        xs, _, nres = static_solve(system, x, np.zeros(system.n), t, {
+            "atol": atol, "rtol": rtol, "max_iter": corrector_iter, "label": "friction corrector",
+            "linear_solve": _unsymmetric_solver(solver)})
     out.corrector_iterations = int(nres.iterations)
+    out.walls.append(time.perf_counter() - t0)
     out.iterations += out.corrector_iterations
     out.residuals.extend(float(v) for v in nres.residuals[1:])
     if nres.converged:
