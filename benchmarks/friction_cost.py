@@ -54,8 +54,10 @@ def main():
     ap.add_argument("--freeze", default="committed", choices=["committed", "current"])
     ap.add_argument("--load-rtol", type=float, default=0.05)
     ap.add_argument("--rounds", type=int, default=4)
-    ap.add_argument("--refreeze", action="store_true", help="loads refrozen at every accepted predictor iterate")
-    ap.add_argument("--predictor-rtol", type=float, default=1e-6)
+    ap.add_argument("--rounds-mode", action="store_true",
+                    help="predictor rounds at fixed loads (refrozen between rounds) instead of the loads refrozen "
+                         "at every accepted iterate")
+    ap.add_argument("--predictor-rtol", type=float, default=1e-3)
     ap.add_argument("--compare", action="store_true",
                     help="also solve every frictional step with the other method and print the difference")
     ap.add_argument("--log", action="store_true",
@@ -95,7 +97,7 @@ def main():
                 system.rebuild(x.reshape(-1))
                 xs, res = frictional_solve(system, x.reshape(-1), 0.0, atol=atol, rtol=1e-12, max_iter=iters,
                                            freeze=a.freeze, load_rtol=a.load_rtol, max_rounds=a.rounds,
-                                           refreeze=a.refreeze, predictor_rtol=a.predictor_rtol)
+                                           refreeze=not a.rounds_mode, predictor_rtol=a.predictor_rtol)
                 if res.converged:
                     system.term.friction.commit(xs)
                 detail.append({"rounds": res.rounds, "predictor": res.predictor_iterations,

@@ -112,8 +112,7 @@ def _exact_residual(system, x, t) -> float:
 def _load_change(fr, x) -> float:
     """max |f(x) - f0| / max f0 over the map's points (the frozen loads f0 against those at x)."""
     f0 = fr.frozen_loads()["f0"]
-    sel = np.arange(fr.contact.map.n_pairs)
-    f, _, _ = fr._loads(fr.contact.geometry(x, sel), sel)
+    f = fr.loads_at(x)["f0"]
     scale = max(float(f0.max(initial=0.0)), float(np.max(f, initial=0.0)), 1e-300)
     return float(np.abs(f - f0).max(initial=0.0)) / scale
 
@@ -147,26 +146,45 @@ def _refreezer(fr):
 
 
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
-                     max_rounds: int = 4, load_rtol: float = 0.05, predictor_rtol: float = 1e-6, refreeze: bool = False, corrector_iter: int = 12,
+                     refreeze: bool = True, predictor_rtol: float = 1e-3, retry_rtol: float = 1e-6,
+                     max_rounds: int = 4, load_rtol: float = 0.05, corrector_iter: int = 12,
                      freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None):
     """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
-    from .minimize import capped_newton, minimize_energy
-    from .static import pseudo_transient_solve
-
     fr = friction_of(system)
     if fr is None:
         raise ValueError("frictional_solve: the system has no friction")
     x = np.array(x, float, copy=True)
     system.rebuild(x)
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
-    committed = fr._committed_loads is not None and freeze == "committed"
-    for k in range(max_rounds):
+    first = fr._committed_loads is not None and freeze == "committed"
+    for ptol in (predictor_rtol, retry_rtol):
+        x = _predictor(system, fr, x, t, out, max(atol, ptol * out.residuals[0]), rtol, max_iter, refreeze,
+                       max_rounds, load_rtol, first, step_cap, backend)
+        first = False
+        xs, nres = _corrector(system, x, t, out, atol, rtol, corrector_iter, backend)
+        if nres.converged:
+            out.u, out.converged, out.method = nres.u, True, "potential predictor + newton"
+            return xs, out
+        log.warning("friction corrector did not converge (%s)", nres.reason)
+        if np.isfinite(nres.residuals[-1]) and nres.residuals[-1] < nres.residuals[0]:
+            x = xs
+    if not fallback:
+        out.u, out.reason = None, f"corrector: {nres.reason}"
+        return x, out
+    return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend)
+
+
+def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, committed, step_cap,
+               backend):
+    """The predictor rounds from ``x`` (module docstring); returns the last round's state."""
+    from .minimize import minimize_energy
+
+    for k in range(1 if refreeze else max_rounds):
         t0 = time.perf_counter()
         fr.freeze(None if (k == 0 and committed) else x)
         try:
-            xs, _, mres = minimize_energy(system, x, t, atol=max(atol, predictor_rtol * out.residuals[0]), rtol=rtol,
-                                          max_iter=max_iter, sigma0=0.0,
-                                          backtrack=3, step_cap=step_cap, label=f"friction predictor {k + 1}",
+            xs, _, mres = minimize_energy(system, x, t, atol=ptol, rtol=rtol, max_iter=max_iter, sigma0=0.0,
+                                          backtrack=3, step_cap=step_cap, label=f"friction predictor {out.rounds + 1}",
                                           backend=backend, on_accept=_refreezer(fr) if refreeze else None)
             change = _load_change(fr, xs)
         finally:
@@ -174,41 +192,46 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         out.rounds += 1
         out.walls.append(time.perf_counter() - t0)
         out.predictor_iterations += int(mres.iterations)
+        out.iterations += int(mres.iterations)
         out.load_changes.append(change)
         rn = _exact_residual(system, xs, t)
         out.residuals.append(rn)
         log.info("friction predictor round %d: %s in %d iterations, load change %.3e, exact |F| = %.3e",
-                 k + 1, "converged" if mres.converged else f"not converged ({mres.reason})", mres.iterations,
+                 out.rounds, "converged" if mres.converged else f"not converged ({mres.reason})", mres.iterations,
                  change, rn)
         if not np.isfinite(rn):
             break
         x = xs
-        if change <= load_rtol or rn <= atol or refreeze:
+        if change <= load_rtol or rn <= ptol:
             break
-    out.iterations = out.predictor_iterations
+    return x
+
+
+def _corrector(system, x, t, out, atol, rtol, corrector_iter, backend):
+    """Newton on the exact residual from ``x``, its unsymmetric solves on the run's backend."""
     t0 = time.perf_counter()
     system.rebuild(x)
     with run_backend(backend) as solver:
         xs, _, nres = static_solve(system, x, np.zeros(system.n), t, {
             "atol": atol, "rtol": rtol, "max_iter": corrector_iter, "label": "friction corrector",
             "linear_solve": _unsymmetric_solver(solver)})
-    out.corrector_iterations = int(nres.iterations)
+    out.corrector_iterations += int(nres.iterations)
+    out.iterations += int(nres.iterations)
     out.walls.append(time.perf_counter() - t0)
-    out.iterations += out.corrector_iterations
     out.residuals.extend(float(v) for v in nres.residuals[1:])
-    if nres.converged:
-        out.u, out.converged, out.method = nres.u, True, "potential predictor + newton"
-        return xs, out
-    log.warning("friction corrector did not converge (%s)", nres.reason)
-    if not fallback:
-        out.u, out.reason = nres.u, f"corrector: {nres.reason}"
-        return x, out
-    # the residual path of before, from the better of the two states
-    if not (np.isfinite(nres.residuals[-1]) and nres.residuals[-1] < nres.residuals[0]):
-        xs = x
-    system.rebuild(xs)
+    return xs, nres
+
+
+def _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend):
+    """The residual path of before from ``x``: the capped Newton, then pseudo-transient
+    continuation."""
+    from .minimize import capped_newton
+    from .static import pseudo_transient_solve
+
+    t0 = time.perf_counter()
+    system.rebuild(x)
     cap = 0.5 * float(system.params.margin) if step_cap is None else float(step_cap)
-    xc, _, cres = capped_newton(system, xs, t, atol=atol, rtol=rtol, max_iter=max_iter, step_cap=cap, backend=backend)
+    xc, _, cres = capped_newton(system, x, t, atol=atol, rtol=rtol, max_iter=max_iter, step_cap=cap, backend=backend)
     its = int(cres.iterations)
     if not cres.converged:
         log.warning("frictional capped Newton failed (%s); pseudo-transient continuation", cres.reason)
@@ -219,6 +242,7 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         cres = NewtonResult(pres.u, pres.converged, its, cres.residuals + pres.residuals, pres.reason)
     out.fallback_iterations = its
     out.iterations += its
+    out.walls.append(time.perf_counter() - t0)
     out.residuals.extend(float(v) for v in cres.residuals[1:])
     out.u, out.converged, out.reason = cres.u, bool(cres.converged), cres.reason
     out.method = "capped newton (friction)" if cres.converged else ""

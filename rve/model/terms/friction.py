@@ -102,8 +102,13 @@ def match_rows(keys_to, keys_from) -> np.ndarray:
     if keys_to.shape[0] == 0 or keys_from.shape[0] == 0:
         return out
     both = np.concatenate([keys_from, keys_to])
-    _, inv = np.unique(both, axis=0, return_inverse=True)
-    inv = inv.ravel()
+    # equal rows by a lexicographic sort of the columns (np.unique(axis=0) compares rows as
+    # opaque bytes, ~20x slower on the weave's maps)
+    order = np.lexsort(both.T[::-1])
+    srt = both[order]
+    first = np.r_[True, (srt[1:] != srt[:-1]).any(axis=1)]
+    inv = np.empty(both.shape[0], np.int64)
+    inv[order] = np.cumsum(first) - 1
     owner = np.full(inv.max() + 1, -1, np.int64)
     owner[inv[:keys_from.shape[0]]] = np.arange(keys_from.shape[0])
     return owner[inv[keys_from.shape[0]:]]
@@ -316,10 +321,22 @@ class FrictionTerm:
                 raise ValueError("freeze(None): no committed state yet")
             self._frozen = self._loads_by_key(*self._committed_loads)
             return
-        sel = np.arange(self.contact.map.n_pairs)
-        geo = self.contact.geometry(x, sel)
-        f, _, _ = self._loads(geo, sel)
-        self._frozen = {"f0": np.array(f, float), "n0": np.array(geo.n, float), "s_plus": np.array(geo.s_plus, float)}
+        self._frozen = self.loads_at(x)
+
+    def loads_at(self, x) -> dict:
+        """The loads of every point of the map at ``x``: ``f0`` (P, G) the normal forces (0
+        out of contact), ``n0`` (P, G, 3) the normals (0 out of contact), ``s_plus``. The
+        geometry is evaluated on the pairs in contact only (the compiled gaps select them)."""
+        c = self.contact
+        P, G = self.s_bar.shape
+        sel = np.flatnonzero((np.asarray(c.gaps(x)) > 0.0).any(axis=1))
+        f0, n0 = np.zeros((P, G)), np.zeros((P, G, 3))
+        if sel.size:
+            geo = c.geometry(x, sel)
+            f, _, _ = self._loads(geo, sel)
+            f0[sel] = f
+            n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
+        return {"f0": f0, "n0": n0, "s_plus": np.array(np.broadcast_to(c.map.s_plus, (P, G)), float)}
 
     def unfreeze(self) -> None:
         """Back to the exact law (the frozen loads dropped)."""
@@ -356,27 +373,34 @@ class FrictionTerm:
             return act, R, Kx, Kw
         c = self.contact
         m, nC, ep = c.m, c.nC, c.endpos
-        allp = np.union1d(np.asarray(act, np.int64), fp)
-        pos = np.searchsorted(allp, act)
+        act = np.asarray(act, np.int64)
+        where = np.full(c.map.n_pairs, -1, np.int64)
+        where[act] = np.arange(act.size)
+        extra = fp[where[fp] < 0]                  # frozen pairs out of contact: appended
+        allp = np.concatenate([act, extra])
+        where[extra] = act.size + np.arange(extra.size)
+        fpos = where[fp]
         Rl = np.zeros((allp.size, m, nC))
         if act.size:
-            Rl[pos] = np.asarray(R, float).reshape(act.size, m, nC)
+            Rl[:act.size] = np.asarray(R, float).reshape(act.size, m, nC)
         _, Rf, Kf = self._frozen_forms(x, fp, jacobian)
-        fpos = np.searchsorted(allp, fp)
         Rl[fpos[:, None], ep[None, :], 0:3] += Rf
         Rout = Rl.reshape(allp.size, -1)
         if not jacobian:
             return allp, Rout, None, Kw
-        K5 = np.zeros((allp.size, m, nC, m, nC))
-        if act.size:
-            K5[pos] = np.asarray(Kx, float).reshape(act.size, m, nC, m, nC)
+        if extra.size:
+            K5 = np.zeros((allp.size, m, nC, m, nC))
+            if act.size:
+                K5[:act.size] = np.asarray(Kx, float).reshape(act.size, m, nC, m, nC)
+        else:
+            K5 = np.array(Kx, float).reshape(allp.size, m, nC, m, nC)
         for k in range(4):
             for l in range(4):
                 K5[fpos, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
-        if Kw is not None:
+        if Kw is not None and extra.size:
             Kw_all = np.zeros((allp.size,) + np.shape(Kw)[1:])
             if act.size:
-                Kw_all[pos] = Kw
+                Kw_all[:act.size] = Kw
             Kw = Kw_all
         return allp, Rout, K5.reshape(allp.size, -1), Kw
 
