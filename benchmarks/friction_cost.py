@@ -58,6 +58,8 @@ def main():
                     help="predictor rounds at fixed loads (refrozen between rounds) instead of the loads refrozen "
                          "at every accepted iterate")
     ap.add_argument("--predictor-rtol", type=float, default=1e-3)
+    ap.add_argument("--smoothing", type=float, nargs="*", default=[],
+                    help="continuation: predictor stages with the cone's corner rounded by these eta, then eta = 0")
     ap.add_argument("--compare", action="store_true",
                     help="also solve every frictional step with the other method and print the difference")
     ap.add_argument("--log", action="store_true",
@@ -97,7 +99,8 @@ def main():
                 system.rebuild(x.reshape(-1))
                 xs, res = frictional_solve(system, x.reshape(-1), 0.0, atol=atol, rtol=1e-12, max_iter=iters,
                                            freeze=a.freeze, load_rtol=a.load_rtol, max_rounds=a.rounds,
-                                           refreeze=not a.rounds_mode, predictor_rtol=a.predictor_rtol)
+                                           refreeze=not a.rounds_mode, predictor_rtol=a.predictor_rtol,
+                                           smoothing=a.smoothing)
                 if res.converged:
                     system.term.friction.commit(xs)
                 detail.append({"rounds": res.rounds, "predictor": res.predictor_iterations,

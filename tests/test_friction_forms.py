@@ -141,3 +141,35 @@ def test_frozen_potential_at_its_own_loads_is_the_law():
         a2[p, g] += e[p, g] * (side * limit / kT / en - 1.0)
         psi, _, _ = _frozen(X, sp, s_bar, a2, 0.5, 2.0, f0, n0, jac=False)
         np.testing.assert_allclose(psi[p, g], 0.5 * limit * limit / kT, rtol=1e-8)
+
+
+@pytest.mark.parametrize("eta", [0.5, 0.05])
+def test_smoothed_potential_gradient_hessian_and_limit(eta):
+    """The predictor's rounded cone (eta > 0): forces the gradient of the potential, tangent
+    its Hessian (finite differences), convex; the force never above (1 + eta^2/4) mu f0,
+    and tending to the law's as eta -> 0."""
+    from rve.physics.friction_forms import frozen_potential
+
+    X, sp, s_bar, anchor = _pairs()
+    f0, n0 = _loads_at(X + 0.003, sp)
+    mu, ratio = 0.5, 2.0
+    kT = np.full(f0.shape, 0.05 * ratio * PEN)
+    mus = np.full(X.shape[0], mu)
+
+    def fp(Y, jac=False, e=eta):
+        return frozen_potential(Y, sp, s_bar, anchor, f0, n0, kT, mus, jac, e)
+
+    psi, R, K = fp(X, True)
+    Rfd = fd_nodes(lambda Y: fp(Y)[0].sum(axis=1), X)
+    np.testing.assert_allclose(R, Rfd, rtol=1e-6, atol=1e-7 * np.abs(R).max())
+    Kfd = fd_nodes(lambda Y: fp(Y)[1], X)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
+    A = K.reshape(K.shape[0], 12, 12)
+    assert np.linalg.eigvalsh(A).min() >= -1e-12 * np.abs(A).max()
+    # the point forces: R_k = cb_k t, so t = R[:, 0] / cb_0 for one point per pair (G = 3 here:
+    # compare the pair sums with the law's bound instead)
+    bound = (1 + eta * eta / 4) * mu * f0.sum(axis=1)
+    assert np.all(np.linalg.norm(R[:, 0] + R[:, 1], axis=-1) <= bound * (1 + 1e-12) + 1e-300)
+    R_law = fp(X, e=0.0)[1]
+    R_tiny = fp(X, e=1e-7)[1]
+    np.testing.assert_allclose(R_tiny, R_law, rtol=0, atol=1e-5 * np.abs(R_law).max())

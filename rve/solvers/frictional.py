@@ -148,7 +148,8 @@ def _refreezer(fr):
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
                      refreeze: bool = True, predictor_rtol: float = 1e-3, retry_rtol: float = 1e-6,
                      max_rounds: int = 4, load_rtol: float = 0.05, corrector_iter: int = 12,
-                     freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None):
+                     freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None,
+                     smoothing=()):
     """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
     fr = friction_of(system)
     if fr is None:
@@ -158,8 +159,12 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
     first = fr._committed_loads is not None and freeze == "committed"
     for ptol in (predictor_rtol, retry_rtol):
-        x = _predictor(system, fr, x, t, out, max(atol, ptol * out.residuals[0]), rtol, max_iter, refreeze,
-                       max_rounds, load_rtol, first, step_cap, backend)
+        etas = tuple(float(v) for v in smoothing if v > 0) + (0.0,)
+        for i, eta in enumerate(etas):
+            tol = ptol * 10.0 ** (len(etas) - 1 - i)      # a decade looser per smoother stage
+            x = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, refreeze,
+                           max_rounds, load_rtol, first, step_cap, backend, eta)
+            first = False
         first = False
         xs, nres = _corrector(system, x, t, out, atol, rtol, corrector_iter, backend)
         if nres.converged:
@@ -175,13 +180,14 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
 
 
 def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, committed, step_cap,
-               backend):
+               backend, eta=0.0):
     """The predictor rounds from ``x`` (module docstring); returns the last round's state."""
     from .minimize import minimize_energy
 
     for k in range(1 if refreeze else max_rounds):
         t0 = time.perf_counter()
         fr.freeze(None if (k == 0 and committed) else x)
+        fr.smoothing = eta
         try:
             xs, _, mres = minimize_energy(system, x, t, atol=ptol, rtol=rtol, max_iter=max_iter, sigma0=0.0,
                                           backtrack=3, step_cap=step_cap, label=f"friction predictor {out.rounds + 1}",
@@ -196,8 +202,8 @@ def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds
         out.load_changes.append(change)
         rn = _exact_residual(system, xs, t)
         out.residuals.append(rn)
-        log.info("friction predictor round %d: %s in %d iterations, load change %.3e, exact |F| = %.3e",
-                 out.rounds, "converged" if mres.converged else f"not converged ({mres.reason})", mres.iterations,
+        log.info("friction predictor round %d (smoothing %g): %s in %d iterations, load change %.3e, exact |F| = %.3e",
+                 out.rounds, eta, "converged" if mres.converged else f"not converged ({mres.reason})", mres.iterations,
                  change, rn)
         if not np.isfinite(rn):
             break

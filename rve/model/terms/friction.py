@@ -38,7 +38,8 @@ of the convex incremental potential ``sum psi(e0)`` (``rve.physics.friction_form
 frozen_potential``) on every pair with a frozen load (also pairs not in contact now, so the
 potential and its gradient are smooth in x), ``potential(x)`` its value (added to the
 contact term's ``energy``), and a map rebuild carries the frozen loads by point key (a new
-point: no load). ``frozen`` says whether loads are frozen.
+point: no load). ``frozen`` says whether loads are frozen; ``smoothing`` (eta >= 0, set by
+the solver, reset by ``unfreeze``) rounds the corner of the cone in that potential.
 """
 from __future__ import annotations
 
@@ -137,6 +138,8 @@ class FrictionTerm:
         self._committed_loads = None
         #: frozen loads of the map's points (dict f0 (P, G), n0 (P, G, 3), s_plus (P, G)), or None
         self._frozen = None
+        #: the rounding of the cone's corner in the frozen-load potential (0: the law's)
+        self.smoothing = 0.0
 
     # ------------------------------------------------------------------ set-up
     def set_families(self, labels) -> None:
@@ -339,8 +342,9 @@ class FrictionTerm:
         return {"f0": f0, "n0": n0, "s_plus": np.array(np.broadcast_to(c.map.s_plus, (P, G)), float)}
 
     def unfreeze(self) -> None:
-        """Back to the exact law (the frozen loads dropped)."""
+        """Back to the exact law (the frozen loads dropped, no smoothing)."""
         self._frozen = None
+        self.smoothing = 0.0
 
     def frozen_loads(self) -> dict:
         """The frozen loads (copies): ``f0`` (P, G), ``n0`` (P, G, 3), ``s_plus`` (P, G)."""
@@ -354,7 +358,7 @@ class FrictionTerm:
         w = np.broadcast_to(np.asarray(self.contact.weight[sel], float)[:, None], fz["f0"][sel].shape)
         kT = w * float(self.law.stiffness) * float(self.contact.params.penalty)
         return frozen_potential(self._ends(x, sel), fz["s_plus"][sel], self.s_bar[sel], self.anchor[sel],
-                                fz["f0"][sel], fz["n0"][sel], kT, self.mu_pair[sel], jacobian)
+                                fz["f0"][sel], fz["n0"][sel], kT, self.mu_pair[sel], jacobian, self.smoothing)
 
     def potential(self, x) -> float:
         """The incremental potential (N mm) at ``x`` of the frozen loads (0 when none are frozen)."""
