@@ -146,10 +146,10 @@ def _refreezer(fr):
 
 
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
-                     refreeze: bool = True, predictor_rtol: float = 1e-3, retry_rtol: float = 1e-6,
+                     refreeze: bool = True, predictor_rtol: float = 3e-4, retry_rtol: float = 1e-6,
                      max_rounds: int = 4, load_rtol: float = 0.05, corrector_iter: int = 12,
                      freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None,
-                     smoothing=()):
+                     smoothing=(1.0,)):
     """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
     fr = friction_of(system)
     if fr is None:
