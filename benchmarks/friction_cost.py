@@ -1,11 +1,17 @@
 """Cost of a static strain-like step with friction against the frictionless one, on a relaxed
 RVE state: the affine field of the first strain increment (shear or uniaxial) applied to
-every node, the pinned ends exactly on their targets, then the static equilibrium by the energy minimiser (mu = 0: ``cell_statics.static_minimize``)
-and by the frictional residual Newton from the relaxed state's history (mu > 0: the capped
-Newton of ``relax_to_equilibrium``, then the commit) in ``--substeps`` equal sub-increments of
-the field, each committed (one increment fails to converge on the weave: the slip directions
-flip between iterates; see docs/contact.md "Friction"). Prints wall times, Newton iterations
-and the median ratio over the runs (one process, alternating).
+every node, the pinned ends exactly on their targets, then the static equilibrium by the
+energy minimiser (mu = 0: ``cell_statics.static_minimize``) and with friction from the relaxed
+state's history (mu > 0) in ``--substeps`` equal sub-increments of the field (default 1: the
+whole increment), each committed, by ``--method potential`` (default:
+``rve.solvers.frictional.frictional_solve``, the energy minimiser on the incremental potential
+at frozen loads, then Newton on the exact residual) or ``--method newton`` (the residual path
+of before: the capped Newton, then pseudo-transient continuation). ``--compare`` solves the
+first run's frictional step by the other method too and prints the difference of the two
+states and dissipations. Prints per run the wall and CPU times, iterations, the phases
+(predictor stages, corrector, fallback: iterations, wall times, the exact residuals), the
+stick/slip counts and the peak RSS; then the medians and their ratios (one process,
+alternating). ``--log``: the solvers' iterations (``rve.newton``: the corrector's rates).
 
     nice -n 10 python benchmarks/friction_cost.py RELAXED.nc [--mode shear] [--mu 0.2] [--runs 3]
     nice -n 10 python benchmarks/friction_cost.py --small [--elements 12]   (a 4x4 plain weave, one

@@ -20,30 +20,36 @@ matrix to a symmetric factorisation).
   ``frictional_solve`` below.
 * ``frictional_solve(system, x, t, atol, rtol=1e-14, max_iter=200, ...)`` -> ``(x,
   FrictionalResult)`` (no commit): the globalised solve of a step that moves many contacts
-  (the weave's strain steps):
+  (the weave's strain steps; docs/contact.md "Cost on a weave"):
 
-  1. **predictor** (rounds ``k = 0, 1, ...``): the loads (normal force and normal of
-     every contact point) frozen — at the last committed state in round 0 (the loads of
-     the step's start; ``freeze="current"``: at ``x``), at the previous round's solution
-     after — the friction is the gradient of a convex incremental potential
+  1. **predictor**: with the loads (normal force and normal of every contact point) frozen,
+     the friction is the gradient of a convex incremental potential
      (``rve.physics.friction_forms.frozen_potential``), so the step is a minimisation of
      ``Pi(x) + sum psi`` by the energy minimiser (``minimize_energy``: trust region,
      inertia check, the map rebuilt as fibrils move, the frozen loads carried by point
-     key). A round's solution has the exact residual's friction at the loads it was frozen
-     with; the rounds stop when the loads at the solution differ from the frozen ones by
-     at most ``load_rtol`` of the largest (a fixed point of the loads is the exact
-     equilibrium) or after ``max_rounds``;
+     key). The loads are frozen first at the last committed state (``freeze="committed"``;
+     ``"current"``: at ``x``) and, ``refreeze=True`` (default), refrozen at every accepted
+     iterate (``minimize_energy(on_accept=...)``), so the minimiser's fixed point is the
+     exact equilibrium (at loads frozen at the state itself the potential's forces are the
+     law's). ``smoothing`` (default ``(1.0,)``): stages with the cone's corner rounded by
+     these ``eta`` first (each to ten times the next stage's tolerance), then the law
+     (``eta = 0``) to ``predictor_rtol`` (default 3e-4) of the step's initial |F|.
+     ``refreeze=False``: rounds of converged minimisations at fixed loads, refrozen between
+     rounds until the loads change by at most ``load_rtol`` (at most ``max_rounds``);
   2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
-     the last round's solution (``static_solve``, line search on |F|; quadratic once the
-     stick/slip set is settled; logged on ``rve.newton``), at most ``corrector_iter``
-     iterations;
-  3. if the corrector fails, the residual path of before from the best state: the capped
+     the predictor's state (``static_solve``, line search on |F|; the linear solves on the
+     LU companion of the run's PARDISO instance, checked by their residual, else
+     ``sparse_solve``; quadratic once the stick/slip set is settled; logged on
+     ``rve.newton``), at most ``corrector_iter`` iterations;
+  3. if the corrector fails: the predictor again to ``retry_rtol`` (1e-6) and the corrector;
+     then (``fallback=True``) the residual path of before from the better state: the capped
      Newton (``rve.solvers.minimize.capped_newton``), then pseudo-transient continuation.
 
   ``FrictionalResult`` (a ``NewtonResult``): ``iterations`` all linear-solve iterations
-  (predictor + corrector + fallback), ``residuals`` the exact |F| after every phase and the
-  corrector's iterations, ``rounds``, ``predictor_iterations``, ``corrector_iterations``,
-  ``fallback_iterations``, ``load_changes`` (per round), ``method`` (the path that
+  (predictor + corrector + fallback), ``residuals`` the exact |F| at the start, after every
+  predictor stage and after every corrector iteration, ``rounds`` (predictor stages),
+  ``predictor_iterations``, ``corrector_iterations``, ``fallback_iterations``,
+  ``load_changes`` (per stage), ``walls`` (s, per phase), ``method`` (the path that
   converged).
 """
 from __future__ import annotations
