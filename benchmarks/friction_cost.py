@@ -63,7 +63,7 @@ def main():
     ap.add_argument("--rounds-mode", action="store_true",
                     help="predictor rounds at fixed loads (refrozen between rounds) instead of the loads refrozen "
                          "at every accepted iterate")
-    ap.add_argument("--predictor-rtol", type=float, default=3e-4)
+    ap.add_argument("--predictor-rtol", type=float, default=1e-4)
     ap.add_argument("--smoothing", type=float, nargs="*", default=[1.0],
                     help="continuation: predictor stages with the cone's corner rounded by these eta, then eta = 0")
     ap.add_argument("--compare", action="store_true",

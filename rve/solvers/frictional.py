@@ -33,7 +33,7 @@ matrix to a symmetric factorisation).
      exact equilibrium (at loads frozen at the state itself the potential's forces are the
      law's). ``smoothing`` (default ``(1.0,)``): stages with the cone's corner rounded by
      these ``eta`` first (each to ten times the next stage's tolerance), then the law
-     (``eta = 0``) to ``predictor_rtol`` (default 3e-4) of the step's initial |F|.
+     (``eta = 0``) to ``predictor_rtol`` (default 1e-4) of the step's initial |F|.
      ``refreeze=False``: rounds of converged minimisations at fixed loads, refrozen between
      rounds until the loads change by at most ``load_rtol`` (at most ``max_rounds``);
   2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
@@ -152,7 +152,7 @@ def _refreezer(fr):
 
 
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
-                     refreeze: bool = True, predictor_rtol: float = 3e-4, retry_rtol: float = 1e-6,
+                     refreeze: bool = True, predictor_rtol: float = 1e-4, retry_rtol: float = 1e-6,
                      max_rounds: int = 4, load_rtol: float = 0.05, corrector_iter: int = 12,
                      freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None,
                      smoothing=(1.0,)):
