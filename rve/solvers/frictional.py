@@ -165,7 +165,8 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
     first = fr._committed_loads is not None and freeze == "committed"
     for ptol in (predictor_rtol, retry_rtol):
-        etas = tuple(float(v) for v in smoothing if v > 0) + (0.0,)
+        # the retry goes on from the corrector's start with the law itself
+        etas = (tuple(float(v) for v in smoothing if v > 0) if ptol == predictor_rtol else ()) + (0.0,)
         for i, eta in enumerate(etas):
             tol = ptol * 10.0 ** (len(etas) - 1 - i)      # a decade looser per smoother stage
             x = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, refreeze,
@@ -219,18 +220,31 @@ def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds
     return x
 
 
-def _corrector(system, x, t, out, atol, rtol, corrector_iter, backend):
-    """Newton on the exact residual from ``x``, its unsymmetric solves on the run's backend."""
+def _corrector(system, x, t, out, atol, rtol, corrector_iter, backend, chunk: int = 3):
+    """Newton on the exact residual from ``x``, its unsymmetric solves on the run's backend,
+    in chunks of ``chunk`` iterations: a chunk that does not reduce |F| tenfold ends it (a
+    stall: Newton heading for another root past a stick/slip change, its line search
+    creeping; the caller then predicts again, more tightly)."""
     t0 = time.perf_counter()
     system.rebuild(x)
+    done, res, xs = 0, [], x
     with run_backend(backend) as solver:
-        xs, _, nres = static_solve(system, x, np.zeros(system.n), t, {
-            "atol": atol, "rtol": rtol, "max_iter": corrector_iter, "label": "friction corrector",
-            "linear_solve": _unsymmetric_solver(solver)})
-    out.corrector_iterations += int(nres.iterations)
-    out.iterations += int(nres.iterations)
+        lin = _unsymmetric_solver(solver)
+        while done < corrector_iter:
+            n = min(chunk, corrector_iter - done)
+            xs, _, nres = static_solve(system, xs, np.zeros(system.n), t, {
+                "atol": atol, "rtol": 0.0, "max_iter": n, "label": "friction corrector", "linear_solve": lin})
+            done += int(nres.iterations)
+            res = res + [float(v) for v in (nres.residuals if not res else nres.residuals[1:])]
+            if nres.converged or not (nres.residuals[-1] <= 0.1 * nres.residuals[0]) or nres.iterations < n:
+                break
+    if not nres.converged and not res[-1] <= atol:
+        nres.reason = nres.reason or f"stalled (|F| {res[0]:.3e} -> {res[-1]:.3e})"
+    nres = NewtonResult(nres.u, bool(nres.converged), done, res, nres.reason)
+    out.corrector_iterations += done
+    out.iterations += done
     out.walls.append(time.perf_counter() - t0)
-    out.residuals.extend(float(v) for v in nres.residuals[1:])
+    out.residuals.extend(res[1:])
     return xs, nres
 
 
