@@ -41,7 +41,11 @@ matrix to a symmetric factorisation).
      LU companion of the run's PARDISO instance, checked by their residual, else
      ``sparse_solve``; quadratic once the stick/slip set is settled; logged on
      ``rve.newton``), at most ``corrector_iter`` iterations;
-  3. if the corrector fails: the predictor again to ``retry_rtol`` (1e-6) and the corrector;
+     It runs in chunks of 3 iterations; a chunk that does not reduce |F| tenfold is a stall
+     (Newton heading for another root of the non-unique frictional equilibrium, its line
+     search creeping) and ends it;
+  3. if the corrector fails: the predictor again (the law, no smoothing stage) to
+     ``retry_rtol`` (1e-6) and the corrector;
      then (``fallback=True``) the residual path of before from the better state: the capped
      Newton (``rve.solvers.minimize.capped_newton``), then pseudo-transient continuation.
 
