@@ -80,3 +80,96 @@ def test_no_gap_history_gives_no_force():
     s_bar, anchor = start_history(X, sp, geo.s_minus)
     R, _, st, _ = _forces(X, sp, s_bar, anchor, 0.3, 1.0, jac=False)
     assert np.abs(R).max() <= 1e-14
+
+
+def _frozen(X, sp, s_bar, anchor, mu, ratio, f0, n0, jac=True):
+    from rve.physics.friction_forms import frozen_potential
+
+    kT = np.full(f0.shape, 0.05 * ratio * PEN)
+    return frozen_potential(X, sp, s_bar, anchor, f0, n0, kT, np.full(X.shape[0], mu), jac)
+
+
+def _loads_at(X, sp):
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    _, p1, _ = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
+    return np.where(geo.active, 0.05 * p1, 0.0), geo.n
+
+
+@pytest.mark.parametrize("regime, mu, ratio", [("stick", 1.5, 0.05), ("slip", 0.2, 50.0), ("mixed", 0.5, 2.0)])
+def test_frozen_potential_gradient_and_hessian(regime, mu, ratio):
+    """At frozen loads the friction forces are the gradient of sum psi and the tangent its
+    Hessian (finite differences of the potential and of the forces); the Hessian is
+    symmetric positive semi-definite (the minimiser's model is convex)."""
+    X, sp, s_bar, anchor = _pairs()
+    f0, n0 = _loads_at(X + 0.003, sp)              # loads frozen at another state
+    psi, R, K = _frozen(X, sp, s_bar, anchor, mu, ratio, f0, n0)
+    st = _forces(X, sp, s_bar, anchor, mu, ratio, jac=False)[2]
+    if regime == "stick":
+        assert st.stick.sum() >= 5 and not st.slip.any()
+    elif regime == "slip":
+        assert st.slip.sum() >= 5 and not st.stick.any()
+    Rfd = fd_nodes(lambda Y: _frozen(Y, sp, s_bar, anchor, mu, ratio, f0, n0, False)[0].sum(axis=1), X)
+    np.testing.assert_allclose(R, Rfd, rtol=1e-6, atol=1e-7 * np.abs(R).max())
+    Kfd = fd_nodes(lambda Y: _frozen(Y, sp, s_bar, anchor, mu, ratio, f0, n0, False)[1], X)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
+    A = K.reshape(K.shape[0], 12, 12)
+    np.testing.assert_allclose(A, np.swapaxes(A, 1, 2), atol=1e-14 * np.abs(A).max())
+    assert np.linalg.eigvalsh(A).min() >= -1e-12 * np.abs(A).max()
+
+
+def test_frozen_potential_at_its_own_loads_is_the_law():
+    """With the loads frozen at the state itself the potential's forces are the return
+    map's (friction_forces), in stick and in slip; psi is continuous at the cone."""
+    X, sp, s_bar, anchor = _pairs()
+    f0, n0 = _loads_at(X, sp)
+    for mu, ratio in ((1.5, 0.05), (0.2, 50.0), (0.5, 2.0)):
+        R_law = _forces(X, sp, s_bar, anchor, mu, ratio, jac=False)[0]
+        _, R, _ = _frozen(X, sp, s_bar, anchor, mu, ratio, f0, n0, jac=False)
+        np.testing.assert_allclose(R, R_law, rtol=0, atol=1e-14 * np.abs(R_law).max())
+    # psi on both sides of the stick limit |e| = mu f0 / kT (one point, the gap scaled)
+    from rve.physics.friction_forms import tangential_gap
+
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    e = tangential_gap(geo, X, s_bar, anchor)
+    kT = 0.05 * 2.0 * PEN
+    p, g = np.unravel_index(np.argmax(f0), f0.shape)
+    limit = 0.5 * f0[p, g]
+    en = np.linalg.norm(e[p, g])
+    # the anchor moved so that |e| sits just below / above the limit of that point
+    for side in (1 - 1e-9, 1 + 1e-9):
+        a2 = anchor.copy()
+        a2[p, g] += e[p, g] * (side * limit / kT / en - 1.0)
+        psi, _, _ = _frozen(X, sp, s_bar, a2, 0.5, 2.0, f0, n0, jac=False)
+        np.testing.assert_allclose(psi[p, g], 0.5 * limit * limit / kT, rtol=1e-8)
+
+
+@pytest.mark.parametrize("eta", [0.5, 0.05])
+def test_smoothed_potential_gradient_hessian_and_limit(eta):
+    """The predictor's rounded cone (eta > 0): forces the gradient of the potential, tangent
+    its Hessian (finite differences), convex; the force never above (1 + eta^2/4) mu f0,
+    and tending to the law's as eta -> 0."""
+    from rve.physics.friction_forms import frozen_potential
+
+    X, sp, s_bar, anchor = _pairs()
+    f0, n0 = _loads_at(X + 0.003, sp)
+    mu, ratio = 0.5, 2.0
+    kT = np.full(f0.shape, 0.05 * ratio * PEN)
+    mus = np.full(X.shape[0], mu)
+
+    def fp(Y, jac=False, e=eta):
+        return frozen_potential(Y, sp, s_bar, anchor, f0, n0, kT, mus, jac, e)
+
+    psi, R, K = fp(X, True)
+    Rfd = fd_nodes(lambda Y: fp(Y)[0].sum(axis=1), X)
+    np.testing.assert_allclose(R, Rfd, rtol=1e-6, atol=1e-7 * np.abs(R).max())
+    Kfd = fd_nodes(lambda Y: fp(Y)[1], X)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
+    A = K.reshape(K.shape[0], 12, 12)
+    assert np.linalg.eigvalsh(A).min() >= -1e-12 * np.abs(A).max()
+    # the point forces: R_k = cb_k t, so t = R[:, 0] / cb_0 for one point per pair (G = 3 here:
+    # compare the pair sums with the law's bound instead)
+    bound = (1 + eta * eta / 4) * mu * f0.sum(axis=1)
+    assert np.all(np.linalg.norm(R[:, 0] + R[:, 1], axis=-1) <= bound * (1 + 1e-12) + 1e-300)
+    R_law = fp(X, e=0.0)[1]
+    R_tiny = fp(X, e=1e-7)[1]
+    np.testing.assert_allclose(R_tiny, R_law, rtol=0, atol=1e-5 * np.abs(R_law).max())

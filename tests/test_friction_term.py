@@ -145,7 +145,7 @@ def test_relaxation_of_a_frictional_system_solves_the_residual():
     system.term.friction.seed(rec)              # back to the history of the last converged state
     out = relax_to_equilibrium(system, x, np.zeros(system.n),
                                RelaxSettings(duration=1.0, steps=1, method="energy", static_atol=1e-11))
-    assert out.static_converged and out.history[0]["method"] == "capped newton (friction)"
+    assert out.static_converged and out.history[0]["method"] == "potential predictor + newton"
     np.testing.assert_allclose(out.x, ref, rtol=0, atol=1e-9)
     assert system.term.friction.dissipated == pytest.approx(rec["dissipated"] + d, rel=1e-6)
 
@@ -258,3 +258,45 @@ def test_cell_static_step_of_a_frictional_system():
     xs, info = static_minimize(system, x, 1e-11, 40)
     assert info["converged"] and info["method"] == "friction"
     np.testing.assert_allclose(xs, ref, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("case", ["stick", "slip", "separated"])
+def test_frozen_loads_are_a_potential_of_the_assembled_system(case):
+    """With the loads frozen (FrictionTerm.freeze) the assembled residual is the gradient of
+    system.energy (penalty + beams + the incremental potential) and its tangent the exact
+    Hessian, also where the pair has separated (the frozen load still acts: the potential
+    is smooth); a rebuild carries the frozen loads by point key (the energy unchanged);
+    the energy minimiser accepts the system only while its loads are frozen."""
+    from rve.solvers.minimize import minimize_energy
+
+    cfg, system, parts, x = _slid(cycle_steps=2, u=0.04)
+    fr = system.term.friction
+    fr.freeze(None)                                     # the loads of the committed state
+    f0 = fr.frozen_loads()["f0"]
+    assert f0.max() > 0
+    y = x.copy()
+    y[parts["contact_x"]] += {"stick": -0.002, "slip": 0.002, "separated": 0.002}[case]
+    if case == "separated":
+        lay, mesh = system.layout, system.mesh
+        node = parts["contact_x"][0] // lay.block
+        slider = next(f for f in range(mesh.n_fibrils) if node in mesh.fibril_nodes(f))
+        y.reshape(-1, lay.block)[mesh.fibril_nodes(slider), 2] += 0.03    # the slider lifted off
+        assert system.term.map.n_pairs == 1
+        assert system.active_pairs(y).size == 0
+    w = np.zeros(system.n)
+    F, Fx, _ = system.evaluate(y, w, 0.0)
+    mech = system.layout.dofs("mech", system.mesh.conn[cfg.mesh.elements // 2])
+    assert np.abs(F[mech]).max() > 1e-6
+    g = fd_jacobian(lambda v: np.array([system.energy(v)]), y, mech, eps=1e-7)[0]
+    np.testing.assert_allclose(F[mech], g, rtol=1e-5, atol=1e-6 * np.abs(F[mech]).max())
+    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], y, mech, eps=1e-7)
+    A = Fx.toarray()[:, mech]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    e0 = system.energy(y)
+    system.rebuild(y)
+    assert system.energy(y) == pytest.approx(e0, rel=1e-12)
+    np.testing.assert_array_equal(fr.frozen_loads()["f0"], f0)
+    minimize_energy(system, y, max_iter=1)              # accepted while frozen
+    fr.unfreeze()
+    with pytest.raises(ValueError, match="friction"):
+        minimize_energy(system, y, max_iter=1)

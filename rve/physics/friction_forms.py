@@ -33,6 +33,17 @@ from - to +, distance ``rho``).
 * ``friction_state`` also returns what a step commits: the new history at the state
   (``s_bar`` = the current closest point, ``anchor = t/kT - j``) and the dissipated energy
   ``t . (e - t/kT)`` of every point (the work of the force on the slip of the return map).
+* **Incremental potential at frozen loads** (``frozen_potential``; the predictor of the
+  frictional static step, ``rve.solvers.frictional``): with the normal force ``f0`` and
+  the normal ``n0`` of every point frozen (taken from a state), the gap
+  ``e0 = (I - n0 n0^T) u`` is linear in ``X`` and the return map ``t(e0)`` is the gradient
+  of the convex, C^1 Huber function ``psi(e0) = kT |e0|^2 / 2`` (stick,
+  ``kT |e0| <= mu f0``), ``mu f0 |e0| - (mu f0)^2 / (2 kT)`` (slip). So
+  ``sum_p psi(e0_p(X))`` is a convex potential whose gradient is ``R_k = cb_k t`` and
+  whose Hessian is ``K_kl = cb_k cb_l D`` with ``D = kT P0`` (stick),
+  ``(mu f0/|e0|)(P0 - e_hat e_hat^T)`` (slip): symmetric, positive semi-definite. At
+  loads frozen at the state itself (``f0 = f(X)``, ``n0 = n(X)``) it is the residual of
+  the law above.
 """
 from __future__ import annotations
 
@@ -41,7 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
-           "tangential_gap"]
+           "tangential_gap", "frozen_potential"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -158,3 +169,82 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True)
     # K_kilj = sum_g cb_gk dT_g,l,i,j
     K = np.einsum("pgk,pglij->pkilj", cb, dT, optimize=True)
     return R, K
+
+
+def _smooth_cone(x, eta):
+    """The smoothed corner of the return map (``frozen_potential`` with ``eta > 0``): with
+    ``x = |e| / delta``, the force ``mu f0 phi(x)`` and the potential ``(mu f0)^2 / kT Phi(x)``,
+    ``phi(x) = (x + 1 - sqrt((x - 1)^2 + eta^2)) / 2 - c0`` (``c0`` so that phi(0) = 0: min(x, 1)
+    with its corner rounded over ~eta), ``Phi`` its integral from 0; returns ``(Phi, phi,
+    phi', phi / x)``."""
+    def S(z):
+        r = np.sqrt(z * z + eta * eta)
+        return 0.5 * (z * r + eta * eta * np.arcsinh(z / eta))
+
+    r = np.sqrt((x - 1.0) ** 2 + eta * eta)
+    c0 = 0.5 * (1.0 - np.sqrt(1.0 + eta * eta))
+    phi = 0.5 * (x + 1.0 - r) - c0
+    dphi = 0.5 * (1.0 - (x - 1.0) / r)
+    Phi = 0.25 * x * x + 0.5 * x - 0.5 * (S(x - 1.0) - S(-1.0)) - c0 * x
+    small = x < 1e-8
+    over = np.where(small, dphi, phi / np.where(small, 1.0, x))
+    return Phi, phi, dphi, over
+
+
+def frozen_potential(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian: bool = True, eta: float = 0.0):
+    """The incremental potential of the points at frozen loads (module docstring):
+    ``(psi (P, G), R (P, 4, 3), K (P, 4, 3, 4, 3) or None)`` at chord ends ``X`` (P, 4, 3)
+    from the history (``s_bar``, ``anchor``), ``s_plus`` (P, G) the + points, the frozen
+    normal forces ``f0`` (P, G) (0: no friction at the point) and normals ``n0`` (P, G, 3),
+    ``kT`` (P, G) and ``mu`` (P,) or (P, G). ``eta > 0``: the corner of the cone rounded
+    (``_smooth_cone``; convex and C^2, the force within ``(1 + eta^2/4) mu f0``), the
+    predictor's continuation towards ``eta = 0``, the law."""
+    f0 = np.asarray(f0, float)
+    if eta > 0.0:
+        return _frozen_smooth(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian, float(eta))
+    mu = _per_point(mu, f0.shape)
+    cb = material_weights(s_plus, s_bar)
+    u = anchor + np.einsum("pgk,pki->pgi", cb, X)
+    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
+    limit = np.where((f0 > 0.0) & (mu > 0.0), mu * f0, 0.0)
+    en, stick, slip, t = _return_map(e, limit, kT, 1.0, limit > 0.0)
+    kTs = np.where(kT > 0, kT, 1.0)
+    psi = np.where(stick, 0.5 * kT * en * en, np.where(slip, limit * en - 0.5 * limit * limit / kTs, 0.0))
+    R = np.einsum("pgk,pgi->pki", cb, t)
+    if not jacobian:
+        return psi, R, None
+    I3 = np.eye(3)
+    P0 = I3 - n0[..., :, None] * n0[..., None, :]
+    ehat = e / np.where(en > 0, en, 1.0)[..., None]
+    a_slip = np.where(slip, limit / np.where(en > 0, en, 1.0), 0.0)
+    D = (np.where(stick, kT, 0.0)[..., None, None] * P0
+         + a_slip[..., None, None] * (P0 - ehat[..., :, None] * ehat[..., None, :]))
+    K = np.einsum("pgk,pgl,pgij->pkilj", cb, cb, D, optimize=True)
+    return psi, R, K
+
+
+def _frozen_smooth(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian, eta):
+    mu = _per_point(mu, f0.shape)
+    cb = material_weights(s_plus, s_bar)
+    u = anchor + np.einsum("pgk,pki->pgi", cb, X)
+    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
+    on = (f0 > 0.0) & (mu > 0.0) & (kT > 0.0)
+    L = np.where(on, mu * f0, 0.0)
+    kTs = np.where(kT > 0, kT, 1.0)
+    delta = np.where(on, L / kTs, 1.0)
+    en = np.sqrt(np.einsum("pgi,pgi->pg", e, e))
+    Phi, phi, dphi, over = _smooth_cone(en / delta, eta)
+    psi = np.where(on, L * delta * Phi, 0.0)
+    ehat = e / np.where(en > 0, en, 1.0)[..., None]
+    t = np.where(on, L * phi, 0.0)[..., None] * ehat
+    R = np.einsum("pgk,pgi->pki", cb, t)
+    if not jacobian:
+        return psi, R, None
+    I3 = np.eye(3)
+    P0 = I3 - n0[..., :, None] * n0[..., None, :]
+    a = np.where(on, kTs * dphi, 0.0)          # along e_hat: d|t|/d|e|
+    b = np.where(on, kTs * over, 0.0)          # across: |t| / |e|
+    ee = ehat[..., :, None] * ehat[..., None, :]
+    D = a[..., None, None] * ee + b[..., None, None] * (P0 - ee)
+    K = np.einsum("pgk,pgl,pgij->pkilj", cb, cb, D, optimize=True)
+    return psi, R, K

@@ -1,28 +1,78 @@
-"""Static steps of a system with friction: a residual Newton from the history of the last
-converged step, then the history committed (docs/contact.md "Friction").
+"""Static steps of a system with friction: the equilibrium from the history of the last
+converged step, then the history committed (docs/contact.md "Friction", "Solving with
+friction" and "Cost on a weave").
 
 Contract
 --------
-Friction is path-dependent: its forces are not the gradient of an energy, so a frictional
-static step cannot go through the energy minimiser (``rve.solvers.minimize``); it solves
-the residual ``F(x, 0, t) = 0`` with Newton (``rve.solvers.static.static_solve``, whose
-linear solves send the unsymmetric tangent to the LU path: ``rve.solvers.linear.sparse_solve``
-never hands an unsymmetric matrix to a symmetric factorisation) with the friction history
-of the last converged step held fixed.
+Friction is path-dependent: its forces are not the gradient of an energy, so the exact
+frictional equilibrium is a root of the residual ``F(x, 0, t) = 0`` (the friction history
+of the last converged step held fixed), whose tangent is unsymmetric (the linear solves
+send it to the LU path: ``rve.solvers.linear.sparse_solve`` never hands an unsymmetric
+matrix to a symmetric factorisation).
 
 * ``friction_of(system)`` -> the system's friction (an object with ``commit(x)``: the
   ``FrictionTerm`` of a contact system's term), or None for a frictionless system;
-* ``frictional_static_step(system, x, w, t, newton_opts=None)`` -> ``(x, w, result,
-  dissipated)``: the Newton solve, and on convergence the commit (``dissipated``: the
-  energy dissipated by the step, N mm; 0.0 without convergence, the history unchanged).
+* ``frictional_static_step(system, x, w, t, newton_opts=None, method="newton")`` ->
+  ``(x, w, result, dissipated)``: the solve, and on convergence the commit
+  (``dissipated``: the energy dissipated by the step, N mm; 0.0 without convergence, the
+  history unchanged). ``method="newton"``: Newton on the residual from ``x``
+  (``rve.solvers.static.static_solve``; the single-fibril scenes); ``"potential"``:
+  ``frictional_solve`` below.
+* ``frictional_solve(system, x, t, atol, rtol=1e-14, max_iter=200, ...)`` -> ``(x,
+  FrictionalResult)`` (no commit): the globalised solve of a step that moves many contacts
+  (the weave's strain steps; docs/contact.md "Cost on a weave"):
+
+  1. **predictor**: with the loads (normal force and normal of every contact point) frozen,
+     the friction is the gradient of a convex incremental potential
+     (``rve.physics.friction_forms.frozen_potential``), so the step is a minimisation of
+     ``Pi(x) + sum psi`` by the energy minimiser (``minimize_energy``: trust region,
+     inertia check, the map rebuilt as fibrils move, the frozen loads carried by point
+     key). The loads are frozen first at the last committed state (``freeze="committed"``;
+     ``"current"``: at ``x``) and, ``refreeze=True`` (default), refrozen at every accepted
+     iterate (``minimize_energy(on_accept=...)``), so the minimiser's fixed point is the
+     exact equilibrium (at loads frozen at the state itself the potential's forces are the
+     law's). ``smoothing`` (default ``(1.0,)``): stages with the cone's corner rounded by
+     these ``eta`` first (each to ten times the next stage's tolerance), then the law
+     (``eta = 0``) to ``predictor_rtol`` (default 1e-4) of the step's initial |F|.
+     ``refreeze=False``: rounds of converged minimisations at fixed loads, refrozen between
+     rounds until the loads change by at most ``load_rtol`` (at most ``max_rounds``);
+  2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
+     the predictor's state (``static_solve``, line search on |F|; the linear solves on the
+     LU companion of the run's PARDISO instance, checked by their residual, else
+     ``sparse_solve``; quadratic once the stick/slip set is settled; logged on
+     ``rve.newton``), at most ``corrector_iter`` iterations;
+     It runs in chunks of 3 iterations; a chunk that does not reduce |F| tenfold is a stall
+     (Newton heading for another root of the non-unique frictional equilibrium, its line
+     search creeping) and ends it;
+  3. if the corrector fails: the predictor again (the law, no smoothing stage) to
+     ``retry_rtol`` (1e-6) and the corrector;
+     then (``fallback=True``) the residual path of before from the better state: the capped
+     Newton (``rve.solvers.minimize.capped_newton``), then pseudo-transient continuation.
+
+  ``FrictionalResult`` (a ``NewtonResult``): ``iterations`` all linear-solve iterations
+  (predictor + corrector + fallback), ``residuals`` the exact |F| at the start, after every
+  predictor stage and after every corrector iteration, ``rounds`` (predictor stages),
+  ``predictor_iterations``, ``corrector_iterations``, ``fallback_iterations``,
+  ``load_changes`` (per stage), ``walls`` (s, per phase), ``method`` (the path that
+  converged).
 """
 from __future__ import annotations
 
+import logging
+import time
+from dataclasses import dataclass, field
 from typing import Optional
 
-from .static import static_solve
+import numpy as np
 
-__all__ = ["friction_of", "frictional_static_step"]
+from .backends.registry import run_backend
+from .linear import sparse_solve
+from .newton import NewtonResult, StageFactorisation
+from .static import StaticProblem, static_solve
+
+__all__ = ["friction_of", "frictional_static_step", "frictional_solve", "FrictionalResult"]
+
+log = logging.getLogger("rve.solvers.frictional")
 
 
 def friction_of(system):
@@ -31,11 +81,199 @@ def friction_of(system):
     return getattr(term, "friction", None) if term is not None else None
 
 
-def frictional_static_step(system, x, w, t: float, newton_opts: Optional[dict] = None):
+def frictional_static_step(system, x, w, t: float, newton_opts: Optional[dict] = None, method: str = "newton"):
     """One static step from the held friction history; commits it on convergence."""
-    xs, ws, res = static_solve(system, x, w, t, newton_opts)
+    if method == "potential":
+        opts = dict(newton_opts or {})
+        xs, res = frictional_solve(system, x, t, atol=opts.get("atol", 1e-9), rtol=opts.get("rtol", 1e-14),
+                                   max_iter=opts.get("max_iter", 200))
+        ws = np.zeros(system.n)
+    elif method == "newton":
+        xs, ws, res = static_solve(system, x, w, t, newton_opts)
+    else:
+        raise ValueError(f"unknown frictional step method {method!r} (newton, potential)")
     dissipated = 0.0
     fr = friction_of(system)
     if res.converged and fr is not None:
         dissipated = fr.commit(xs)
     return xs, ws, res, dissipated
+
+
+@dataclass
+class FrictionalResult(NewtonResult):
+    """``NewtonResult`` of ``frictional_solve`` with its phases (module docstring)."""
+
+    rounds: int = 0
+    predictor_iterations: int = 0
+    corrector_iterations: int = 0
+    fallback_iterations: int = 0
+    load_changes: list = field(default_factory=list)
+    method: str = ""
+    #: wall time (s) of every predictor round, then of the corrector, then of the fallback
+    walls: list = field(default_factory=list)
+
+
+def _exact_residual(system, x, t) -> float:
+    prob = StaticProblem(system, x, np.zeros(system.n), t)
+    F, _, _ = system.evaluate(prob.x, prob.w, t, jacobian=False)
+    return float(np.linalg.norm(np.asarray(F, float)[prob.free]))
+
+
+def _load_change(fr, x) -> float:
+    """max |f(x) - f0| / max f0 over the map's points (the frozen loads f0 against those at x)."""
+    f0 = fr.frozen_loads()["f0"]
+    f = fr.loads_at(x)["f0"]
+    scale = max(float(f0.max(initial=0.0)), float(np.max(f, initial=0.0)), 1e-300)
+    return float(np.abs(f - f0).max(initial=0.0)) / scale
+
+
+def _unsymmetric_solver(solver):
+    """``linear_solve`` of the corrector: the unsymmetric tangent by the run's instance
+    (``StageFactorisation``: a symmetric PARDISO instance hands it to its LU companion,
+    whose analysis is reused while the pattern holds), checked by its residual, else
+    ``sparse_solve``."""
+
+    def solve(J, r):
+        try:
+            du = StageFactorisation(J, solver).solve(r)
+            if np.all(np.isfinite(du)) and np.linalg.norm(J @ du - r) <= 1e-8 * max(np.linalg.norm(r), 1e-300):
+                return du
+        except RuntimeError:
+            pass
+        return sparse_solve(J, r)
+
+    return solve
+
+
+def _refreezer(fr):
+    """``on_accept`` of the minimiser: the loads refrozen at every accepted iterate."""
+
+    def on_accept(x):
+        fr.freeze(x)
+        return True
+
+    return on_accept
+
+
+def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
+                     refreeze: bool = True, predictor_rtol: float = 1e-4, retry_rtol: float = 1e-6,
+                     max_rounds: int = 4, load_rtol: float = 0.05, corrector_iter: int = 12,
+                     freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None,
+                     smoothing=(1.0,)):
+    """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
+    fr = friction_of(system)
+    if fr is None:
+        raise ValueError("frictional_solve: the system has no friction")
+    x = np.array(x, float, copy=True)
+    system.rebuild(x)
+    out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
+    first = fr._committed_loads is not None and freeze == "committed"
+    for ptol in (predictor_rtol, retry_rtol):
+        # the retry goes on from the corrector's start with the law itself
+        etas = (tuple(float(v) for v in smoothing if v > 0) if ptol == predictor_rtol else ()) + (0.0,)
+        for i, eta in enumerate(etas):
+            tol = ptol * 10.0 ** (len(etas) - 1 - i)      # a decade looser per smoother stage
+            x = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, refreeze,
+                           max_rounds, load_rtol, first, step_cap, backend, eta)
+            first = False
+        first = False
+        xs, nres = _corrector(system, x, t, out, atol, rtol, corrector_iter, backend)
+        if nres.converged:
+            out.u, out.converged, out.method = nres.u, True, "potential predictor + newton"
+            return xs, out
+        log.warning("friction corrector did not converge (%s)", nres.reason)
+        if np.isfinite(nres.residuals[-1]) and nres.residuals[-1] < nres.residuals[0]:
+            x = xs
+    if not fallback:
+        out.u, out.reason = None, f"corrector: {nres.reason}"
+        return x, out
+    return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend)
+
+
+def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, committed, step_cap,
+               backend, eta=0.0):
+    """The predictor rounds from ``x`` (module docstring); returns the last round's state."""
+    from .minimize import minimize_energy
+
+    for k in range(1 if refreeze else max_rounds):
+        t0 = time.perf_counter()
+        fr.freeze(None if (k == 0 and committed) else x)
+        fr.smoothing = eta
+        try:
+            xs, _, mres = minimize_energy(system, x, t, atol=ptol, rtol=rtol, max_iter=max_iter, sigma0=0.0,
+                                          backtrack=3, step_cap=step_cap, label=f"friction predictor {out.rounds + 1}",
+                                          backend=backend, on_accept=_refreezer(fr) if refreeze else None)
+            change = _load_change(fr, xs)
+        finally:
+            fr.unfreeze()
+        out.rounds += 1
+        out.walls.append(time.perf_counter() - t0)
+        out.predictor_iterations += int(mres.iterations)
+        out.iterations += int(mres.iterations)
+        out.load_changes.append(change)
+        rn = _exact_residual(system, xs, t)
+        out.residuals.append(rn)
+        log.info("friction predictor round %d (smoothing %g): %s in %d iterations, load change %.3e, exact |F| = %.3e",
+                 out.rounds, eta, "converged" if mres.converged else f"not converged ({mres.reason})", mres.iterations,
+                 change, rn)
+        if not np.isfinite(rn):
+            break
+        x = xs
+        if change <= load_rtol or rn <= ptol:
+            break
+    return x
+
+
+def _corrector(system, x, t, out, atol, rtol, corrector_iter, backend, chunk: int = 3):
+    """Newton on the exact residual from ``x``, its unsymmetric solves on the run's backend,
+    in chunks of ``chunk`` iterations: a chunk that does not reduce |F| tenfold ends it (a
+    stall: Newton heading for another root past a stick/slip change, its line search
+    creeping; the caller then predicts again, more tightly)."""
+    t0 = time.perf_counter()
+    system.rebuild(x)
+    done, res, xs = 0, [], x
+    with run_backend(backend) as solver:
+        lin = _unsymmetric_solver(solver)
+        while done < corrector_iter:
+            n = min(chunk, corrector_iter - done)
+            xs, _, nres = static_solve(system, xs, np.zeros(system.n), t, {
+                "atol": atol, "rtol": 0.0, "max_iter": n, "label": "friction corrector", "linear_solve": lin})
+            done += int(nres.iterations)
+            res = res + [float(v) for v in (nres.residuals if not res else nres.residuals[1:])]
+            if nres.converged or not (nres.residuals[-1] <= 0.1 * nres.residuals[0]) or nres.iterations < n:
+                break
+    if not nres.converged and not res[-1] <= atol:
+        nres.reason = nres.reason or f"stalled (|F| {res[0]:.3e} -> {res[-1]:.3e})"
+    nres = NewtonResult(nres.u, bool(nres.converged), done, res, nres.reason)
+    out.corrector_iterations += done
+    out.iterations += done
+    out.walls.append(time.perf_counter() - t0)
+    out.residuals.extend(res[1:])
+    return xs, nres
+
+
+def _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend):
+    """The residual path of before from ``x``: the capped Newton, then pseudo-transient
+    continuation."""
+    from .minimize import capped_newton
+    from .static import pseudo_transient_solve
+
+    t0 = time.perf_counter()
+    system.rebuild(x)
+    cap = 0.5 * float(system.params.margin) if step_cap is None else float(step_cap)
+    xc, _, cres = capped_newton(system, x, t, atol=atol, rtol=rtol, max_iter=max_iter, step_cap=cap, backend=backend)
+    its = int(cres.iterations)
+    if not cres.converged:
+        log.warning("frictional capped Newton failed (%s); pseudo-transient continuation", cres.reason)
+        system.rebuild(xc)
+        xc, _, pres = pseudo_transient_solve(system, xc, np.zeros(system.n), t, atol=atol, rtol=rtol, max_iter=200,
+                                             backend=backend)
+        its += int(pres.iterations)
+        cres = NewtonResult(pres.u, pres.converged, its, cres.residuals + pres.residuals, pres.reason)
+    out.fallback_iterations = its
+    out.iterations += its
+    out.walls.append(time.perf_counter() - t0)
+    out.residuals.extend(float(v) for v in cres.residuals[1:])
+    out.u, out.converged, out.reason = cres.u, bool(cres.converged), cres.reason
+    out.method = "capped newton (friction)" if cres.converged else ""
+    return xc, out

@@ -214,7 +214,7 @@ class MinimizeResult(NewtonResult):
 
 def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, step_cap=None, sigma0=None,
                     label="minimize", time_budget=None, backtrack=0, backend=None, max_rejections=None,
-                    max_sigma_rel=1e16, options: MinimizeOptions = DEFAULT_OPTIONS):
+                    max_sigma_rel=1e16, options: MinimizeOptions = DEFAULT_OPTIONS, on_accept=None):
     """Static equilibrium of a mechanics-only ``ContactRelaxable`` system (e.g. a
     ``ContactSystem``) as a **local minimum** of its
     potential ``system.energy(x)`` (beam strain energy + penalty energy), by Newton's method
@@ -249,17 +249,24 @@ def minimize_energy(system, x, t=0.0, *, atol=1e-9, rtol=1e-14, max_iter=300, st
     exhaustion the result is not converged, ``reason`` says which budget, ``residuals``
     is the history and ``x`` the last accepted iterate.
 
+    ``on_accept(x) -> bool`` (optional) is called with every trial state the energy test
+    accepts, before its residual is evaluated; True says the caller changed the potential
+    there (``rve.solvers.frictional`` refreezes the friction loads), whose energy is then
+    the merit of the next iteration. None (default): the potential is fixed.
+
     Returns ``(x, w, MinimizeResult)``; every iteration is logged on ``rve.solvers.minimize``.
     A system with friction (``rve.solvers.frictional.friction_of``) is a ValueError: it has
-    no potential.
+    no potential; unless its loads are frozen (``FrictionTerm.freeze``), when the friction
+    is the convex incremental potential of those loads (``rve.solvers.frictional``).
     """
-    if friction_of(system) is not None:
+    fr = friction_of(system)
+    if fr is not None and not fr.frozen:
         raise ValueError("minimize_energy: the system has friction, which has no potential; solve its residual "
                          "(rve.solvers.frictional.frictional_static_step, or relax_to_equilibrium)")
     budget = max(200, 2 * int(max_iter)) if max_rejections is None else int(max_rejections)
     with options.run_backend(backend) as solver, _long_lived_objects_frozen():
         return _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget,
-                                backtrack, solver, budget, float(max_sigma_rel), options)
+                                backtrack, solver, budget, float(max_sigma_rel), options, on_accept)
 
 
 @contextlib.contextmanager
@@ -357,7 +364,7 @@ def _next_sigma(sigma, backtracked, ratio, alpha, sig_floor, sig_neg, contractio
 
 
 def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label, time_budget, backtrack, solver,
-                     max_rejections, max_sigma_rel, options: MinimizeOptions):
+                     max_rejections, max_sigma_rel, options: MinimizeOptions, on_accept=None):
     t0 = time.perf_counter()
     keep = options.keep_stored_pattern and solver.name == "pardiso"
     analyses0 = _analyses(solver)
@@ -408,6 +415,10 @@ def _minimize_energy(system, x, t, atol, rtol, max_iter, step_cap, sigma0, label
             prob, cen, Mff = _restricted(system, x_cur, t, fmt)
             u = prob.u0()
         ut = u + alpha * du
+        if accept and on_accept is not None and on_accept(prob.state(ut)[0]):
+            # the caller changed the potential at the accepted state (frozen friction loads
+            # refreshed): the merit of the next iteration is the new potential's
+            Pt = float(system.energy(prob.state(ut)[0]))
         if accept or (np.isfinite(Pt) and Pt <= Pi + noise):
             rt, Jt = prob(ut)
             rtn = float(np.linalg.norm(rt))

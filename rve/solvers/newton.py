@@ -18,7 +18,9 @@ the Jacobian assembly at the converged point. ``residual`` must return the same 
 ``fun``.
 
 Returns a ``NewtonResult`` (never raises for non-convergence: the caller decides whether
-to cut a step or give up). Every iteration is logged at INFO on the ``rve.newton`` logger
+to cut a step or give up). ``linear_solve(J, r) -> du`` (optional, without ``reuse``) replaces ``sparse_solve`` (the
+frictional corrector keeps one PARDISO instance, whose LU analysis it reuses). Every
+iteration is logged at INFO on the ``rve.newton`` logger
 as ``it, |r|, |du|, rate`` where ``rate = log(r_k/r_k-1) / log(r_k-1/r_k-2)`` tends to 2
 for quadratic convergence. Without ``reuse`` the linear solves are
 ``rve.solvers.linear.sparse_solve`` (one factorisation per iteration, docs/engine.md).
@@ -267,6 +269,7 @@ def newton(
     divergence_factor: float = 1e8,
     residual=None,
     reuse: Optional[JacobianReuse] = None,
+    linear_solve=None,
 ) -> NewtonResult:
     if reuse is not None:
         return _modified_newton(fun, u0, atol=atol, rtol=rtol, max_iter=max_iter, admissible=admissible,
@@ -301,7 +304,7 @@ def newton(
             nj += 1
         nf += 1
         try:
-            du = -sparse_solve(J, r)
+            du = -(sparse_solve if linear_solve is None else linear_solve)(J, r)
         except RuntimeError as exc:  # singular factor
             return result(False, it - 1, f"linear solve failed: {exc}")
         if not np.all(np.isfinite(du)):

@@ -20,8 +20,8 @@ rebuildable contact map, ``energy(x)``, ``set_onset``, ``params.margin``; e.g.
   ``contact_forms.penalty_law``; the last entry is the law of the result) smooths the
   first stages; the last stage ends with sigma = 0, i.e. plain Newton, quadratically.
   Velocities are zero throughout. A system with friction (``rve.solvers.frictional.
-  friction_of``) has no potential: ``"energy"`` then solves the static residual by the
-  capped Newton below from the friction history of the last converged state, and commits
+  friction_of``) has no potential: ``"energy"`` then solves the static residual by
+  ``rve.solvers.frictional.frictional_solve`` from the friction history of the last converged state, and commits
   the history at the solution. ``"dynamic"`` commits the friction history after every
   accepted time step (each step's stages return-map from the last accepted state) and
   after every converged static round.
@@ -240,29 +240,28 @@ def _relax_static(system, x, w, t, s: RelaxSettings, out: RelaxResult, t_start: 
 
 
 def _relax_frictional(system, x, s: RelaxSettings, t0) -> RelaxResult:
-    """The static residual of a frictional system by the capped Newton (the map rebuilt as
-    the centroids move, the history carried by point key) from the held history, by
-    pseudo-transient continuation where it fails; the history is committed at the solution
+    """The static residual of a frictional system from the held history by
+    ``rve.solvers.frictional.frictional_solve`` (the energy minimiser at frozen normal
+    loads, then Newton on the exact residual; the capped Newton and pseudo-transient
+    continuation where that fails); the history is committed at the solution
     (``RelaxResult.static_converged``)."""
+    from .frictional import frictional_solve
+
     t_start = time.perf_counter()
     x = np.array(x, float, copy=True)
     out = RelaxResult(x, np.zeros(system.n), float(t0))
-    cap = s.step_cap if s.step_cap is not None else 0.5 * float(system.params.margin)
-    system.rebuild(x)
-    xs, _, res = capped_newton(system, x, t0, atol=s.static_atol, rtol=s.static_rtol, max_iter=s.static_max_iter,
-                               step_cap=cap, backend=s.linear_backend)
-    if not res.converged:
-        log.warning("frictional static Newton failed (%s); pseudo-transient continuation", res.reason)
-        system.rebuild(xs)
-        xs, _, pres = pseudo_transient_solve(system, xs, np.zeros(system.n), t0, atol=s.static_atol,
-                                             rtol=s.static_rtol, max_iter=200, backend=s.linear_backend)
-        res = NewtonResult(pres.u, pres.converged, res.iterations + pres.iterations, res.residuals + pres.residuals,
-                           pres.reason)
+    xs, res = frictional_solve(system, x, t0, atol=s.static_atol, rtol=s.static_rtol, max_iter=s.static_max_iter,
+                               step_cap=s.step_cap, backend=s.linear_backend)
     if res.converged:
         friction_of(system).commit(xs)
     st = system.contact_state(xs)
-    out.history.append({"phase": "static", "method": "capped newton (friction)", "converged": bool(res.converged),
-                        "newton_iterations": int(res.iterations), "residuals": [float(r) for r in res.residuals],
+    out.history.append({"phase": "static", "method": res.method or "friction (not converged)",
+                        "converged": bool(res.converged), "newton_iterations": int(res.iterations),
+                        "predictor_rounds": int(res.rounds), "predictor_iterations": int(res.predictor_iterations),
+                        "corrector_iterations": int(res.corrector_iterations),
+                        "fallback_iterations": int(res.fallback_iterations),
+                        "load_changes": [float(v) for v in res.load_changes],
+                        "residuals": [float(r) for r in res.residuals],
                         "pairs": st["pairs"], "active_pairs": st["active_pairs"],
                         "max_overlap_over_R": st["max_overlap_over_R"], "wall_s": time.perf_counter() - t_start})
     out.static_newton_iterations = int(res.iterations)

@@ -501,10 +501,15 @@ class ContactTerm:
 
     def energy(self, x) -> float:
         """Penalty energy ``Σ w φ(g)`` (N mm) of the map's points at ``x`` (with multipliers:
-        of the shifted overlap, the potential of the residual at fixed multipliers)."""
+        of the shifted overlap, the potential of the residual at fixed multipliers); with friction
+        at frozen loads (``FrictionTerm.freeze``) plus its incremental potential."""
         if self.map.n_pairs == 0:
             return 0.0
-        return penalty_energy(self.gaps(x), self.weight, self.params.penalty, self.onset)
+        e = penalty_energy(self.gaps(x), self.weight, self.params.penalty, self.onset)
+        if self.friction is not None and self.friction.frozen:
+            # the incremental potential of friction at frozen loads (rve.solvers.frictional)
+            e = e + self.friction.potential(x)
+        return e
 
     def conductance_law(self, g, field: str, kappa):
         """Conductance per unit length and its derivative in g, ``(k, dk/dg)``, of the

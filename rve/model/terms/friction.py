@@ -30,6 +30,16 @@ carry the history to another system or through a checkpoint (by point key);
 ``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``);
 ``last`` the return mapping of the last committed state and ``points()`` its summary (total
 friction and normal force, stick and slip counts).
+
+Frozen loads (the predictor of ``rve.solvers.frictional``): ``freeze(x)`` (or
+``freeze(None)``: the loads of the last committed state) fixes the normal force ``f0`` and
+normal ``n0`` of every point by point key; until ``unfreeze()`` the term's forces are those
+of the convex incremental potential ``sum psi(e0)`` (``rve.physics.friction_forms.
+frozen_potential``) on every pair with a frozen load (also pairs not in contact now, so the
+potential and its gradient are smooth in x), ``potential(x)`` its value (added to the
+contact term's ``energy``), and a map rebuild carries the frozen loads by point key (a new
+point: no load). ``frozen`` says whether loads are frozen; ``smoothing`` (eta >= 0, set by
+the solver, reset by ``unfreeze``) rounds the corner of the cone in that potential.
 """
 from __future__ import annotations
 
@@ -38,8 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...physics.contact_forms import penalty_law
-from ...physics.friction_forms import (friction_forces, friction_state, material_weights, start_history,
-                                      tangential_gap)
+from ...physics.friction_forms import (friction_forces, friction_state, frozen_potential, material_weights,
+                                      start_history, tangential_gap)
 
 __all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
 
@@ -93,8 +103,13 @@ def match_rows(keys_to, keys_from) -> np.ndarray:
     if keys_to.shape[0] == 0 or keys_from.shape[0] == 0:
         return out
     both = np.concatenate([keys_from, keys_to])
-    _, inv = np.unique(both, axis=0, return_inverse=True)
-    inv = inv.ravel()
+    # equal rows by a lexicographic sort of the columns (np.unique(axis=0) compares rows as
+    # opaque bytes, ~20x slower on the weave's maps)
+    order = np.lexsort(both.T[::-1])
+    srt = both[order]
+    first = np.r_[True, (srt[1:] != srt[:-1]).any(axis=1)]
+    inv = np.empty(both.shape[0], np.int64)
+    inv[order] = np.cumsum(first) - 1
     owner = np.full(inv.max() + 1, -1, np.int64)
     owner[inv[:keys_from.shape[0]]] = np.arange(keys_from.shape[0])
     return owner[inv[keys_from.shape[0]:]]
@@ -119,6 +134,12 @@ class FrictionTerm:
         self.mu_pair = np.zeros(0)
         #: the return mapping of the last committed state (FrictionPoints), None before
         self.last = None
+        #: loads of the last committed state by point key: (keys, f, n, s_plus), None before
+        self._committed_loads = None
+        #: frozen loads of the map's points (dict f0 (P, G), n0 (P, G, 3), s_plus (P, G)), or None
+        self._frozen = None
+        #: the rounding of the cone's corner in the frozen-load potential (0: the law's)
+        self.smoothing = 0.0
 
     # ------------------------------------------------------------------ set-up
     def set_families(self, labels) -> None:
@@ -166,11 +187,15 @@ class FrictionTerm:
             a_new = a_new.reshape(-1, 3)
             s_new[hit] = self.s_bar.reshape(-1)[idx[hit]]
             a_new[hit] = self.anchor.reshape(-1, 3)[idx[hit]]
+        old_keys = self.keys
         self.keys = keys
         self.s_bar = s_new.reshape(P, G)
         self.anchor = a_new.reshape(P, G, 3)
         if P and not hit.all():
             self.share_along_fibrils(x, receivers=~hit.reshape(P, G), geo=geo)
+        if self._frozen is not None:
+            self._frozen = self._loads_by_key(old_keys, self._frozen["f0"], self._frozen["n0"],
+                                              self._frozen["s_plus"])
 
     def _loads(self, geo, sel):
         c = self.contact
@@ -194,7 +219,12 @@ class FrictionTerm:
         last commit (N mm), added to ``dissipated``."""
         if self.contact.map.n_pairs == 0:
             return 0.0
-        st = self.state(x)
+        sel = np.arange(self.contact.map.n_pairs)
+        geo = self.contact.geometry(x, sel)
+        f, _, kT = self._loads(geo, sel)
+        st = friction_state(geo, self._ends(x, sel), self.s_bar, self.anchor, f, kT, self.mu_pair)
+        self._committed_loads = (np.array(self.keys, np.int64), np.array(f, float), np.array(geo.n, float),
+                                 np.array(geo.s_plus, float))
         self.last = st
         self.s_bar, self.anchor = st.s_bar, st.anchor
         self.share_along_fibrils(x, receivers=st.normal <= 0.0)
@@ -269,6 +299,115 @@ class FrictionTerm:
         self.s_bar, self.anchor = s.reshape(self.s_bar.shape), a.reshape(self.anchor.shape)
         self.dissipated = float(record.get("dissipated", 0.0))
 
+    # ------------------------------------------------------------------ frozen loads
+    @property
+    def frozen(self) -> bool:
+        return self._frozen is not None
+
+    def _loads_by_key(self, keys_from, f, n, s_plus) -> dict:
+        """Loads given per point of ``keys_from`` re-expressed on the current map's points
+        (a point not among them: no load)."""
+        P, G = self.s_bar.shape
+        idx = match_rows(self.keys, keys_from) if keys_from is not None else np.full(P * G, -1)
+        hit = idx >= 0
+        f0, n0, sp0 = np.zeros(P * G), np.zeros((P * G, 3)), np.full(P * G, 0.5)
+        f0[hit] = np.asarray(f, float).reshape(-1)[idx[hit]]
+        n0[hit] = np.asarray(n, float).reshape(-1, 3)[idx[hit]]
+        sp0[hit] = np.asarray(s_plus, float).reshape(-1)[idx[hit]]
+        return {"f0": f0.reshape(P, G), "n0": n0.reshape(P, G, 3), "s_plus": sp0.reshape(P, G)}
+
+    def freeze(self, x=None) -> None:
+        """Freeze the normal force and normal of every point at state ``x`` (None: at the last
+        committed state, by point key; before any commit, an error)."""
+        if x is None:
+            if self._committed_loads is None:
+                raise ValueError("freeze(None): no committed state yet")
+            self._frozen = self._loads_by_key(*self._committed_loads)
+            return
+        self._frozen = self.loads_at(x)
+
+    def loads_at(self, x) -> dict:
+        """The loads of every point of the map at ``x``: ``f0`` (P, G) the normal forces (0
+        out of contact), ``n0`` (P, G, 3) the normals (0 out of contact), ``s_plus``. The
+        geometry is evaluated on the pairs in contact only (the compiled gaps select them)."""
+        c = self.contact
+        P, G = self.s_bar.shape
+        sel = np.flatnonzero((np.asarray(c.gaps(x)) > 0.0).any(axis=1))
+        f0, n0 = np.zeros((P, G)), np.zeros((P, G, 3))
+        if sel.size:
+            geo = c.geometry(x, sel)
+            f, _, _ = self._loads(geo, sel)
+            f0[sel] = f
+            n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
+        return {"f0": f0, "n0": n0, "s_plus": np.array(np.broadcast_to(c.map.s_plus, (P, G)), float)}
+
+    def unfreeze(self) -> None:
+        """Back to the exact law (the frozen loads dropped, no smoothing)."""
+        self._frozen = None
+        self.smoothing = 0.0
+
+    def frozen_loads(self) -> dict:
+        """The frozen loads (copies): ``f0`` (P, G), ``n0`` (P, G, 3), ``s_plus`` (P, G)."""
+        return {k: np.array(v) for k, v in self._frozen.items()}
+
+    def _frozen_pairs(self) -> np.ndarray:
+        return np.flatnonzero((self._frozen["f0"] > 0.0).any(axis=1) & (self.mu_pair > 0.0))
+
+    def _frozen_forms(self, x, sel, jacobian: bool):
+        fz = self._frozen
+        w = np.broadcast_to(np.asarray(self.contact.weight[sel], float)[:, None], fz["f0"][sel].shape)
+        kT = w * float(self.law.stiffness) * float(self.contact.params.penalty)
+        return frozen_potential(self._ends(x, sel), fz["s_plus"][sel], self.s_bar[sel], self.anchor[sel],
+                                fz["f0"][sel], fz["n0"][sel], kT, self.mu_pair[sel], jacobian, self.smoothing)
+
+    def potential(self, x) -> float:
+        """The incremental potential (N mm) at ``x`` of the frozen loads (0 when none are frozen)."""
+        if self._frozen is None or self.contact.map.n_pairs == 0:
+            return 0.0
+        sel = self._frozen_pairs()
+        if sel.size == 0:
+            return 0.0
+        return float(self._frozen_forms(x, sel, False)[0].sum())
+
+    def _add_frozen(self, x, act, R, Kx, Kw, jacobian: bool):
+        """``add_to`` at frozen loads: the potential's forces on the pairs with a frozen load,
+        the active pairs extended by them (their normal forms zero)."""
+        fp = self._frozen_pairs()
+        if fp.size == 0:
+            return act, R, Kx, Kw
+        c = self.contact
+        m, nC, ep = c.m, c.nC, c.endpos
+        act = np.asarray(act, np.int64)
+        where = np.full(c.map.n_pairs, -1, np.int64)
+        where[act] = np.arange(act.size)
+        extra = fp[where[fp] < 0]                  # frozen pairs out of contact: appended
+        allp = np.concatenate([act, extra])
+        where[extra] = act.size + np.arange(extra.size)
+        fpos = where[fp]
+        Rl = np.zeros((allp.size, m, nC))
+        if act.size:
+            Rl[:act.size] = np.asarray(R, float).reshape(act.size, m, nC)
+        _, Rf, Kf = self._frozen_forms(x, fp, jacobian)
+        Rl[fpos[:, None], ep[None, :], 0:3] += Rf
+        Rout = Rl.reshape(allp.size, -1)
+        if not jacobian:
+            return allp, Rout, None, Kw
+        if extra.size:
+            K5 = np.zeros((allp.size, m, nC, m, nC))
+            if act.size:
+                K5[:act.size] = np.asarray(Kx, float).reshape(act.size, m, nC, m, nC)
+        else:
+            K5 = np.array(Kx, float).reshape(allp.size, m, nC, m, nC)
+        for k in range(4):
+            for l in range(4):
+                K5[fpos, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
+        if Kw is not None and extra.size:
+            Kw_all = np.zeros((allp.size,) + np.shape(Kw)[1:])
+            if act.size:
+                Kw_all[:act.size] = Kw
+            Kw = Kw_all
+        return allp, Rout, K5.reshape(allp.size, -1), Kw
+
     # ------------------------------------------------------------------ forms
     def forces(self, x, sel, jacobian: bool):
         """Friction residual (len(sel), 4, 3) and tangent (len(sel), 4, 3, 4, 3) of map pairs
@@ -280,6 +419,8 @@ class FrictionTerm:
 
     def add_to(self, x, act, R, Kx, Kw, jacobian: bool):
         """The contact term's ``forms`` output with the friction of its active pairs added."""
+        if self._frozen is not None:
+            return self._add_frozen(x, act, R, Kx, Kw, jacobian)
         if act.size == 0:
             return act, R, Kx, Kw
         c = self.contact

@@ -1,0 +1,127 @@
+"""The frictional static step by the incremental potential at frozen loads and the Newton
+corrector (rve.solvers.frictional.frictional_solve): the same equilibrium as the residual
+Newton where that converges, a root of the exact residual where it does not, a corrector
+that converges faster than linearly, and a system without friction refused."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rve.solvers.frictional import frictional_solve, frictional_static_step
+from rve.solvers.static import StaticProblem
+
+
+def _free_residual(system, x):
+    prob = StaticProblem(system, x, np.zeros(system.n), 0.0)
+    F, _, _ = system.evaluate(prob.x, prob.w, 0.0, jacobian=False)
+    return float(np.linalg.norm(np.asarray(F)[prob.free]))
+
+
+@pytest.fixture(scope="module")
+def weave():
+    """A relaxed 4x4 plain weave (one fibril per yarn, 12 el/fibril) and the affine field
+    of its first shear increment (benchmarks/friction_cost.py --small)."""
+    from rve.config.rve import RVEConfig
+    from rve.fabrics.relaxation import relax
+    from rve.fabrics.setup import clamped_ends, contact_params, fabric_and_mesh
+    from rve.homogenisation.strain import affine_velocity, end_targets
+
+    cfg = RVEConfig(scene="rve", fabric={"kind": "plain", "rows": [1]}, mesh={"elements": 12})
+    fab, mesh = fabric_and_mesh(cfg)
+    xr = relax(cfg).x.reshape(-1, 9)
+    ends, _, _ = clamped_ends(fab, mesh)
+    eps = cfg.strain.total / cfg.strain.steps
+
+    def target(x_prev, k, n):
+        """Sub-increment k of n from the state ``x_prev`` (the driven phase's field)."""
+        x = x_prev.reshape(-1, 9) + affine_velocity(xr, "shear", eps / n)
+        x[ends, :3] = end_targets(xr[ends, :3], "shear", eps * k / n)
+        return x.reshape(-1)
+
+    base = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False)
+    return cfg, fab, mesh, xr.reshape(-1), base, target
+
+
+def _system(weave, mu=0.2):
+    from rve.fabrics.setup import mechanics_system
+    from rve.model.terms.friction import FrictionLaw
+
+    cfg, fab, mesh, x0, base, _ = weave
+    s = mechanics_system(fab, mesh, cfg, dataclasses.replace(base, friction=FrictionLaw(mu)), 0.0, x0)
+    s.term.friction.set_families(fab.fibril_direction)
+    s.term.friction.commit(x0)
+    return s
+
+
+def test_same_equilibrium_as_the_residual_newton_in_two_sub_increments(weave):
+    """Where the capped residual Newton converges (two committed sub-increments of the shear
+    increment), the potential predictor + corrector finds its equilibrium (to 1e-8 mm) and
+    the same dissipation."""
+    from rve.solvers.minimize import capped_newton
+
+    cfg, _, _, _, _, target = weave
+    atol = cfg.strain.static_atol
+    a, b = _system(weave), _system(weave)
+    xa = xb = weave[3]
+    for k in (1, 2):
+        y = target(xa, k, 2)
+        a.rebuild(y)
+        xa, res = frictional_solve(a, y, 0.0, atol=atol, rtol=1e-12)
+        assert res.converged and res.method == "potential predictor + newton" and res.fallback_iterations == 0
+        a.term.friction.commit(xa)
+        y = target(xb, k, 2)
+        b.rebuild(y)
+        xb, _, rb = capped_newton(b, y, 0.0, atol=atol, rtol=1e-12, max_iter=100, step_cap=0.5 * b.params.margin)
+        assert rb.converged
+        b.term.friction.commit(xb)
+        assert np.abs(xa - xb).max() <= 1e-8
+    assert a.term.friction.dissipated > 0
+    assert a.term.friction.dissipated == pytest.approx(b.term.friction.dissipated, rel=1e-6)
+
+
+def test_whole_increment_converges_to_a_root_of_the_exact_residual(weave):
+    """The whole increment at once (where the residual Newton does not converge, docs): the
+    result is a root of the exact frictional residual (evaluated afresh), found by the
+    predictor and a corrector whose last step contracts by > 1e3 (Newton's rate, not a
+    linear one); the friction is active (slipping points)."""
+    cfg, _, _, _, _, target = weave
+    atol = 1e-11
+    s = _system(weave)
+    y = target(weave[3], 1, 1)
+    s.rebuild(y)
+    r0 = _free_residual(s, y)
+    xs, res = frictional_solve(s, y, 0.0, atol=atol, rtol=1e-14)
+    assert res.converged and res.fallback_iterations == 0 and res.corrector_iterations >= 1
+    assert _free_residual(s, xs) <= atol < 1e-6 * r0
+    r = res.residuals
+    assert r[-1] <= 1e-3 * r[-2]
+    st = s.term.friction.state(xs)
+    assert st.slip.sum() > 0
+
+
+def test_potential_step_of_the_crossing_equals_newton():
+    """The single crossing in slip (tests/test_friction_term.py): frictional_static_step by
+    the potential method and by Newton give the same state and dissipation."""
+    from test_friction_term import _slid
+
+    _, system, parts, x = _slid(cycle_steps=1, u=0.004)
+    x[parts["x"]] = 0.03
+    fr = system.term.friction
+    rec = fr.record()
+    ref, _, res, d = frictional_static_step(system, x, np.zeros(system.n), 0.0, {"atol": 1e-11, "max_iter": 30})
+    assert res.converged and d > 0
+    fr.seed(rec)
+    xs, _, res2, d2 = frictional_static_step(system, x, np.zeros(system.n), 0.0, {"atol": 1e-11, "max_iter": 30},
+                                             method="potential")
+    assert res2.converged
+    np.testing.assert_allclose(xs, ref, rtol=0, atol=1e-9)
+    assert d2 == pytest.approx(d, rel=1e-6)
+
+
+def test_frictionless_system_is_refused(weave):
+    from rve.fabrics.setup import mechanics_system
+
+    cfg, fab, mesh, x0, base, _ = weave
+    s = mechanics_system(fab, mesh, cfg, base, 0.0, x0)
+    with pytest.raises(ValueError, match="no friction"):
+        frictional_solve(s, x0)
