@@ -4,7 +4,8 @@ One validated :class:`RVEConfig` describes everything one combination of the pip
 computes: the fabric, material, contact law and mesh (the same sections as the
 relaxation scene ``fabric_relax``, ``rve.config.fabric``), the relaxation, the strain
 path of Algorithm 7.1 (``strain``), the probes (``probes``) and the probe solver
-(``probe_solver``). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
+(``probe_solver``), and friction between the fibrils (``friction``, the section of
+``rve.config.friction``; off by default, mu = 0). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
 V) or strings with units. Named in ``rve.scenes.registry.SCENES`` (a pipeline scene:
 ``rve run`` prints the Snakemake command that builds its table, docs/configuration.md).
 
@@ -18,13 +19,14 @@ from typing import Literal, Optional
 from pydantic import Field, field_validator, model_validator
 
 from .weaves import WEAVE_PATTERNS
+from .friction import FrictionSection
 from .fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
 from .fields import (
     DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, SceneConfig, Section, ThermalConductivity,
     Time, Voltage,
 )
 
-__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing", "FrictionSection"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
 MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
@@ -257,6 +259,40 @@ class RVEConfig(SceneConfig):
         "pinned", description="pinned: the thesis's cell, every fibril end pinned (Algorithm 7.1); periodic: the "
                               "smallest repeat with periodic ties (section cell)")
     cell: PeriodicCell = Field(default_factory=PeriodicCell, description="the periodic cell (boundary: periodic)")
+    friction: FrictionSection = Field(
+        default_factory=FrictionSection,
+        description="regularised Coulomb friction between fibrils along the strain path (mu = 0: none; the "
+                    "relaxation is frictionless; docs/contact.md 'Friction in the RVE pipeline')")
+
+    @property
+    def has_friction(self) -> bool:
+        """Whether any fibril pair has mu > 0 (then the strain steps carry a friction term)."""
+        return self.friction.coefficient > 0 or any(float(m) > 0 for m in self.friction.pairs.values())
+
+    @model_validator(mode="after")
+    def _friction_paths(self):
+        """Friction exists on the chord geometry of the pinned cell's strain path, penalty
+        enforcement, without the branch test (docs/contact.md 'Friction in the RVE pipeline');
+        any other combination is an error naming the key."""
+        if not self.has_friction:
+            return self
+        mu = f"friction.coefficient = {self.friction.coefficient:g}" + (
+            f", friction.pairs = {dict(self.friction.pairs)}" if self.friction.pairs else "")
+        if self.contact.geometry != "chord":
+            raise ValueError(f"contact.geometry = {self.contact.geometry!r} with {mu}: friction is implemented on "
+                             "the chord contact geometry only (contact.geometry: chord, or friction.coefficient: 0)")
+        if self.contact.enforcement != "penalty":
+            raise ValueError(f"contact.enforcement = {self.contact.enforcement!r} with {mu}: the augmented "
+                             "Lagrangian's multiplier updates are not a load path for the friction history "
+                             "(contact.enforcement: penalty, or friction.coefficient: 0)")
+        if self.boundary != "pinned":
+            raise ValueError(f"boundary = {self.boundary!r} with {mu}: friction is available in the pinned cell "
+                             "only (boundary: pinned, or friction.coefficient: 0)")
+        if self.strain.follow_branch:
+            raise ValueError(f"strain.follow_branch = true with {mu}: the branch test balances the potential "
+                             "against the clamps' work, which friction's dissipation breaks (strain.follow_branch: "
+                             "false)")
+        return self
 
     @model_validator(mode="after")
     def _unique_probe_names(self):

@@ -23,6 +23,11 @@ otherwise the state goes to ``<name>.unconverged.nc`` and :class:`NotAnEquilibri
 raised, unless ``checks.keep_unconverged``); the probe job recomputes the state's
 equilibrium residual and refuses (:class:`StateRefused`, file quarantined) a state whose
 residual is more than ``checks.residual_refuse_factor`` x max(recorded, tolerance).
+With friction (``friction.coefficient`` > 0) the relaxed state carries the friction history
+with no elastic gap (the relaxation is frictionless), every strain step starts from its input
+state's history and writes its own (``State.friction``), and the probe job recomputes the
+residual with the stored history; a frictional run refuses a state without a history and a
+frictionless run one with a history (``_check_friction``).
 The table rules (``rve_gather``, ``rve_report``) are ``rve.tables.jobs``: the tables are the
 higher layer and import this package, never the other way round. A re-run of any job
 gives the same bytes of data, so a killed run resumes from the last complete step with an
@@ -142,7 +147,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
     from ..fabrics.setup import clamp_reactions
     from ..solvers.linear import linear_threads, solver_threads
     from .multipliers import multiplier_record
-    from .strain import relax_fabric
+    from .strain import friction_start, relax_fabric
 
     with logging_to(log_path), linear_threads(threads):
         log.info("relax job: the minimiser's PARDISO factorisations on %d thread(s)", solver_threads())
@@ -157,7 +162,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
         st = State(x=x, w=np.zeros_like(x), origin=x, kind="relaxed", step=0, strain=0.0,
                    time=float(cfg.relaxation.duration), combo=combo, params=combo_params(spec, combo),
                    config=_config_dict(cfg), reaction_force=reac, contact_count=int(cstate["active_points"]),
-                   solver=info, multipliers=multiplier_record(system))
+                   solver=info, multipliers=multiplier_record(system), friction=friction_start(cfg, fab, mesh, x))
         _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"relax job ({combo})")
         log.info("relaxed: converged=%s (|F| = %.3e N), %d active contact points, reactions %s, %.1f s -> %s",
                  info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"], out_state)
@@ -170,7 +175,7 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
     from .checkpoint import State, load_state
     from ..fabrics.setup import clamp_reactions
     from .multipliers import multiplier_record
-    from .strain import strain_step
+    from .strain import friction_record, strain_step
 
     step = int(step)
     with logging_to(log_path):
@@ -184,14 +189,17 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
         if prev.kind != expect or (step > 1 and (prev.mode != mode or prev.step != step - 1)):
             raise ValueError(f"{in_state}: expected the {expect} state before {mode} step {step}, got kind="
                              f"{prev.kind} mode={prev.mode!r} step={prev.step}")
-        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers)
+        _check_friction(cfg, prev, in_state)
+        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers,
+                                      friction=prev.friction)
         # a periodic cell gives its face forces (the Hill-Mandel stress); the pinned cell its clamps
         reac = info.pop("reaction_force", None) or clamp_reactions(fab, system, x)
         cstate = system.contact_state(x.reshape(-1))
         st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="strained", mode=mode, step=step,
                    strain=float(info["strain"]), time=prev.time + cfg.strain.t_step + cfg.strain.t_relax,
                    combo=combo, params=combo_params(spec, combo), config=_config_dict(cfg), reaction_force=reac,
-                   contact_count=int(cstate["active_points"]), solver=info, multipliers=multiplier_record(system))
+                   contact_count=int(cstate["active_points"]), solver=info, multipliers=multiplier_record(system),
+                   friction=friction_record(system))
         _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"{mode} step {step} ({combo})")
         log.info("%s step %d (strain %g): converged=%s (|F| = %.3e N), %d contact points, reactions %s, %.1f s -> %s",
                  mode, step, st.strain, info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"],
@@ -199,13 +207,14 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
     return st
 
 
-def recomputed_residual(cfg, fab, mesh, x, multipliers=None) -> float:
+def recomputed_residual(cfg, fab, mesh, x, multipliers=None, friction=None) -> float:
     """|F(x, 0)| on the free dofs (N) of a stored state, from scratch: the strain path's
     mechanics system (``strain.mech_system``, contact map built at ``x``; a periodic cell's
     reduced system at the macro gradient the state carries), with the state's contact
-    ``multipliers`` (augmented Lagrangian: the equilibrium is one at those multipliers)."""
+    ``multipliers`` (augmented Lagrangian: the equilibrium is one at those multipliers) and
+    its friction history (``friction``: the friction forces that hold the state)."""
     from .multipliers import seed_multipliers
-    from .strain import free_residual, mech_system
+    from .strain import free_residual, mech_system, seed_friction
 
     if cfg.boundary == "periodic":
         from .periodic import periodic_free_residual
@@ -214,6 +223,7 @@ def recomputed_residual(cfg, fab, mesh, x, multipliers=None) -> float:
     xf = np.asarray(x, float).reshape(-1)
     system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
     seed_multipliers(system, multipliers)
+    seed_friction(system, friction, xf)
     return free_residual(system, xf)
 
 
@@ -224,7 +234,7 @@ def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
     recorded = st.solver.get("residual_N")
     recorded = float("nan") if recorded is None else float(recorded)
     tol = _stage_tolerance(cfg, st.kind)
-    residual = recomputed_residual(cfg, fab, mesh, st.x, st.multipliers)
+    residual = recomputed_residual(cfg, fab, mesh, st.x, st.multipliers, st.friction)
     factor = float(cfg.checks.residual_refuse_factor)
     limit = factor * max(recorded if np.isfinite(recorded) else 0.0, tol)
     log.info("%s: equilibrium residual recomputed %.3e N (recorded %.3e N, limit %.3e N)", path, residual,
@@ -257,6 +267,21 @@ def _check_multipliers(cfg, st, path) -> None:
                          f"{cfg.contact.enforcement!r}: it was written by an augmented Lagrangian run")
 
 
+def _check_friction(cfg, st, path) -> None:
+    """A state of a run with friction must carry its friction history (without it the next
+    step would start every contact without elastic gap: another path), and a frictionless
+    run must not read a frictional state."""
+    if st.kind == "initial":
+        return
+    if cfg.has_friction and st.friction is None:
+        raise ValueError(f"{path}: the config has friction (friction.coefficient = {cfg.friction.coefficient:g}) but "
+                         "the state has no friction history (contact_friction_key): it was written by a "
+                         "frictionless run")
+    if not cfg.has_friction and st.friction is not None:
+        raise ValueError(f"{path}: the state carries a friction history but the config has friction.coefficient = "
+                         "0: it was written by a run with friction")
+
+
 def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
                  tubes_path: Optional[PathLike] = None) -> dict:
     """The probe solves on one stored state -> its table record (rve.tables format,
@@ -272,6 +297,7 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
     st = load_state(state_file, quarantine=True)
     _check_state(st, mesh, state_file)
     _check_multipliers(cfg, st, state_file)
+    _check_friction(cfg, st, state_file)
     residual, recorded = verify_equilibrium(cfg, fab, mesh, st, state_file)
     pictures = tubes_path is not None and cfg.output.pictures
     results = solve_probes(cfg, fab, mesh, st.x, with_fields=pictures, multipliers=st.multipliers)
@@ -291,6 +317,12 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
                   "residual_N_recorded": recorded},
         "wall_s": time.perf_counter() - t0,
     }
+    if st.friction is not None:   # the friction of the state (relaxed: the start of the path, none yet)
+        fs = st.solver.get("friction") or {}
+        rec["friction"] = {"dissipated_energy": float(st.friction.get("dissipated", 0.0)),
+                           "friction_force": float(fs.get("friction_force", 0.0)),
+                           "normal_force": float(fs.get("normal_force", 0.0)),
+                           "stick_points": int(fs.get("stick", 0)), "slip_points": int(fs.get("slip", 0))}
     branch = st.solver.get("branch")
     if branch:   # the step's equilibrium-path test (rve.homogenisation.branch), for the table's attributes
         rec["state"]["branch"] = {k: branch.get(k) for k in BRANCH_COUNTS + ("kept",)}

@@ -55,6 +55,7 @@ the step's ``info``; the ends always land exactly on X + eps_n X1 e_i.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from types import SimpleNamespace
@@ -63,6 +64,7 @@ import numpy as np
 
 from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
+from ..solvers.frictional import friction_of
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .continuation import periodic_arc, pinned_arc
@@ -70,7 +72,8 @@ from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
-           "end_targets", "pinned_energy"]
+           "end_targets", "pinned_energy", "friction_law", "friction_record", "seed_friction", "friction_start",
+           "friction_summary"]
 
 log = logging.getLogger("rve.homogenisation.strain")
 
@@ -80,13 +83,80 @@ MODE_DIRECTION = {"uniaxial": 0, "shear": 1, "uniaxial_y": 1, "trellis": 0}
 MODE_SOURCE = {"uniaxial_y": 1}
 
 
-def mech_system(fab, mesh, cfg, damping: float, x, end_velocity=None, twist_gauge: str = "first") -> ContactSystem:
+def mech_system(fab, mesh, cfg, damping: float, x, end_velocity=None, twist_gauge: str = "first",
+                friction: bool = True) -> ContactSystem:
     """Mechanics-only ``ContactSystem`` of a strain-path phase (``rve.fabrics.setup.mechanics_system``):
     ends pinned (centroid velocity ``end_velocity``, (n_ends, 3), default 0), twist gauge,
     volumetric damping ``damping``, the contact law without conduction, the map rebuilt
-    every ``strain.rebuild_every`` steps."""
+    every ``strain.rebuild_every`` steps. With ``friction`` and a config whose friction is on
+    (``cfg.has_friction``) the contact term carries the friction law, every fibril's family
+    its yarn direction (warp, weft, loop: the keys of ``friction.pairs``), and a history that
+    starts at ``x`` with no elastic gap (seed it: :func:`seed_friction`)."""
     params = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False)
-    return mechanics_system(fab, mesh, cfg, params, damping, x, end_velocity=end_velocity, twist_gauge=twist_gauge)
+    law = friction_law(cfg) if friction else None
+    if law is not None:
+        params = dataclasses.replace(params, friction=law)
+    system = mechanics_system(fab, mesh, cfg, params, damping, x, end_velocity=end_velocity, twist_gauge=twist_gauge)
+    fr = friction_of(system)
+    if fr is not None:
+        fr.set_families([fab.yarns[int(y)].direction for y in fab.fibril_yarn])
+    return system
+
+
+def friction_law(cfg):
+    """The ``FrictionLaw`` of the config's ``friction`` section, None when every mu is 0 (the
+    frictionless path, bit for bit)."""
+    if not getattr(cfg, "has_friction", False):
+        return None
+    from ..model.terms.friction import FrictionLaw
+
+    return FrictionLaw(*cfg.friction.law_args())
+
+
+def friction_record(system):
+    """The friction history of ``system`` (``FrictionTerm.record()``), None without friction."""
+    fr = friction_of(system)
+    return None if fr is None else fr.record()
+
+
+def seed_friction(system, record, x) -> None:
+    """The friction history of ``system``'s current map (built at ``x``) from ``record`` by
+    point key; a point not in the record takes the history of its neighbour along the -
+    fibril (``FrictionTerm.share_along_fibrils``, as at a map rebuild), else it keeps the
+    start it has (no elastic gap at ``x``). No-op without friction or record."""
+    fr = friction_of(system)
+    if fr is None or record is None:
+        return
+    from ..model.terms.friction import match_rows
+
+    fr.seed(record)
+    if fr.keys is not None and len(fr.keys):
+        new = match_rows(fr.keys, record["keys"]) < 0
+        if new.any():
+            fr.share_along_fibrils(np.asarray(x, float).reshape(-1), receivers=new.reshape(fr.s_bar.shape))
+
+
+def friction_start(cfg, fab, mesh, x):
+    """The friction history of a state with no elastic gap anywhere (the relaxed state: the
+    relaxation is frictionless, friction starts on the strain path), committed at ``x``;
+    None without friction."""
+    if friction_law(cfg) is None:
+        return None
+    system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, np.asarray(x, float).reshape(-1))
+    friction_of(system).commit(np.asarray(x, float).reshape(-1))
+    return friction_record(system)
+
+
+def friction_summary(system, start_dissipated: float = 0.0) -> dict:
+    """The friction of the last committed state of ``system``: total friction and normal
+    force of the contact points (N), stick and slip counts, the energy dissipated since the
+    start of the path (``dissipated``, N mm) and by this step (``step_dissipated``)."""
+    fr = friction_of(system)
+    if fr is None:
+        return {}
+    out = fr.points()
+    out.update({"dissipated": float(fr.dissipated), "step_dissipated": float(fr.dissipated - start_dissipated)})
+    return out
 
 
 def _settings(duration, steps, k, rtol, max_iter, atol, static, static_rounds=4, static_max_iter=80):
@@ -127,13 +197,13 @@ def relax_fabric(cfg, fab, mesh, x0):
     info = {}
     if getattr(r, "method", "dynamic") == "energy":
         return _relax_energy_scene(cfg, fab, mesh, x, t0)
-    system = mech_system(fab, mesh, cfg, r.damping, x)
+    system = mech_system(fab, mesh, cfg, r.damping, x, friction=False)
     s = _settings(r.duration, r.steps, r.rebuild_every, r.newton_rtol, r.newton_max_iter, r.static_atol, static=False)
     res = relax_to_equilibrium(system, x, np.zeros(system.n), s)
     info["relax"] = _summary(res, system, res.x)
     x = res.x
     if st.duration > 0:
-        system = mech_system(fab, mesh, cfg, st.damping, x)
+        system = mech_system(fab, mesh, cfg, st.damping, x, friction=False)
         s2 = _settings(st.duration, st.steps, r.rebuild_every, r.newton_rtol, r.newton_max_iter, r.static_atol,
                        static=False)
         res = relax_to_equilibrium(system, x, np.zeros(system.n), s2)
@@ -166,7 +236,7 @@ def _relax_energy_scene(cfg, fab, mesh, x0, t0):
         raise ValueError("relaxation system is not mechanics-only")
     x = np.asarray(x, float)
     # our clamps: the scene's (centroids of every end pinned, g1_z gauge at first nodes)
-    sys_out = mech_system(fab, mesh, cfg, cfg.relaxation.damping, x)
+    sys_out = mech_system(fab, mesh, cfg, cfg.relaxation.damping, x, friction=False)
     al = None
     if sys_out.augmented:   # the scene relaxed with the penalty: the multipliers from here
         r = cfg.relaxation
@@ -219,12 +289,14 @@ def end_targets(origin_ends: np.ndarray, mode: str, eps: float) -> np.ndarray:
     return target
 
 
-def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None):
+def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None, friction=None):
     """One step of Algorithm 7.1 (or of the periodic cell, ``boundary: periodic``) from
     ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to eps_step (module docstring).
     ``multipliers``: the contact multipliers of ``x_prev`` (``multipliers.multiplier_record``,
-    the checkpoint's; None: zero), for ``contact.enforcement: augmented_lagrangian``. Returns
-    ``(x (n_nodes, 9), system, info)``; the system holds the multipliers of ``x``."""
+    the checkpoint's; None: zero), for ``contact.enforcement: augmented_lagrangian``.
+    ``friction``: the friction history of ``x_prev`` (``friction_record``, the checkpoint's),
+    with the config's friction on. Returns ``(x (n_nodes, 9), system, info)``; the system
+    holds the multipliers and the committed friction history of ``x``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
     sp_ = cfg.strain
@@ -240,7 +312,8 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
             return periodic_energy(cfg, fab, mesh, x, mode, e, multipliers if system is None else multiplier_record(system))
     else:
         def part(x, e_from, e_to, whole=False, lam=multipliers):
-            return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam)
+            return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam,
+                                   friction=friction)
 
         def energy(system, x, e):
             if system is None:
@@ -318,10 +391,13 @@ def pinned_energy(fab, mesh, system, x, origin, mode: str, eps: float) -> tuple:
 
 
 def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
-                    multipliers=None):
+                    multipliers=None, friction=None):
     """Algorithm 7.1 from ``x_prev`` at strain ``eps_prev`` to ``eps`` (module docstring;
     ``step`` labels the record). The multipliers (``strain_step``) pass from phase to phase;
-    the static solve is in the Uzawa loop (``multipliers.equilibrium``)."""
+    the static solve is in the Uzawa loop (``multipliers.equilibrium``). So does the friction
+    history (``friction``, that of ``x_prev``): every accepted time step of the two dynamic
+    phases commits it (``relax_to_equilibrium``), the static solve solves the residual from it
+    (``cell_statics.static_minimize``) and commits the solution."""
     sp_ = cfg.strain
     t_start = time.perf_counter()
     d_eps = float(eps - eps_prev)
@@ -342,6 +418,9 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     t0 = time.perf_counter()
     sys1 = mech_system(fab, mesh, cfg, sp_.damping, x, end_velocity=end_vel)
     seed_multipliers(sys1, multipliers)
+    seed_friction(sys1, friction, x.reshape(-1))
+    fr1 = friction_of(sys1)
+    d_start = 0.0 if fr1 is None else float(fr1.dissipated)
     s1 = _settings(sp_.t_step, sp_.stretch_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
                    sp_.static_atol, static=False)
     res1 = relax_to_equilibrium(sys1, x.reshape(-1), w_aff.reshape(-1), s1)
@@ -368,6 +447,7 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     t0 = time.perf_counter()
     sys2 = mech_system(fab, mesh, cfg, sp_.relax_damping, x1)
     seed_multipliers(sys2, multiplier_record(sys1))
+    seed_friction(sys2, friction_record(sys1), x1.reshape(-1))
     s2 = _settings(sp_.t_relax, sp_.relax_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
                    sp_.static_atol, static=False)
     res2 = relax_to_equilibrium(sys2, x1.reshape(-1), np.zeros(sys2.n), s2)
@@ -386,6 +466,8 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     x2 = x2.reshape(nn, 9)
     info["converged"] = bool(sinfo["converged"])
     info["residual_N"] = free_residual(sys2, x2)
+    if friction_of(sys2) is not None:
+        info["friction"] = friction_summary(sys2, d_start)
     info["wall_s"] = time.perf_counter() - t_start
     if not info["converged"]:
         log.warning("%s step %d: static solve did not reach %.1e N (|F| = %.3e N)", mode, step, sp_.static_atol,

@@ -1,0 +1,201 @@
+"""Friction through the RVE pipeline (docs/contact.md "Friction in the RVE pipeline"):
+the config section and its refusals, the history through the phases, steps and
+checkpoints of the strain path (resume bit for bit), the table's friction variables."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rve.config import ConfigError, validate_config
+
+#: a tiny cell: 2 x 2 plain weave, one fibril per yarn, 8 elements (8 contact points)
+TINY = {"scene": "rve", "fabric": {"kind": "plain", "n_warp": 2, "n_weft": 2, "rows": [1]}, "mesh": {"elements": 8},
+        "relaxation": {"duration": "2 ms", "steps": 4, "rebuild_every": 2, "static_atol": 1e-9,
+                       "static_max_iter": 40},
+        "strain": {"modes": ["shear"], "total": 0.1, "steps": 2, "static_atol": 1e-9, "static_max_iter": 40,
+                   "follow_branch": False},
+        "output": {"pictures": False}}
+
+
+def _spec(mu: float, **strain) -> dict:
+    scene = {**TINY, "friction": {"coefficient": mu}, "strain": {**TINY["strain"], **strain}}
+    return {"scene_config": None, "overrides": [], "scene": scene}
+
+
+# --------------------------------------------------------------------------- config
+def test_friction_is_off_by_default_and_the_section_validates():
+    cfg = validate_config({"scene": "rve"})
+    assert cfg.friction.coefficient == 0 and not cfg.has_friction
+    on = validate_config({**TINY, "friction": {"coefficient": 0.3, "pairs": {"warp-weft": 0.2}}})
+    assert on.has_friction and on.friction.law_args() == (0.3, 1.0, (("warp", "weft", 0.2),))
+    with pytest.raises(ConfigError, match=r"friction.coefficient = 2.5: must be >= 0 and <= 2"):
+        validate_config({**TINY, "friction": {"coefficient": 2.5}})
+    with pytest.raises(ConfigError, match=r"friction.pairs\['warp-weft'\] = 3.0 must be in \[0, 2.0\]"):
+        validate_config({**TINY, "friction": {"pairs": {"warp-weft": 3.0}}})
+
+
+@pytest.mark.parametrize("extra, key", [
+    ({"contact": {"geometry": "curve"}, "mesh": {"elements": 8, "order": 2}}, "contact.geometry = 'curve'"),
+    ({"contact": {"geometry": "smooth"}, "mesh": {"elements": 8, "order": 2}}, "contact.geometry = 'smooth'"),
+    ({"contact": {"enforcement": "augmented_lagrangian"}}, "contact.enforcement = 'augmented_lagrangian'"),
+    ({"boundary": "periodic", "fabric": {"kind": "plain", "rows": [1]}}, "boundary = 'periodic'"),
+    ({"strain": {**TINY["strain"], "follow_branch": True}}, "strain.follow_branch = true"),
+])
+def test_friction_refuses_what_it_does_not_support(extra, key):
+    raw = {**TINY, "friction": {"coefficient": 0.2}, **extra}
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.").replace("(", r"\(")):
+        validate_config(raw)
+    validate_config({**raw, "friction": {"coefficient": 0.0}})   # frictionless: accepted
+
+
+# --------------------------------------------------------------------------- the strain path
+_JOB = """
+import json, sys
+from rve.homogenisation.jobs import fabric_job, relax_job, strain_job
+kind, spec, a, b, step = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3], sys.argv[4], int(sys.argv[5])
+if kind == "fabric":
+    fabric_job(b, None, spec)
+elif kind == "relax":
+    relax_job(a, b, None, spec)
+else:
+    strain_job(a, b, None, spec, "base", "shear", step)
+"""
+
+
+def _job(kind, spec, a, b, step=0):
+    """One job in its own process, as Snakemake runs it (a job's bits depend on its input file
+    only; within one process the linear solvers' reused analyses may move the last bit)."""
+    proc = subprocess.run([sys.executable, "-c", _JOB, kind, json.dumps(spec), str(a), str(b), str(step)],
+                          capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                                               "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+def _chain(spec, out, steps=(1, 2), start=None):
+    """fabric, relax and the shear steps ``steps`` as jobs, each in its own process from the
+    file of the one before; returns the stored states."""
+    from rve.homogenisation.checkpoint import load_state
+
+    out.mkdir(parents=True, exist_ok=True)
+    if start is None:
+        _job("fabric", spec, "", out / "initial.nc")
+        _job("relax", spec, out / "initial.nc", out / "relaxed.nc")
+    states = {}
+    prev = out / ("relaxed.nc" if steps[0] == 1 else f"shear_{steps[0] - 1:02d}.nc")
+    for i in steps:
+        _job("strain", spec, prev, out / f"shear_{i:02d}.nc", i)
+        prev = out / f"shear_{i:02d}.nc"
+        states[i] = load_state(prev)
+    return states
+
+
+@pytest.fixture(scope="module")
+def frictional_chain(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rve_friction")
+    return out, _chain(_spec(0.3), out)
+
+
+def test_steps_with_friction_are_equilibria_with_their_history_in_the_checkpoint(frictional_chain):
+    from rve.homogenisation.checkpoint import load_state
+    from rve.homogenisation.jobs import recomputed_residual
+    from rve.homogenisation.sweeps import load_run_config
+    from rve.fabrics.setup import fabric_and_mesh
+
+    out, states = frictional_chain
+    cfg = load_run_config(_spec(0.3))
+    fab, mesh = fabric_and_mesh(cfg)
+    relaxed = load_state(out / "relaxed.nc")
+    # the relaxation is frictionless: its history has no elastic gap and nothing dissipated
+    assert relaxed.friction is not None and relaxed.friction["dissipated"] == 0.0
+    d_prev = 0.0
+    for i in (1, 2):
+        st = load_state(out / f"shear_{i:02d}.nc")
+        assert st.friction is not None and len(st.friction["keys"]) > 0
+        assert st.solver["converged"] and st.solver["residual_N"] <= 1e-9
+        # the stored state is an equilibrium with its friction forces (recomputed from the file) ...
+        assert recomputed_residual(cfg, fab, mesh, st.x, friction=st.friction) <= 1e-9
+        # ... and not without them: friction holds the sheared crossings
+        assert recomputed_residual(cfg, fab, mesh, st.x, friction=None) > 1e-6
+        fr = st.solver["friction"]
+        assert fr["friction_force"] > 0 and fr["stick"] + fr["slip"] > 0
+        # dissipation accumulates along the path (each step's share is >= 0)
+        assert st.friction["dissipated"] == pytest.approx(d_prev + fr["step_dissipated"], rel=1e-12, abs=1e-18)
+        assert fr["step_dissipated"] >= 0.0
+        d_prev = st.friction["dissipated"]
+
+
+def test_resume_from_a_mid_run_checkpoint_is_bit_identical(frictional_chain, tmp_path):
+    """Step 2 of a run resumed from the stored step 1 (a new process that reads only that file)
+    equals the uninterrupted run's step 2 bit for bit; step 2 from the same state without its
+    friction history is another state (the history matters)."""
+    from rve.homogenisation.checkpoint import load_state
+    from rve.homogenisation.strain import strain_step
+    from rve.homogenisation.sweeps import load_run_config
+    from rve.fabrics.setup import fabric_and_mesh
+
+    out, _ = frictional_chain
+    resumed = tmp_path / "resumed"
+    resumed.mkdir()
+    shutil.copy(out / "shear_01.nc", resumed / "shear_01.nc")
+    _chain(_spec(0.3), resumed, steps=(2,), start="shear_01")
+    a, b = load_state(out / "shear_02.nc"), load_state(resumed / "shear_02.nc")
+    np.testing.assert_array_equal(a.x, b.x)
+    for k in ("keys", "s_bar", "anchor"):
+        np.testing.assert_array_equal(a.friction[k], b.friction[k])
+    assert a.friction["dissipated"] == b.friction["dissipated"]
+    assert a.reaction_force == b.reaction_force
+    # without the history (every contact restarted with no elastic gap): not the same step
+    cfg = load_run_config(_spec(0.3))
+    fab, mesh = fabric_and_mesh(cfg)
+    prev = load_state(out / "shear_01.nc")
+    x_forgot, _, _ = strain_step(cfg, fab, mesh, prev.x, prev.origin, "shear", 2, friction=None)
+    assert np.abs(x_forgot - a.x).max() > 1e-9
+
+
+def test_a_frictionless_run_refuses_a_frictional_state_and_vice_versa(frictional_chain, tmp_path):
+    from rve.homogenisation.jobs import strain_job
+
+    out, _ = frictional_chain
+    with pytest.raises(ValueError, match="carries a friction history but the config has friction.coefficient = 0"):
+        strain_job(out / "shear_01.nc", tmp_path / "x.nc", None, _spec(0.0), "base", "shear", 2)
+
+
+def test_mu_zero_path_is_the_frictionless_path_bit_for_bit(tmp_path):
+    """friction.coefficient: 0 builds no friction term: the states equal those of a config
+    without the section, bit for bit, and carry no history."""
+    from rve.homogenisation.checkpoint import load_state
+
+    spec0 = _spec(0.0)
+    plain = {"scene_config": None, "overrides": [], "scene": {k: v for k, v in spec0["scene"].items()
+                                                               if k != "friction"}}
+    _chain(spec0, tmp_path / "a", steps=(1,))
+    _chain(plain, tmp_path / "b", steps=(1,))
+    a, b = load_state(tmp_path / "a" / "shear_01.nc"), load_state(tmp_path / "b" / "shear_01.nc")
+    np.testing.assert_array_equal(a.x, b.x)
+    assert a.friction is None and b.friction is None
+
+
+def test_probe_records_and_table_carry_the_friction(frictional_chain):
+    from rve.homogenisation.jobs import probe_record
+    from rve.tables.build import build_table
+    from rve.tables.jobs import gather_records
+
+    out, _ = frictional_chain
+    spec = _spec(0.3)
+    recs = [probe_record(out / f"{n}.nc", spec) for n in ("relaxed", "shear_01", "shear_02")]
+    assert recs[0]["friction"]["dissipated_energy"] == 0.0
+    assert recs[2]["friction"]["dissipated_energy"] > recs[1]["friction"]["dissipated_energy"] > 0
+    ds = build_table(gather_records(recs, ["shear"]), fabric="plain", config={}, swept=None)
+    d = ds["friction_dissipated_energy"].sel(mode="shear").values
+    assert d[0] == 0.0 and np.all(np.diff(d) > 0)
+    for v in ("friction_dissipated_energy", "friction_force", "friction_stick_points", "friction_slip_points"):
+        assert ds[v].attrs["units"] and ds[v].attrs["long_name"]
+    # a table without friction in its records has none of these variables
+    plain = [{k: v for k, v in r.items() if k != "friction"} for r in recs]
+    assert "friction_force" not in build_table(gather_records(plain, ["shear"]), fabric="plain", config={})
