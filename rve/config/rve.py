@@ -109,7 +109,22 @@ class StrainPath(Section):
         1000, ge=1, description="iterations of the static solve (energy: the minimiser's cap; a step that "
                                 "rearranges the plain weave's stacks took 463; newton: per round)")
 
-    @field_validator("modes")
+    path: Literal["algorithm_7_1", "quasi_static"] = Field(
+        "algorithm_7_1", description="how a step moves the cell: algorithm_7_1 (the thesis: driven dynamics, damped "
+                                     "relaxation, static solve) or quasi_static (substeps sub-increments, each the "
+                                     "affine increment as predictor and a static solve; with friction each is one "
+                                     "committed backward-Euler step of the slip, docs/contact.md)")
+    substeps: Integer = Field(2, ge=1, le=50, description="sub-increments of a quasi_static step")
+    cycle_modes: list[Literal["uniaxial", "shear", "uniaxial_y", "trellis"]] = Field(
+        [], description="modes that also get a loading-unloading cycle from the relaxed state: cycle_steps steps "
+                        "up to cycle_total, as many back to 0 (the hysteresis loop; docs/rve_pipeline.md "
+                        "'Loading-unloading cycles')")
+    cycle_total: Optional[Dimensionless] = Field(
+        None, gt=0, le=1, description="strain at the turning point of a cycle (null: total)")
+    cycle_steps: Optional[Integer] = Field(
+        None, ge=1, le=49, description="strain steps of each leg of a cycle (null: steps)")
+
+    @field_validator("modes", "cycle_modes")
     @classmethod
     def _unique_modes(cls, v):
         if len(set(v)) != len(v):
@@ -268,6 +283,13 @@ class RVEConfig(SceneConfig):
     def has_friction(self) -> bool:
         """Whether any fibril pair has mu > 0 (then the strain steps carry a friction term)."""
         return self.friction.coefficient > 0 or any(float(m) > 0 for m in self.friction.pairs.values())
+
+    @model_validator(mode="after")
+    def _cycles_in_the_pinned_cell(self):
+        if self.strain.cycle_modes and self.boundary != "pinned":
+            raise ValueError(f"strain.cycle_modes = {self.strain.cycle_modes}: loading-unloading cycles are "
+                             f"available in the pinned cell only (boundary = {self.boundary!r})")
+        return self
 
     @model_validator(mode="after")
     def _friction_paths(self):

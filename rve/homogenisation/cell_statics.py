@@ -2,6 +2,7 @@
 (``rve.homogenisation.strain``) and the periodic (``rve.homogenisation.periodic``) steps.
 
 * :func:`strain_levels` -- the strain after step 0..steps of ``cfg.strain``;
+* :func:`cycle_levels` -- the strain after step 0..2n of a loading-unloading cycle;
 * :func:`static_minimize` -- static equilibrium as a local minimum of the potential
   (trust-region Newton, inertia check, energy as merit), then a map rebuild that must find
   no newly active pair; ``(x, info)``; a system with friction has no potential: its static
@@ -22,7 +23,7 @@ from ..solvers.frictional import friction_of, frictional_static_step
 from ..solvers.minimize import capped_newton, minimize_energy
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 
-__all__ = ["strain_levels", "static_minimize", "static_polish", "free_residual", "trellis_gradient"]
+__all__ = ["strain_levels", "cycle_levels", "static_minimize", "static_polish", "free_residual", "trellis_gradient"]
 
 log = logging.getLogger("rve.homogenisation.strain")
 
@@ -31,6 +32,17 @@ def strain_levels(cfg) -> np.ndarray:
     """Strain after step 0..steps (step 0 = the relaxed state)."""
     n = int(cfg.strain.steps)
     return np.array([round(i * cfg.strain.total / n, 12) for i in range(n + 1)])
+
+
+def cycle_levels(cfg) -> np.ndarray:
+    """Strain after step 0..2n of a loading-unloading cycle (step 0 = the relaxed state):
+    n = ``strain.cycle_steps`` (default ``steps``) steps up to ``strain.cycle_total`` (default
+    ``total``), then the same levels back down to 0 (the unloading lands exactly on them)."""
+    sp_ = cfg.strain
+    n = int(sp_.cycle_steps or sp_.steps)
+    top = float(sp_.cycle_total or sp_.total)
+    up = [round(i * top / n, 12) for i in range(n + 1)]
+    return np.array(up + up[-2::-1])
 
 
 def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
@@ -99,8 +111,10 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
         system.rebuild(x)
         after = set(zip(*_active(system, x)))
         committed = free_residual(system, x)
+        pts = friction_of(system).points() if converged else {}
         info["rounds"].append({"method": how, "iterations": its, "converged": converged,
-                               "new_active_pairs": len(after - before), "committed_residual_N": committed})
+                               "new_active_pairs": len(after - before), "committed_residual_N": committed,
+                               "stick": int(pts.get("stick", 0)), "slip": int(pts.get("slip", 0))})
         if not converged or (after <= before and committed <= atol):
             break
     info["converged"] = bool(info["converged"] and committed <= atol)

@@ -8,6 +8,8 @@ and the run spec (``rve.homogenisation.sweeps``), logs to the rule's log file
 ``fabric_job``      run spec -> the designed initial state (``rve_fabric``)
 ``relax_job``       initial state -> relaxed state, strain 0 (``rve_relax``)
 ``strain_job``      previous state -> state after one strain step (``rve_strain_step``)
+``cycle_job``       previous state -> state after one step of a loading-unloading cycle
+                    (``rve_cycle_step``; ``strain.cycle_modes``)
 ``probe_job``       a stored state -> its probe record, JSON (``rve_probes``)
 ==================  ====================================================================
 
@@ -47,7 +49,7 @@ from ..io.provenance import logging_to
 from .branch import BRANCH_COUNTS
 from .sweeps import BASE_COMBO, combo_params, load_run_config
 
-__all__ = ["fabric_job", "relax_job", "strain_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
+__all__ = ["fabric_job", "relax_job", "strain_job", "cycle_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
            "recomputed_residual", "verify_equilibrium"]
 
 log = logging.getLogger("rve.homogenisation.jobs")
@@ -204,6 +206,65 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
         log.info("%s step %d (strain %g): converged=%s (|F| = %.3e N), %d contact points, reactions %s, %.1f s -> %s",
                  mode, step, st.strain, info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"],
                  out_state)
+    return st
+
+
+def cycle_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLike], spec: Mapping,
+              combo: str, mode: str, step: int):
+    """Step ``step`` (1..2n) of the loading-unloading cycle of ``mode`` (``strain.cycle_modes``)
+    from ``in_state`` (the relaxed state for step 1): Algorithm 7.1 between the cycle's levels
+    (``cell_statics.cycle_levels``), the friction history carried as on the strain path. The
+    state (kind ``cycle``) records in ``solver["cycle"]`` its strain, the potential ``energy``
+    (N mm), the clamps' ``work_rate`` dW/d eps (N mm; ``strain.pinned_energy``) and whether the
+    step loads or unloads; step 1 also the relaxed state's (``start``), so the cycle's table
+    needs only the cycle's files."""
+    from .cell_statics import cycle_levels
+    from .checkpoint import State, load_state
+    from ..fabrics.setup import clamp_reactions
+    from .multipliers import multiplier_record
+    from .strain import friction_record, mech_system, pinned_energy, seed_friction, strain_step
+
+    step = int(step)
+    with logging_to(log_path):
+        cfg = load_run_config(spec, combo)
+        if mode not in cfg.strain.cycle_modes:
+            raise ValueError(f"mode {mode!r} is not in the config's strain.cycle_modes {cfg.strain.cycle_modes}")
+        levels = cycle_levels(cfg)
+        if not 1 <= step < len(levels):
+            raise ValueError(f"cycle step must be in 1..{len(levels) - 1}, got {step}")
+        fab, mesh = _fabric_mesh(cfg)
+        prev = load_state(in_state, quarantine=True)
+        _check_state(prev, mesh, in_state)
+        expect = "relaxed" if step == 1 else "cycle"
+        if prev.kind != expect or (step > 1 and (prev.mode != mode or prev.step != step - 1)):
+            raise ValueError(f"{in_state}: expected the {expect} state before {mode} cycle step {step}, got kind="
+                             f"{prev.kind} mode={prev.mode!r} step={prev.step}")
+        _check_friction(cfg, prev, in_state)
+        eps_prev, eps = float(levels[step - 1]), float(levels[step])
+        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers,
+                                      friction=prev.friction, levels=(eps_prev, eps))
+        energy, rate = pinned_energy(fab, mesh, system, x, prev.origin, mode, eps)
+        info["cycle"] = {"strain": eps, "energy": energy, "work_rate": rate,
+                         "leg": "load" if eps > eps_prev else "unload", "steps": len(levels) - 1}
+        if step == 1:   # the relaxed state as the cycle's step 0 (its friction forces: none, no elastic gap)
+            xf = prev.x.reshape(-1)
+            sys0 = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
+            seed_friction(sys0, prev.friction, xf)
+            e0, r0 = pinned_energy(fab, mesh, sys0, prev.x, prev.origin, mode, eps_prev)
+            info["cycle"]["start"] = {"strain": eps_prev, "energy": e0, "work_rate": r0,
+                                      "reaction_force": prev.reaction_force,
+                                      "dissipated": float((prev.friction or {}).get("dissipated", 0.0))}
+        reac = clamp_reactions(fab, system, x)
+        cstate = system.contact_state(x.reshape(-1))
+        st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="cycle", mode=mode, step=step, strain=eps,
+                   time=prev.time + cfg.strain.t_step + cfg.strain.t_relax, combo=combo,
+                   params=combo_params(spec, combo), config=_config_dict(cfg), reaction_force=reac,
+                   contact_count=int(cstate["active_points"]), solver=info, multipliers=multiplier_record(system),
+                   friction=friction_record(system))
+        _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"{mode} cycle step {step} ({combo})")
+        log.info("%s cycle step %d (strain %g, %s): converged=%s (|F| = %.3e N), work rate %.6g N mm, energy "
+                 "%.6g N mm, dissipated %.6g N mm -> %s", mode, step, eps, info["cycle"]["leg"], info["converged"],
+                 info["residual_N"], rate, energy, (st.friction or {}).get("dissipated", 0.0), out_state)
     return st
 
 

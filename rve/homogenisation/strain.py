@@ -66,11 +66,11 @@ from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
 from ..solvers.frictional import friction_of
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
-from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .cell_statics import cycle_levels, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .continuation import periodic_arc, pinned_arc
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
-__all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
+__all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "cycle_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
            "end_targets", "pinned_energy", "friction_law", "friction_record", "seed_friction", "friction_start",
            "friction_summary"]
@@ -147,14 +147,20 @@ def friction_start(cfg, fab, mesh, x):
     return friction_record(system)
 
 
-def friction_summary(system, start_dissipated: float = 0.0) -> dict:
+def friction_summary(system, start_dissipated: float = 0.0, static_info=None) -> dict:
     """The friction of the last committed state of ``system``: total friction and normal
     force of the contact points (N), stick and slip counts, the energy dissipated since the
-    start of the path (``dissipated``, N mm) and by this step (``step_dissipated``)."""
+    start of the path (``dissipated``, N mm) and by this step (``step_dissipated``). With
+    ``static_info`` (the step's frictional static solve) the counts are those of its first
+    round, the increment itself: the later rounds are the small re-solves after the commit
+    (``cell_statics``), in which a point that slides on the Coulomb cone sticks."""
     fr = friction_of(system)
     if fr is None:
         return {}
     out = fr.points()
+    rounds = (static_info or {}).get("rounds") or []
+    if rounds and "slip" in rounds[0]:
+        out.update({"stick": int(rounds[0]["stick"]), "slip": int(rounds[0]["slip"])})
     out.update({"dissipated": float(fr.dissipated), "step_dissipated": float(fr.dissipated - start_dissipated)})
     return out
 
@@ -289,13 +295,15 @@ def end_targets(origin_ends: np.ndarray, mode: str, eps: float) -> np.ndarray:
     return target
 
 
-def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None, friction=None):
+def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None, friction=None,
+                levels=None):
     """One step of Algorithm 7.1 (or of the periodic cell, ``boundary: periodic``) from
     ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to eps_step (module docstring).
     ``multipliers``: the contact multipliers of ``x_prev`` (``multipliers.multiplier_record``,
     the checkpoint's; None: zero), for ``contact.enforcement: augmented_lagrangian``.
     ``friction``: the friction history of ``x_prev`` (``friction_record``, the checkpoint's),
-    with the config's friction on. Returns ``(x (n_nodes, 9), system, info)``; the system
+    with the config's friction on. ``levels``: ``(eps_from, eps_to)`` of the step instead of
+    ``strain_levels`` (a loading-unloading cycle, ``cycle_levels``). Returns ``(x (n_nodes, 9), system, info)``; the system
     holds the multipliers and the committed friction history of ``x``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
@@ -311,18 +319,22 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         def energy(system, x, e):
             return periodic_energy(cfg, fab, mesh, x, mode, e, multipliers if system is None else multiplier_record(system))
     else:
+        stepper = _quasi_static_step if sp_.path == "quasi_static" else _algorithm_step
+
         def part(x, e_from, e_to, whole=False, lam=multipliers):
-            return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam,
-                                   friction=friction)
+            return stepper(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam, friction=friction)
 
         def energy(system, x, e):
             if system is None:
                 system = mech_system(fab, mesh, cfg, sp_.relax_damping, np.asarray(x, float).reshape(-1))
             return pinned_energy(fab, mesh, system, x, origin, mode, e)
-    if not 1 <= step <= sp_.steps:
-        raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
-    levels = strain_levels(cfg)
-    eps_prev, eps = float(levels[step - 1]), float(levels[step])
+    if levels is not None:
+        eps_prev, eps = float(levels[0]), float(levels[1])
+    else:
+        if not 1 <= step <= sp_.steps:
+            raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
+        levels = strain_levels(cfg)
+        eps_prev, eps = float(levels[step - 1]), float(levels[step])
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
         if periodic:
             arc = periodic_arc(cfg, fab, mesh, mode)
@@ -388,6 +400,66 @@ def pinned_energy(fab, mesh, system, x, origin, mode: str, eps: float) -> tuple:
     rate = (end_targets(origin_ends, mode, eps + h) - end_targets(origin_ends, mode, eps - h)) / (2.0 * h)
     work_rate = float(np.asarray(F)[np.asarray(pinned, dtype=np.int64)] @ rate.reshape(-1))
     return float(system.energy(xf)), work_rate
+
+
+def _quasi_static_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
+                       multipliers=None, friction=None):
+    """``strain.path: quasi_static`` from ``x_prev`` at ``eps_prev`` to ``eps``: ``strain.substeps``
+    equal sub-increments, each the affine increment of the mode applied to every node as the
+    predictor (``affine_velocity`` / ``secant_velocity`` times a unit time; the ends exactly on
+    their targets) and the static solve from there (``cell_statics.static_minimize``: the energy
+    minimiser, or with friction the committed frictional residual solve from the history of
+    the last sub-increment; in the Uzawa loop with the augmented Lagrangian). No dynamics: with
+    friction each sub-increment is one backward-Euler step of the slip, so the return-map
+    dissipation is that of the quasi-static path (Algorithm 7.1's driven phase makes contacts
+    slip on its way, docs/contact.md "Friction in the RVE pipeline")."""
+    sp_ = cfg.strain
+    t_start = time.perf_counter()
+    nn = mesh.n_nodes
+    origin = np.asarray(origin, float)
+    x = np.array(x_prev, float).reshape(nn, 9)
+    ends, _, _ = clamped_ends(fab, mesh)
+    system = mech_system(fab, mesh, cfg, sp_.relax_damping, x.reshape(-1))
+    seed_multipliers(system, multipliers)
+    seed_friction(system, friction, x.reshape(-1))
+    fr = friction_of(system)
+    d_start = 0.0 if fr is None else float(fr.dissipated)
+    n = int(sp_.substeps)
+    levels = [eps_prev + (eps - eps_prev) * k / n for k in range(n)] + [float(eps)]
+    info = {"mode": mode, "step": int(step), "strain": float(eps), "strain_increment": float(eps - eps_prev),
+            "path": "quasi_static", "substeps": []}
+
+    def static(xs):
+        return static_minimize(system, xs, sp_.static_atol, sp_.static_max_iter)
+
+    sinfo = {"converged": True}
+    for k in range(1, n + 1):
+        t0 = time.perf_counter()
+        if mode == "trellis":
+            du = secant_velocity(origin, trellis_gradient(levels[k - 1]), trellis_gradient(levels[k]), 1.0)
+        else:
+            du = affine_velocity(origin, mode, levels[k] - levels[k - 1])
+        x = x + du
+        x[ends, :3] = end_targets(origin[ends, :3], mode, levels[k])
+        x2, sinfo = equilibrium(system, static, x.reshape(-1))
+        x = np.asarray(x2, float).reshape(nn, 9)
+        sinfo["wall_s"] = time.perf_counter() - t0
+        info["substeps"].append({"strain": float(levels[k]), "converged": bool(sinfo["converged"]),
+                                 "iterations": int(sinfo.get("iterations", 0)), "wall_s": sinfo["wall_s"]})
+        if not sinfo["converged"]:
+            log.warning("%s step %d: sub-increment %d of %d (strain %g) did not converge", mode, step, k, n,
+                        levels[k])
+            break
+    info["static"] = sinfo
+    info["converged"] = bool(sinfo["converged"])
+    info["residual_N"] = free_residual(system, x)
+    if fr is not None:
+        info["friction"] = friction_summary(system, d_start, sinfo)
+    info["wall_s"] = time.perf_counter() - t_start
+    if not info["converged"]:
+        log.warning("%s step %d: static solve did not reach %.1e N (|F| = %.3e N)", mode, step, sp_.static_atol,
+                    info["residual_N"])
+    return x, system, info
 
 
 def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
@@ -467,7 +539,7 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     info["converged"] = bool(sinfo["converged"])
     info["residual_N"] = free_residual(sys2, x2)
     if friction_of(sys2) is not None:
-        info["friction"] = friction_summary(sys2, d_start)
+        info["friction"] = friction_summary(sys2, d_start, sinfo)
     info["wall_s"] = time.perf_counter() - t_start
     if not info["converged"]:
         log.warning("%s step %d: static solve did not reach %.1e N (|F| = %.3e N)", mode, step, sp_.static_atol,

@@ -30,7 +30,7 @@ from ..homogenisation.network import TERMINALS
 from ..io.provenance import to_jsonable
 
 __all__ = ["TABLE_FORMAT", "TABLE_FORMAT_V1", "EDGES", "YARNS", "MODES", "TERMINALS", "COMPONENTS", "SIDE_ORDER", "DIMENSIONLESS", "STRAIN_DECIMALS",
-           "COORD_ATTRS", "VARIABLES", "FRICTION_VARIABLES", "FRICTION_RECORD_KEYS", "KNOWN_PARAMETERS", "LABEL_DIMS", "lead_dims", "json_safe"]
+           "COORD_ATTRS", "VARIABLES", "FRICTION_VARIABLES", "FRICTION_RECORD_KEYS", "KNOWN_PARAMETERS", "LABEL_DIMS", "CYCLE_DIMS", "lead_dims", "json_safe"]
 
 TABLE_FORMAT = "rve-lookup-table/2"
 TABLE_FORMAT_V1 = "rve-lookup-table/1"
@@ -150,9 +150,14 @@ KNOWN_PARAMETERS: dict[str, tuple[str, str]] = {
 LABEL_DIMS = ("probe", "side", "component", "terminal", "edge", "yarn")
 
 
+#: dimensions of a loading-unloading cycle (``rve.tables.cycles``): neither labels nor swept
+CYCLE_DIMS = ("cycle_mode", "cycle_step")
+
+
 def lead_dims(ds: xr.Dataset) -> list[str]:
-    """The leading (non-label) dimensions of ``ds``, in dataset order."""
-    return [d for d in ds.dims if d not in LABEL_DIMS]
+    """The leading (non-label) dimensions of ``ds``, in dataset order (mode, strain, swept
+    parameters; not the cycle's)."""
+    return [d for d in ds.dims if d not in LABEL_DIMS and d not in CYCLE_DIMS]
 
 
 def _nonfinite_to_null(obj):
