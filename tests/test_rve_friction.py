@@ -8,6 +8,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -199,3 +200,124 @@ def test_probe_records_and_table_carry_the_friction(frictional_chain):
     # a table without friction in its records has none of these variables
     plain = [{k: v for k, v in r.items() if k != "friction"} for r in recs]
     assert "friction_force" not in build_table(gather_records(plain, ["shear"]), fabric="plain", config={})
+
+
+# --------------------------------------------------------------------------- loading-unloading cycles
+def _cycle(mu: float, n: int, out):
+    """The shear cycle of the tiny cell on the quasi-static path, n steps per leg, in this
+    process (energies, not bits): ``(strain, work_rate, energy, dissipated)`` per cycle step."""
+    from rve.homogenisation.jobs import cycle_job, fabric_job, relax_job
+
+    spec = _spec(mu, path="quasi_static", cycle_modes=["shear"], cycle_steps=n)
+    out.mkdir(parents=True, exist_ok=True)
+    fabric_job(out / "initial.nc", None, spec)
+    relax_job(out / "initial.nc", out / "relaxed.nc", None, spec)
+    prev, rows = out / "relaxed.nc", []
+    for i in range(1, 2 * n + 1):
+        st = cycle_job(prev, out / f"shear_cycle_{i:02d}.nc", None, spec, "base", "shear", i)
+        prev = out / f"shear_cycle_{i:02d}.nc"
+        c = st.solver["cycle"]
+        if i == 1:
+            rows.append((c["start"]["strain"], c["start"]["work_rate"], c["start"]["energy"], 0.0))
+        rows.append((c["strain"], c["work_rate"], c["energy"], (st.friction or {}).get("dissipated", 0.0)))
+    return np.array(rows)
+
+
+def _loop_balance(rows):
+    """(work of the clamps over the loop by the trapezoid rule, potential change, dissipation)."""
+    eps, rate = rows[:, 0], rows[:, 1]
+    work = float(np.sum(0.5 * (rate[1:] + rate[:-1]) * np.diff(eps)))
+    return work, float(rows[-1, 2] - rows[0, 2]), float(rows[-1, 3] - rows[0, 3])
+
+
+def test_frictionless_cycle_unloads_on_the_loading_curve_and_dissipates_nothing(tmp_path):
+    rows = _cycle(0.0, 4, tmp_path)
+    assert np.all(rows[:, 3] == 0.0)
+    rate = rows[:, 1]
+    scale = np.abs(rate).max()
+    # the same strain on the way up and on the way down: the same equilibrium, to what the
+    # static tolerance (1e-9 N on forces of ~1e-3 N) leaves
+    np.testing.assert_allclose(rate[5:], rate[3::-1], rtol=0, atol=1e-6 * scale)
+    work, dpi, _ = _loop_balance(rows)
+    assert abs(work) <= 1e-6 * scale * rows[:, 0].max()
+    assert abs(dpi) <= 1e-6 * rows[:, 2].max()
+
+
+def test_frictional_cycle_dissipates_what_the_return_map_dissipates(tmp_path):
+    """With mu = 0.3 the loop is open (unloading below loading) and the clamps' work over the
+    closed cycle minus the stored energy change converges to the friction term's accumulated
+    return-map dissipation as the steps are refined (the trapezoid rule's error: first order
+    at the turning point, where the response switches from stick to slip)."""
+    errors = []
+    for n in (4, 8):
+        rows = _cycle(0.3, n, tmp_path / f"n{n}")
+        assert rows[-1, 0] == 0.0 and rows[n, 0] == pytest.approx(0.1)   # back at strain 0
+        rate = rows[:, 1]
+        assert np.all(rate[n + 1:] < rate[n - 1::-1])       # unloading below loading at every strain
+        work, dpi, dissipated = _loop_balance(rows)
+        assert dissipated > 0 and work > 0
+        errors.append(abs(work - dpi - dissipated) / dissipated)
+    assert errors[1] < 0.6 * errors[0]
+    assert errors[1] < 0.1
+
+
+# --------------------------------------------------------------------------- through Snakemake
+@pytest.mark.slow
+def test_friction_sweep_and_cycle_tables_through_snakemake(tmp_path):
+    """The CI config's ci_friction run (mu = 0, 0.3; 2 shear steps; a 2 + 2 step shear cycle):
+    a friction_coefficient dimension with CF attributes, the friction and cycle variables, the
+    loops' figure; at mu = 0 nothing is dissipated and the cycle unloads on its loading curve,
+    at mu = 0.3 the loop encloses the work its friction dissipated; the table passes the CF
+    checker."""
+    import netCDF4
+    from PIL import Image
+
+    from rve.homogenisation import layout as L
+    from rve.tables import open_table
+    from workflow_copy import workflow_copy
+
+    pytest.importorskip("snakemake")
+    (tmp_path / "wf").mkdir()
+    work = workflow_copy(tmp_path / "wf")
+    table = L.table_outputs("ci_friction")["table"]
+    loops = L.cycle_report_outputs("ci_friction")["loops"]
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "-j2", table, loops, "--configfile",
+                           "configs/tests/pipeline_ci.yaml"], cwd=work, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    t = open_table(work / table)
+    assert list(t["friction_coefficient"].values) == [0.0, 0.3]
+    assert t["friction_coefficient"].attrs["units"] == "1" and "friction" in t["friction_coefficient"].attrs["long_name"]
+    assert t["reaction_force"].dims == ("mode", "strain", "friction_coefficient", "side", "component")
+    for name in list(t.data_vars) + list(t.coords):
+        assert "units" in t[name].attrs and "long_name" in t[name].attrs, name
+    d = t["friction_dissipated_energy"].sel(mode="shear")
+    assert np.all(d.sel(friction_coefficient=0.0).values == 0.0)
+    assert np.all(np.diff(d.sel(friction_coefficient=0.3).values) > 0)
+    rate = t["cycle_work_rate"].sel(cycle_mode="shear")
+    r0, r3 = rate.sel(friction_coefficient=0.0).values, rate.sel(friction_coefficient=0.3).values
+    scale = np.abs(r0).max()
+    assert abs(r0[1] - r0[3]) <= 1e-6 * scale and abs(r0[4] - r0[0]) <= 1e-6 * scale
+    assert r3[3] < r3[1] and r3[4] < r3[0]
+    c = t.sel(cycle_mode="shear")
+    assert float(c["cycle_dissipated_energy"].sel(friction_coefficient=0.0)) == 0.0
+    assert float(c["cycle_dissipated_energy"].sel(friction_coefficient=0.3)) > 0
+    assert float(c["cycle_work"].sel(friction_coefficient=0.3)) > 0
+    assert float(c["cycle_strain"].sel(friction_coefficient=0.3).isel(cycle_step=-1)) == 0.0
+    img = np.asarray(Image.open(work / loops).convert("L"), float)
+    assert img.std() > 5   # not blank
+    # the CF checker (as tests/test_tables.py) on the friction table
+    sys.path.insert(0, str(Path(__file__).parent))
+    from cf_checker import cfchecks_command
+
+    exe, env = cfchecks_command(tmp_path)
+    if exe is None:
+        pytest.skip("the CF checker (pip cfchecker) is not installed")
+    path = tmp_path / "check.nc"
+    shutil.copy(work / table, path)
+    with netCDF4.Dataset(path, "a") as f:
+        f.Conventions = "CF-1.8"
+    cft = Path(__file__).parent / "data" / "cf_tables"
+    run = subprocess.run([exe, "-v", "1.8", "-s", str(cft / "standard_name_table.xml"), "-a",
+                          str(cft / "area_type_table.xml"), "-r", str(cft / "region_names.xml"), str(path)],
+                         capture_output=True, text=True, timeout=300, env=env)
+    assert "ERRORS detected: 0" in run.stdout and "WARNINGS given: 0" in run.stdout, run.stdout[-3000:]
