@@ -264,7 +264,8 @@ def test_frictional_cycle_dissipates_what_the_return_map_dissipates(tmp_path):
 # --------------------------------------------------------------------------- through Snakemake
 @pytest.mark.slow
 def test_friction_sweep_and_cycle_tables_through_snakemake(tmp_path):
-    """The CI config's ci_friction run (mu = 0, 0.3; 2 shear steps; a 2 + 2 step shear cycle):
+    """The CI config's ci_friction run (mu = 0, 0.3; 2 shear steps; a 2 + 2 step shear cycle) and
+    its ci_pullout run (the pull-out curve per mu):
     a friction_coefficient dimension with CF attributes, the friction and cycle variables, the
     loops' figure; at mu = 0 nothing is dissipated and the cycle unloads on its loading curve,
     at mu = 0.3 the loop encloses the work its friction dissipated; the table passes the CF
@@ -281,8 +282,10 @@ def test_friction_sweep_and_cycle_tables_through_snakemake(tmp_path):
     work = workflow_copy(tmp_path / "wf")
     table = L.table_outputs("ci_friction")["table"]
     loops = L.cycle_report_outputs("ci_friction")["loops"]
-    proc = subprocess.run([sys.executable, "-m", "snakemake", "-j2", table, loops, "--configfile",
-                           "configs/tests/pipeline_ci.yaml"], cwd=work, capture_output=True, text=True, timeout=900)
+    pull = L.pullout_outputs("ci_pullout")
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "-j2", table, loops, pull["table"], pull["curve"],
+                           "--configfile", "configs/tests/pipeline_ci.yaml"], cwd=work, capture_output=True, text=True,
+                          timeout=1200)
     assert proc.returncode == 0, proc.stderr[-4000:]
     t = open_table(work / table)
     assert list(t["friction_coefficient"].values) == [0.0, 0.3]
@@ -305,6 +308,20 @@ def test_friction_sweep_and_cycle_tables_through_snakemake(tmp_path):
     assert float(c["cycle_strain"].sel(friction_coefficient=0.3).isel(cycle_step=-1)) == 0.0
     img = np.asarray(Image.open(work / loops).convert("L"), float)
     assert img.std() > 5   # not blank
+    # the pull-out (ci_pullout: mu = 0, 0.3) through its rules: the curve per mu, peak and sliding force
+    from rve.io.checksum import open_netcdf
+
+    po = open_netcdf(work / pull["table"], require_seal=True)
+    assert po["pullout_force"].dims == ("pullout_step", "friction_coefficient")
+    for name in list(po.data_vars) + list(po.coords):
+        assert "units" in po[name].attrs and "long_name" in po[name].attrs, name
+    f = po["pullout_force"]
+    assert bool((f.sel(friction_coefficient=0.3).isel(pullout_step=slice(1, None))
+                 > f.sel(friction_coefficient=0.0).isel(pullout_step=slice(1, None))).all())
+    assert float(po["pullout_sliding_force"].sel(friction_coefficient=0.3)) > float(
+        po["pullout_sliding_force"].sel(friction_coefficient=0.0))
+    assert (work / pull["csv"]).read_text().startswith("pullout_step,friction_coefficient,")
+    assert np.asarray(Image.open(work / pull["curve"]).convert("L"), float).std() > 5
     # the CF checker (as tests/test_tables.py) on the friction table
     sys.path.insert(0, str(Path(__file__).parent))
     from cf_checker import cfchecks_command
@@ -321,3 +338,56 @@ def test_friction_sweep_and_cycle_tables_through_snakemake(tmp_path):
                           str(cft / "area_type_table.xml"), "-r", str(cft / "region_names.xml"), str(path)],
                          capture_output=True, text=True, timeout=300, env=env)
     assert "ERRORS detected: 0" in run.stdout and "WARNINGS given: 0" in run.stdout, run.stdout[-3000:]
+
+
+# --------------------------------------------------------------------------- yarn pull-out
+def _pullout(mu: float, out):
+    """The warp yarn at y = -1 mm of the tiny cell pulled 0.1 mm in 2 steps (in this process)."""
+    from rve.homogenisation.jobs import fabric_job, pullout_job, relax_job
+
+    spec = _spec(mu, static_max_iter=400)
+    spec["scene"]["pullout"] = {"yarn": "warp", "position": "-1 mm", "displacement": "0.1 mm", "steps": 2}
+    out.mkdir(parents=True, exist_ok=True)
+    fabric_job(out / "initial.nc", None, spec)
+    relax_job(out / "initial.nc", out / "relaxed.nc", None, spec)
+    prev, states = out / "relaxed.nc", []
+    for i in (1, 2):
+        states.append(pullout_job(prev, out / f"pullout_{i:02d}.nc", None, spec, "base", i))
+        prev = out / f"pullout_{i:02d}.nc"
+    return states
+
+
+def test_pullout_moves_the_pulled_ends_and_friction_resists_the_sliding(tmp_path):
+    """The pulled ends land on u; the released ends slide along x (the yarn comes out); every
+    state is an equilibrium whose supports' axial forces sum to zero (the pull force is the
+    reaction that balances the others); friction raises the pull force at every step above the
+    frictionless one and dissipates energy as the yarn slides; the table has the curve, the
+    peak and the sliding force with their units."""
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.sweeps import load_run_config
+    from rve.tables.pullout import plot_pullout, pullout_curve
+
+    curves = {}
+    for mu in (0.0, 0.3):
+        states = _pullout(mu, tmp_path / f"mu{mu}")
+        cfg = load_run_config(_spec(mu))
+        fab, mesh = fabric_and_mesh(cfg)
+        yarn = fab.yarn_at("warp", -1.0, tol=1e-6)
+        plus, minus = fab.end_nodes(mesh, "x+", yarn.index), fab.end_nodes(mesh, "x-", yarn.index)
+        for k, st in enumerate(states, start=1):
+            po = st.solver["pullout"]
+            assert st.solver["converged"] and st.solver["residual_N"] <= 1e-9
+            np.testing.assert_allclose(st.x[plus, 0] - st.origin[plus, 0], 0.05 * k, rtol=0, atol=1e-12)
+            np.testing.assert_array_equal(st.x[minus, 1:3], st.origin[minus, 1:3])   # held across the axis
+            assert abs(po["balance"]) <= 1e-8 * max(1e-3, abs(po["force"]))
+        curves[mu] = [s.solver["pullout"] for s in states]
+        ds = pullout_curve(states)
+        assert ds["pullout_force"].attrs["units"] == "N" and ds["pullout_peak_force"].attrs["long_name"]
+        assert float(ds["pullout_peak_force"]) == pytest.approx(float(ds["pullout_force"].max()))
+        plot_pullout(ds, tmp_path / f"pullout_{mu}.png")
+        assert (tmp_path / f"pullout_{mu}.png").stat().st_size > 1000
+    for k in range(2):
+        assert curves[0.3][k]["force"] > curves[0.0][k]["force"] + 1e-4
+        assert curves[0.3][k]["released_displacement"] > 0.05   # the yarn slid out at its free end
+        assert curves[0.0][k]["dissipated"] == 0.0
+    assert 0 < curves[0.3][0]["dissipated"] < curves[0.3][1]["dissipated"]

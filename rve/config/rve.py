@@ -5,7 +5,8 @@ computes: the fabric, material, contact law and mesh (the same sections as the
 relaxation scene ``fabric_relax``, ``rve.config.fabric``), the relaxation, the strain
 path of Algorithm 7.1 (``strain``), the probes (``probes``) and the probe solver
 (``probe_solver``), and friction between the fibrils (``friction``, the section of
-``rve.config.friction``; off by default, mu = 0). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
+``rve.config.friction``; off by default, mu = 0) and the yarn pull-out (``pullout``, run only
+by the ``rve_pullout`` target). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
 V) or strings with units. Named in ``rve.scenes.registry.SCENES`` (a pipeline scene:
 ``rve run`` prints the Snakemake command that builds its table, docs/configuration.md).
 
@@ -26,7 +27,7 @@ from .fields import (
     Time, Voltage,
 )
 
-__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing", "FrictionSection"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing", "FrictionSection", "Pullout"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
 MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
@@ -252,6 +253,24 @@ class PeriodicCell(Section):
                                                    "across the cell faces (false: only the pairs inside the cell)")
 
 
+class Pullout(Section):
+    """Yarn pull-out (``rve.homogenisation.pullout``): from the relaxed state, one yarn's ends on
+    the + side (x+ warp, y+ weft) pulled along its axis, its ends on the - side released, every
+    other fibril end pinned; ``steps`` quasi-static steps (``strain.substeps`` sub-increments each)."""
+
+    yarn: Literal["warp", "weft"] = Field("warp", description="direction of the pulled yarn")
+    position: Length = Field("-1 mm", description="position of the pulled yarn across the fabric (warp: y, weft: x)")
+    displacement: Length = Field("0.5 mm", gt=0, description="total pull-out displacement of the pulled ends")
+    steps: Integer = Field(10, ge=1, le=99, description="pull-out steps")
+    release_steps: Integer = Field(4, ge=1, le=50, description="decrements in which the released ends' clamp force "
+                                                               "is taken off before the pull")
+    max_halvings: Integer = Field(4, ge=0, le=10, description="a pull-out sub-increment that fails is undone and "
+                                                             "halved, at most this deep")
+    sliding_fraction: Dimensionless = Field(
+        1.0 / 3.0, gt=0, le=1, description="the sliding force is the mean force over this last fraction of the "
+                                           "displacement")
+
+
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 
@@ -274,6 +293,7 @@ class RVEConfig(SceneConfig):
         "pinned", description="pinned: the thesis's cell, every fibril end pinned (Algorithm 7.1); periodic: the "
                               "smallest repeat with periodic ties (section cell)")
     cell: PeriodicCell = Field(default_factory=PeriodicCell, description="the periodic cell (boundary: periodic)")
+    pullout: Pullout = Field(default_factory=Pullout, description="yarn pull-out (rve_pullout; docs/rve_pipeline.md)")
     friction: FrictionSection = Field(
         default_factory=FrictionSection,
         description="regularised Coulomb friction between fibrils along the strain path (mu = 0: none; the "

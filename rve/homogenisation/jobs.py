@@ -10,6 +10,7 @@ and the run spec (``rve.homogenisation.sweeps``), logs to the rule's log file
 ``strain_job``      previous state -> state after one strain step (``rve_strain_step``)
 ``cycle_job``       previous state -> state after one step of a loading-unloading cycle
                     (``rve_cycle_step``; ``strain.cycle_modes``)
+``pullout_job``     previous state -> state after one yarn pull-out step (``rve_pullout_step``)
 ``probe_job``       a stored state -> its probe record, JSON (``rve_probes``)
 ==================  ====================================================================
 
@@ -49,7 +50,7 @@ from ..io.provenance import logging_to
 from .branch import BRANCH_COUNTS
 from .sweeps import BASE_COMBO, combo_params, load_run_config
 
-__all__ = ["fabric_job", "relax_job", "strain_job", "cycle_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
+__all__ = ["fabric_job", "relax_job", "strain_job", "cycle_job", "pullout_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
            "recomputed_residual", "verify_equilibrium"]
 
 log = logging.getLogger("rve.homogenisation.jobs")
@@ -265,6 +266,45 @@ def cycle_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
         log.info("%s cycle step %d (strain %g, %s): converged=%s (|F| = %.3e N), work rate %.6g N mm, energy "
                  "%.6g N mm, dissipated %.6g N mm -> %s", mode, step, eps, info["cycle"]["leg"], info["converged"],
                  info["residual_N"], rate, energy, (st.friction or {}).get("dissipated", 0.0), out_state)
+    return st
+
+
+def pullout_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLike], spec: Mapping,
+                combo: str, step: int):
+    """Step ``step`` of the yarn pull-out (``rve.homogenisation.pullout``) from ``in_state``
+    (the relaxed state for step 1); the state (kind ``pullout``) records ``solver["pullout"]``."""
+    from .checkpoint import State, load_state
+    from .multipliers import multiplier_record
+    from .pullout import pullout_step
+    from .strain import friction_record
+
+    step = int(step)
+    with logging_to(log_path):
+        cfg = load_run_config(spec, combo)
+        if cfg.boundary != "pinned":
+            raise ValueError(f"pullout: boundary = {cfg.boundary!r}; the yarn pull-out is defined on the pinned cell")
+        if cfg.contact.enforcement != "penalty":
+            raise ValueError("pullout: contact.enforcement must be 'penalty' (the pull-out's static solves have no "
+                             "Uzawa loop)")
+        fab, mesh = _fabric_mesh(cfg)
+        prev = load_state(in_state, quarantine=True)
+        _check_state(prev, mesh, in_state)
+        expect = "relaxed" if step == 1 else "pullout"
+        if prev.kind != expect or (step > 1 and prev.step != step - 1):
+            raise ValueError(f"{in_state}: expected the {expect} state before pull-out step {step}, got kind="
+                             f"{prev.kind} step={prev.step}")
+        _check_friction(cfg, prev, in_state)
+        x, system, info = pullout_step(cfg, fab, mesh, prev.x, prev.origin, step, friction=prev.friction)
+        cstate = system.contact_state(x.reshape(-1))
+        po = info["pullout"]
+        st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="pullout", mode="pullout", step=step,
+                   strain=float(po["displacement"]), time=prev.time, combo=combo, params=combo_params(spec, combo),
+                   config=_config_dict(cfg), reaction_force={}, contact_count=int(cstate["active_points"]),
+                   solver=info, multipliers=multiplier_record(system), friction=friction_record(system))
+        _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"pull-out step {step} ({combo})")
+        log.info("pull-out step %d: u = %g mm, force %.6g N (supports %.3g N), released ends moved %.4g mm, "
+                 "|F| = %.3e N -> %s", step, po["displacement"], po["force"], po["balance"],
+                 po["released_displacement"], info["residual_N"], out_state)
     return st
 
 

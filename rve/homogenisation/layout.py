@@ -19,6 +19,9 @@ rule's pattern: ``state_path("{run}", "{combo}", "{state}")`` ->
 ``table_hermite.json``, ``table_curves/{curve}.csv``      docs/macro_export.md)
 ``{RVE_DIR}/{run}/plots/table_*.png``                   figures (rve_report)
 ``{RVE_DIR}/{run}/plots/table_cycle_loops.png``         hysteresis loops (rve_cycle_report)
+``{RVE_DIR}/{run}/{combo}/states/pullout_{i:02d}.nc``   after yarn pull-out step i (rve_pullout_step)
+``{RVE_DIR}/{run}/pullout.nc``, ``pullout.csv``,        pull-out curve (rve_pullout_table) and
+``plots/table_pullout.png``                             its figure (rve_pullout_report)
 ``{RVE_DIR}/{run}/{combo}/tubes/{state}.vtp``           tube mesh of a state (rve_probes,
                                                         with ``output.pictures``)
 ``{RVE_DIR}/{run}/{combo}/pictures/{mode}.pvd``, ``*.png``  series and renders
@@ -30,8 +33,9 @@ rule's pattern: ``state_path("{run}", "{combo}", "{state}")`` ->
 
 ``{job}`` (``job_name``): ``{combo}/fabric``, ``{combo}/relax``,
 ``{combo}/strain/{state}``, ``{combo}/probes/{state}``, ``{combo}/pictures/{relaxed|mode}``, ``gather``,
-``exports``, ``report``, ``ensemble_report``, ``cycle_report`` (a cycle step is
-``{combo}/strain/{mode}_cycle_{step}``).
+``exports``, ``report``, ``ensemble_report``, ``cycle_report``, ``pullout_table``,
+``pullout_report`` (a cycle step is ``{combo}/strain/{mode}_cycle_{step}``, a pull-out step
+``{combo}/pullout/pullout_{step}``).
 ``RVE_DIR`` = results/rve, ``LOG_DIR`` = results/logs/rve, ``BENCHMARK_DIR`` =
 results/benchmarks/rve; every function takes ``root`` to place a run elsewhere.
 
@@ -56,7 +60,8 @@ __all__ = [
     "log_path", "benchmark_path", "default_targets", "tubes_path", "picture_outputs", "picture_targets",
     "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default", "config_digest",
     "work_precision_outputs", "work_precision_runs", "cycle_state_name", "cycle_state_names", "previous_cycle_state",
-    "cycle_state_paths", "cycle_report_outputs",
+    "cycle_state_paths", "cycle_report_outputs", "pullout_state_name", "previous_pullout_state",
+    "pullout_state_paths", "pullout_outputs",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -67,7 +72,7 @@ BENCHMARK_DIR = "results/benchmarks/rve"
 
 #: the jobs of a run, in DAG order (one Snakemake rule each)
 STAGES = ("fabric", "relax", "strain", "probes", "probes_dask", "pictures", "gather", "exports", "report",
-          "ensemble_report", "cycle_report")
+          "ensemble_report", "cycle_report", "pullout", "pullout_table", "pullout_report")
 
 
 # ============================================================================ state names
@@ -204,6 +209,34 @@ def cycle_report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
     return {"loops": f"{report_prefix(run, root)}_cycle_loops.png"}
 
 
+# ============================================================================ yarn pull-out
+def pullout_state_name(step: int) -> str:
+    """``pullout_{step:02d}`` after pull-out step ``step``; ``relaxed`` for step 0."""
+    return "relaxed" if int(step) == 0 else f"pullout_{int(step):02d}"
+
+
+def previous_pullout_state(run: str, combo: str, step: int, root: PathLike = RVE_DIR) -> str:
+    """Input of pull-out step ``step``: the relaxed state or the previous pull-out step."""
+    if int(step) < 1:
+        raise ValueError(f"pull-out steps start at 1, got {step}")
+    return state_path(run, combo, pullout_state_name(int(step) - 1), root)
+
+
+def pullout_state_paths(spec: Mapping, run: str, root: PathLike = RVE_DIR) -> list[str]:
+    """Every pull-out state of a run (all combinations, ``pullout.steps`` each)."""
+    out = []
+    for c in combos(spec):
+        n = int(load_run_config(spec, c.id).pullout.steps)
+        out += [state_path(run, c.id, pullout_state_name(i), root) for i in range(1, n + 1)]
+    return out
+
+
+def pullout_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
+    """The pull-out table of a run: ``table`` (netCDF) and ``csv``; and its figure ``curve``."""
+    return {"table": f"{root}/{run}/pullout.nc", "csv": f"{root}/{run}/pullout.csv",
+            "curve": f"{report_prefix(run, root)}_pullout.png"}
+
+
 def mode_state_names(spec: Mapping, combo: str, mode: str) -> list[str]:
     """The relaxed state and every step of ``mode`` of one combination, in order."""
     steps = load_run_config(spec, combo).strain.steps
@@ -303,7 +336,8 @@ def job_name(stage: str, combo: Optional[str] = None, state: Optional[str] = Non
     ``report``."""
     if stage not in STAGES:
         raise ValueError(f"unknown stage {stage!r} (have {', '.join(STAGES)})")
-    if stage in ("probes_dask", "gather", "exports", "report", "ensemble_report", "cycle_report"):
+    if stage in ("probes_dask", "gather", "exports", "report", "ensemble_report", "cycle_report", "pullout_table",
+                 "pullout_report"):
         return stage
     if combo is None:
         raise ValueError(f"stage {stage!r}: a job of one combination needs its combo")

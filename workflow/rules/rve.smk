@@ -356,6 +356,86 @@ rule rve_friction:
         **rve_layout.cycle_report_outputs(FRICTION_RUN),
 
 
+# --------------------------------------------------------------------------- yarn pull-out
+# One yarn of the relaxed cell pulled out along its axis (pullout section of the scene config;
+# rve.homogenisation.pullout): a chain of steps per combination, then the force-displacement
+# table (peak and sliding force) and its figure. Run plain_weave_pullout: mu = 0, 0.3.
+#   snakemake -j2 rve_pullout
+PULLOUT_RUN = "plain_weave_pullout"
+
+
+rule rve_pullout_step:
+    """Pull-out step {step} from the previous state (the relaxed one for step 1)."""
+    input:
+        state=lambda w: rve_layout.previous_pullout_state(w.run, w.combo, int(w.step)),
+    output:
+        state=rve_layout.state_path("{run}", "{combo}", "pullout_{step}"),
+    log:
+        rve_layout.log_path("{run}", "pullout", "{combo}", "pullout_{step}"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pullout", "{combo}", "pullout_{step}")
+    params:
+        spec=lambda w: config["rve"]["runs"][w.run],
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
+    priority: 10
+    run:
+        from rve.homogenisation.jobs import pullout_job
+
+        pullout_job(input.state, output.state, log[0], params.spec, wildcards.combo, int(wildcards.step))
+
+
+rule rve_pullout_table:
+    """Every pull-out state of a run -> the force-displacement table (netCDF, CSV)."""
+    input:
+        states=lambda w: rve_layout.pullout_state_paths(config["rve"]["runs"][w.run], w.run),
+    output:
+        table=rve_layout.pullout_outputs("{run}")["table"],
+        csv=rve_layout.pullout_outputs("{run}")["csv"],
+    log:
+        rve_layout.log_path("{run}", "pullout_table"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pullout_table")
+    params:
+        spec=lambda w: config["rve"]["runs"][w.run],
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
+    run:
+        from rve.tables.pullout import pullout_table_job
+
+        pullout_table_job(list(input.states), output.table, output.csv, log[0], params.spec)
+
+
+rule rve_pullout_report:
+    """The pull-out table -> its force-displacement figure (one curve per combination)."""
+    input:
+        table=rve_layout.pullout_outputs("{run}")["table"],
+    output:
+        curve=rve_layout.pullout_outputs("{run}")["curve"],
+    log:
+        rve_layout.log_path("{run}", "pullout_report"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pullout_report")
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
+    run:
+        from rve.tables.pullout import pullout_report_job
+
+        pullout_report_job(input.table, output.curve, log[0])
+
+
+rule rve_pullout:
+    """`snakemake -j2 rve_pullout`: the yarn pull-out of the plain weave (run plain_weave_pullout)."""
+    input:
+        **rve_layout.pullout_outputs(PULLOUT_RUN),
+
+
 # --------------------------------------------------------------------------- ensembles
 # A run with `sweep: {realization: [...]}` (packing.seed) and a packing.perturbation is an
 # ensemble of perturbed packings: its table has a `realization` dimension with mean, std and
