@@ -49,6 +49,20 @@ jumped to another equilibrium is followed from the previous state in halves
 (``strain.branch_method: halving``, the default) or by pseudo-arclength continuation through
 its limit points (``arc_length``, ``rve.homogenisation.continuation``; halving where it fails); the record is ``info["branch"]`` (docs/table_accuracy.md, "One equilibrium path").
 
+``strain.path: quasi_static`` replaces 1.-3. by ``strain.substeps`` sub-increments, each the
+affine increment applied to every node as the predictor (the ends exactly on their targets)
+and the static solve from there (``_quasi_static_step``): no dynamics, so with friction every
+sub-increment is one committed backward-Euler step of the slip.
+
+Friction (``friction`` with mu > 0; docs/contact.md "Friction in the RVE pipeline"): the
+relaxation is frictionless; the strain path's systems carry the friction law
+(``mech_system``), the history passes from the input state to each phase's system
+(``seed_friction``) and is committed by every accepted time step and by the static solve;
+``friction_record`` is what the checkpoint stores, ``friction_start`` the relaxed state's
+history (no elastic gap), ``friction_summary`` the step's record. A loading-unloading cycle
+(``strain.cycle_modes``) is the same step between the levels of ``cycle_levels``
+(``strain_step(levels=...)``).
+
 If the driven phase fails (step control exhausted), the remaining part of the field is
 applied kinematically (an affine move of every node) and the failure is recorded in
 the step's ``info``; the ends always land exactly on X + eps_n X1 e_i.
