@@ -391,3 +391,53 @@ def test_pullout_moves_the_pulled_ends_and_friction_resists_the_sliding(tmp_path
         assert curves[0.3][k]["released_displacement"] > 0.05   # the yarn slid out at its free end
         assert curves[0.0][k]["dissipated"] == 0.0
     assert 0 < curves[0.3][0]["dissipated"] < curves[0.3][1]["dissipated"]
+
+
+@pytest.mark.long
+@pytest.mark.slow
+def test_killed_frictional_run_resumes_with_an_identical_table(tmp_path):
+    """ci_friction killed (SIGKILL of the whole process group, jobs in flight) once the first
+    frictional state after the relaxed one is on disk, unlocked and re-run: the table (the
+    friction and cycle variables included) is identical to the uninterrupted run's, bit for bit."""
+    import signal
+
+    from rve.homogenisation import layout as L
+    from rve.tables import open_table
+    from workflow_copy import workflow_copy
+
+    pytest.importorskip("snakemake")
+    table = L.table_outputs("ci_friction")["table"]
+    cmd = [sys.executable, "-m", "snakemake", "-j2", table, "--configfile", "configs/tests/pipeline_ci.yaml"]
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a, b = workflow_copy(tmp_path / "a"), workflow_copy(tmp_path / "b")
+    proc = subprocess.run(cmd, cwd=a, capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    states = b / "results" / "rve" / "ci_friction" / "friction_coefficient-0.3" / "states"
+    run = subprocess.Popen(cmd, cwd=b, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        import time
+
+        t0 = time.time()
+        while not (list(states.glob("shear_01.nc")) or list(states.glob("shear_cycle_01.nc"))):
+            if run.poll() is not None or time.time() - t0 > 600:
+                pytest.fail(f"snakemake ended ({run.returncode}) before a frictional step was written")
+            time.sleep(0.2)
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+        run.wait()
+    assert not (b / table).exists()
+    relaxed = (states / "relaxed.nc").stat().st_mtime_ns
+    subprocess.run([sys.executable, "-m", "snakemake", "--unlock", "--configfile", "configs/tests/pipeline_ci.yaml"],
+                   cwd=b, capture_output=True, timeout=120, check=True)
+    proc = subprocess.run(cmd + ["--rerun-incomplete"], cwd=b, capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    assert (states / "relaxed.nc").stat().st_mtime_ns == relaxed   # resumed, not redone
+    ta, tb = open_table(a / table), open_table(b / table)
+    assert set(ta.data_vars) == set(tb.data_vars) and "cycle_dissipated_energy" in ta
+    for k in list(ta.data_vars) + list(ta.coords):
+        if ta[k].dtype.kind == "f":
+            np.testing.assert_array_equal(ta[k].values, tb[k].values, err_msg=k)
+        else:
+            assert list(ta[k].values.ravel()) == list(tb[k].values.ravel()), k
