@@ -9,7 +9,8 @@ Contract
   (mm), ``pullout_friction_dissipated`` (N mm), ``pullout_support_balance`` (N: the other
   supports' axial forces, minus the pull at an equilibrium), and per combination
   ``pullout_peak_force`` (the largest pull force) and ``pullout_sliding_force`` (the mean
-  pull force over the last ``sliding_fraction`` of the displacement); CF attributes
+  pull force of the steps whose displacement lies in the last ``sliding_fraction`` of the
+  largest one); CF attributes
   (units, long_name) on every variable and coordinate;
 * :func:`plot_pullout` ``(ds, path)``: the curves, one per combination (per mu), with the
   peak and sliding forces in the legend, written atomically;
@@ -87,13 +88,14 @@ def pullout_curve(states: Sequence, swept: Optional[Mapping[str, str]] = None, s
         "pullout_support_balance": (dims, arr["balance"], {"units": "N", "long_name": "sum of the axial forces of "
                                                            "all other supports (minus the pull at equilibrium)"}),
     }, coords=coords)
-    force = arr["force"]
-    k0 = int(np.floor((1.0 - sliding_fraction) * n))
+    force, disp = arr["force"], arr["displacement"]
+    # the sliding part: the steps whose displacement is within the last sliding_fraction of the largest
+    sliding = disp >= (1.0 - sliding_fraction) * np.nanmax(disp, axis=0, keepdims=True) - 1e-12
     ds["pullout_peak_force"] = (tuple(pnames), np.nanmax(force, axis=0),
                                 {"units": "N", "long_name": "peak pull-out force"})
-    ds["pullout_sliding_force"] = (tuple(pnames), np.nanmean(force[max(k0, 1):], axis=0),
-                                   {"units": "N", "long_name": f"sliding pull-out force: mean force over the last "
-                                                               f"{sliding_fraction:.3g} of the displacement"})
+    ds["pullout_sliding_force"] = (tuple(pnames), np.nanmean(np.where(sliding, force, np.nan), axis=0),
+                                   {"units": "N", "long_name": f"sliding pull-out force: mean force over the steps in "
+                                                               f"the last {sliding_fraction:.3g} of the displacement"})
     ds.attrs.update({"title": "RVE yarn pull-out: force-displacement", "Conventions": "CF-1.11",
                      "swept_parameters": " ".join(pnames), "yarn": str(states[0].solver["pullout"]["yarn"])})
     return ds
