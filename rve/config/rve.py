@@ -4,7 +4,9 @@ One validated :class:`RVEConfig` describes everything one combination of the pip
 computes: the fabric, material, contact law and mesh (the same sections as the
 relaxation scene ``fabric_relax``, ``rve.config.fabric``), the relaxation, the strain
 path of Algorithm 7.1 (``strain``), the probes (``probes``) and the probe solver
-(``probe_solver``). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
+(``probe_solver``), and friction between the fibrils (``friction``, the section of
+``rve.config.friction``; off by default, mu = 0) and the yarn pull-out (``pullout``, run only
+by the ``rve_pullout`` target). Quantities accept numbers in internal units (mm, ms, g, N, MPa, K, A,
 V) or strings with units. Named in ``rve.scenes.registry.SCENES`` (a pipeline scene:
 ``rve run`` prints the Snakemake command that builds its table, docs/configuration.md).
 
@@ -18,13 +20,14 @@ from typing import Literal, Optional
 from pydantic import Field, field_validator, model_validator
 
 from .weaves import WEAVE_PATTERNS
+from .friction import FrictionSection
 from .fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
 from .fields import (
     DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, SceneConfig, Section, ThermalConductivity,
     Time, Voltage,
 )
 
-__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing"]
+__all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing", "FrictionSection", "Pullout"]
 
 #: deformation modes of the strain path (rve.tables.MODES)
 MODES = ("uniaxial", "shear", "uniaxial_y", "trellis")
@@ -107,7 +110,22 @@ class StrainPath(Section):
         1000, ge=1, description="iterations of the static solve (energy: the minimiser's cap; a step that "
                                 "rearranges the plain weave's stacks took 463; newton: per round)")
 
-    @field_validator("modes")
+    path: Literal["algorithm_7_1", "quasi_static"] = Field(
+        "algorithm_7_1", description="how a step moves the cell: algorithm_7_1 (the thesis: driven dynamics, damped "
+                                     "relaxation, static solve) or quasi_static (substeps sub-increments, each the "
+                                     "affine increment as predictor and a static solve; with friction each is one "
+                                     "committed backward-Euler step of the slip, docs/contact.md)")
+    substeps: Integer = Field(2, ge=1, le=50, description="sub-increments of a quasi_static step")
+    cycle_modes: list[Literal["uniaxial", "shear", "uniaxial_y", "trellis"]] = Field(
+        [], description="modes that also get a loading-unloading cycle from the relaxed state: cycle_steps steps "
+                        "up to cycle_total, as many back to 0 (the hysteresis loop; docs/rve_pipeline.md "
+                        "'Loading-unloading cycles')")
+    cycle_total: Optional[Dimensionless] = Field(
+        None, gt=0, le=1, description="strain at the turning point of a cycle (null: total)")
+    cycle_steps: Optional[Integer] = Field(
+        None, ge=1, le=49, description="strain steps of each leg of a cycle (null: steps)")
+
+    @field_validator("modes", "cycle_modes")
     @classmethod
     def _unique_modes(cls, v):
         if len(set(v)) != len(v):
@@ -235,6 +253,24 @@ class PeriodicCell(Section):
                                                    "across the cell faces (false: only the pairs inside the cell)")
 
 
+class Pullout(Section):
+    """Yarn pull-out (``rve.homogenisation.pullout``): from the relaxed state, one yarn's ends on
+    the + side (x+ warp, y+ weft) pulled along its axis, its ends on the - side released, every
+    other fibril end pinned; ``steps`` quasi-static steps (``strain.substeps`` sub-increments each)."""
+
+    yarn: Literal["warp", "weft"] = Field("warp", description="direction of the pulled yarn")
+    position: Length = Field("-1 mm", description="position of the pulled yarn across the fabric (warp: y, weft: x)")
+    displacement: Length = Field("0.5 mm", gt=0, description="total pull-out displacement of the pulled ends")
+    steps: Integer = Field(10, ge=1, le=99, description="pull-out steps")
+    release_steps: Integer = Field(4, ge=1, le=50, description="decrements in which the released ends' clamp force "
+                                                               "is taken off before the pull")
+    max_halvings: Integer = Field(4, ge=0, le=10, description="a pull-out sub-increment that fails is undone and "
+                                                             "halved, at most this deep")
+    sliding_fraction: Dimensionless = Field(
+        1.0 / 3.0, gt=0, le=1, description="the sliding force is the mean force over this last fraction of the "
+                                           "displacement")
+
+
 class RVEConfig(SceneConfig):
     """RVE homogenisation: relax, strain step by step, probe every stored state (thesis ch. 7)."""
 
@@ -257,6 +293,48 @@ class RVEConfig(SceneConfig):
         "pinned", description="pinned: the thesis's cell, every fibril end pinned (Algorithm 7.1); periodic: the "
                               "smallest repeat with periodic ties (section cell)")
     cell: PeriodicCell = Field(default_factory=PeriodicCell, description="the periodic cell (boundary: periodic)")
+    pullout: Pullout = Field(default_factory=Pullout, description="yarn pull-out (rve_pullout; docs/rve_pipeline.md)")
+    friction: FrictionSection = Field(
+        default_factory=FrictionSection,
+        description="regularised Coulomb friction between fibrils along the strain path (mu = 0: none; the "
+                    "relaxation is frictionless; docs/contact.md 'Friction in the RVE pipeline')")
+
+    @property
+    def has_friction(self) -> bool:
+        """Whether any fibril pair has mu > 0 (then the strain steps carry a friction term)."""
+        return self.friction.coefficient > 0 or any(float(m) > 0 for m in self.friction.pairs.values())
+
+    @model_validator(mode="after")
+    def _cycles_in_the_pinned_cell(self):
+        if self.strain.cycle_modes and self.boundary != "pinned":
+            raise ValueError(f"strain.cycle_modes = {self.strain.cycle_modes}: loading-unloading cycles are "
+                             f"available in the pinned cell only (boundary = {self.boundary!r})")
+        return self
+
+    @model_validator(mode="after")
+    def _friction_paths(self):
+        """Friction exists on the chord geometry of the pinned cell's strain path, penalty
+        enforcement, without the branch test (docs/contact.md 'Friction in the RVE pipeline');
+        any other combination is an error naming the key."""
+        if not self.has_friction:
+            return self
+        mu = f"friction.coefficient = {self.friction.coefficient:g}" + (
+            f", friction.pairs = {dict(self.friction.pairs)}" if self.friction.pairs else "")
+        if self.contact.geometry != "chord":
+            raise ValueError(f"contact.geometry = {self.contact.geometry!r} with {mu}: friction is implemented on "
+                             "the chord contact geometry only (contact.geometry: chord, or friction.coefficient: 0)")
+        if self.contact.enforcement != "penalty":
+            raise ValueError(f"contact.enforcement = {self.contact.enforcement!r} with {mu}: the augmented "
+                             "Lagrangian's multiplier updates are not a load path for the friction history "
+                             "(contact.enforcement: penalty, or friction.coefficient: 0)")
+        if self.boundary != "pinned":
+            raise ValueError(f"boundary = {self.boundary!r} with {mu}: friction is available in the pinned cell "
+                             "only (boundary: pinned, or friction.coefficient: 0)")
+        if self.strain.follow_branch:
+            raise ValueError(f"strain.follow_branch = true with {mu}: the branch test balances the potential "
+                             "against the clamps' work, which friction's dissipation breaks (strain.follow_branch: "
+                             "false)")
+        return self
 
     @model_validator(mode="after")
     def _unique_probe_names(self):

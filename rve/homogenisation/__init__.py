@@ -6,11 +6,14 @@ cheap), low to high:
 * ``config`` -- the ``RVEConfig`` model (``scene: rve``);
 * ``network`` -- the resistor-network model of a woven cell and its fit (R_y, R_c);
 * ``checkpoint`` -- the self-describing state files (``write_state``, ``load_state``);
-* ``strain`` -- relaxation and the strain steps of Algorithm 7.1 (``strain_step``);
+* ``strain`` -- relaxation and the strain steps of Algorithm 7.1 (``strain_step``), the
+  quasi-static path, friction along the path, loading-unloading cycles;
+* ``pullout`` -- the yarn pull-out (``pullout_step``);
 * ``probes`` -- the decoupled voltage / current / Joule-temperature probe solves;
 * ``sweeps`` -- runs, sweep combinations and their configs (``load_run_config``);
 * ``layout`` -- every file path of a run (shared with workflow/rules/rve.smk);
-* ``jobs`` -- the bodies of the state rules (fabric, relax, strain step, probes).
+* ``jobs`` -- the bodies of the state rules (fabric, relax, strain step, cycle step, pull-out
+  step, probes).
 
 The table rules (gather, report) are ``rve.tables.jobs``: the tables import this package,
 never the other way round. See docs/rve_pipeline.md.
@@ -19,7 +22,7 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("config", "network", "checkpoint", "strain", "probes", "sweeps", "layout", "jobs")
+_MODULES = ("config", "network", "checkpoint", "strain", "pullout", "probes", "sweeps", "layout", "jobs")
 
 _WHERE = {
     "RVEConfig": "config",

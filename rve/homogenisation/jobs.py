@@ -8,6 +8,9 @@ and the run spec (``rve.homogenisation.sweeps``), logs to the rule's log file
 ``fabric_job``      run spec -> the designed initial state (``rve_fabric``)
 ``relax_job``       initial state -> relaxed state, strain 0 (``rve_relax``)
 ``strain_job``      previous state -> state after one strain step (``rve_strain_step``)
+``cycle_job``       previous state -> state after one step of a loading-unloading cycle
+                    (``rve_cycle_step``; ``strain.cycle_modes``)
+``pullout_job``     previous state -> state after one yarn pull-out step (``rve_pullout_step``)
 ``probe_job``       a stored state -> its probe record, JSON (``rve_probes``)
 ==================  ====================================================================
 
@@ -23,6 +26,11 @@ otherwise the state goes to ``<name>.unconverged.nc`` and :class:`NotAnEquilibri
 raised, unless ``checks.keep_unconverged``); the probe job recomputes the state's
 equilibrium residual and refuses (:class:`StateRefused`, file quarantined) a state whose
 residual is more than ``checks.residual_refuse_factor`` x max(recorded, tolerance).
+With friction (``friction.coefficient`` > 0) the relaxed state carries the friction history
+with no elastic gap (the relaxation is frictionless), every strain step starts from its input
+state's history and writes its own (``State.friction``), and the probe job recomputes the
+residual with the stored history; a frictional run refuses a state without a history and a
+frictionless run one with a history (``_check_friction``).
 The table rules (``rve_gather``, ``rve_report``) are ``rve.tables.jobs``: the tables are the
 higher layer and import this package, never the other way round. A re-run of any job
 gives the same bytes of data, so a killed run resumes from the last complete step with an
@@ -42,7 +50,7 @@ from ..io.provenance import logging_to
 from .branch import BRANCH_COUNTS
 from .sweeps import BASE_COMBO, combo_params, load_run_config
 
-__all__ = ["fabric_job", "relax_job", "strain_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
+__all__ = ["fabric_job", "relax_job", "strain_job", "cycle_job", "pullout_job", "probe_record", "probe_job", "NotAnEquilibrium", "StateRefused",
            "recomputed_residual", "verify_equilibrium"]
 
 log = logging.getLogger("rve.homogenisation.jobs")
@@ -142,7 +150,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
     from ..fabrics.setup import clamp_reactions
     from ..solvers.linear import linear_threads, solver_threads
     from .multipliers import multiplier_record
-    from .strain import relax_fabric
+    from .strain import friction_start, relax_fabric
 
     with logging_to(log_path), linear_threads(threads):
         log.info("relax job: the minimiser's PARDISO factorisations on %d thread(s)", solver_threads())
@@ -157,7 +165,7 @@ def relax_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
         st = State(x=x, w=np.zeros_like(x), origin=x, kind="relaxed", step=0, strain=0.0,
                    time=float(cfg.relaxation.duration), combo=combo, params=combo_params(spec, combo),
                    config=_config_dict(cfg), reaction_force=reac, contact_count=int(cstate["active_points"]),
-                   solver=info, multipliers=multiplier_record(system))
+                   solver=info, multipliers=multiplier_record(system), friction=friction_start(cfg, fab, mesh, x))
         _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"relax job ({combo})")
         log.info("relaxed: converged=%s (|F| = %.3e N), %d active contact points, reactions %s, %.1f s -> %s",
                  info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"], out_state)
@@ -170,7 +178,7 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
     from .checkpoint import State, load_state
     from ..fabrics.setup import clamp_reactions
     from .multipliers import multiplier_record
-    from .strain import strain_step
+    from .strain import friction_record, strain_step
 
     step = int(step)
     with logging_to(log_path):
@@ -184,14 +192,17 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
         if prev.kind != expect or (step > 1 and (prev.mode != mode or prev.step != step - 1)):
             raise ValueError(f"{in_state}: expected the {expect} state before {mode} step {step}, got kind="
                              f"{prev.kind} mode={prev.mode!r} step={prev.step}")
-        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers)
+        _check_friction(cfg, prev, in_state)
+        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers,
+                                      friction=prev.friction)
         # a periodic cell gives its face forces (the Hill-Mandel stress); the pinned cell its clamps
         reac = info.pop("reaction_force", None) or clamp_reactions(fab, system, x)
         cstate = system.contact_state(x.reshape(-1))
         st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="strained", mode=mode, step=step,
                    strain=float(info["strain"]), time=prev.time + cfg.strain.t_step + cfg.strain.t_relax,
                    combo=combo, params=combo_params(spec, combo), config=_config_dict(cfg), reaction_force=reac,
-                   contact_count=int(cstate["active_points"]), solver=info, multipliers=multiplier_record(system))
+                   contact_count=int(cstate["active_points"]), solver=info, multipliers=multiplier_record(system),
+                   friction=friction_record(system))
         _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"{mode} step {step} ({combo})")
         log.info("%s step %d (strain %g): converged=%s (|F| = %.3e N), %d contact points, reactions %s, %.1f s -> %s",
                  mode, step, st.strain, info["converged"], info["residual_N"], st.contact_count, reac, info["wall_s"],
@@ -199,13 +210,112 @@ def strain_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathL
     return st
 
 
-def recomputed_residual(cfg, fab, mesh, x, multipliers=None) -> float:
+def cycle_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLike], spec: Mapping,
+              combo: str, mode: str, step: int):
+    """Step ``step`` (1..2n) of the loading-unloading cycle of ``mode`` (``strain.cycle_modes``)
+    from ``in_state`` (the relaxed state for step 1): Algorithm 7.1 between the cycle's levels
+    (``cell_statics.cycle_levels``), the friction history carried as on the strain path. The
+    state (kind ``cycle``) records in ``solver["cycle"]`` its strain, the potential ``energy``
+    (N mm), the clamps' ``work_rate`` dW/d eps (N mm; ``strain.pinned_energy``) and whether the
+    step loads or unloads; step 1 also the relaxed state's (``start``), so the cycle's table
+    needs only the cycle's files."""
+    from .cell_statics import cycle_levels
+    from .checkpoint import State, load_state
+    from ..fabrics.setup import clamp_reactions
+    from .multipliers import multiplier_record
+    from .strain import friction_record, mech_system, pinned_energy, seed_friction, strain_step
+
+    step = int(step)
+    with logging_to(log_path):
+        cfg = load_run_config(spec, combo)
+        if mode not in cfg.strain.cycle_modes:
+            raise ValueError(f"mode {mode!r} is not in the config's strain.cycle_modes {cfg.strain.cycle_modes}")
+        levels = cycle_levels(cfg)
+        if not 1 <= step < len(levels):
+            raise ValueError(f"cycle step must be in 1..{len(levels) - 1}, got {step}")
+        fab, mesh = _fabric_mesh(cfg)
+        prev = load_state(in_state, quarantine=True)
+        _check_state(prev, mesh, in_state)
+        expect = "relaxed" if step == 1 else "cycle"
+        if prev.kind != expect or (step > 1 and (prev.mode != mode or prev.step != step - 1)):
+            raise ValueError(f"{in_state}: expected the {expect} state before {mode} cycle step {step}, got kind="
+                             f"{prev.kind} mode={prev.mode!r} step={prev.step}")
+        _check_friction(cfg, prev, in_state)
+        eps_prev, eps = float(levels[step - 1]), float(levels[step])
+        x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers,
+                                      friction=prev.friction, levels=(eps_prev, eps))
+        energy, rate = pinned_energy(fab, mesh, system, x, prev.origin, mode, eps)
+        info["cycle"] = {"strain": eps, "energy": energy, "work_rate": rate,
+                         "leg": "load" if eps > eps_prev else "unload", "steps": len(levels) - 1}
+        if step == 1:   # the relaxed state as the cycle's step 0 (its friction forces: none, no elastic gap)
+            xf = prev.x.reshape(-1)
+            sys0 = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
+            seed_friction(sys0, prev.friction, xf)
+            e0, r0 = pinned_energy(fab, mesh, sys0, prev.x, prev.origin, mode, eps_prev)
+            info["cycle"]["start"] = {"strain": eps_prev, "energy": e0, "work_rate": r0,
+                                      "reaction_force": prev.reaction_force,
+                                      "dissipated": float((prev.friction or {}).get("dissipated", 0.0))}
+        reac = clamp_reactions(fab, system, x)
+        cstate = system.contact_state(x.reshape(-1))
+        st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="cycle", mode=mode, step=step, strain=eps,
+                   time=prev.time + cfg.strain.t_step + cfg.strain.t_relax, combo=combo,
+                   params=combo_params(spec, combo), config=_config_dict(cfg), reaction_force=reac,
+                   contact_count=int(cstate["active_points"]), solver=info, multipliers=multiplier_record(system),
+                   friction=friction_record(system))
+        _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"{mode} cycle step {step} ({combo})")
+        log.info("%s cycle step %d (strain %g, %s): converged=%s (|F| = %.3e N), work rate %.6g N mm, energy "
+                 "%.6g N mm, dissipated %.6g N mm -> %s", mode, step, eps, info["cycle"]["leg"], info["converged"],
+                 info["residual_N"], rate, energy, (st.friction or {}).get("dissipated", 0.0), out_state)
+    return st
+
+
+def pullout_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLike], spec: Mapping,
+                combo: str, step: int):
+    """Step ``step`` of the yarn pull-out (``rve.homogenisation.pullout``) from ``in_state``
+    (the relaxed state for step 1); the state (kind ``pullout``) records ``solver["pullout"]``."""
+    from .checkpoint import State, load_state
+    from .multipliers import multiplier_record
+    from .pullout import pullout_step
+    from .strain import friction_record
+
+    step = int(step)
+    with logging_to(log_path):
+        cfg = load_run_config(spec, combo)
+        if cfg.boundary != "pinned":
+            raise ValueError(f"pullout: boundary = {cfg.boundary!r}; the yarn pull-out is defined on the pinned cell")
+        if cfg.contact.enforcement != "penalty":
+            raise ValueError("pullout: contact.enforcement must be 'penalty' (the pull-out's static solves have no "
+                             "Uzawa loop)")
+        fab, mesh = _fabric_mesh(cfg)
+        prev = load_state(in_state, quarantine=True)
+        _check_state(prev, mesh, in_state)
+        expect = "relaxed" if step == 1 else "pullout"
+        if prev.kind != expect or (step > 1 and prev.step != step - 1):
+            raise ValueError(f"{in_state}: expected the {expect} state before pull-out step {step}, got kind="
+                             f"{prev.kind} step={prev.step}")
+        _check_friction(cfg, prev, in_state)
+        x, system, info = pullout_step(cfg, fab, mesh, prev.x, prev.origin, step, friction=prev.friction)
+        cstate = system.contact_state(x.reshape(-1))
+        po = info["pullout"]
+        st = State(x=x, w=np.zeros_like(x), origin=prev.origin, kind="pullout", mode="pullout", step=step,
+                   strain=float(po["displacement"]), time=prev.time, combo=combo, params=combo_params(spec, combo),
+                   config=_config_dict(cfg), reaction_force={}, contact_count=int(cstate["active_points"]),
+                   solver=info, multipliers=multiplier_record(system), friction=friction_record(system))
+        _store_equilibrium(cfg, out_state, st, fab, mesh, system, f"pull-out step {step} ({combo})")
+        log.info("pull-out step %d: u = %g mm, force %.6g N (supports %.3g N), released ends moved %.4g mm, "
+                 "|F| = %.3e N -> %s", step, po["displacement"], po["force"], po["balance"],
+                 po["released_displacement"], info["residual_N"], out_state)
+    return st
+
+
+def recomputed_residual(cfg, fab, mesh, x, multipliers=None, friction=None) -> float:
     """|F(x, 0)| on the free dofs (N) of a stored state, from scratch: the strain path's
     mechanics system (``strain.mech_system``, contact map built at ``x``; a periodic cell's
     reduced system at the macro gradient the state carries), with the state's contact
-    ``multipliers`` (augmented Lagrangian: the equilibrium is one at those multipliers)."""
+    ``multipliers`` (augmented Lagrangian: the equilibrium is one at those multipliers) and
+    its friction history (``friction``: the friction forces that hold the state)."""
     from .multipliers import seed_multipliers
-    from .strain import free_residual, mech_system
+    from .strain import free_residual, mech_system, seed_friction
 
     if cfg.boundary == "periodic":
         from .periodic import periodic_free_residual
@@ -214,6 +324,7 @@ def recomputed_residual(cfg, fab, mesh, x, multipliers=None) -> float:
     xf = np.asarray(x, float).reshape(-1)
     system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
     seed_multipliers(system, multipliers)
+    seed_friction(system, friction, xf)
     return free_residual(system, xf)
 
 
@@ -224,7 +335,7 @@ def verify_equilibrium(cfg, fab, mesh, st, path, quarantine: bool = True):
     recorded = st.solver.get("residual_N")
     recorded = float("nan") if recorded is None else float(recorded)
     tol = _stage_tolerance(cfg, st.kind)
-    residual = recomputed_residual(cfg, fab, mesh, st.x, st.multipliers)
+    residual = recomputed_residual(cfg, fab, mesh, st.x, st.multipliers, st.friction)
     factor = float(cfg.checks.residual_refuse_factor)
     limit = factor * max(recorded if np.isfinite(recorded) else 0.0, tol)
     log.info("%s: equilibrium residual recomputed %.3e N (recorded %.3e N, limit %.3e N)", path, residual,
@@ -257,6 +368,21 @@ def _check_multipliers(cfg, st, path) -> None:
                          f"{cfg.contact.enforcement!r}: it was written by an augmented Lagrangian run")
 
 
+def _check_friction(cfg, st, path) -> None:
+    """A state of a run with friction must carry its friction history (without it the next
+    step would start every contact without elastic gap: another path), and a frictionless
+    run must not read a frictional state."""
+    if st.kind == "initial":
+        return
+    if cfg.has_friction and st.friction is None:
+        raise ValueError(f"{path}: the config has friction (friction.coefficient = {cfg.friction.coefficient:g}) but "
+                         "the state has no friction history (contact_friction_key): it was written by a "
+                         "frictionless run")
+    if not cfg.has_friction and st.friction is not None:
+        raise ValueError(f"{path}: the state carries a friction history but the config has friction.coefficient = "
+                         "0: it was written by a run with friction")
+
+
 def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
                  tubes_path: Optional[PathLike] = None) -> dict:
     """The probe solves on one stored state -> its table record (rve.tables format,
@@ -272,6 +398,7 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
     st = load_state(state_file, quarantine=True)
     _check_state(st, mesh, state_file)
     _check_multipliers(cfg, st, state_file)
+    _check_friction(cfg, st, state_file)
     residual, recorded = verify_equilibrium(cfg, fab, mesh, st, state_file)
     pictures = tubes_path is not None and cfg.output.pictures
     results = solve_probes(cfg, fab, mesh, st.x, with_fields=pictures, multipliers=st.multipliers)
@@ -291,6 +418,12 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
                   "residual_N_recorded": recorded},
         "wall_s": time.perf_counter() - t0,
     }
+    if st.friction is not None:   # the friction of the state (relaxed: the start of the path, none yet)
+        fs = st.solver.get("friction") or {}
+        rec["friction"] = {"dissipated_energy": float(st.friction.get("dissipated", 0.0)),
+                           "friction_force": float(fs.get("friction_force", 0.0)),
+                           "normal_force": float(fs.get("normal_force", 0.0)),
+                           "stick_points": int(fs.get("stick", 0)), "slip_points": int(fs.get("slip", 0))}
     branch = st.solver.get("branch")
     if branch:   # the step's equilibrium-path test (rve.homogenisation.branch), for the table's attributes
         rec["state"]["branch"] = {k: branch.get(k) for k in BRANCH_COUNTS + ("kept",)}

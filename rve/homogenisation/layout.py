@@ -10,12 +10,18 @@ rule's pattern: ``state_path("{run}", "{combo}", "{state}")`` ->
 ``{RVE_DIR}/{run}/{combo}/states/initial.nc``           generated fabric (rve_fabric)
 ``{RVE_DIR}/{run}/{combo}/states/relaxed.nc``           relaxed state = step 0 (rve_relax)
 ``{RVE_DIR}/{run}/{combo}/states/{mode}_{step:02d}.nc`` after strain step i (rve_strain_step)
+``{RVE_DIR}/{run}/{combo}/states/{mode}_cycle_{i:02d}.nc``  after step i of a loading-unloading
+                                                        cycle (rve_cycle_step)
 ``{RVE_DIR}/{run}/{combo}/probes/{state}.json``         probe record of a state (rve_probes)
 ``{RVE_DIR}/{run}/table.nc``, ``table.csv``,            lookup table (rve_gather)
 ``summary.txt``
 ``{RVE_DIR}/{run}/table_abaqus.inc``, ``table_lsdyna.k``,  macro-FE exports (rve_exports;
 ``table_hermite.json``, ``table_curves/{curve}.csv``      docs/macro_export.md)
 ``{RVE_DIR}/{run}/plots/table_*.png``                   figures (rve_report)
+``{RVE_DIR}/{run}/plots/table_cycle_loops.png``         hysteresis loops (rve_cycle_report)
+``{RVE_DIR}/{run}/{combo}/states/pullout_{i:02d}.nc``   after yarn pull-out step i (rve_pullout_step)
+``{RVE_DIR}/{run}/pullout.nc``, ``pullout.csv``,        pull-out curve (rve_pullout_table) and
+``plots/table_pullout.png``                             its figure (rve_pullout_report)
 ``{RVE_DIR}/{run}/{combo}/tubes/{state}.vtp``           tube mesh of a state (rve_probes,
                                                         with ``output.pictures``)
 ``{RVE_DIR}/{run}/{combo}/pictures/{mode}.pvd``, ``*.png``  series and renders
@@ -27,7 +33,9 @@ rule's pattern: ``state_path("{run}", "{combo}", "{state}")`` ->
 
 ``{job}`` (``job_name``): ``{combo}/fabric``, ``{combo}/relax``,
 ``{combo}/strain/{state}``, ``{combo}/probes/{state}``, ``{combo}/pictures/{relaxed|mode}``, ``gather``,
-``exports``, ``report``, ``ensemble_report``.
+``exports``, ``report``, ``ensemble_report``, ``cycle_report``, ``pullout_table``,
+``pullout_report`` (a cycle step is ``{combo}/strain/{mode}_cycle_{step}``, a pull-out step
+``{combo}/pullout/pullout_{step}``).
 ``RVE_DIR`` = results/rve, ``LOG_DIR`` = results/logs/rve, ``BENCHMARK_DIR`` =
 results/benchmarks/rve; every function takes ``root`` to place a run elsewhere.
 
@@ -51,7 +59,9 @@ __all__ = [
     "previous_state", "run_record_paths", "table_outputs", "export_outputs", "report_prefix", "report_outputs", "job_name",
     "log_path", "benchmark_path", "default_targets", "tubes_path", "picture_outputs", "picture_targets",
     "ensemble_report_outputs", "mode_state_names", "convergence_outputs", "convergence_default", "config_digest",
-    "work_precision_outputs", "work_precision_runs",
+    "work_precision_outputs", "work_precision_runs", "cycle_state_name", "cycle_state_names", "previous_cycle_state",
+    "cycle_state_paths", "cycle_report_outputs", "pullout_state_name", "previous_pullout_state",
+    "pullout_state_paths", "pullout_outputs",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -62,7 +72,7 @@ BENCHMARK_DIR = "results/benchmarks/rve"
 
 #: the jobs of a run, in DAG order (one Snakemake rule each)
 STAGES = ("fabric", "relax", "strain", "probes", "probes_dask", "pictures", "gather", "exports", "report",
-          "ensemble_report")
+          "ensemble_report", "cycle_report", "pullout", "pullout_table", "pullout_report")
 
 
 # ============================================================================ state names
@@ -160,6 +170,71 @@ def picture_targets(spec: Mapping, run: str, root: PathLike = RVE_DIR) -> list[s
         for m in cfg.strain.modes:
             out += list(picture_outputs(run, c.id, m, root).values())
     return out
+
+
+# ============================================================================ loading-unloading cycles
+def cycle_state_name(mode: str, step: int) -> str:
+    """``{mode}_cycle_{step:02d}`` after step ``step`` of ``mode``'s cycle; ``relaxed`` for step 0."""
+    return "relaxed" if int(step) == 0 else f"{mode}_cycle_{int(step):02d}"
+
+
+def cycle_state_names(cfg, mode: str) -> list[str]:
+    """The states of ``mode``'s loading-unloading cycle after the relaxed one (2n)."""
+    n = int(cfg.strain.cycle_steps or cfg.strain.steps)
+    return [cycle_state_name(mode, i) for i in range(1, 2 * n + 1)]
+
+
+def previous_cycle_state(run: str, combo: str, mode: str, step: int, root: PathLike = RVE_DIR) -> str:
+    """Input of cycle step ``step`` of ``mode``: the relaxed state or the previous cycle step."""
+    step = int(step)
+    if step < 1:
+        raise ValueError(f"cycle steps start at 1, got {step}")
+    return state_path(run, combo, cycle_state_name(mode, step - 1), root)
+
+
+def cycle_state_paths(spec: Mapping, run: str, root: PathLike = RVE_DIR) -> list[str]:
+    """Every cycle state of a run (all combinations, every mode of ``strain.cycle_modes``),
+    the gather's input for the cycle variables of the table."""
+    out = []
+    for c in combos(spec):
+        cfg = load_run_config(spec, c.id)
+        for m in cfg.strain.cycle_modes:
+            out += [state_path(run, c.id, n, root) for n in cycle_state_names(cfg, m)]
+    return out
+
+
+def cycle_report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
+    """The hysteresis figure of a run with cycles: ``loops`` (work rate against strain per mode
+    and combination)."""
+    return {"loops": f"{report_prefix(run, root)}_cycle_loops.png"}
+
+
+# ============================================================================ yarn pull-out
+def pullout_state_name(step: int) -> str:
+    """``pullout_{step:02d}`` after pull-out step ``step``; ``relaxed`` for step 0."""
+    return "relaxed" if int(step) == 0 else f"pullout_{int(step):02d}"
+
+
+def previous_pullout_state(run: str, combo: str, step: int, root: PathLike = RVE_DIR) -> str:
+    """Input of pull-out step ``step``: the relaxed state or the previous pull-out step."""
+    if int(step) < 1:
+        raise ValueError(f"pull-out steps start at 1, got {step}")
+    return state_path(run, combo, pullout_state_name(int(step) - 1), root)
+
+
+def pullout_state_paths(spec: Mapping, run: str, root: PathLike = RVE_DIR) -> list[str]:
+    """Every pull-out state of a run (all combinations, ``pullout.steps`` each)."""
+    out = []
+    for c in combos(spec):
+        n = int(load_run_config(spec, c.id).pullout.steps)
+        out += [state_path(run, c.id, pullout_state_name(i), root) for i in range(1, n + 1)]
+    return out
+
+
+def pullout_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
+    """The pull-out table of a run: ``table`` (netCDF) and ``csv``; and its figure ``curve``."""
+    return {"table": f"{root}/{run}/pullout.nc", "csv": f"{root}/{run}/pullout.csv",
+            "curve": f"{report_prefix(run, root)}_pullout.png"}
 
 
 def mode_state_names(spec: Mapping, combo: str, mode: str) -> list[str]:
@@ -261,7 +336,8 @@ def job_name(stage: str, combo: Optional[str] = None, state: Optional[str] = Non
     ``report``."""
     if stage not in STAGES:
         raise ValueError(f"unknown stage {stage!r} (have {', '.join(STAGES)})")
-    if stage in ("probes_dask", "gather", "exports", "report", "ensemble_report"):
+    if stage in ("probes_dask", "gather", "exports", "report", "ensemble_report", "cycle_report", "pullout_table",
+                 "pullout_report"):
         return stage
     if combo is None:
         raise ValueError(f"stage {stage!r}: a job of one combination needs its combo")
@@ -288,7 +364,8 @@ def benchmark_path(run: str, stage: str, combo: Optional[str] = None, state: Opt
 def default_targets(config: Mapping, extra: Optional[Mapping[str, Sequence[str]]] = None) -> list[str]:
     """Targets of ``snakemake -j2``: the table, its macro-ready exports (runs without a
     parameter sweep: the exports need the swept values chosen, ``rve table export --param``)
-    and figures of every run in ``rve.default_runs`` when ``default_targets`` lists ``rve``
+    and figures (with the hysteresis loops of a run with ``strain.cycle_modes``) of every run in
+    ``rve.default_runs`` when ``default_targets`` lists ``rve``
     (the default), plus the outputs of the other names ``default_targets`` lists
     (``extra``: name -> files)."""
     names = list(config.get("default_targets") or ["rve"])
@@ -300,6 +377,8 @@ def default_targets(config: Mapping, extra: Optional[Mapping[str, Sequence[str]]
             for run in rve.get("default_runs") or []:
                 out += list(table_outputs(run).values()) + list(report_outputs(run).values())
                 out += picture_targets(rve.get("runs", {}).get(run) or {}, run)
+                if cycle_state_paths(rve.get("runs", {}).get(run) or {}, run):
+                    out += list(cycle_report_outputs(run).values())
                 if not (rve.get("runs", {}).get(run) or {}).get("sweep"):
                     out += list(export_outputs(run).values())
         elif name in extra:

@@ -49,12 +49,27 @@ jumped to another equilibrium is followed from the previous state in halves
 (``strain.branch_method: halving``, the default) or by pseudo-arclength continuation through
 its limit points (``arc_length``, ``rve.homogenisation.continuation``; halving where it fails); the record is ``info["branch"]`` (docs/table_accuracy.md, "One equilibrium path").
 
+``strain.path: quasi_static`` replaces 1.-3. by ``strain.substeps`` sub-increments, each the
+affine increment applied to every node as the predictor (the ends exactly on their targets)
+and the static solve from there (``_quasi_static_step``): no dynamics, so with friction every
+sub-increment is one committed backward-Euler step of the slip.
+
+Friction (``friction`` with mu > 0; docs/contact.md "Friction in the RVE pipeline"): the
+relaxation is frictionless; the strain path's systems carry the friction law
+(``mech_system``), the history passes from the input state to each phase's system
+(``seed_friction``) and is committed by every accepted time step and by the static solve;
+``friction_record`` is what the checkpoint stores, ``friction_start`` the relaxed state's
+history (no elastic gap), ``friction_summary`` the step's record. A loading-unloading cycle
+(``strain.cycle_modes``) is the same step between the levels of ``cycle_levels``
+(``strain_step(levels=...)``).
+
 If the driven phase fails (step control exhausted), the remaining part of the field is
 applied kinematically (an affine move of every node) and the failure is recorded in
 the step's ``info``; the ends always land exactly on X + eps_n X1 e_i.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from types import SimpleNamespace
@@ -63,14 +78,16 @@ import numpy as np
 
 from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
+from ..solvers.frictional import friction_of
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
-from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .cell_statics import cycle_levels, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .continuation import periodic_arc, pinned_arc
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
-__all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "affine_velocity", "free_residual",
+__all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "cycle_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
-           "end_targets", "pinned_energy"]
+           "end_targets", "pinned_energy", "friction_law", "friction_record", "seed_friction", "friction_start",
+           "friction_summary"]
 
 log = logging.getLogger("rve.homogenisation.strain")
 
@@ -80,13 +97,86 @@ MODE_DIRECTION = {"uniaxial": 0, "shear": 1, "uniaxial_y": 1, "trellis": 0}
 MODE_SOURCE = {"uniaxial_y": 1}
 
 
-def mech_system(fab, mesh, cfg, damping: float, x, end_velocity=None, twist_gauge: str = "first") -> ContactSystem:
+def mech_system(fab, mesh, cfg, damping: float, x, end_velocity=None, twist_gauge: str = "first",
+                friction: bool = True) -> ContactSystem:
     """Mechanics-only ``ContactSystem`` of a strain-path phase (``rve.fabrics.setup.mechanics_system``):
     ends pinned (centroid velocity ``end_velocity``, (n_ends, 3), default 0), twist gauge,
     volumetric damping ``damping``, the contact law without conduction, the map rebuilt
-    every ``strain.rebuild_every`` steps."""
+    every ``strain.rebuild_every`` steps. With ``friction`` and a config whose friction is on
+    (``cfg.has_friction``) the contact term carries the friction law, every fibril's family
+    its yarn direction (warp, weft, loop: the keys of ``friction.pairs``), and a history that
+    starts at ``x`` with no elastic gap (seed it: :func:`seed_friction`)."""
     params = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False)
-    return mechanics_system(fab, mesh, cfg, params, damping, x, end_velocity=end_velocity, twist_gauge=twist_gauge)
+    law = friction_law(cfg) if friction else None
+    if law is not None:
+        params = dataclasses.replace(params, friction=law)
+    system = mechanics_system(fab, mesh, cfg, params, damping, x, end_velocity=end_velocity, twist_gauge=twist_gauge)
+    fr = friction_of(system)
+    if fr is not None:
+        fr.set_families([fab.yarns[int(y)].direction for y in fab.fibril_yarn])
+    return system
+
+
+def friction_law(cfg):
+    """The ``FrictionLaw`` of the config's ``friction`` section, None when every mu is 0 (the
+    frictionless path, bit for bit)."""
+    if not getattr(cfg, "has_friction", False):
+        return None
+    from ..model.terms.friction import FrictionLaw
+
+    return FrictionLaw(*cfg.friction.law_args())
+
+
+def friction_record(system):
+    """The friction history of ``system`` (``FrictionTerm.record()``), None without friction."""
+    fr = friction_of(system)
+    return None if fr is None else fr.record()
+
+
+def seed_friction(system, record, x) -> None:
+    """The friction history of ``system``'s current map (built at ``x``) from ``record`` by
+    point key; a point not in the record takes the history of its neighbour along the -
+    fibril (``FrictionTerm.share_along_fibrils``, as at a map rebuild), else it keeps the
+    start it has (no elastic gap at ``x``). No-op without friction or record."""
+    fr = friction_of(system)
+    if fr is None or record is None:
+        return
+    from ..model.terms.friction import match_rows
+
+    fr.seed(record)
+    if fr.keys is not None and len(fr.keys):
+        new = match_rows(fr.keys, record["keys"]) < 0
+        if new.any():
+            fr.share_along_fibrils(np.asarray(x, float).reshape(-1), receivers=new.reshape(fr.s_bar.shape))
+
+
+def friction_start(cfg, fab, mesh, x):
+    """The friction history of a state with no elastic gap anywhere (the relaxed state: the
+    relaxation is frictionless, friction starts on the strain path), committed at ``x``;
+    None without friction."""
+    if friction_law(cfg) is None:
+        return None
+    system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, np.asarray(x, float).reshape(-1))
+    friction_of(system).commit(np.asarray(x, float).reshape(-1))
+    return friction_record(system)
+
+
+def friction_summary(system, start_dissipated: float = 0.0, static_info=None) -> dict:
+    """The friction of the last committed state of ``system``: total friction and normal
+    force of the contact points (N), stick and slip counts, the energy dissipated since the
+    start of the path (``dissipated``, N mm) and by this step (``step_dissipated``). With
+    ``static_info`` (the step's frictional static solve) the counts are those of its first
+    round, the increment itself: the later rounds are the small re-solves after the commit
+    (``cell_statics``), in which a point that slides on the Coulomb cone sticks."""
+    fr = friction_of(system)
+    if fr is None:
+        return {}
+    out = fr.points()
+    rounds = (static_info or {}).get("rounds") or []
+    if rounds and "slip" in rounds[0]:
+        out.update({"stick": int(rounds[0]["stick"]), "slip": int(rounds[0]["slip"])})
+    out.update({"dissipated": float(fr.dissipated), "step_dissipated": float(fr.dissipated - start_dissipated)})
+    return out
 
 
 def _settings(duration, steps, k, rtol, max_iter, atol, static, static_rounds=4, static_max_iter=80):
@@ -127,13 +217,13 @@ def relax_fabric(cfg, fab, mesh, x0):
     info = {}
     if getattr(r, "method", "dynamic") == "energy":
         return _relax_energy_scene(cfg, fab, mesh, x, t0)
-    system = mech_system(fab, mesh, cfg, r.damping, x)
+    system = mech_system(fab, mesh, cfg, r.damping, x, friction=False)
     s = _settings(r.duration, r.steps, r.rebuild_every, r.newton_rtol, r.newton_max_iter, r.static_atol, static=False)
     res = relax_to_equilibrium(system, x, np.zeros(system.n), s)
     info["relax"] = _summary(res, system, res.x)
     x = res.x
     if st.duration > 0:
-        system = mech_system(fab, mesh, cfg, st.damping, x)
+        system = mech_system(fab, mesh, cfg, st.damping, x, friction=False)
         s2 = _settings(st.duration, st.steps, r.rebuild_every, r.newton_rtol, r.newton_max_iter, r.static_atol,
                        static=False)
         res = relax_to_equilibrium(system, x, np.zeros(system.n), s2)
@@ -166,7 +256,7 @@ def _relax_energy_scene(cfg, fab, mesh, x0, t0):
         raise ValueError("relaxation system is not mechanics-only")
     x = np.asarray(x, float)
     # our clamps: the scene's (centroids of every end pinned, g1_z gauge at first nodes)
-    sys_out = mech_system(fab, mesh, cfg, cfg.relaxation.damping, x)
+    sys_out = mech_system(fab, mesh, cfg, cfg.relaxation.damping, x, friction=False)
     al = None
     if sys_out.augmented:   # the scene relaxed with the penalty: the multipliers from here
         r = cfg.relaxation
@@ -219,12 +309,16 @@ def end_targets(origin_ends: np.ndarray, mode: str, eps: float) -> np.ndarray:
     return target
 
 
-def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None):
+def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None, friction=None,
+                levels=None):
     """One step of Algorithm 7.1 (or of the periodic cell, ``boundary: periodic``) from
     ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to eps_step (module docstring).
     ``multipliers``: the contact multipliers of ``x_prev`` (``multipliers.multiplier_record``,
-    the checkpoint's; None: zero), for ``contact.enforcement: augmented_lagrangian``. Returns
-    ``(x (n_nodes, 9), system, info)``; the system holds the multipliers of ``x``."""
+    the checkpoint's; None: zero), for ``contact.enforcement: augmented_lagrangian``.
+    ``friction``: the friction history of ``x_prev`` (``friction_record``, the checkpoint's),
+    with the config's friction on. ``levels``: ``(eps_from, eps_to)`` of the step instead of
+    ``strain_levels`` (a loading-unloading cycle, ``cycle_levels``). Returns ``(x (n_nodes, 9), system, info)``; the system
+    holds the multipliers and the committed friction history of ``x``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
     sp_ = cfg.strain
@@ -239,17 +333,22 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         def energy(system, x, e):
             return periodic_energy(cfg, fab, mesh, x, mode, e, multipliers if system is None else multiplier_record(system))
     else:
+        stepper = _quasi_static_step if sp_.path == "quasi_static" else _algorithm_step
+
         def part(x, e_from, e_to, whole=False, lam=multipliers):
-            return _algorithm_step(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam)
+            return stepper(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam, friction=friction)
 
         def energy(system, x, e):
             if system is None:
                 system = mech_system(fab, mesh, cfg, sp_.relax_damping, np.asarray(x, float).reshape(-1))
             return pinned_energy(fab, mesh, system, x, origin, mode, e)
-    if not 1 <= step <= sp_.steps:
-        raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
-    levels = strain_levels(cfg)
-    eps_prev, eps = float(levels[step - 1]), float(levels[step])
+    if levels is not None:
+        eps_prev, eps = float(levels[0]), float(levels[1])
+    else:
+        if not 1 <= step <= sp_.steps:
+            raise ValueError(f"step must be in 1..{sp_.steps}, got {step}")
+        levels = strain_levels(cfg)
+        eps_prev, eps = float(levels[step - 1]), float(levels[step])
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
         if periodic:
             arc = periodic_arc(cfg, fab, mesh, mode)
@@ -317,11 +416,74 @@ def pinned_energy(fab, mesh, system, x, origin, mode: str, eps: float) -> tuple:
     return float(system.energy(xf)), work_rate
 
 
+def _quasi_static_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
+                       multipliers=None, friction=None):
+    """``strain.path: quasi_static`` from ``x_prev`` at ``eps_prev`` to ``eps``: ``strain.substeps``
+    equal sub-increments, each the affine increment of the mode applied to every node as the
+    predictor (``affine_velocity`` / ``secant_velocity`` times a unit time; the ends exactly on
+    their targets) and the static solve from there (``cell_statics.static_minimize``: the energy
+    minimiser, or with friction the committed frictional residual solve from the history of
+    the last sub-increment; in the Uzawa loop with the augmented Lagrangian). No dynamics: with
+    friction each sub-increment is one backward-Euler step of the slip, so the return-map
+    dissipation is that of the quasi-static path (Algorithm 7.1's driven phase makes contacts
+    slip on its way, docs/contact.md "Friction in the RVE pipeline")."""
+    sp_ = cfg.strain
+    t_start = time.perf_counter()
+    nn = mesh.n_nodes
+    origin = np.asarray(origin, float)
+    x = np.array(x_prev, float).reshape(nn, 9)
+    ends, _, _ = clamped_ends(fab, mesh)
+    system = mech_system(fab, mesh, cfg, sp_.relax_damping, x.reshape(-1))
+    seed_multipliers(system, multipliers)
+    seed_friction(system, friction, x.reshape(-1))
+    fr = friction_of(system)
+    d_start = 0.0 if fr is None else float(fr.dissipated)
+    n = int(sp_.substeps)
+    levels = [eps_prev + (eps - eps_prev) * k / n for k in range(n)] + [float(eps)]
+    info = {"mode": mode, "step": int(step), "strain": float(eps), "strain_increment": float(eps - eps_prev),
+            "path": "quasi_static", "substeps": []}
+
+    def static(xs):
+        return static_minimize(system, xs, sp_.static_atol, sp_.static_max_iter)
+
+    sinfo = {"converged": True}
+    for k in range(1, n + 1):
+        t0 = time.perf_counter()
+        if mode == "trellis":
+            du = secant_velocity(origin, trellis_gradient(levels[k - 1]), trellis_gradient(levels[k]), 1.0)
+        else:
+            du = affine_velocity(origin, mode, levels[k] - levels[k - 1])
+        x = x + du
+        x[ends, :3] = end_targets(origin[ends, :3], mode, levels[k])
+        x2, sinfo = equilibrium(system, static, x.reshape(-1))
+        x = np.asarray(x2, float).reshape(nn, 9)
+        sinfo["wall_s"] = time.perf_counter() - t0
+        info["substeps"].append({"strain": float(levels[k]), "converged": bool(sinfo["converged"]),
+                                 "iterations": int(sinfo.get("iterations", 0)), "wall_s": sinfo["wall_s"]})
+        if not sinfo["converged"]:
+            log.warning("%s step %d: sub-increment %d of %d (strain %g) did not converge", mode, step, k, n,
+                        levels[k])
+            break
+    info["static"] = sinfo
+    info["converged"] = bool(sinfo["converged"])
+    info["residual_N"] = free_residual(system, x)
+    if fr is not None:
+        info["friction"] = friction_summary(system, d_start, sinfo)
+    info["wall_s"] = time.perf_counter() - t_start
+    if not info["converged"]:
+        log.warning("%s step %d: static solve did not reach %.1e N (|F| = %.3e N)", mode, step, sp_.static_atol,
+                    info["residual_N"])
+    return x, system, info
+
+
 def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
-                    multipliers=None):
+                    multipliers=None, friction=None):
     """Algorithm 7.1 from ``x_prev`` at strain ``eps_prev`` to ``eps`` (module docstring;
     ``step`` labels the record). The multipliers (``strain_step``) pass from phase to phase;
-    the static solve is in the Uzawa loop (``multipliers.equilibrium``)."""
+    the static solve is in the Uzawa loop (``multipliers.equilibrium``). So does the friction
+    history (``friction``, that of ``x_prev``): every accepted time step of the two dynamic
+    phases commits it (``relax_to_equilibrium``), the static solve solves the residual from it
+    (``cell_statics.static_minimize``) and commits the solution."""
     sp_ = cfg.strain
     t_start = time.perf_counter()
     d_eps = float(eps - eps_prev)
@@ -342,6 +504,9 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     t0 = time.perf_counter()
     sys1 = mech_system(fab, mesh, cfg, sp_.damping, x, end_velocity=end_vel)
     seed_multipliers(sys1, multipliers)
+    seed_friction(sys1, friction, x.reshape(-1))
+    fr1 = friction_of(sys1)
+    d_start = 0.0 if fr1 is None else float(fr1.dissipated)
     s1 = _settings(sp_.t_step, sp_.stretch_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
                    sp_.static_atol, static=False)
     res1 = relax_to_equilibrium(sys1, x.reshape(-1), w_aff.reshape(-1), s1)
@@ -368,6 +533,7 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     t0 = time.perf_counter()
     sys2 = mech_system(fab, mesh, cfg, sp_.relax_damping, x1)
     seed_multipliers(sys2, multiplier_record(sys1))
+    seed_friction(sys2, friction_record(sys1), x1.reshape(-1))
     s2 = _settings(sp_.t_relax, sp_.relax_steps, sp_.rebuild_every, sp_.newton_rtol, sp_.newton_max_iter,
                    sp_.static_atol, static=False)
     res2 = relax_to_equilibrium(sys2, x1.reshape(-1), np.zeros(sys2.n), s2)
@@ -386,6 +552,8 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     x2 = x2.reshape(nn, 9)
     info["converged"] = bool(sinfo["converged"])
     info["residual_N"] = free_residual(sys2, x2)
+    if friction_of(sys2) is not None:
+        info["friction"] = friction_summary(sys2, d_start, sinfo)
     info["wall_s"] = time.perf_counter() - t_start
     if not info["converged"]:
         log.warning("%s step %d: static solve did not reach %.1e N (|F| = %.3e N)", mode, step, sp_.static_atol,

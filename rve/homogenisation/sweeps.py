@@ -16,7 +16,8 @@ paths (``SWEEP_ALIASES``): ``fibril_radius`` / ``fibril.radius`` (sets
 (``contact.conductance``), ``thermal_contact_conductance`` / ``contact.h_c``,
 ``contact_penalty``, ``weave`` (``fabric.kind``), ``youngs_modulus``, ``conductivity``,
 ``thermal_conductivity``, ``spacing``, ``amplitude``, ``realization`` (``packing.seed``: an
-ensemble of perturbed packings, ``rve.tables.ensemble``), or any dotted RVEConfig path
+ensemble of perturbed packings, ``rve.tables.ensemble``), ``friction_coefficient`` /
+``friction.coefficient`` (mu of every fibril pair), or any dotted RVEConfig path
 (dimension = the path with dots replaced by underscores). Numeric values are in internal
 units or strings with units (converted with the unit of the config field).
 
@@ -60,6 +61,8 @@ SWEEP_ALIASES: dict[str, tuple[str, str, Optional[float]]] = {
     "spacing": ("spacing", "fabric.spacing", 1.0),
     "amplitude": ("amplitude", "fabric.amplitude", 1.0),
     "realization": ("realization", "packing.seed", 1.0),  # an ensemble of packings (rve.tables.ensemble)
+    "friction_coefficient": ("friction_coefficient", "friction.coefficient", 1.0),
+    "friction.coefficient": ("friction_coefficient", "friction.coefficient", 1.0),
 }
 
 

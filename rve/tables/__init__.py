@@ -14,6 +14,8 @@ docs/lookup_tables.md. One concept per module:
 * ``formats`` -- the macro-FE exports abaqus, lsdyna, curves, comsol, hermite, spice
   (:func:`export_macro`, docs/macro_export.md §3);
 * ``summary`` -- :func:`summarize`; ``plot`` -- :func:`plot_table`;
+* ``cycles`` -- the loading-unloading cycles' variables and loops (``add_cycle_variables``);
+  ``pullout`` -- the yarn pull-out's force-displacement table and figure (not imported here);
 * ``jobs`` -- the bodies of the Snakemake rules ``rve_gather`` and ``rve_report`` (not
   imported here: they need the homogenisation pipeline).
 """

@@ -56,6 +56,13 @@ contact_resistance         (mode, strain, *swept)                  ohm
 network_fit_residual       (mode, strain, *swept)                  1
 =========================  =====================================  ======
 
+With friction (a record with ``friction``: ``dissipated_energy``, ``friction_force``,
+``stick_points``, ``slip_points``) also the variables of ``schema.FRICTION_VARIABLES`` on
+``(mode, strain, *swept)`` (``friction_dissipated_energy`` N mm, ``friction_force`` N,
+``friction_stick_points``, ``friction_slip_points``); a record without ``friction`` in such a
+table (a frictionless combination of a mu sweep) has 0 there. Without friction in any record
+they are absent (the frictionless table is unchanged).
+
 ``probe_resistance = V / I`` with I = (I(+) - I(-))/2; the internal units are V and A, so
 this is in ohm directly. ``yarn_resistance`` R_y and ``contact_resistance`` R_c are the
 two resistors of the network model of thesis Fig. 7.2.1
@@ -82,8 +89,8 @@ from ..homogenisation.network import (Terminal, YarnNetwork, default_probe_termi
                                       terminal_text)
 from ..io.provenance import cf_attributes, package_version
 from .macro import add_macro_quantities
-from .schema import (COMPONENTS, COORD_ATTRS, DIMENSIONLESS, KNOWN_PARAMETERS, MODES, SIDE_ORDER, STRAIN_DECIMALS,
-                     TABLE_FORMAT, TERMINALS, VARIABLES, json_safe)
+from .schema import (COMPONENTS, COORD_ATTRS, DIMENSIONLESS, FRICTION_RECORD_KEYS, FRICTION_VARIABLES, KNOWN_PARAMETERS,
+                     MODES, SIDE_ORDER, STRAIN_DECIMALS, TABLE_FORMAT, TERMINALS, VARIABLES, json_safe)
 
 __all__ = ["build_table", "CF_VERSION"]
 
@@ -241,6 +248,9 @@ def build_table(records: Sequence[Mapping], *, fabric: Any, config: Any,
     for name, (dims, units, long_name, extra) in VARIABLES.items():
         attrs = {"units": units, "long_name": long_name, **extra}
         data_vars[name] = (lead + dims, data[name], attrs)
+    if any(rec.get("friction") is not None for rec in records):
+        for name, (dims, units, long_name, extra) in FRICTION_VARIABLES.items():
+            data_vars[name] = (lead + dims, data[name], {"units": units, "long_name": long_name, **extra})
     ds = xr.Dataset(data_vars, coords=coords)
     ds["yarn_resistance"].attrs["comment"] = ds["contact_resistance"].attrs["comment"] = (
         "fitted to the probe resistances under the network model of docs/lookup_tables.md "
@@ -359,7 +369,7 @@ def _fill(records, pnames, pvalues, mode_coord, strains, strain_coord, probes, s
     shape0 = (len(mode_coord), len(strain_coord)) + tuple(len(pvalues[p]) for p in pnames)
     sizes = {"probe": len(probes), "side": len(sides), "component": 3, "terminal": 2}
     data = {name: np.full(shape0 + tuple(sizes[d] for d in dims), np.nan)
-            for name, (dims, *_rest) in VARIABLES.items()}
+            for name, (dims, *_rest) in {**VARIABLES, **FRICTION_VARIABLES}.items()}
     filled = np.zeros(shape0, dtype=bool)
 
     pidx = {p: i for i, p in enumerate(probes)}
@@ -387,6 +397,9 @@ def _fill(records, pnames, pvalues, mode_coord, strains, strain_coord, probes, s
         conv = rec.get("converged", (rec.get("state") or {}).get("converged"))
         if conv is not None:
             data["converged"][idx] = 1.0 if conv else 0.0
+        fr = rec.get("friction") or {}
+        for name, key in FRICTION_RECORD_KEYS.items():   # (only written to the table with friction)
+            data[name][idx] = float(fr.get(key, 0.0))
         for pname, pr in (rec.get("probes") or {}).items():
             k = idx + (pidx[str(pname)],)
             pw = f"{where}, probe {pname}"

@@ -84,9 +84,10 @@ def _describe_periodic(ds, cfg) -> None:
 
 
 def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: PathLike, out_summary: PathLike,
-               log_path: Optional[PathLike], spec: Mapping, run: str = ""):
+               log_path: Optional[PathLike], spec: Mapping, run: str = "", cycle_states: Sequence[PathLike] = ()):
     """All probe records of a run -> the lookup table (netCDF), its CSV export and a
-    text summary (all atomic)."""
+    text summary (all atomic). ``cycle_states``: the states of the run's loading-unloading
+    cycles (``strain.cycle_modes``), added as the ``cycle_*`` variables (``rve.tables.cycles``)."""
     with logging_to(log_path):
         cfgs = {c.id: load_run_config(spec, c.id) for c in combos(spec)}
         first = next(iter(cfgs.values()))
@@ -119,6 +120,10 @@ def gather_job(record_files: Sequence[PathLike], out_table: PathLike, out_csv: P
             from .ensemble import add_ensemble_statistics
 
             ds = add_ensemble_statistics(ds, packing=first.packing.model_dump(exclude={"seed"}))
+        if cycle_states:
+            from .cycles import add_cycle_variables
+
+            ds = add_cycle_variables(ds, list(cycle_states))
         write_table(ds, out_table)
         export_table(ds, out_csv, "csv")
         text = summarize(ds)

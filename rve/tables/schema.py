@@ -30,7 +30,7 @@ from ..homogenisation.network import TERMINALS
 from ..io.provenance import to_jsonable
 
 __all__ = ["TABLE_FORMAT", "TABLE_FORMAT_V1", "EDGES", "YARNS", "MODES", "TERMINALS", "COMPONENTS", "SIDE_ORDER", "DIMENSIONLESS", "STRAIN_DECIMALS",
-           "COORD_ATTRS", "VARIABLES", "KNOWN_PARAMETERS", "LABEL_DIMS", "lead_dims", "json_safe"]
+           "COORD_ATTRS", "VARIABLES", "FRICTION_VARIABLES", "FRICTION_RECORD_KEYS", "KNOWN_PARAMETERS", "LABEL_DIMS", "CYCLE_DIMS", "lead_dims", "json_safe"]
 
 TABLE_FORMAT = "rve-lookup-table/2"
 TABLE_FORMAT_V1 = "rve-lookup-table/1"
@@ -113,6 +113,22 @@ VARIABLES: dict[str, tuple[tuple[str, ...], str, str, dict]] = {
                                        "left over as a check; NaN with fewer)", {}),
 }
 
+#: variables of a table whose run has friction (``friction`` in its records; absent otherwise, so
+#: a frictionless table is unchanged): name -> (label dims, units, long_name, extra attrs)
+FRICTION_VARIABLES: dict[str, tuple[tuple[str, ...], str, str, dict]] = {
+    "friction_dissipated_energy": ((), "N mm",
+                                   "energy dissipated by fibril-fibril friction along the mode's strain path from "
+                                   "the relaxed state (sum of the return-map dissipation of every committed "
+                                   "step; 0 without friction)", {}),
+    "friction_force": ((), "N", "sum over the contact points of the magnitude of the friction force at the "
+                       "stored state", {}),
+    "friction_stick_points": ((), DIMENSIONLESS, "contact points that stick at the stored state", {}),
+    "friction_slip_points": ((), DIMENSIONLESS, "contact points that slip at the stored state", {}),
+}
+#: the record key of each friction variable (``record["friction"]``)
+FRICTION_RECORD_KEYS = {"friction_dissipated_energy": "dissipated_energy", "friction_force": "friction_force",
+                        "friction_stick_points": "stick_points", "friction_slip_points": "slip_points"}
+
 # known swept parameters: name -> (units, long_name)
 KNOWN_PARAMETERS: dict[str, tuple[str, str]] = {
     "fibril_radius": ("mm", "fibril radius R"),
@@ -126,6 +142,7 @@ KNOWN_PARAMETERS: dict[str, tuple[str, str]] = {
     "spacing": ("mm", "yarn spacing"),
     "amplitude": ("mm", "crimp amplitude"),
     "weave": (DIMENSIONLESS, "weave pattern"),
+    "friction_coefficient": (DIMENSIONLESS, "Coulomb friction coefficient mu between fibrils"),
 }
 
 
@@ -133,9 +150,14 @@ KNOWN_PARAMETERS: dict[str, tuple[str, str]] = {
 LABEL_DIMS = ("probe", "side", "component", "terminal", "edge", "yarn")
 
 
+#: dimensions of a loading-unloading cycle (``rve.tables.cycles``): neither labels nor swept
+CYCLE_DIMS = ("cycle_mode", "cycle_step")
+
+
 def lead_dims(ds: xr.Dataset) -> list[str]:
-    """The leading (non-label) dimensions of ``ds``, in dataset order."""
-    return [d for d in ds.dims if d not in LABEL_DIMS]
+    """The leading (non-label) dimensions of ``ds``, in dataset order (mode, strain, swept
+    parameters; not the cycle's)."""
+    return [d for d in ds.dims if d not in LABEL_DIMS and d not in CYCLE_DIMS]
 
 
 def _nonfinite_to_null(obj):

@@ -88,6 +88,18 @@ def summarize(ds: xr.Dataset) -> str:
     if "equilibrium_residual" in ds and np.isfinite(ds["equilibrium_residual"].values).any():
         r = ds["equilibrium_residual"].values
         lines.append(f"  equilibrium residual [N]: max {np.nanmax(r):.3g} over {int(np.isfinite(r).sum())} table entries")
+    if "friction_dissipated_energy" in ds:
+        lines.append("  friction dissipated along the path [N mm]: " + "; ".join(
+            f"{m} {_rng(ds['friction_dissipated_energy'].sel(mode=m).values)}" for m in ds["mode"].values))
+    if "cycle_work" in ds:   # loading-unloading cycles (rve.tables.cycles)
+        lines.append("  loading-unloading cycles [N mm] (work of the clamps = potential change + friction "
+                     "dissipation):")
+        for m in ds["cycle_mode"].values:
+            c = ds.sel(cycle_mode=m)
+            for name, label in (("cycle_work", "work"), ("cycle_potential_change", "potential change"),
+                                ("cycle_dissipated_energy", "dissipated")):
+                vals = " ".join(f"{v:.5g}" for v in np.asarray(c[name].values).ravel())
+                lines.append(f"    {m} {label}: {vals}")
     # reactions at the smallest |strain|
     k = int(np.argmin(np.abs(ds["strain"].values)))
     s0 = float(ds["strain"].values[k])

@@ -21,6 +21,7 @@ wildcard_constraints:
     mode=r"uniaxial_y|uniaxial|shear|trellis",
     step=r"[0-9]{2}",
     state=r"relaxed|(uniaxial_y|uniaxial|shear|trellis)_[0-9]{2}",
+    # (cycle states, {mode}_cycle_{step}, have no probe job: the table takes their mechanics)
 
 
 rule rve_fabric:
@@ -98,6 +99,29 @@ rule rve_strain_step:
             wildcards.mode,
             int(wildcards.step),
         )
+
+
+rule rve_cycle_step:
+    """Step {step} of the loading-unloading cycle of {mode} (strain.cycle_modes) from the previous state."""
+    input:
+        state=lambda w: rve_layout.previous_cycle_state(w.run, w.combo, w.mode, int(w.step)),
+    output:
+        state=rve_layout.state_path("{run}", "{combo}", "{mode}_cycle_{step}"),
+    log:
+        rve_layout.log_path("{run}", "strain", "{combo}", "{mode}_cycle_{step}"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "strain", "{combo}", "{mode}_cycle_{step}")
+    params:
+        spec=lambda w: config["rve"]["runs"][w.run],
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
+    priority: 10
+    run:
+        from rve.homogenisation.jobs import cycle_job
+
+        cycle_job(input.state, output.state, log[0], params.spec, wildcards.combo, wildcards.mode, int(wildcards.step))
 
 
 # The probe solves: one job per stored state (rve.probe_executor snakemake, the default), or
@@ -222,6 +246,8 @@ rule rve_gather:
     """All probe records of a run -> the lookup table (netCDF, CSV, text summary)."""
     input:
         records=lambda w: rve_layout.run_record_paths(config["rve"]["runs"][w.run], w.run),
+        # the loading-unloading cycles' states (strain.cycle_modes): the table's cycle_* variables
+        cycles=lambda w: rve_layout.cycle_state_paths(config["rve"]["runs"][w.run], w.run),
         accuracy=lambda w: config["rve"]["runs"][w.run].get("accuracy") or [],
     output:
         **rve_layout.table_outputs("{run}"),
@@ -246,6 +272,7 @@ rule rve_gather:
             log[0],
             params.spec,
             wildcards.run,
+            cycle_states=list(input.cycles),
         )
 
 
@@ -292,6 +319,121 @@ rule rve_report:
         from rve.tables.jobs import report_job
 
         report_job(input.table, params.prefix, log[0])
+
+
+rule rve_cycle_report:
+    """Hysteresis loops of a run's loading-unloading cycles (the table's cycle_* variables)."""
+    input:
+        table=rve_layout.table_outputs("{run}")["table"],
+    output:
+        **rve_layout.cycle_report_outputs("{run}"),
+    log:
+        rve_layout.log_path("{run}", "cycle_report"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "cycle_report")
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
+    run:
+        from rve.tables.cycles import cycle_report_job
+
+        cycle_report_job(input.table, dict(output.items()), log[0])
+
+
+# --------------------------------------------------------------------------- friction
+# The friction coefficient as a sweep axis with a loading-unloading cycle in shear (run
+# plain_weave_friction of configs/pipeline.yaml; docs/rve_pipeline.md "Friction"):
+#   snakemake -j2 rve_friction
+FRICTION_RUN = "plain_weave_friction"
+
+
+rule rve_friction:
+    """`snakemake -j2 rve_friction`: the mu sweep of the plain weave, its table, figures and hysteresis loops."""
+    input:
+        **rve_layout.table_outputs(FRICTION_RUN),
+        **rve_layout.report_outputs(FRICTION_RUN),
+        **rve_layout.cycle_report_outputs(FRICTION_RUN),
+
+
+# --------------------------------------------------------------------------- yarn pull-out
+# One yarn of the relaxed cell pulled out along its axis (pullout section of the scene config;
+# rve.homogenisation.pullout): a chain of steps per combination, then the force-displacement
+# table (peak and sliding force) and its figure. Run plain_weave_pullout: mu = 0, 0.3.
+#   snakemake -j2 rve_pullout
+PULLOUT_RUN = "plain_weave_pullout"
+
+
+rule rve_pullout_step:
+    """Pull-out step {step} from the previous state (the relaxed one for step 1)."""
+    input:
+        state=lambda w: rve_layout.previous_pullout_state(w.run, w.combo, int(w.step)),
+    output:
+        state=rve_layout.state_path("{run}", "{combo}", "pullout_{step}"),
+    log:
+        rve_layout.log_path("{run}", "pullout", "{combo}", "pullout_{step}"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pullout", "{combo}", "pullout_{step}")
+    params:
+        spec=lambda w: config["rve"]["runs"][w.run],
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["rve_mem_mb"],
+        runtime=config["resources"]["rve_runtime_min"],
+    priority: 10
+    run:
+        from rve.homogenisation.jobs import pullout_job
+
+        pullout_job(input.state, output.state, log[0], params.spec, wildcards.combo, int(wildcards.step))
+
+
+rule rve_pullout_table:
+    """Every pull-out state of a run -> the force-displacement table (netCDF, CSV)."""
+    input:
+        states=lambda w: rve_layout.pullout_state_paths(config["rve"]["runs"][w.run], w.run),
+    output:
+        table=rve_layout.pullout_outputs("{run}")["table"],
+        csv=rve_layout.pullout_outputs("{run}")["csv"],
+    log:
+        rve_layout.log_path("{run}", "pullout_table"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pullout_table")
+    params:
+        spec=lambda w: config["rve"]["runs"][w.run],
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
+    run:
+        from rve.tables.pullout import pullout_table_job
+
+        pullout_table_job(list(input.states), output.table, output.csv, log[0], params.spec)
+
+
+rule rve_pullout_report:
+    """The pull-out table -> its force-displacement figure (one curve per combination)."""
+    input:
+        table=rve_layout.pullout_outputs("{run}")["table"],
+    output:
+        curve=rve_layout.pullout_outputs("{run}")["curve"],
+    log:
+        rve_layout.log_path("{run}", "pullout_report"),
+    benchmark:
+        rve_layout.benchmark_path("{run}", "pullout_report")
+    threads: 1
+    resources:
+        mem_mb=config["resources"]["gather_mem_mb"],
+        runtime=config["resources"]["gather_runtime_min"],
+    run:
+        from rve.tables.pullout import pullout_report_job
+
+        pullout_report_job(input.table, output.curve, log[0])
+
+
+rule rve_pullout:
+    """`snakemake -j2 rve_pullout`: the yarn pull-out of the plain weave (run plain_weave_pullout)."""
+    input:
+        **rve_layout.pullout_outputs(PULLOUT_RUN),
 
 
 # --------------------------------------------------------------------------- ensembles
