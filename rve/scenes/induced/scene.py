@@ -230,7 +230,8 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         tracemalloc.stop()
     if record:
         summary["history"] = {"stored": {k: np.asarray(v) for k, v in rec.stored.items()},
-                              "balances": rec.history(), "balance_series": errs["series"]}
+                              "balances": rec.history(), "balance_series": errs["series"],
+                              "h": np.asarray(rec.h_used)}
     return SceneResult(state={"x": x, "w": w, "T": rec.T_of(w)}, model=base, summary=summary)
 
 
