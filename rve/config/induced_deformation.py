@@ -105,8 +105,8 @@ class InducedAdaptive(Section):
 
     enabled: bool = Field(False, description="false: the thesis's steps of t_end/steps (halved only when Newton "
                                              "fails); true: steps from the embedded error estimate")
-    rtol: Dimensionless = Field(1e-3, ge=0, le=1, description="relative tolerance of the local error")
-    atol: Length = Field("1e-3 mm", gt=0, le=1.0, description="absolute tolerance (mm, at most 1) of the positions' local error")
+    rtol: Dimensionless = Field(1e-2, ge=0, le=1, description="relative tolerance of the local error")
+    atol: Length = Field("1e-2 mm", gt=0, le=1.0, description="absolute tolerance (mm, at most 1) of the positions' local error")
     atol_velocity: Optional[Velocity] = Field(None, gt=0, description="absolute tolerance of the velocities' local "
                                                                        "error (null: positions only)")
     safety: Dimensionless = Field(0.9, gt=0, le=1, description="safety factor of the step proposal")
