@@ -10,6 +10,13 @@ Thesis §6.2 and Appendix C; see ``docs/time_integration.md``.
   ``x_i = x̂_i + h a_ii w_i`` (§6.2.2). Stiffly accurate => ``(x1, w1)`` is the last stage.
 * ``integrate`` -- the time loop, with step cutting on failure and regrowth after success,
   landing exactly on ``t_end``; or ``fixed_step=True`` (failure raises at once).
+* Error-controlled steps (``integrate(adaptive=AdaptiveControl(...))``, default off): SDIRK2 and
+  SDIRK3 carry embedded weights ``b_hat`` of order s − 1 from the same stages (R̂(∞) = −1);
+  ``local_error`` takes the estimate ``y1 − ŷ = Σ e_j (Y_j − y0)`` from the stage values (no
+  M⁻¹) on the mechanical positions (and velocities with ``atol_w``); a PI or elementary
+  controller with safety factor, growth limits and a hold band proposes the next step, a step
+  with err > 1 is rejected and retried; the steps land on a grid of ``land_every`` nominal
+  steps. docs/time_integration.md §4 "Error-controlled steps".
 * ``consistent_initialization`` -- solves ``F = 0`` for the massless (algebraic) dofs at
   t0 so that e.g. the potential V(0) is consistent with x(0), w(0).
 * Factorisation reuse (``integrate(reuse=ReusePolicy(mode=...))``, default off: one factorisation
