@@ -940,7 +940,10 @@ def _segment_adaptive(stepper, out, x, w, t, t_end, ctl: StepControl, bud: Budge
     budget = max(64, 2 * n_est) if bud.max_rejections is None else int(bud.max_rejections)
     rejected0, wall0 = out.rejected, time.perf_counter()
     cuts, pending = 0, 0
-    h_floor = lambda tt: max(float(ctl.min_step_rel) * h0, float(ctl.min_step_t_rel) * abs(tt))  # noqa: E731
+
+    def h_floor(tt: float) -> float:
+        return max(float(ctl.min_step_rel) * h0, float(ctl.min_step_t_rel) * abs(tt))
+
     while t < t_end - 1e-12 * max(1.0, abs(t_end)):
         t_target = _landing(t, t0, t_end, grid)
         h_want = min(hs.h, ada.h_max if ada.h_max is not None else math.inf)
