@@ -65,7 +65,8 @@ def run_induced(a, opts):
     from rve.scenes.induced.record import InducedRecorder
 
     cfg = load_config(a.config or "configs/scenes/induced_deformation.yaml",
-                      OUT + [f"field.orientation={a.orientation}", "time.store_every=1", "time.adaptive.enabled=false"] + (a.set or []))
+                      OUT + [f"field.orientation={a.orientation}", "time.store_every=1",
+                             "time.adaptive.enabled=false"] + (a.set or []))
     h = cfg.time.t_end / cfg.time.steps
     with StepClock(InducedRecorder) as clock:
         w0, c0 = time.perf_counter(), time.process_time()

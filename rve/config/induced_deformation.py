@@ -108,7 +108,8 @@ class InducedAdaptive(Section):
                                              "estimate (configs/scenes/induced_deformation.yaml: measured, "
                                              "docs/engine.md)")
     rtol: Dimensionless = Field(2e-2, ge=0, le=1, description="relative tolerance of the local error")
-    atol: Length = Field("2e-2 mm", gt=0, le=1.0, description="absolute tolerance (mm, at most 1) of the positions' local error")
+    atol: Length = Field("2e-2 mm", gt=0, le=1.0,
+                         description="absolute tolerance (mm, at most 1) of the positions' local error")
     atol_velocity: Optional[Velocity] = Field(None, gt=0, description="absolute tolerance of the velocities' local "
                                                                        "error (null: positions only)")
     safety: Dimensionless = Field(0.9, gt=0, le=1, description="safety factor of the step proposal")

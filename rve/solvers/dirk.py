@@ -1116,7 +1116,8 @@ def integrate(
         if control.fixed_step:
             raise ValueError("error-controlled steps (adaptive) and fixed_step exclude each other")
         if rebuild is not None and hasattr(rebuild, "horizon"):
-            raise ValueError("error-controlled steps do not follow a rebuild hook's horizon (segments of nominal steps)")
+            raise ValueError("error-controlled steps do not follow a rebuild hook's horizon "
+                             "(segments of nominal steps)")
     x = np.array(x0, dtype=float, copy=True)
     w = np.array(w0, dtype=float, copy=True)
     t = float(t0)
