@@ -20,7 +20,8 @@ TINY_INDUCED = ["geometry.n_warp=2", "geometry.n_weft=2", "geometry.span=5 mm", 
 @pytest.mark.parametrize("target, point_rule", [("impact_velocity_sweep", "impact_velocity_point"),
                                                 ("induced_current_sweep", "induced_current_point")])
 def test_sweep_dry_run_has_one_job_per_point(target, point_rule, tmp_path):
-    out = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--directory", str(ROOT), target,
+    """--forceall: the DAG of the config, whatever results/ already holds."""
+    out = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--forceall", "--directory", str(ROOT), target,
                           "--config", "impact={\"velocities\": [10, 20.5, 30]}",
                           "induced_deformation={\"currents\": [250, 750, 1500]}"],
                          cwd=ROOT, capture_output=True, text=True)
