@@ -5,12 +5,13 @@ truncated (or the full) horizon (docs/engine.md "Dynamic scenes: profile and lev
     python benchmarks/dynamic_compare.py run induced --steps 300 --orientation B2 --out ref.npz [--opt ...]
     python benchmarks/dynamic_compare.py diff ref.npz lever.npz [more.npz ...]
 
-``run``: one scene run from t = 0 over ``--steps`` nominal steps (impact: 0.5 µs from the
+``run``: one scene run from t = 0 over ``--steps`` nominal steps (induced: the thesis's fixed
+steps, ``time.adaptive.enabled=false``, unless ``--set time.adaptive.enabled=true``) (impact: 0.5 µs from the
 relaxed state of ``--relaxed``; induced: 5 µs) with the integrator options ``--opt`` (flat
 names of ``rve.solvers.dirk.integrator_options``; none = the scene's defaults) and config
 overrides ``--set``; saves the per-step histories (impact: projectile centre-of-mass velocity
 and position; induced: the mean and the largest warp deflection; both: the balance errors, the
-wall time of every step) and the summary's figures to ``--out``.
+wall time of every step; induced: the step sizes) and the summary's figures to ``--out``.
 
 ``diff``: for each further file against the first (the reference): the largest difference of
 the projectile velocity history (mm/ms, and relative to the speed) or of the deflection
@@ -64,7 +65,8 @@ def run_induced(a, opts):
     from rve.scenes.induced.record import InducedRecorder
 
     cfg = load_config(a.config or "configs/scenes/induced_deformation.yaml",
-                      OUT + [f"field.orientation={a.orientation}", "time.store_every=1"] + (a.set or []))
+                      OUT + [f"field.orientation={a.orientation}", "time.store_every=1",
+                             "time.adaptive.enabled=false"] + (a.set or []))
     h = cfg.time.t_end / cfg.time.steps
     with StepClock(InducedRecorder) as clock:
         w0, c0 = time.perf_counter(), time.process_time()
@@ -77,7 +79,7 @@ def run_induced(a, opts):
     X = np.asarray(st["x"])[:, warp, :3] - problem.x0.reshape(base.mesh.n_nodes, -1)[warp, :3]
     hist = {"t": np.asarray(st["t"]), "mean_deflection": X.mean(axis=1),
             "max_deflection": np.linalg.norm(X, axis=2).max(axis=1),
-            "max_T": np.asarray([np.max(T) for T in st["T"]])}
+            "max_T": np.asarray([np.max(T) for T in st["T"]]), "h": np.asarray(s["history"]["h"])}
     bal = {k: float(v) for k, v in s["balance_errors"].items()}
     return hist, bal, clock, wall, cpu, s
 
@@ -88,7 +90,9 @@ def do_run(a):
     step_wall = np.diff([clock.t0] + clock.times)
     meta = {"scene": a.scene, "options": opts, "balances": bal, "wall_s": wall, "cpu_s": cpu,
             "steps": s["steps_accepted"], "rejected": s["steps_rejected"],
-            "newton_iterations_per_stage": s["newton_iterations_per_stage"], "factorizations": s["factorizations"]}
+            "newton_iterations_per_stage": s["newton_iterations_per_stage"], "factorizations": s["factorizations"],
+            "time_control": s.get("time_control", "fixed"), "error_rejections": s.get("steps_rejected_by_error", 0),
+            "step_ms": s.get("step_ms", {})}
     np.savez(a.out, meta=np.array(json.dumps(meta, default=float)), step_wall=step_wall, **hist)
     print(f"[{a.scene}] {json.dumps(meta, default=float)}")
 
@@ -121,6 +125,13 @@ def do_diff(a):
         print(f"{f}: options {meta['options']}, {meta['steps']} steps ({len(ia)} common times up to "
               f"t = {ref['t'][ia[-1]]:.6g} ms)")
         keys = ("v_com", "com", "omega") if "v_com" in ref else ("mean_deflection", "max_deflection")
+        if meta.get("time_control") == "adaptive" or ref_meta.get("time_control") == "adaptive":
+            print(f"  time control {ref_meta.get('time_control', 'fixed')} -> {meta.get('time_control', 'fixed')}: "
+                  f"steps {ref_meta['steps']} -> {meta['steps']}, rejected {ref_meta['rejected']} -> "
+                  f"{meta['rejected']} (by the error estimate {meta.get('error_rejections', 0)}), step ms "
+                  f"{json.dumps(meta.get('step_ms', {}))}; wall {ref_meta['wall_s']:.1f} -> {meta['wall_s']:.1f} s "
+                  f"(ratio {meta['wall_s'] / ref_meta['wall_s']:.3f}), CPU {ref_meta['cpu_s']:.1f} -> "
+                  f"{meta['cpu_s']:.1f} s (ratio {meta['cpu_s'] / ref_meta['cpu_s']:.3f})")
         for k in keys + ("max_T",):
             d = np.abs(np.asarray(hist[k])[ib] - np.asarray(ref[k])[ia])
             scale = float(np.max(np.abs(ref[k][ia]))) or 1.0

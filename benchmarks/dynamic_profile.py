@@ -167,7 +167,7 @@ def run_induced(a, opts: dict) -> dict:
     from rve.scenes.induced.record import InducedRecorder
 
     cfg = load_config(a.config or "configs/scenes/induced_deformation.yaml",
-                      OUT + [f"field.orientation={a.orientation}"] + (a.set or []))
+                      OUT + ["time.adaptive.enabled=false", f"field.orientation={a.orientation}"] + (a.set or []))
     h = cfg.time.t_end / cfg.time.steps
     with Probe() as probe, StepClock(InducedRecorder) as clock:
         c0, w0 = time.process_time(), time.perf_counter()

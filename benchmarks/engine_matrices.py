@@ -253,7 +253,7 @@ def induced_scene_matrices(out: Path, t_end: float = 0.35, steps: int = 70, keep
     from rve.scenes.induced import solve
 
     cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml",
-                      ["output.vtk=false", "output.png=false", f"field.orientation={orientation}"])
+                      ["output.vtk=false", "output.png=false", "time.adaptive.enabled=false", f"field.orientation={orientation}"])
     seen, undo = _hook_stage_matrices(keep)
     try:
         res = solve(cfg, t_end=t_end, steps=steps, record=False)

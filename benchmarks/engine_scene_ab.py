@@ -147,7 +147,7 @@ def main_scene_ab(scene: str, backends, rounds: int, steps: int, start: int, red
     else:
         from rve.scenes.induced import solve as induced_solve
 
-        cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml", ov + ["field.orientation=B3"])
+        cfg = load_config(ROOT / "configs/scenes/induced_deformation.yaml", ov + ["time.adaptive.enabled=false", "field.orientation=B3"])
 
         def one(backend):
             return induced_solve(cfg, t_end=5e-3 * steps, steps=steps, record=False,

@@ -120,7 +120,7 @@ def contact_check(a, ov):
             return T
 
     o, t_end, steps = a.contact_check.split(":")
-    cfg = load_config(a.config, ov + [f"field.orientation={o}"])
+    cfg = load_config(a.config, ["time.adaptive.enabled=false"] + ov + [f"field.orientation={o}"])
     keep = scene.ThermalPostSolver
     scene.ThermalPostSolver = Chains
     try:
@@ -144,7 +144,7 @@ def ab(a, ov):
     for case in a.ab.split(","):
         o, t_end, steps = case.split(":")
         t_end, steps = float(t_end), int(steps)
-        cfg = load_config(a.config, ov + [f"field.orientation={o}"])
+        cfg = load_config(a.config, ["time.adaptive.enabled=false"] + ov + [f"field.orientation={o}"])
         h = t_end / steps
         for name in paths:  # warm-up: numba caches, imports, first factorisations
             _solve_path(cfg, name, 2 * h, 2, original)
@@ -221,7 +221,7 @@ def main():
             contact_check(a, ov)
         return
     for o in a.orientations.split(","):
-        cfg = load_config(a.config, ov + [f"field.orientation={o}"])
+        cfg = load_config(a.config, ["time.adaptive.enabled=false"] + ov + [f"field.orientation={o}"])
         runs = {"post": [], "monolithic": []}
         for _ in range(max(1, a.repeat)):
             for mode in ("post",) + (() if a.skip_monolithic else ("monolithic",)):
@@ -249,7 +249,7 @@ def main():
                   f"medians of {len(runs['post'])} interleaved pairs)  max|T_post - T_mono|/max T = {dT:.2e}  "
                   f"Newton its/stage {rm.summary['newton_iterations_per_stage']:.2f} vs {s['newton_iterations_per_stage']:.2f}")
     steps = [int(v) for v in a.study_steps.split(",")]
-    cfg = load_config(a.config, ov + ["field.orientation=B2"])
+    cfg = load_config(a.config, ["time.adaptive.enabled=false"] + ov + ["field.orientation=B2"])
     errs = {k: [] for k in ("mechanical", "thermal", "total", "charge")}
     for n in steps:
         s = solve(cfg, t_end=a.study_t, steps=n, record=False).summary

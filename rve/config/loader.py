@@ -165,7 +165,7 @@ def parse_override(text: str) -> tuple[str, Any]:
 
 
 #: top-level keys of a pipeline config (workflow/schemas/pipeline.schema.yaml)
-PIPELINE_KEYS = ("verification", "rve", "default_targets", "resources")
+PIPELINE_KEYS = ("verification", "rve", "default_targets", "resources", "induced_deformation", "impact")
 
 
 class NotASceneConfig(ConfigError):

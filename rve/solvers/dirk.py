@@ -10,6 +10,13 @@ Thesis §6.2 and Appendix C; see ``docs/time_integration.md``.
   ``x_i = x̂_i + h a_ii w_i`` (§6.2.2). Stiffly accurate => ``(x1, w1)`` is the last stage.
 * ``integrate`` -- the time loop, with step cutting on failure and regrowth after success,
   landing exactly on ``t_end``; or ``fixed_step=True`` (failure raises at once).
+* Error-controlled steps (``integrate(adaptive=AdaptiveControl(...))``, default off): SDIRK2 and
+  SDIRK3 carry embedded weights ``b_hat`` of order s − 1 from the same stages (R̂(∞) = −1);
+  ``local_error`` takes the estimate ``y1 − ŷ = Σ e_j (Y_j − y0)`` from the stage values (no
+  M⁻¹) on the mechanical positions (and velocities with ``atol_w``); a PI or elementary
+  controller with safety factor, growth limits and a hold band proposes the next step, a step
+  with err > 1 is rejected and retried; the steps land on a grid of ``land_every`` nominal
+  steps. docs/time_integration.md §4 "Error-controlled steps".
 * ``consistent_initialization`` -- solves ``F = 0`` for the massless (algebraic) dofs at
   t0 so that e.g. the potential V(0) is consistent with x(0), w(0).
 * Factorisation reuse (``integrate(reuse=ReusePolicy(mode=...))``, default off: one factorisation
@@ -42,7 +49,7 @@ __all__ = [
     "order_conditions", "stability_function",
     "StepInfo", "StepFailure", "IntegrationFailure", "IntegrationResult",
     "dirk_step", "integrate", "consistent_initialization", "DirkStepper", "structure_token", "StructureHook",
-    "StepControl", "Budgets", "ReusePolicy", "integrator_options",
+    "StepControl", "Budgets", "ReusePolicy", "AdaptiveControl", "local_error", "integrator_options",
 ]
 
 log = logging.getLogger("rve.dirk")
@@ -58,6 +65,9 @@ class Tableau:
     b: np.ndarray
     c: np.ndarray
     order: int
+    #: embedded weights b̂ (same stages, order ``embedded_order``); None: no error estimate
+    b_hat: Optional[np.ndarray] = None
+    embedded_order: int = 0
 
     @property
     def stages(self) -> int:
@@ -82,6 +92,28 @@ class Tableau:
         bad = {k: v for k, v in order_conditions(self, self.order).items() if abs(v) > tol}
         if bad:
             raise ValueError(f"{self.name}: order conditions violated: {bad}")
+        if self.b_hat is not None:
+            emb = Tableau(self.name + " embedded", self.A, np.asarray(self.b_hat, float), self.c, self.embedded_order)
+            bad = {k: v for k, v in order_conditions(emb, self.embedded_order).items() if abs(v) > tol}
+            if bad or self.embedded_order < 1:
+                raise ValueError(f"{self.name}: embedded order conditions violated: {bad}")
+
+    @property
+    def error_weights(self) -> np.ndarray:
+        """``e`` with ``y1 − ŷ = Σ_j e_j (Y_j − y0)``: the embedded estimate from the stage
+        VALUES. Since ``Y − y0 = h A K`` (stage slopes K), ``h b̂ᵀK = b̂ᵀA⁻¹(Y − y0)``, and
+        stiffly accurate ``bᵀA⁻¹ = e_s``; so ``e = e_s − A⁻ᵀ b̂``. It applies to the positions
+        and to the differential rows of ``M ẇ = −F`` alike, with no M⁻¹."""
+        if self.b_hat is None:
+            raise ValueError(f"{self.name} has no embedded method")
+        e = np.zeros(self.stages)
+        e[-1] = 1.0
+        return e - np.linalg.solve(self.A.T, np.asarray(self.b_hat, float))
+
+    def embedded_stability(self, z: complex) -> complex:
+        """R̂(z) of the embedded method (y' = λy, z = hλ)."""
+        k = np.linalg.solve(np.eye(self.stages) - z * self.A, np.ones(self.stages, dtype=complex))
+        return complex(1 + z * (np.asarray(self.b_hat, float) @ k))
 
 
 def _order_trees(A, b, c):
@@ -122,19 +154,35 @@ def stability_function(tableau: Tableau, z: complex) -> complex:
 SDIRK3_ALPHA = 0.43586652150845899942
 
 
+def _embedded_weights(A, b, c) -> np.ndarray:
+    """b̂ of order s − 1 from the same s stages with R̂(∞) = −1.
+
+    Order s − 1 leaves one free direction v (Σv = 0, v·c = 0 for s = 3; v = (1, −1) for
+    s = 2), b̂ = b + δ v. Every δ ≠ 0 gives the same estimate direction up to its scale; the
+    scale is fixed by the embedded method's value at infinity, R̂(∞) = 1 − b̂ᵀA⁻¹1 = −δ vᵀA⁻¹1:
+    |R̂(∞)| = 1 is the largest estimate whose embedded method stays bounded on stiff modes
+    (R̂(∞) = −1 chosen of the two signs). SDIRK2: b̂ = (2√2 − 2, 3 − 2√2)."""
+    s = b.size
+    v = np.array([1.0, -1.0]) if s == 2 else np.array([c[1] - c[2], c[2] - c[0], c[0] - c[1]])
+    delta = 1.0 / (v @ np.linalg.solve(A, np.ones(s)))
+    return b + delta * v
+
+
 def _make_tableaus():
     be = Tableau("backward Euler (SDIRK1)", np.array([[1.0]]), np.array([1.0]), np.array([1.0]), 1)
 
     g = 1.0 - math.sqrt(2.0) / 2.0
     A2 = np.array([[g, 0.0], [1.0 - g, g]])
-    s2 = Tableau("SDIRK2 (γ = 1 − √2/2)", A2, A2[-1].copy(), np.array([g, 1.0]), 2)
+    c2 = np.array([g, 1.0])
+    s2 = Tableau("SDIRK2 (γ = 1 − √2/2)", A2, A2[-1].copy(), c2, 2, _embedded_weights(A2, A2[-1], c2), 1)
 
     a = SDIRK3_ALPHA
     tau = (1.0 + a) / 2.0
     b1 = -(6 * a * a - 16 * a + 1) / 4.0
     b2 = (6 * a * a - 20 * a + 5) / 4.0
     A3 = np.array([[a, 0.0, 0.0], [tau - a, a, 0.0], [b1, b2, a]])
-    s3 = Tableau("SDIRK3 (α = 0.4358665215...)", A3, A3[-1].copy(), np.array([a, tau, 1.0]), 3)
+    c3 = np.array([a, tau, 1.0])
+    s3 = Tableau("SDIRK3 (α = 0.4358665215...)", A3, A3[-1].copy(), c3, 3, _embedded_weights(A3, A3[-1], c3), 2)
     for t in (be, s2, s3):
         t.check()
     return be, s2, s3
@@ -171,6 +219,7 @@ class StepInfo:
     #: last one is the step's result (a post-solve driven by the stages reads them here)
     stage_states: list = field(default_factory=list)
     rejected_attempts: int = 0   # attempts rejected (step cut) since the previous accepted step
+    error: Optional[float] = None  # scaled local error estimate (error-controlled steps)
 
     @property
     def jacobians(self) -> int:
@@ -245,6 +294,8 @@ class IntegrationResult:
     refactor_reasons: dict = field(default_factory=dict)  # why reused factorisations were dropped
     contractions: list = field(default_factory=list)      # all |r_k|/|r_k-1| of accepted steps (reuse on)
     restarts: int = 0                    # step-control restarts after a structure change (``rebuild``)
+    error_rejections: int = 0            # attempts rejected by the error estimate (counted in ``rejected`` too)
+    errors: list = field(default_factory=list)  # scaled error estimate per accepted step (error control)
 
     def add(self, counts: dict) -> None:
         """Add the counts of one step attempt (``StepInfo`` / ``StepFailure`` counts)."""
@@ -662,6 +713,74 @@ class Budgets:
 
 
 @dataclass(frozen=True)
+class AdaptiveControl:
+    """Error-controlled steps (``integrate(adaptive=...)``; docs/time_integration.md §4).
+
+    The local error of a step is estimated from its stage values by the tableau's embedded
+    method (``Tableau.error_weights``: ``y1 − ŷ``, order p̂ = ``embedded_order``) on the
+    positions of the mechanical dofs and, with ``atol_w`` set, on their velocities (the
+    massless rows are algebraic: they follow the state and carry no error of their own);
+    ``err = max_i |e_i| / (atol + rtol max(|y0_i|, |y1_i|))`` (``atol`` for positions,
+    ``atol_w`` for velocities). A step with ``err > 1`` is rejected and retried from the same
+    state. The next step is ``h · clip(safety · err^(−β1) · err_prev^(β2), min_factor,
+    max_factor)`` (``controller`` "pi": Gustafsson's β1 = 0.7/k, β2 = 0.4/k; "elementary":
+    β1 = 1/k, β2 = 0; k = p̂ + 1), no growth after a rejection, and h kept when the factor is in
+    [1, ``hold_band``] (a held factorisation of the modified Newton depends on h).
+    ``h_max`` (absolute; None: no cap) bounds the step; steps land on the grid of
+    ``land_every`` nominal steps from t0 (outputs on a fixed time grid) and on ``t_end``.
+    """
+
+    rtol: float = 1e-3
+    atol: float = 1e-3
+    atol_w: Optional[float] = None
+    safety: float = 0.9
+    min_factor: float = 0.2
+    max_factor: float = 4.0
+    hold_band: float = 1.2
+    controller: str = "pi"
+    h_max: Optional[float] = None
+    land_every: int = 1
+
+    def __post_init__(self):
+        checks = [("rtol", self.rtol >= 0), ("atol", self.atol > 0),
+                  ("atol_w", self.atol_w is None or self.atol_w > 0), ("safety", 0 < self.safety <= 1),
+                  ("min_factor", 0 < self.min_factor < 1), ("max_factor", self.max_factor > 1),
+                  ("hold_band", self.hold_band >= 1), ("controller", self.controller in ("pi", "elementary")),
+                  ("h_max", self.h_max is None or self.h_max > 0), ("land_every", int(self.land_every) >= 1)]
+        bad = [k for k, ok in checks if not ok]
+        if bad:
+            raise ValueError(f"AdaptiveControl: invalid {', '.join(f'{k} = {getattr(self, k)!r}' for k in bad)}")
+
+    def exponents(self, tableau: "Tableau") -> tuple:
+        k = float(tableau.embedded_order + 1)
+        return (1.0 / k, 0.0) if self.controller == "elementary" else (0.7 / k, 0.4 / k)
+
+
+def local_error(tableau: Tableau, x0, w0, states, mech, ada: AdaptiveControl) -> float:
+    """The scaled local error ``err`` of one step (``AdaptiveControl``) from its stage states
+    ``[(x_i, w_i)]`` (the last is the step's result)."""
+    e = tableau.error_weights
+    x1, w1 = states[-1]
+    ex = sum(e[j] * (xj[mech] - x0[mech]) for j, (xj, _) in enumerate(states))
+    err = float(np.max(np.abs(ex) / (ada.atol + ada.rtol * np.maximum(np.abs(x0[mech]), np.abs(x1[mech])))))
+    if ada.atol_w is not None:
+        ew = sum(e[j] * (wj[mech] - w0[mech]) for j, (_, wj) in enumerate(states))
+        sc = ada.atol_w + ada.rtol * np.maximum(np.abs(w0[mech]), np.abs(w1[mech]))
+        err = max(err, float(np.max(np.abs(ew) / sc)))
+    return err
+
+
+@dataclass
+class _StepSize:
+    """What the error control carries across segments (restarts): the step size and the
+    previous accepted error."""
+
+    h: float
+    err_prev: Optional[float] = None
+    rejected_last: bool = False
+
+
+@dataclass(frozen=True)
 class ReusePolicy:
     """Factorisation reuse of the stage Newton solves (modified Newton,
     ``rve.solvers.newton.JacobianReuse``; docs/time_integration.md): ``mode`` False (one
@@ -800,6 +919,116 @@ def _segment(stepper, out, x, w, t, t_stop, n, ctl: StepControl, bud: Budgets, o
     return x, w, t
 
 
+def _landing(t: float, t0: float, t_end: float, grid: float) -> float:
+    """The next landing point after ``t`` on the grid ``t0 + k grid``, or ``t_end``."""
+    k = math.floor((t - t0) / grid + 1e-9) + 1
+    return min(float(t_end), t0 + k * grid)
+
+
+def _segment_adaptive(stepper, out, x, w, t, t_end, ctl: StepControl, bud: Budgets, ada: AdaptiveControl,
+                      hs: _StepSize, on_step, rebuild, bar, t0, h0):
+    """Error-controlled steps (``AdaptiveControl``) from ``t`` to ``t_end`` with one stepper;
+    returns ``(x, w, t)`` at ``t_end`` or where ``rebuild`` restarted. ``hs`` carries the step
+    size and the previous error over restarts; a Newton failure halves the step as in
+    ``_segment`` (``max_cuts``, ``min_step_rel``), an error rejection shrinks it by the
+    controller's factor."""
+    tab = stepper.tableau
+    beta1, beta2 = ada.exponents(tab)
+    mech = stepper.mech
+    grid = int(ada.land_every) * h0
+    n_est = max(1, int(math.ceil((t_end - t) / h0 - 1e-6)))
+    budget = max(64, 2 * n_est) if bud.max_rejections is None else int(bud.max_rejections)
+    rejected0, wall0 = out.rejected, time.perf_counter()
+    cuts, pending = 0, 0
+
+    def h_floor(tt: float) -> float:
+        return max(float(ctl.min_step_rel) * h0, float(ctl.min_step_t_rel) * abs(tt))
+
+    while t < t_end - 1e-12 * max(1.0, abs(t_end)):
+        t_target = _landing(t, t0, t_end, grid)
+        h_want = min(hs.h, ada.h_max if ada.h_max is not None else math.inf)
+        n_left = max(1, int(math.ceil((t_target - t) / h_want - 1e-9)))
+        h_try = (t_target - t) / n_left   # equal steps to the landing point: no sliver step
+        lands = n_left == 1
+        saved = stepper._points
+        try:
+            x1, w1, info = stepper.step(x, w, t, h_try)
+        except StepFailure as fail:
+            out.rejected += 1
+            out.add(fail.counts)
+            log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)", out.steps + 1, t, h_try, fail.stage,
+                     fail.reason)
+            stop = _give_up(fail, ctl, bud, t, h_try, h0, cuts, out.rejected - rejected0, budget, wall0)
+            if stop is not None:
+                raise IntegrationFailure(
+                    f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
+                    f"after {stop[1]}: stage {fail.stage}: {fail.reason}; Newton residuals "
+                    f"{_fmt_res(fail.residuals)}; {out.steps} steps accepted, {out.rejected} rejected; "
+                    f"last good state at t = {t:.9g}",
+                    x.copy(), w.copy(), t, h_try, fail.residuals, fail, out, cause=stop[0]) from fail
+            cuts, pending = cuts + 1, pending + 1
+            hs.h, hs.rejected_last = h_try / 2.0, True
+            continue
+        err = local_error(tab, x, w, info.stage_states, mech, ada)
+        if not math.isfinite(err) or err > 1.0:
+            out.rejected += 1
+            out.error_rejections += 1
+            out.add({"newton_iterations": info.newton_iterations, "linear_solves": info.linear_solves,
+                     "jacobians": info.jacobians, "factorizations": info.factorizations,
+                     "reuses": sum(info.stage_reuses), "rejected_reuses": info.rejected_reuses,
+                     "stage_retries": info.stage_retries})
+            stepper._points = saved   # the rejected step's stages must not feed the predictor
+            # after a rejection the elementary controller: the PI memory is of accepted steps
+            factor = (ada.min_factor if not math.isfinite(err)
+                      else max(ada.min_factor, ada.safety * err ** (-1.0 / (tab.embedded_order + 1))))
+            h_new = h_try * min(factor, 1.0)
+            log.info("step %d t=%.6g h=%.3e REJECTED (error estimate %.3g > 1): h -> %.3e", out.steps + 1, t, h_try,
+                     err, h_new)
+            pending += 1
+            if h_new < h_floor(t):
+                raise IntegrationFailure(
+                    f"time integration failed at t = {t:.9g}: the error-controlled step h = {h_new:.6g} would be "
+                    f"below the minimum step {h_floor(t):.3g} (error estimate {err:.3g}); {out.steps} steps "
+                    f"accepted, {out.rejected} rejected; last good state at t = {t:.9g}",
+                    x.copy(), w.copy(), t, h_try, info.stage_residuals[-1], None, out, cause="min_step")
+            if out.rejected - rejected0 >= budget:
+                raise IntegrationFailure(
+                    f"time integration failed at t = {t:.9g} after {out.rejected - rejected0} rejected steps "
+                    f"(max_rejections = {budget}; last error estimate {err:.3g}); last good state at t = {t:.9g}",
+                    x.copy(), w.copy(), t, h_try, info.stage_residuals[-1], None, out, cause="rejections")
+            hs.h, hs.rejected_last = h_new, True
+            continue
+        # accepted
+        factor = ada.safety * max(err, 1e-10) ** (-beta1)
+        if hs.err_prev is not None and beta2:
+            factor *= max(hs.err_prev, 1e-10) ** beta2
+        factor = min(ada.max_factor, max(ada.min_factor, factor))
+        if hs.rejected_last:
+            factor = min(factor, 1.0)
+        if 1.0 <= factor <= ada.hold_band:
+            factor = 1.0
+        base = hs.h if (factor >= 1.0 and h_try < hs.h) else h_try   # a step shortened to land does not shrink h
+        hs.h, hs.err_prev, hs.rejected_last = base * factor, err, False
+        t = t_target if lands else t + h_try
+        x, w = x1, w1
+        info.rejected_attempts, pending, cuts = pending, 0, 0
+        info.error = err
+        out.errors.append(err)
+        _accept(out, info, t, h_try, bar, t0)
+        log.info("step %d error estimate %.3g: next h=%.3e", out.steps, err, hs.h)
+        if on_step is not None:
+            on_step(t, x, w, info)
+        if rebuild is not None and t < t_end and rebuild(t, x, w):
+            return x, w, t
+        if bud.wall_budget_s is not None and t < t_end and time.perf_counter() - wall0 > bud.wall_budget_s:
+            raise IntegrationFailure(
+                f"time integration stopped at t = {t:.9g} (step size h = {h_try:.6g}) after the wall-time "
+                f"budget of {bud.wall_budget_s:g} s; {out.steps} steps accepted, {out.rejected} rejected; "
+                f"last good state at t = {t:.9g}", x.copy(), w.copy(), t, h_try, info.stage_residuals[-1],
+                None, out, cause="wall_time")
+    return x, w, float(t_end) if abs(t - t_end) <= 1e-12 * max(1.0, abs(t_end)) else t
+
+
 def integrate(
     system,
     x0,
@@ -821,6 +1050,7 @@ def integrate(
     predictor_degree: int = 2,
     lazy_jacobian: bool = True,
     predictor_across_restarts: bool = False,
+    adaptive: Optional[AdaptiveControl] = None,
 ) -> IntegrationResult:
     """Integrate from ``t0`` to ``t_end`` with nominal step ``h0 = (t_end − t0)/n_steps``.
 
@@ -868,10 +1098,26 @@ def integrate(
     counts Jacobian evaluations, factorisations, reused iterations, rejected modified
     steps, full-Newton stage retries and why factorisations were dropped
     (``refactor_reasons``).
+
+    Error-controlled steps (``adaptive``, an ``AdaptiveControl``; None: the steps above):
+    the first step is ``h0``, the later ones follow the embedded error estimate of the
+    tableau (``Tableau.b_hat``; SDIRK2 and SDIRK3), landing on the grid of
+    ``adaptive.land_every`` nominal steps and on ``t_end``; a Newton failure still halves
+    the step. The step size and the controller's memory survive the restarts of ``rebuild``
+    (which must not have a ``horizon``). The result adds ``error_rejections`` and the
+    accepted ``errors``.
     """
     tab = tableau if tableau is not None else sdirk(stages)
     if n_steps < 1 or not t_end > t0:
         raise ValueError("need n_steps >= 1 and t_end > t0")
+    if adaptive is not None:
+        if tab.b_hat is None:
+            raise ValueError(f"error-controlled steps need an embedded method; {tab.name} has none (use 2 or 3 stages)")
+        if control.fixed_step:
+            raise ValueError("error-controlled steps (adaptive) and fixed_step exclude each other")
+        if rebuild is not None and hasattr(rebuild, "horizon"):
+            raise ValueError("error-controlled steps do not follow a rebuild hook's horizon "
+                             "(segments of nominal steps)")
     x = np.array(x0, dtype=float, copy=True)
     w = np.array(w0, dtype=float, copy=True)
     t = float(t0)
@@ -888,6 +1134,7 @@ def integrate(
                    bar_format="{l_bar}{bar}| t-t0 = {n:.6g}/{total:.6g} [{elapsed}<{remaining}{postfix}]")
     reusers: list = []   # the JacobianReuse objects of the run (one per segment unless carried)
     stepper = None
+    hs = _StepSize(h0)
     try:
         t_stop, n = (float(t_end), int(n_steps)) if rebuild is None else _horizon(rebuild, t, t_end, h0)
         while True:
@@ -900,7 +1147,12 @@ def integrate(
             if stepper.reuse is not None and all(r is not stepper.reuse for r in reusers):
                 reusers.append(stepper.reuse)
             final = t_stop >= float(t_end)
-            x, w, t = _segment(stepper, out, x, w, t, t_stop, n, control, budgets, on_step, rebuild, final, bar, t0)
+            if adaptive is not None:
+                x, w, t = _segment_adaptive(stepper, out, x, w, t, float(t_end), control, budgets, adaptive, hs,
+                                            on_step, rebuild, bar, float(t0), h0)
+            else:
+                x, w, t = _segment(stepper, out, x, w, t, t_stop, n, control, budgets, on_step, rebuild, final, bar,
+                                   t0)
             if t >= float(t_end):
                 break
             out.restarts += 1

@@ -7,7 +7,9 @@
 # the projectile and the horizon scaled by 1/4 (same yarn spacing, elements of 0.64 mm, the
 # same deflection-to-span ratio at t_end); each point of the full size costs as much as the
 # full run.
-# Pipeline config key impact: {scene_config, overrides, sweep_overrides, currents}, its
+# Target `impact_velocity_sweep`: the projectile speeds of config impact.velocities (mm/ms) on
+# the same reduced case and relaxed state as the current sweep, then the sweep's figure.
+# Pipeline config key impact: {scene_config, overrides, sweep_overrides, currents, velocities}, its
 # defaults in workflow/schemas/pipeline.schema.yaml; the full run's memory from config
 # resources.impact_mem_mb (the others: the profile's default-resources);
 # every path from rve.scenes.layout; the job bodies (rve.scenes.impact.jobs) are imported in
@@ -111,3 +113,55 @@ rule impact_sweep:
         from rve.scenes.impact.jobs import sweep_curve
 
         sweep_curve(input, params.currents, output.png, output.json)
+
+
+wildcard_constraints:
+    impact_speed=r"[0-9]+(\.[0-9]+)?",
+
+
+rule impact_velocity_point:
+    """One impact speed of the velocity sweep (the reduced case of impact.sweep_overrides,
+    from the sweep's relaxed state: the relaxation does not depend on the speed)."""
+    input:
+        scene=IMPACT["scene_config"],
+        relaxed=scene_layout.impact_file("sweep", "relaxed"),
+    output:
+        summary=scene_layout.impact_file("velocity_sweep/v{impact_speed}", "summary"),
+        nc=scene_layout.impact_file("velocity_sweep/v{impact_speed}", "netcdf"),
+    log:
+        scene_layout.log_path("impact", "velocity_sweep_v{impact_speed}"),
+    benchmark:
+        scene_layout.benchmark_path("impact", "velocity_sweep_v{impact_speed}")
+    params:
+        overrides=lambda wc: IMPACT["overrides"] + IMPACT["sweep_overrides"] + [f"projectile.speed={wc.impact_speed} mm/ms"],
+        out=lambda wc: scene_layout.impact_velocity_dir(wc.impact_speed),
+    threads: 1
+    run:
+        from rve.scenes.impact.jobs import impact_job
+
+        impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
+                   relaxed=input.relaxed)
+
+
+rule impact_velocity_sweep:
+    """Speed histories, speed kept, tilt rate and peak temperature against the impact speed."""
+    input:
+        [scene_layout.impact_file(f"velocity_sweep/v{v}", "summary") for v in IMPACT["velocities"]],
+        [scene_layout.impact_file(f"velocity_sweep/v{v}", "netcdf") for v in IMPACT["velocities"]],
+    output:
+        png=scene_layout.IMPACT_VELOCITY_SWEEP_PNG,
+        json=scene_layout.IMPACT_VELOCITY_SWEEP_JSON,
+    log:
+        scene_layout.log_path("impact", "velocity_sweep_curve"),
+    benchmark:
+        scene_layout.benchmark_path("impact", "velocity_sweep_curve")
+    params:
+        speeds=IMPACT["velocities"],
+        dirs=[scene_layout.impact_velocity_dir(v) for v in IMPACT["velocities"]],
+    threads: 1
+    run:
+        from rve.scenes.impact.jobs import velocity_curve
+        from rve.scenes.protocol import job_log
+
+        with job_log(log[0]):
+            velocity_curve(params.dirs, params.speeds, output.png, output.json)

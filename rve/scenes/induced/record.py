@@ -9,7 +9,8 @@ Contract
   the thermal post-solve on the step's converged stage states (``info.stage_states``), the
   balances of the accepted state (reusing the residual of its last stage evaluation when
   ``system.residual_at`` has it) and, every ``store_every`` steps and at ``t_end``, the
-  stored state. ``history()`` gives the balance series as arrays.
+  stored state (with ``store_dt`` set, error-controlled steps: at the times k store_dt, where
+  the steps land). ``history()`` gives the balance series as arrays.
 * ``induced_summary(cfg, problem, rec, tab, t_end, h0, res, hook, wall, x, w) -> (summary,
   errors)``: the summary of ``rve.scenes.induced.solve`` (its module docstring).
 """
@@ -46,6 +47,8 @@ class InducedRecorder:
                          "since_store": 0}
         self.stage_its: list = []
         self.wall = {"balances": 0.0}
+        self.store_dt = None   # error-controlled steps: store on the time grid k store_dt instead of by count
+        self.h_used: list = []
 
     def T_of(self, w):
         return self.T if self.post is not None else self.base.nodal(w)[:, self.base.oT].copy()
@@ -69,7 +72,10 @@ class InducedRecorder:
         self.bal_t.append(t)
         self.wall["balances"] += time.perf_counter() - tb
         c["since_store"] += 1
-        if self.record and (c["since_store"] >= self.store_every or t >= self.t_end * (1 - 1e-12)):
+        self.h_used.append(info.h)
+        due = (c["since_store"] >= self.store_every if self.store_dt is None
+               else abs(t / self.store_dt - round(t / self.store_dt)) < 1e-6)
+        if self.record and (due or t >= self.t_end * (1 - 1e-12)):
             c["since_store"] = 0
             self.stored["t"].append(t)
             self.stored["x"].append(self.base.nodal(x)[:, :9].copy())
@@ -111,7 +117,11 @@ def induced_summary(cfg, problem, rec: InducedRecorder, tab, t_end, h0, res, hoo
         "orientation": orientation if isinstance(orientation, str) else [float(v) for v in orientation],
         "B_kT": problem.info["B_kT"], "temperature_mode": problem.mode,
         "t_end_ms": t_end, "h_nominal_ms": h0, "stages": tab.stages,
+        "time_control": "adaptive" if rec.store_dt is not None else "fixed",
         "steps_accepted": c["steps"], "steps_rejected": res.rejected,
+        "steps_rejected_by_error": res.error_rejections,
+        "step_ms": {"min": float(np.min(rec.h_used)), "median": float(np.median(rec.h_used)),
+                    "max": float(np.max(rec.h_used))} if rec.h_used else {},
         "newton_iterations": newton_acc, "newton_iterations_per_stage": newton_acc / n_stages,
         "linear_solves": c["linear_solves"], "factorizations": c["factorizations"],
         "jacobian_evaluations": c["jacobians"],

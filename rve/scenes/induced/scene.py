@@ -9,7 +9,9 @@ Contract (the scene protocol, rve.scenes.protocol)
 conditions, the initial state and the circuit bookkeeping; ``mode`` "post" (fields mech, V;
 T post-solved after every accepted step) or "monolithic" (mech, T, V).
 ``solve(cfg, record=True) -> SceneResult``: integrates from the crimped initial state at
-rest to ``time.t_end`` with ONE ``rve.solvers.dirk.integrate`` call (so the stage predictor's
+rest to ``time.t_end`` with ONE ``rve.solvers.dirk.integrate`` call (the thesis's steps
+of ``t_end/steps``, or with ``time.adaptive.enabled`` error-controlled steps landing on the
+store grid: ``adaptive_control``) (so the stage predictor's
 history and the kept stage factorisation of the modified Newton survive the contact-map
 rebuilds); the map is rebuilt from ``on_step`` every ``contact.rebuild_every`` accepted steps
 that end on the nominal grid (Appendix A), and at once when a centroid has moved half the
@@ -49,7 +51,7 @@ from ...fem.assembly import DofLayout
 from ...fabrics.setup import contact_params
 from ...model import BeamMaterial, BeamModel, CircuitBC, ContactSystem, Couplings, DirichletBC
 from ...model import RowScaledSystem
-from ...solvers.dirk import IntegrationFailure, integrate, sdirk
+from ...solvers.dirk import AdaptiveControl, IntegrationFailure, integrate, sdirk
 from ...solvers.dirk import integrator_options as integrator_options_of
 from ...model.balances import StateBalances
 from ...model.thermal_post import ThermalOperators
@@ -59,7 +61,8 @@ from ..rebuild import MapRebuild
 from ...fabrics.slack import slack_weave
 from ..protocol import SceneFailure, SceneResult
 
-__all__ = ["InducedProblem", "setup", "solve", "run", "field_vector", "field_ramp", "warp_circuit"]
+__all__ = ["InducedProblem", "setup", "solve", "run", "field_vector", "field_ramp", "warp_circuit",
+           "adaptive_control"]
 
 log = logging.getLogger("rve.scenes.induced")
 
@@ -144,6 +147,15 @@ def setup(cfg, mode: str | None = None) -> InducedProblem:
     return InducedProblem(system, weave, mode, x0, circuit_in, circuit_leak, dirichlet_V, ends.ravel(), ends, info)
 
 
+def adaptive_control(cfg) -> AdaptiveControl:
+    """The ``AdaptiveControl`` of ``time.adaptive``; the steps land on the store grid
+    (``time.store_every`` nominal steps), so the stored states are on fixed times."""
+    a = cfg.time.adaptive
+    return AdaptiveControl(rtol=a.rtol, atol=a.atol, atol_w=a.atol_velocity, safety=a.safety,
+                           min_factor=a.min_factor, max_factor=a.max_factor, hold_band=a.hold_band,
+                           controller=a.controller, h_max=a.h_max, land_every=cfg.time.store_every)
+
+
 def _initial_w(problem, system, x0, t0, nopts):
     from ...solvers.dirk import consistent_initialization
 
@@ -187,12 +199,15 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     steps = int(cfg.time.steps if steps is None else steps)
     tab = sdirk(cfg.time.stages)
     nopts = {"atol": cfg.newton.atol, "rtol": cfg.newton.rtol, "max_iter": cfg.newton.max_iter}
-    iopts = integrator_options_of(
-        max_cuts=cfg.time.max_cuts, fixed_step=not cfg.time.step_control, jacobian_reuse=cfg.newton.jacobian_reuse,
-        reuse_contraction=cfg.newton.reuse_contraction,
-        linear_backend=None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend,
-        **(integrator_options or {}))
+    iopts = integrator_options_of(**{
+        "max_cuts": cfg.time.max_cuts, "fixed_step": not cfg.time.step_control,
+        "jacobian_reuse": cfg.newton.jacobian_reuse, "reuse_contraction": cfg.newton.reuse_contraction,
+        "linear_backend": None if cfg.newton.linear_backend in (None, "auto") else cfg.newton.linear_backend,
+        **({"adaptive": adaptive_control(cfg)} if cfg.time.adaptive.enabled else {}),
+        **(integrator_options or {})})
     rs, x, w, rec = _induced_start(cfg, problem, t_end / steps, tab, nopts, record, progress, t_end, post_reuse)
+    if iopts.get("adaptive") is not None:   # the steps land on the store grid: store by time there
+        rec.store_dt = iopts["adaptive"].land_every * t_end / steps
     every = cfg.contact.rebuild_every if cfg.contact.rebuild == "every" else None
     hook = MapRebuild(sysm, t_end, every, 0.5 * float(sysm.params.margin))
     sysm.rebuild(x)
@@ -215,7 +230,8 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
         tracemalloc.stop()
     if record:
         summary["history"] = {"stored": {k: np.asarray(v) for k, v in rec.stored.items()},
-                              "balances": rec.history(), "balance_series": errs["series"]}
+                              "balances": rec.history(), "balance_series": errs["series"],
+                              "h": np.asarray(rec.h_used)}
     return SceneResult(state={"x": x, "w": w, "T": rec.T_of(w)}, model=base, summary=summary)
 
 
