@@ -925,6 +925,52 @@ def _landing(t: float, t0: float, t_end: float, grid: float) -> float:
     return min(float(t_end), t0 + k * grid)
 
 
+def _error_rejection(out, info, tab, ada: AdaptiveControl, err: float, h_try: float, t: float, x, w,
+                     h_floor: float, rejected0: int, budget: int) -> float:
+    """Count a step whose error estimate ``err`` exceeds 1 and return the shorter step (the
+    elementary controller: the PI memory is of accepted steps); an ``IntegrationFailure`` with
+    the last good state when that step is below ``h_floor`` or the rejections exceed ``budget``."""
+    out.rejected += 1
+    out.error_rejections += 1
+    out.add({"newton_iterations": info.newton_iterations, "linear_solves": info.linear_solves,
+             "jacobians": info.jacobians, "factorizations": info.factorizations,
+             "reuses": sum(info.stage_reuses), "rejected_reuses": info.rejected_reuses,
+             "stage_retries": info.stage_retries})
+    factor = (ada.min_factor if not math.isfinite(err)
+              else max(ada.min_factor, ada.safety * err ** (-1.0 / (tab.embedded_order + 1))))
+    h_new = h_try * min(factor, 1.0)
+    log.info("step %d t=%.6g h=%.3e REJECTED (error estimate %.3g > 1): h -> %.3e", out.steps + 1, t, h_try,
+             err, h_new)
+    if h_new < h_floor:
+        raise IntegrationFailure(
+            f"time integration failed at t = {t:.9g}: the error-controlled step h = {h_new:.6g} would be "
+            f"below the minimum step {h_floor:.3g} (error estimate {err:.3g}); {out.steps} steps "
+            f"accepted, {out.rejected} rejected; last good state at t = {t:.9g}",
+            x.copy(), w.copy(), t, h_try, info.stage_residuals[-1], None, out, cause="min_step")
+    if out.rejected - rejected0 >= budget:
+        raise IntegrationFailure(
+            f"time integration failed at t = {t:.9g} after {out.rejected - rejected0} rejected steps "
+            f"(max_rejections = {budget}; last error estimate {err:.3g}); last good state at t = {t:.9g}",
+            x.copy(), w.copy(), t, h_try, info.stage_residuals[-1], None, out, cause="rejections")
+    return h_new
+
+
+def _next_step_size(ada: AdaptiveControl, hs, err: float, h_try: float, beta1: float, beta2: float) -> float:
+    """The step after an accepted one of size ``h_try`` and error estimate ``err`` (the PI or
+    elementary controller, clipped to the growth limits; no growth right after a rejection;
+    growths inside the hold band keep h, and with it the held factorisation)."""
+    factor = ada.safety * max(err, 1e-10) ** (-beta1)
+    if hs.err_prev is not None and beta2:
+        factor *= max(hs.err_prev, 1e-10) ** beta2
+    factor = min(ada.max_factor, max(ada.min_factor, factor))
+    if hs.rejected_last:
+        factor = min(factor, 1.0)
+    if 1.0 <= factor <= ada.hold_band:
+        factor = 1.0
+    base = hs.h if (factor >= 1.0 and h_try < hs.h) else h_try   # a step shortened to land does not shrink h
+    return base * factor
+
+
 def _segment_adaptive(stepper, out, x, w, t, t_end, ctl: StepControl, bud: Budgets, ada: AdaptiveControl,
                       hs: _StepSize, on_step, rebuild, bar, t0, h0):
     """Error-controlled steps (``AdaptiveControl``) from ``t`` to ``t_end`` with one stepper;
@@ -971,44 +1017,12 @@ def _segment_adaptive(stepper, out, x, w, t, t_end, ctl: StepControl, bud: Budge
             continue
         err = local_error(tab, x, w, info.stage_states, mech, ada)
         if not math.isfinite(err) or err > 1.0:
-            out.rejected += 1
-            out.error_rejections += 1
-            out.add({"newton_iterations": info.newton_iterations, "linear_solves": info.linear_solves,
-                     "jacobians": info.jacobians, "factorizations": info.factorizations,
-                     "reuses": sum(info.stage_reuses), "rejected_reuses": info.rejected_reuses,
-                     "stage_retries": info.stage_retries})
             stepper._points = saved   # the rejected step's stages must not feed the predictor
-            # after a rejection the elementary controller: the PI memory is of accepted steps
-            factor = (ada.min_factor if not math.isfinite(err)
-                      else max(ada.min_factor, ada.safety * err ** (-1.0 / (tab.embedded_order + 1))))
-            h_new = h_try * min(factor, 1.0)
-            log.info("step %d t=%.6g h=%.3e REJECTED (error estimate %.3g > 1): h -> %.3e", out.steps + 1, t, h_try,
-                     err, h_new)
             pending += 1
-            if h_new < h_floor(t):
-                raise IntegrationFailure(
-                    f"time integration failed at t = {t:.9g}: the error-controlled step h = {h_new:.6g} would be "
-                    f"below the minimum step {h_floor(t):.3g} (error estimate {err:.3g}); {out.steps} steps "
-                    f"accepted, {out.rejected} rejected; last good state at t = {t:.9g}",
-                    x.copy(), w.copy(), t, h_try, info.stage_residuals[-1], None, out, cause="min_step")
-            if out.rejected - rejected0 >= budget:
-                raise IntegrationFailure(
-                    f"time integration failed at t = {t:.9g} after {out.rejected - rejected0} rejected steps "
-                    f"(max_rejections = {budget}; last error estimate {err:.3g}); last good state at t = {t:.9g}",
-                    x.copy(), w.copy(), t, h_try, info.stage_residuals[-1], None, out, cause="rejections")
-            hs.h, hs.rejected_last = h_new, True
+            hs.h = _error_rejection(out, info, tab, ada, err, h_try, t, x, w, h_floor(t), rejected0, budget)
+            hs.rejected_last = True
             continue
-        # accepted
-        factor = ada.safety * max(err, 1e-10) ** (-beta1)
-        if hs.err_prev is not None and beta2:
-            factor *= max(hs.err_prev, 1e-10) ** beta2
-        factor = min(ada.max_factor, max(ada.min_factor, factor))
-        if hs.rejected_last:
-            factor = min(factor, 1.0)
-        if 1.0 <= factor <= ada.hold_band:
-            factor = 1.0
-        base = hs.h if (factor >= 1.0 and h_try < hs.h) else h_try   # a step shortened to land does not shrink h
-        hs.h, hs.err_prev, hs.rejected_last = base * factor, err, False
+        hs.h, hs.err_prev, hs.rejected_last = _next_step_size(ada, hs, err, h_try, beta1, beta2), err, False
         t = t_target if lands else t + h_try
         x, w = x1, w1
         info.rejected_attempts, pending, cuts = pending, 0, 0

@@ -68,17 +68,12 @@ import numpy as np
 from .backends.registry import run_backend
 from .linear import sparse_solve
 from .newton import NewtonResult, StageFactorisation
+from .system import friction_of
 from .static import StaticProblem, static_solve
 
 __all__ = ["friction_of", "frictional_static_step", "frictional_solve", "FrictionalResult"]
 
 log = logging.getLogger("rve.solvers.frictional")
-
-
-def friction_of(system):
-    """The friction of ``system`` (``system.term.friction``), None when it has none."""
-    term = getattr(system, "term", None)
-    return getattr(term, "friction", None) if term is not None else None
 
 
 def frictional_static_step(system, x, w, t: float, newton_opts: Optional[dict] = None, method: str = "newton"):

@@ -39,7 +39,7 @@ import numpy as np
 
 from .backends.registry import run_backend
 from .linear import factor_inertia, factor_positive_definite, shifted, sparse_solve
-from .frictional import friction_of
+from .system import friction_of
 from .newton import NewtonResult, convergence_rates
 from .static import StaticProblem
 

@@ -59,7 +59,7 @@ import scipy.sparse as sp
 
 from .backends.base import same_structure as _same_structure
 
-__all__ = ["DynamicSystem", "ContactRelaxable", "FreeDofs", "massless_dofs", "mech_mask", "scale_columns"]
+__all__ = ["DynamicSystem", "ContactRelaxable", "FreeDofs", "friction_of", "massless_dofs", "mech_mask", "scale_columns"]
 
 
 @runtime_checkable
@@ -303,3 +303,11 @@ def scale_columns(A, mask: np.ndarray):
     A = sp.csr_matrix(A, copy=True)
     A.data *= mask[A.indices]
     return A
+
+
+def friction_of(system):
+    """The friction of ``system`` (``system.term.friction``: the ``FrictionTerm`` of a contact
+    system's term), None when it has none: what a solver asks before it chooses the energy
+    minimiser (a potential) or the frictional residual (none)."""
+    term = getattr(system, "term", None)
+    return getattr(term, "friction", None) if term is not None else None
