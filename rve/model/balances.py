@@ -117,7 +117,10 @@ def balance_errors(s: dict) -> dict:
     electrical: max |P_circuit - (Joule + contact Joule + Lorentz power)| / max |P_circuit|;
     mechanical: max |Δ(kin + strain + contact) + ∫P_damping - ∫P_Lorentz| / max(|∫P_L|, |ΔE_mech|);
     thermal: max |ΔH + ∫q_out - ∫Joule| / max ∫Joule;
-    total: max |∫P_circuit - ΔE_mech - ∫P_damping - ∫Joule - ∫P_contact_joule| / max |∫P_circuit|."""
+    total: max |∫P_circuit - ΔE_mech - ∫P_damping - ∫Joule - ∫P_contact_joule| / max |∫P_circuit|.
+    With friction (``friction_dissipated``, ``energy_friction`` in ``s``): E_mech includes the
+    tangential springs' energy and the dissipated work (beside ∫P_damping in the mechanical
+    and total balances) the friction's dissipated energy since the start."""
     t = np.asarray(s["t"], float)
     g = {k: np.asarray(v, float) for k, v in s.items() if k != "terminal_currents"}
     I_in = g["current_in"]
@@ -125,17 +128,25 @@ def balance_errors(s: dict) -> dict:
     P_el = g["power_circuit"]
     elec = np.abs(P_el - g["power_joule"] - g["power_contact_joule"] - g["power_lorentz"])
     Em = g["energy_kinetic"] + g["energy_strain"] + g["energy_contact"]
+    W_d = _cumtrapz(t, g["power_damping"])
+    if "friction_dissipated" in g:
+        # friction (rve.scenes.dynamic_friction): the tangential springs' energy is stored
+        # mechanical energy, the return maps' slip work dissipated (a state quantity per
+        # committed step, not a rate: no quadrature)
+        Em = Em + g["energy_friction"]
+        W_dis = W_d + (g["friction_dissipated"] - g["friction_dissipated"][0])
+    else:
+        W_dis = W_d
     dEm = Em - Em[0]
     W_L = _cumtrapz(t, g["power_lorentz"])
-    W_d = _cumtrapz(t, g["power_damping"])
-    mech = np.abs(dEm + W_d - W_L)
+    mech = np.abs(dEm + W_dis - W_L)
     Q_J = _cumtrapz(t, g["power_joule"])
     Q_out = _cumtrapz(t, g["heat_out"])
     dH = g["heat_content"] - g["heat_content"][0]
     therm = np.abs(dH + Q_out - Q_J)
     W_el = _cumtrapz(t, P_el)
     W_cj = _cumtrapz(t, g["power_contact_joule"])
-    total = np.abs(W_el - dEm - W_d - Q_J - W_cj)
+    total = np.abs(W_el - dEm - W_dis - Q_J - W_cj)
     tiny = 1e-300
     return {
         "charge": float(charge.max() / max(np.abs(I_in).max(), tiny)),
@@ -145,8 +156,10 @@ def balance_errors(s: dict) -> dict:
         "total": float(total.max() / max(np.abs(W_el).max(), tiny)),
         "work_lorentz_mJ": float(W_L[-1]), "work_circuit_mJ": float(W_el[-1]), "joule_heat_mJ": float(Q_J[-1]),
         "damping_mJ": float(W_d[-1]), "delta_mechanical_energy_mJ": float(dEm[-1]),
-        "series": {"mechanical_residual": dEm + W_d - W_L, "thermal_residual": dH + Q_out - Q_J,
-                   "total_residual": W_el - dEm - W_d - Q_J - W_cj, "charge_residual": I_in - g["current_out"]
+        **({"friction_dissipated_mJ": float(g["friction_dissipated"][-1] - g["friction_dissipated"][0]),
+            "friction_elastic_energy_mJ": float(g["energy_friction"][-1])} if "friction_dissipated" in g else {}),
+        "series": {"mechanical_residual": dEm + W_dis - W_L, "thermal_residual": dH + Q_out - Q_J,
+                   "total_residual": W_el - dEm - W_dis - Q_J - W_cj, "charge_residual": I_in - g["current_out"]
                    - g["current_leak"], "electrical_residual": P_el - g["power_joule"] - g["power_contact_joule"]
                    - g["power_lorentz"]},
     }
