@@ -105,14 +105,15 @@ def test_kept_stage_factorisation_solves_the_unsymmetric_frictional_matrix(backe
 
 @pytest.mark.slow
 def test_impact_with_friction_resumes_bit_for_bit(tmp_path, monkeypatch):
-    cfg = load_config(IMPACT, TINY + ["friction.coefficient=0.3"])
+    # the fabric's crossings start sliding at step 38: resumed at step 50, mid-slide
+    cfg = load_config(IMPACT, TINY + ["friction.coefficient=0.3", "time.t_end=0.03 ms", "time.steps=60"])
     x, info = impact.relax(cfg)
     ref = impact.solve(cfg, x_start=x, relax_info=info, record=True)
     D = ref.summary["energies_mJ"]["friction_dissipated_mJ"]
     assert D > 0
     ck = tmp_path / "checkpoint.npz"
     with pytest.raises(SceneFailure):
-        impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck, stop_after_steps=35)
+        impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck, stop_after_steps=50)
     with np.load(ck) as d:
         assert float(d["friction/dissipated"]) > 0   # the history is in the checkpoint
     saved = ck.read_bytes()
@@ -141,7 +142,7 @@ def test_induced_energy_balance_closes_with_the_friction_terms():
     the crossings slide and friction dissipates a large part of the Lorentz work. The
     mechanical and total balances close as they do without friction (the same scheme's
     numerical dissipation, within 1.5x) only with the friction terms; without them the
-    error is several times that."""
+    error is 2.5x that or more (mechanical 4x, total 3x in this case)."""
     sets = ["mesh.elements=12", "field.orientation=B3", "time.t_end=0.5 ms", "time.steps=100",
             "newton.jacobian_reuse=false"]
     e0 = induced.solve(load_config(INDUCED, sets), record=True).summary["balance_errors"]
@@ -153,4 +154,4 @@ def test_induced_energy_balance_closes_with_the_friction_terms():
     off = _errors_without_friction(s["history"]["balances"])
     for k in ("mechanical", "total"):
         assert e[k] <= 1.5 * e0[k]
-        assert off[k] >= 3.0 * e0[k]
+        assert off[k] >= 2.5 * e0[k]
