@@ -22,6 +22,11 @@ accepted step, from the residual the last stage's Newton left at the step's end 
 chunk boundary and resumed from when present (same config digest).
 ``run(cfg, out_dir) -> dict``: load_or_relax + solve + outputs (``rve.scenes.impact.outputs``)
 + the summary (docs/impact.md).
+Friction (``cfg.friction``, some mu > 0; ``ImpactProblem.friction``, a
+``rve.scenes.dynamic_friction.DynamicFriction``): between the fibrils in the impact phase only
+(the relaxation and the sphere contact stay frictionless); the history is committed after
+every accepted step, before the balances (which then include the friction terms) and the
+rebuilds, and is part of the checkpoint (and of its digest). mu = 0: the frictionless scene.
 
 Sampled yarns: the warp yarns nearest y = -R_p/2 (``minus_y``) and +R_p/2 (``plus_y``) of the
 projectile axis, and the warp yarn j = 0 (``edge``, the -y edge).

@@ -27,6 +27,11 @@ max_temperature_K, terminal_current_A, charge_balance_error, energy_balance_erro
 wall_time_s). A failed integration raises ``SceneFailure`` (last good state; ``run`` saves
 it to ``induced_deformation_last_good_state.npz``).
 
+Friction (``cfg.friction``, some mu > 0; ``InducedProblem.friction``, a
+``rve.scenes.dynamic_friction.DynamicFriction``): the history is committed after every
+accepted step, before the balances (which then include the friction terms) and the map
+rebuilds. mu = 0: the frictionless scene.
+
 Set-up: ``rve.fabrics.slack.slack_weave`` (single-fibril yarns, L0 = 12.5 mm natural
 length between ends 10 mm apart, crimped so that the fibrils start unstretched and apart).
 Every fibril end's centroid pinned (directors free). Warp: V = 0 at the x+ end, the mixed
