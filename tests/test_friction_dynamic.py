@@ -15,6 +15,7 @@ from rve.scenes.frictional import initial_state, step
 from rve.scenes.induced import scene as induced
 from rve.scenes.protocol import SceneFailure
 from rve.solvers.linear import get_backend, is_symmetric
+from rve.testing import fd_jacobian
 from rve.solvers.newton import StageFactorisation
 from rve.solvers.backends.pruned import PardisoOrPruned, PrunedSuperLU
 
@@ -103,12 +104,20 @@ def test_kept_stage_factorisation_solves_the_unsymmetric_frictional_matrix(backe
     assert np.linalg.norm(S @ du - b) > 1e-8 * np.linalg.norm(b)
 
 
-@pytest.mark.slow
-def test_impact_with_friction_resumes_bit_for_bit(tmp_path, monkeypatch):
-    # the fabric's crossings start sliding at step 38: resumed at step 50, mid-slide
-    cfg = load_config(IMPACT, TINY + ["friction.coefficient=0.3", "time.t_end=0.03 ms", "time.steps=60"])
+#: the fabric's crossings start sliding at step 38 of the tiny impact: resumed at step 50, mid-slide
+FRICTIONAL = TINY + ["friction.coefficient=0.3", "time.t_end=0.03 ms", "time.steps=60"]
+
+
+@pytest.fixture(scope="module")
+def frictional_impact():
+    cfg = load_config(IMPACT, FRICTIONAL)
     x, info = impact.relax(cfg)
-    ref = impact.solve(cfg, x_start=x, relax_info=info, record=True)
+    return cfg, x, info, impact.solve(cfg, x_start=x, relax_info=info, record=True)
+
+
+@pytest.mark.slow
+def test_impact_with_friction_resumes_bit_for_bit(tmp_path, monkeypatch, frictional_impact):
+    cfg, x, info, ref = frictional_impact
     D = ref.summary["energies_mJ"]["friction_dissipated_mJ"]
     assert D > 0
     ck = tmp_path / "checkpoint.npz"
@@ -127,6 +136,28 @@ def test_impact_with_friction_resumes_bit_for_bit(tmp_path, monkeypatch):
     monkeypatch.setattr(DynamicFriction, "restore", lambda self, x_, arrays: None)
     bad = impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck)
     assert not np.array_equal(bad.state["x"], ref.state["x"])
+
+
+@pytest.mark.slow
+def test_impact_system_jacobian_with_friction_fd(frictional_impact):
+    """The whole ImpactSystem's tangent (fabric with friction + projectile + spheres, on its
+    union pattern) against central differences at a trial state moved on from the last
+    committed one along the velocity (the sliding crossings slip there)."""
+    _, _, _, ref = frictional_impact
+    sysm, x, w = ref.model, ref.state["x"], ref.state["w"]
+    fr = sysm.fabric.term.friction
+    xt = x + 2e-4 * w                       # 0.2 us further on, the history held
+    st = fr.state(sysm.split(xt)[0])
+    assert st.slip.sum() > 0
+    F, Fx, _ = sysm.evaluate(xt, w, 0.03)
+    assert not is_symmetric(Fx)
+    pairs = np.flatnonzero(st.slip.any(axis=1))[:3]
+    c = sysm.fabric.term
+    nodes = np.unique(np.concatenate([np.ravel(c.map.nodes_plus[pairs]), np.ravel(c.map.nodes_minus[pairs])]))
+    cols = sysm.fabric.layout.dofs("r", nodes)
+    J = fd_jacobian(lambda v: sysm.evaluate(v, w, 0.03, jacobian=False)[0], xt, cols, eps=1e-7)
+    A = Fx.toarray()[:, cols]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
 
 
 def _errors_without_friction(history_balances):
