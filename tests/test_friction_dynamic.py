@@ -163,7 +163,8 @@ def test_impact_system_jacobian_with_friction_fd(frictional_impact):
 def _errors_without_friction(history_balances):
     from rve.model.balances import balance_errors
 
-    s = {k: v for k, v in history_balances.items() if k not in ("friction_dissipated", "energy_friction")}
+    s = {k: v for k, v in history_balances.items()
+         if k not in ("friction_dissipated", "energy_friction", "power_friction")}
     return balance_errors(s)
 
 

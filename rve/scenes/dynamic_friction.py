@@ -39,6 +39,7 @@ import dataclasses
 import numpy as np
 
 from ..model.terms.friction import FrictionLaw, match_rows
+from ..physics.friction_forms import material_weights
 
 __all__ = ["contact_params_with_friction", "DynamicFriction", "FrictionBalances"]
 
@@ -112,9 +113,24 @@ class DynamicFriction:
                 inner(t, x, w, info)
         return step
 
-    def terms(self) -> dict:
-        return {"friction_dissipated": float(self.term.dissipated) + self.released,
-                "energy_friction": float(self._energy.sum())}
+    def power(self, w) -> float:
+        """The power the friction forces of the last committed state take from the motion
+        ``w`` (W = mJ/ms): sum over the points of t . (v+ - v-) at the material points."""
+        st, c = self.term.last, self.term.contact
+        if st is None or st.t.size == 0 or c.map is None or c.map.n_pairs != st.t.shape[0]:
+            return 0.0
+        if c.map.shift is not None:
+            raise ValueError("friction power: periodic shifts are not supported")
+        V = np.stack(c.ends(self.part(w)), axis=1)
+        cb = material_weights(np.broadcast_to(c.map.s_plus, st.s_bar.shape), st.s_bar)
+        return float(np.einsum("pgk,pki,pgi->", cb, V, st.t))
+
+    def terms(self, w=None) -> dict:
+        out = {"friction_dissipated": float(self.term.dissipated) + self.released,
+               "energy_friction": float(self._energy.sum())}
+        if w is not None:
+            out["power_friction"] = self.power(w)
+        return out
 
     # ------------------------------------------------------------------ checkpoints
     def arrays(self) -> dict:
@@ -156,5 +172,6 @@ class FrictionBalances:
 
     def __call__(self, *args, **kwargs) -> dict:
         b = self.balances(*args, **kwargs)
-        b.update(self.friction.terms())
+        w = args[1] if len(args) > 1 else kwargs.get("w")
+        b.update(self.friction.terms(w))
         return b
