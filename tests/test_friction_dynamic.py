@@ -160,6 +160,27 @@ def test_impact_system_jacobian_with_friction_fd(frictional_impact):
     np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
 
 
+@pytest.mark.slow
+def test_impact_energy_balance_closes_with_the_friction_work(frictional_impact):
+    """The tiny impact with mu = 0.3 (the crossings slide over the last 22 of 60 steps):
+    the mechanical balance's residual is a small part of the friction work with it and most
+    of it without it; the work W_f (trapezoid of the friction power) and the return maps'
+    dissipated energy plus the springs' energy agree to first order in h."""
+    from rve.model.balances import impact_balance_errors
+
+    _, _, _, ref = frictional_impact
+    bal = {k: np.asarray(v) for k, v in ref.summary["history"]["balances"].items()}
+    e = impact_balance_errors(bal)
+    W_f, D, E_T = e["friction_work_mJ"], e["friction_dissipated_mJ"], e["friction_elastic_energy_mJ"]
+    assert W_f > 0.5 * abs(e["delta_mechanical_energy_mJ"])       # friction matters here
+    res = np.abs(e["series"]["mechanical_residual"]).max()
+    assert res <= 0.02 * W_f
+    off = impact_balance_errors({k: v for k, v in bal.items()
+                                 if k not in ("friction_dissipated", "energy_friction", "power_friction")})
+    assert np.abs(off["series"]["mechanical_residual"]).max() >= 0.5 * W_f
+    assert abs(W_f - (D + E_T)) <= 0.1 * W_f
+
+
 def _errors_without_friction(history_balances):
     from rve.model.balances import balance_errors
 
