@@ -1,7 +1,7 @@
 """Friction between fibrils in the dynamic fabric scenes (the impact, the induced
 deformation): the law from the config, the history committed after every accepted time
 step, the friction terms of the energy balances, and the history in the checkpoints
-(docs/contact.md "Friction", docs/impact.md "Friction").
+(docs/contact.md "Friction", docs/impact.md "Friction between fibrils").
 
 Contract
 --------
@@ -19,12 +19,16 @@ Contract
   state: backward Euler in the slip). Keeps, per contact point, the elastic energy
   ``|t|^2 / (2 kT)`` of the tangential spring at that state.
 * ``on_step(inner)``: an ``on_step`` callable that commits, then calls ``inner``.
-* ``terms()`` -> ``{"friction_dissipated": D, "energy_friction": E}`` (mJ): ``D`` the energy
-  dissipated since the start (``FrictionTerm.dissipated``, the work of the return maps'
-  slip, plus the elastic energy of the tangential springs of points that lost contact:
-  their force drops to zero without returning it), ``E`` the elastic energy of the
-  tangential springs now. The energy balances count ``E`` with the mechanical energy and
-  ``D`` with the dissipated work (``rve.model.balances.balance_errors``).
+* ``power(w)``: the power (W = mJ/ms) the friction forces of the last committed state take
+  from the motion ``w``: sum over the points of t . (v+ - v-) at their material points.
+* ``terms(w=None)`` -> ``{"friction_dissipated": D, "energy_friction": E, "power_friction":
+  P}`` (mJ, mJ, W; ``P`` only with ``w``): ``D`` the energy dissipated since the start
+  (``FrictionTerm.dissipated``, the work of the return maps' slip, plus the elastic energy
+  of the tangential springs of points that lost contact: their force drops to zero without
+  returning it), ``E`` the elastic energy of the tangential springs now, ``P`` = ``power(w)``.
+  The energy balances (``rve.model.balances.balance_errors``) count the friction work
+  ∫P dt (trapezoid rule, like their other powers) as dissipated work; ``D + E`` is the
+  return maps' first-order estimate of the same work, reported beside it.
 * ``FrictionBalances(balances, friction)``: a balances callable whose dict has ``terms()``
   added.
 * ``arrays()`` -> the history as plain arrays (names ``friction/...``, for an npz

@@ -161,7 +161,7 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
     params = contact_params(k, k.rebuild_every)
     if not relaxing:
         # the relaxation stays frictionless: its crimped start is an exact equilibrium at
-        # rest, so friction would change nothing there (docs/impact.md "Friction")
+        # rest, so friction would change nothing there (docs/impact.md "Friction between fibrils")
         params = contact_params_with_friction(params, cfg.friction)
     xf = np.zeros(base.n)
     base.nodal(xf)[:, :9] = weave.x0
