@@ -117,7 +117,12 @@ def balance_errors(s: dict) -> dict:
     electrical: max |P_circuit - (Joule + contact Joule + Lorentz power)| / max |P_circuit|;
     mechanical: max |Δ(kin + strain + contact) + ∫P_damping - ∫P_Lorentz| / max(|∫P_L|, |ΔE_mech|);
     thermal: max |ΔH + ∫q_out - ∫Joule| / max ∫Joule;
-    total: max |∫P_circuit - ΔE_mech - ∫P_damping - ∫Joule - ∫P_contact_joule| / max |∫P_circuit|."""
+    total: max |∫P_circuit - ΔE_mech - ∫P_damping - ∫Joule - ∫P_contact_joule| / max |∫P_circuit|.
+    With friction (``power_friction``, ``friction_dissipated``, ``energy_friction`` in ``s``):
+    the work of the friction forces ∫P_friction (W_f) is dissipated work beside ∫P_damping in
+    the mechanical and total balances; ``friction_work_mJ`` W_f, ``friction_dissipated_mJ`` the
+    return maps' dissipated energy D and ``friction_elastic_energy_mJ`` the springs' energy
+    E_T at the end (W_f = D + E_T up to the first-order error of the return map's estimate)."""
     t = np.asarray(s["t"], float)
     g = {k: np.asarray(v, float) for k, v in s.items() if k != "terminal_currents"}
     I_in = g["current_in"]
@@ -125,17 +130,26 @@ def balance_errors(s: dict) -> dict:
     P_el = g["power_circuit"]
     elec = np.abs(P_el - g["power_joule"] - g["power_contact_joule"] - g["power_lorentz"])
     Em = g["energy_kinetic"] + g["energy_strain"] + g["energy_contact"]
+    W_d = _cumtrapz(t, g["power_damping"])
+    if "power_friction" in g:
+        # friction (rve.scenes.dynamic_friction): the work taken from the motion by the
+        # friction forces, by the trapezoid rule like every other power here (the return
+        # maps' dissipated energy plus the springs' energy is a backward-Euler estimate of
+        # the same work: first order in h, docs/impact.md "Friction between fibrils")
+        W_f = _cumtrapz(t, g["power_friction"])
+        W_dis = W_d + W_f
+    else:
+        W_dis = W_d
     dEm = Em - Em[0]
     W_L = _cumtrapz(t, g["power_lorentz"])
-    W_d = _cumtrapz(t, g["power_damping"])
-    mech = np.abs(dEm + W_d - W_L)
+    mech = np.abs(dEm + W_dis - W_L)
     Q_J = _cumtrapz(t, g["power_joule"])
     Q_out = _cumtrapz(t, g["heat_out"])
     dH = g["heat_content"] - g["heat_content"][0]
     therm = np.abs(dH + Q_out - Q_J)
     W_el = _cumtrapz(t, P_el)
     W_cj = _cumtrapz(t, g["power_contact_joule"])
-    total = np.abs(W_el - dEm - W_d - Q_J - W_cj)
+    total = np.abs(W_el - dEm - W_dis - Q_J - W_cj)
     tiny = 1e-300
     return {
         "charge": float(charge.max() / max(np.abs(I_in).max(), tiny)),
@@ -145,8 +159,11 @@ def balance_errors(s: dict) -> dict:
         "total": float(total.max() / max(np.abs(W_el).max(), tiny)),
         "work_lorentz_mJ": float(W_L[-1]), "work_circuit_mJ": float(W_el[-1]), "joule_heat_mJ": float(Q_J[-1]),
         "damping_mJ": float(W_d[-1]), "delta_mechanical_energy_mJ": float(dEm[-1]),
-        "series": {"mechanical_residual": dEm + W_d - W_L, "thermal_residual": dH + Q_out - Q_J,
-                   "total_residual": W_el - dEm - W_d - Q_J - W_cj, "charge_residual": I_in - g["current_out"]
+        **({"friction_work_mJ": float(W_f[-1]),
+            "friction_dissipated_mJ": float(g["friction_dissipated"][-1] - g["friction_dissipated"][0]),
+            "friction_elastic_energy_mJ": float(g["energy_friction"][-1])} if "power_friction" in g else {}),
+        "series": {"mechanical_residual": dEm + W_dis - W_L, "thermal_residual": dH + Q_out - Q_J,
+                   "total_residual": W_el - dEm - W_dis - Q_J - W_cj, "charge_residual": I_in - g["current_out"]
                    - g["current_leak"], "electrical_residual": P_el - g["power_joule"] - g["power_contact_joule"]
                    - g["power_lorentz"]},
     }

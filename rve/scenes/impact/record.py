@@ -13,11 +13,13 @@ Contract
   integrator solves, if set; its ``residual_at`` hands the balances the residual of the
   last stage's Newton at the step's end state (counted in ``residual_reused``), so they do
   not evaluate it again. ``wall`` holds the seconds of the balances and of the post-solve.
-* ``ImpactCheckpoint(path, digest, t_end, steps)``: ``save(rec, t, x, w, rebuilds, early)``
-  writes an npz of plain arrays (no pickle: every series is stacked, the counters are
-  integers, the run's identity is the digest, ``t_end`` and ``steps``); ``load(rec)`` fills a
-  fresh recorder from a matching file and returns ``(t, x, w, rebuilds, early)``, or None
-  when there is none or it is for another run.
+* ``ImpactCheckpoint(path, digest, t_end, steps, friction=None)``: ``save(rec, t, x, w, rebuilds,
+  early)`` writes an npz of plain arrays (no pickle: every series is stacked, the counters are
+  integers, the run's identity is the digest, ``t_end`` and ``steps``; with ``friction``, a
+  ``rve.scenes.dynamic_friction.DynamicFriction``, its history as ``friction/...``);
+  ``load(rec)`` fills a fresh recorder from a matching file and returns ``(t, x, w, rebuilds,
+  early)``, or None when there is none or it is for another run (the friction history in
+  ``friction_arrays``, for ``DynamicFriction.restore`` after the map rebuild).
 * ``impact_summary(...) -> (summary, errors)``: the summary of ``rve.scenes.impact.solve``
   (docs/impact.md) and ``impact_balance_errors`` of the run; ``wall_split``: its wall-time split.
 """
@@ -142,9 +144,11 @@ def _lists(d: dict, prefix: str, npz) -> None:
 class ImpactCheckpoint:
     """The resumable state of an impact run as an npz of plain arrays (module docstring)."""
 
-    def __init__(self, path, digest: str, t_end: float, steps: int):
+    def __init__(self, path, digest: str, t_end: float, steps: int, friction=None):
         self.path, self.digest, self.t_end, self.steps = Path(path), str(digest), float(t_end), int(steps)
         self.wall = 0.0
+        #: the run's ``DynamicFriction`` (None: frictionless); ``friction_arrays`` its saved history after ``load``
+        self.friction, self.friction_arrays = friction, None
 
     def save(self, rec: ImpactRecorder, t, x, w, rebuilds: int, early: int) -> None:
         from ...io.atomic import atomic_path
@@ -155,6 +159,8 @@ class ImpactCheckpoint:
                   "stage_iterations": np.asarray(rec.stage_its, dtype=np.int64).reshape(len(rec.stage_its), -1),
                   "rebuilds": np.array(int(rebuilds)), "early": np.array(int(early))}
         arrays.update({f"counter/{k}": np.array(int(v)) for k, v in rec.counters.items()})
+        if self.friction is not None:
+            arrays.update(self.friction.arrays())
         for prefix, d in (("series/", rec.series), ("bal/", rec.bal), ("stored/", rec.stored)):
             arrays.update({prefix + k: np.asarray(v) for k, v in d.items() if len(v)})
         with atomic_path(self.path) as tmp:
@@ -176,6 +182,8 @@ class ImpactCheckpoint:
             _lists(rec.series, "series/", d)
             _lists(rec.bal, "bal/", d)
             _lists(rec.stored, "stored/", d)
+            if self.friction is not None:
+                self.friction_arrays = {k: d[k].copy() for k in d.files if k.startswith("friction/")}
             out = float(d["t"]), d["x"].copy(), d["w"].copy(), int(d["rebuilds"]), int(d["early"])
         log.info("resumed from %s at t = %.6g ms", self.path, out[0])
         return out
@@ -214,8 +222,9 @@ def impact_summary(problem, rec: ImpactRecorder, tab, t_end, h0, dt_rule, hook, 
                                                 "mechanical", "thermal", "total")},
         "impulses_Nms": {k: errs[k] for k in ("impulse_sphere_on_projectile_Nms", "impulse_clamp_Nms",
                                               "impulse_lorentz_Nms")},
-        "energies_mJ": {k: errs[k] for k in ("work_lorentz_mJ", "work_circuit_mJ", "joule_heat_mJ",
-                                             "damping_mJ", "delta_mechanical_energy_mJ")},
+        "energies_mJ": {k: errs[k] for k in ("work_lorentz_mJ", "work_circuit_mJ", "joule_heat_mJ", "damping_mJ",
+                                             "delta_mechanical_energy_mJ", "friction_work_mJ",
+                                             "friction_dissipated_mJ", "friction_elastic_energy_mJ") if k in errs},
         "geometry": problem.info, "sampled_yarns": problem.sampled, "relaxation": relax_info,
         "resumed_from_ms": resumed, "wall_time_s": wall,
     }, errs

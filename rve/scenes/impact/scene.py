@@ -22,6 +22,11 @@ accepted step, from the residual the last stage's Newton left at the step's end 
 chunk boundary and resumed from when present (same config digest).
 ``run(cfg, out_dir) -> dict``: load_or_relax + solve + outputs (``rve.scenes.impact.outputs``)
 + the summary (docs/impact.md).
+Friction (``cfg.friction``, some mu > 0; ``ImpactProblem.friction``, a
+``rve.scenes.dynamic_friction.DynamicFriction``): between the fibrils in the impact phase only
+(the relaxation and the sphere contact stay frictionless); the history is committed after
+every accepted step, before the balances (which then include the friction terms) and the
+rebuilds, and is part of the checkpoint (and of its digest). mu = 0: the frictionless scene.
 
 Sampled yarns: the warp yarns nearest y = -R_p/2 (``minus_y``) and +R_p/2 (``plus_y``) of the
 projectile axis, and the warp yarn j = 0 (``edge``, the -y edge).
@@ -54,6 +59,7 @@ from .record import (ImpactCheckpoint, ImpactRecorder, angular_velocity, impact_
 from .thermal import ImpactThermal
 from ..rebuild import ChunkedRebuild
 from ..thermal_post import ThermalPostSolver
+from ..dynamic_friction import DynamicFriction, FrictionBalances, contact_params_with_friction
 from ..induced.scene import warp_circuit
 from ...fabrics.taut import chord_clearance, taut_weave, weave_with_chord_clearance
 from ..protocol import SceneFailure, SceneResult
@@ -106,6 +112,8 @@ class ImpactProblem:
     ends: np.ndarray
     sampled: dict
     info: dict = field(default_factory=dict)
+    #: the friction between fibrils (``rve.scenes.dynamic_friction``), None when frictionless
+    friction: DynamicFriction | None = None
 
     @property
     def fabric(self) -> ContactSystem:
@@ -151,6 +159,10 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
                      circuits=circuit_in + circuit_leak)
     k = cfg.contact
     params = contact_params(k, k.rebuild_every)
+    if not relaxing:
+        # the relaxation stays frictionless: its crimped start is an exact equilibrium at
+        # rest, so friction would change nothing there (docs/impact.md "Friction between fibrils")
+        params = contact_params_with_friction(params, cfg.friction)
     xf = np.zeros(base.n)
     base.nodal(xf)[:, :9] = weave.x0
     fabric = ContactSystem(base, params, xf)
@@ -184,7 +196,7 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
             "projectile_mass_g": float(pr.density * parea * Lp), "sampled_warp_y_mm":
                 {k_: float(ywarp[v]) for k_, v in sampled.items()}}
     return ImpactProblem(system, weave, x0, circuit_in, circuit_leak, pcirc, dirichlet_V, ends.ravel(), ends, sampled,
-                         info)
+                         info, DynamicFriction.of(fabric, weave.direction, lambda x_: system.split(x_)[0]))
 
 
 def _integrator_options(cfg, sysm=None, extra: dict | None = None) -> dict:
@@ -283,11 +295,16 @@ def _impact_start(cfg, problem, x_start, t_end, steps, tab, nopts, checkpoint, r
     thermal = ImpactThermal(sysm, cfg.contact.heat_transfer, problem.fixed_T_nodes,
                             sink=cfg.contact.projectile_heat_sink)
     balances, post = ImpactBalances(problem, thermal), ThermalPostSolver(thermal, tab, cfg.end_temperature)
+    if problem.friction is not None:
+        balances = FrictionBalances(balances, problem.friction)
     rec = ImpactRecorder(problem, balances, post, np.full(sysm.fabric.mesh.n_nodes, float(cfg.end_temperature)), X0p,
                          float(problem.info["projectile_length_mm"]), cfg.time.store_every, t_end, record)
-    digest = config_digest(cfg, ("geometry", "warp", "weft", "material", "projectile", "contact", "field", "mesh",
-                                 "relaxation", "time", "newton"))
-    ck = None if checkpoint is None else ImpactCheckpoint(checkpoint, digest, t_end, steps)
+    sections = ("geometry", "warp", "weft", "material", "projectile", "contact", "field", "mesh", "relaxation", "time",
+                "newton")
+    if problem.friction is not None:   # frictionless runs keep the digests (and checkpoints) they had
+        sections = sections + ("friction",)
+    digest = config_digest(cfg, sections)
+    ck = None if checkpoint is None else ImpactCheckpoint(checkpoint, digest, t_end, steps, problem.friction)
     scale = sysm.row_scales(t_end / steps, x, w)
     start = None if ck is None else ck.load(rec)
     if start is not None:
@@ -357,9 +374,16 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
     try:
         if t < t_end * (1 - 1e-12):
             hook.rebuild(x)
+            on_step = rec.on_step
+            if problem.friction is not None:
+                if resumed is not None:
+                    problem.friction.restore(x, ck.friction_arrays)
+                # the accepted step is the friction history of the next (committed before
+                # the balances read it and before a map rebuild carries it)
+                on_step = problem.friction.on_step(rec.on_step)
             rec.system = RowScaledSystem(sysm, scale)
             res = integrate(rec.system, x, w, t, t_end, steps, stages=tab.stages,
-                            newton_opts=nopts, on_step=rec.on_step, consistent=False, rebuild=hook, **iopts)
+                            newton_opts=nopts, on_step=on_step, consistent=False, rebuild=hook, **iopts)
             x, w, t = res.x, res.w, res.t
             boundary(t, x, w)
     except IntegrationFailure as exc:

@@ -29,6 +29,11 @@ max_temperature_K, terminal_current_A, charge_balance_error, energy_balance_erro
 wall_time_s). A failed integration raises ``SceneFailure`` (last good state; ``run`` saves
 it to ``induced_deformation_last_good_state.npz``).
 
+Friction (``cfg.friction``, some mu > 0; ``InducedProblem.friction``, a
+``rve.scenes.dynamic_friction.DynamicFriction``): the history is committed after every
+accepted step, before the balances (which then include the friction terms) and the map
+rebuilds. mu = 0: the frictionless scene.
+
 Set-up: ``rve.fabrics.slack.slack_weave`` (single-fibril yarns, L0 = 12.5 mm natural
 length between ends 10 mm apart, crimped so that the fibrils start unstretched and apart).
 Every fibril end's centroid pinned (directors free). Warp: V = 0 at the x+ end, the mixed
@@ -56,6 +61,7 @@ from ...solvers.dirk import integrator_options as integrator_options_of
 from ...model.balances import StateBalances
 from ...model.thermal_post import ThermalOperators
 from ..thermal_post import ThermalPostSolver
+from ..dynamic_friction import DynamicFriction, FrictionBalances, contact_params_with_friction
 from .record import InducedRecorder, induced_summary
 from ..rebuild import MapRebuild
 from ...fabrics.slack import slack_weave
@@ -88,6 +94,8 @@ class InducedProblem:
     fixed_T_nodes: np.ndarray
     ends: np.ndarray
     info: dict = field(default_factory=dict)
+    #: the friction between fibrils (``rve.scenes.dynamic_friction``), None when frictionless
+    friction: DynamicFriction | None = None
 
     @property
     def model(self) -> BeamModel:
@@ -138,13 +146,14 @@ def setup(cfg, mode: str | None = None) -> InducedProblem:
     base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, fields=fields, bcs=bcs, couplings=couplings,
                      circuits=circuit_in + circuit_leak, field_ramp=field_ramp(cfg.field.ramp_time))
     k = cfg.contact
-    params = contact_params(k, k.rebuild_every)
+    params = contact_params_with_friction(contact_params(k, k.rebuild_every), cfg.friction)
     x0 = np.zeros(base.n)
     base.nodal(x0)[:, :9] = weave.x0
     system = ContactSystem(base, params, x0)
     info = {"amplitude_warp_mm": weave.amplitude_warp, "amplitude_weft_mm": weave.amplitude_weft,
             "initial_clearance_mm": weave.clearance, "B_kT": [float(v) for v in B]}
-    return InducedProblem(system, weave, mode, x0, circuit_in, circuit_leak, dirichlet_V, ends.ravel(), ends, info)
+    return InducedProblem(system, weave, mode, x0, circuit_in, circuit_leak, dirichlet_V, ends.ravel(), ends, info,
+                          DynamicFriction.of(system, weave.direction))
 
 
 def adaptive_control(cfg) -> AdaptiveControl:
@@ -173,6 +182,8 @@ def _induced_start(cfg, problem, h0, tab, nopts, record, progress, t_end, post_r
     if problem.mode == "post":
         post = ThermalPostSolver(thermal, tab, cfg.end_temperature, reuse=post_reuse)
     balances = StateBalances(sysm, thermal, problem.circuit_in, problem.circuit_leak, problem.dirichlet_V)
+    if problem.friction is not None:
+        balances = FrictionBalances(balances, problem.friction)
     w, _ = _initial_w(problem, rs, x, 0.0, nopts)
     T0 = None
     if post is not None:  # the clamped ends at the end temperature, the rest at the reference
@@ -211,9 +222,12 @@ def solve(cfg, *, record: bool = True, mode: str | None = None, t_end: float | N
     every = cfg.contact.rebuild_every if cfg.contact.rebuild == "every" else None
     hook = MapRebuild(sysm, t_end, every, 0.5 * float(sysm.params.margin))
     sysm.rebuild(x)
+    # with friction the accepted step is the history of the next (committed before the
+    # balances read it and before a map rebuild carries it)
+    on_step = rec.on_step if problem.friction is None else problem.friction.on_step(rec.on_step)
     ti = time.perf_counter()
     try:
-        res = integrate(rs, x, w, 0.0, t_end, steps, stages=tab.stages, newton_opts=nopts, on_step=rec.on_step,
+        res = integrate(rs, x, w, 0.0, t_end, steps, stages=tab.stages, newton_opts=nopts, on_step=on_step,
                         consistent=False, rebuild=hook, **iopts)
         x, w = res.x, res.w
     except IntegrationFailure as exc:
