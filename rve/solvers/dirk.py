@@ -880,18 +880,7 @@ def _segment(stepper, out, x, w, t, t_stop, n, ctl: StepControl, bud: Budgets, o
         try:
             x1, w1, info = stepper.step(x, w, t, h_try)
         except StepFailure as fail:
-            out.rejected += 1
-            out.add(fail.counts)
-            log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)", out.steps + 1, t, h_try, fail.stage,
-                     fail.reason)
-            stop = _give_up(fail, ctl, bud, t, h_try, h0, cuts, out.rejected - rejected0, budget, wall0)
-            if stop is not None:
-                raise IntegrationFailure(
-                    f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
-                    f"after {stop[1]}: stage {fail.stage}: {fail.reason}; Newton residuals "
-                    f"{_fmt_res(fail.residuals)}; {out.steps} steps accepted, {out.rejected} rejected; "
-                    f"last good state at t = {t:.9g}",
-                    x.copy(), w.copy(), t, h_try, fail.residuals, fail, out, cause=stop[0]) from fail
+            _newton_rejection(out, fail, ctl, bud, t, h_try, h0, cuts, rejected0, budget, wall0, x, w)
             cuts, successes, h = cuts + 1, 0, h_try / 2.0
             pending += 1
             continue
@@ -917,6 +906,23 @@ def _segment(stepper, out, x, w, t, t_stop, n, ctl: StepControl, bud: Budgets, o
                 f"last good state at t = {t:.9g}", x.copy(), w.copy(), t, h_try, info.stage_residuals[-1],
                 None, out, cause="wall_time")
     return x, w, t
+
+
+def _newton_rejection(out, fail: StepFailure, ctl: StepControl, bud: Budgets, t: float, h_try: float, h0: float,
+                      cuts: int, rejected0: int, budget: int, wall0: float, x, w) -> None:
+    """Count a step whose stage Newton failed and log it; an ``IntegrationFailure`` with the
+    last good state ``(x, w, t)`` when ``_give_up`` says the step cannot be cut again."""
+    out.rejected += 1
+    out.add(fail.counts)
+    log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)", out.steps + 1, t, h_try, fail.stage, fail.reason)
+    stop = _give_up(fail, ctl, bud, t, h_try, h0, cuts, out.rejected - rejected0, budget, wall0)
+    if stop is not None:
+        raise IntegrationFailure(
+            f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
+            f"after {stop[1]}: stage {fail.stage}: {fail.reason}; Newton residuals "
+            f"{_fmt_res(fail.residuals)}; {out.steps} steps accepted, {out.rejected} rejected; "
+            f"last good state at t = {t:.9g}",
+            x.copy(), w.copy(), t, h_try, fail.residuals, fail, out, cause=stop[0]) from fail
 
 
 def _landing(t: float, t0: float, t_end: float, grid: float) -> float:
@@ -1000,18 +1006,7 @@ def _segment_adaptive(stepper, out, x, w, t, t_end, ctl: StepControl, bud: Budge
         try:
             x1, w1, info = stepper.step(x, w, t, h_try)
         except StepFailure as fail:
-            out.rejected += 1
-            out.add(fail.counts)
-            log.info("step %d t=%.6g h=%.3e REJECTED (stage %d: %s)", out.steps + 1, t, h_try, fail.stage,
-                     fail.reason)
-            stop = _give_up(fail, ctl, bud, t, h_try, h0, cuts, out.rejected - rejected0, budget, wall0)
-            if stop is not None:
-                raise IntegrationFailure(
-                    f"time integration failed at t = {t:.9g} with step size h = {h_try:.6g} "
-                    f"after {stop[1]}: stage {fail.stage}: {fail.reason}; Newton residuals "
-                    f"{_fmt_res(fail.residuals)}; {out.steps} steps accepted, {out.rejected} rejected; "
-                    f"last good state at t = {t:.9g}",
-                    x.copy(), w.copy(), t, h_try, fail.residuals, fail, out, cause=stop[0]) from fail
+            _newton_rejection(out, fail, ctl, bud, t, h_try, h0, cuts, rejected0, budget, wall0, x, w)
             cuts, pending = cuts + 1, pending + 1
             hs.h, hs.rejected_last = h_try / 2.0, True
             continue
