@@ -48,7 +48,7 @@ import numpy as np
 from ..fabrics.setup import clamped_ends, contact_params
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, ContactSystem, DirichletBC
-from ..solvers.frictional import friction_of
+from ..solvers.system import DeadLoad, friction_of
 from .cell_statics import free_residual, static_minimize
 from .strain import friction_law, friction_summary, seed_friction
 
@@ -102,26 +102,6 @@ def pullout_system(cfg, fab, mesh, x):
     return system, pulled, released, comp
 
 
-class _EndLoad:
-    """``system`` with a dead load ``load`` (n,) (F -> F - load, energy -> energy - load . x):
-    the released ends' clamp force while it is taken off."""
-
-    def __init__(self, system, load):
-        self.system, self.load = system, np.asarray(load, float)
-
-    def __getattr__(self, name):
-        if name == "system":
-            raise AttributeError(name)
-        return getattr(self.system, name)
-
-    def evaluate(self, x, w, t, jacobian: bool = True):
-        F, Fx, Fw = self.system.evaluate(x, w, t, jacobian)
-        return F - self.load, Fx, Fw
-
-    def energy(self, x):
-        return self.system.energy(x) - float(self.load @ np.asarray(x, float).reshape(-1))
-
-
 def _release(system, x, released, comp, cfg):
     """Take the released ends' clamp force off in ``pullout.release_steps`` equal decrements,
     each a static solve (with friction a committed one); returns ``(x, info)``."""
@@ -135,7 +115,7 @@ def _release(system, x, released, comp, cfg):
     out = {"converged": True, "steps": [], "clamp_force_N": [float(v) for v in load0[dofs]]}
     xs = np.asarray(x, float).reshape(-1)
     for j in range(1, k + 1):
-        loaded = _EndLoad(system, (1.0 - j / k) * load0)
+        loaded = DeadLoad(system, (1.0 - j / k) * load0)
         xs, sinfo = static_minimize(loaded, xs, sp_.static_atol, sp_.static_max_iter)
         out["steps"].append({"converged": bool(sinfo["converged"]), "iterations": int(sinfo.get("iterations", 0))})
         if not sinfo["converged"]:

@@ -20,24 +20,10 @@ import numpy as np
 
 from ..model.terms.friction import FrictionLaw
 from ..solvers.frictional import frictional_static_step
+from ..solvers.system import DeadLoad
 from .protocol import SceneFailure
 
 __all__ = ["DeadLoad", "friction_law", "initial_state", "reaction", "step"]
-
-
-class DeadLoad:
-    def __init__(self, system, load):
-        self.system = system
-        self.load = np.asarray(load, float)
-
-    def __getattr__(self, name):
-        if name == "system":
-            raise AttributeError(name)
-        return getattr(self.system, name)
-
-    def evaluate(self, x, w, t, jacobian: bool = True):
-        F, Fx, Fw = self.system.evaluate(x, w, t, jacobian)
-        return F - self.load, Fx, Fw
 
 
 def friction_law(section) -> FrictionLaw:

@@ -59,7 +59,7 @@ import scipy.sparse as sp
 
 from .backends.base import same_structure as _same_structure
 
-__all__ = ["DynamicSystem", "ContactRelaxable", "FreeDofs", "friction_of", "massless_dofs", "mech_mask", "scale_columns"]
+__all__ = ["DynamicSystem", "ContactRelaxable", "DeadLoad", "FreeDofs", "friction_of", "massless_dofs", "mech_mask", "scale_columns"]
 
 
 @runtime_checkable
@@ -311,3 +311,24 @@ def friction_of(system):
     minimiser (a potential) or the frictional residual (none)."""
     term = getattr(system, "term", None)
     return getattr(term, "friction", None) if term is not None else None
+
+
+class DeadLoad:
+    """``system`` with a dead load ``load`` (n,): F -> F - load and, where the system has a
+    potential, energy -> energy - load . x (the load's work); every other member is the
+    system's."""
+
+    def __init__(self, system, load):
+        self.system, self.load = system, np.asarray(load, float)
+
+    def __getattr__(self, name):
+        if name == "system":
+            raise AttributeError(name)
+        return getattr(self.system, name)
+
+    def evaluate(self, x, w, t, jacobian: bool = True):
+        F, Fx, Fw = self.system.evaluate(x, w, t, jacobian)
+        return F - self.load, Fx, Fw
+
+    def energy(self, x):
+        return self.system.energy(x) - float(self.load @ np.asarray(x, float).reshape(-1))
