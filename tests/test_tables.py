@@ -515,7 +515,7 @@ def test_plot_table(swept_table, tmp_path):
     # the small swept table (one mode) keeps the figures cheap; swept values: the first
     paths = tables.plot_table(swept_table, tmp_path / "plots" / "rve")
     assert [p.name for p in paths] == ["rve_reaction_force.png", "rve_probe_resistance.png",
-                                       "rve_temperature_rise.png"]
+                                       "rve_temperature_rise.png", "rve_by_parameter.png"]
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(x.name for x in (tmp_path / "plots").iterdir()) == sorted(p.name for p in paths)

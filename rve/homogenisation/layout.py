@@ -136,10 +136,11 @@ def report_prefix(run: str, root: PathLike = RVE_DIR) -> str:
 
 
 def report_outputs(run: str, root: PathLike = RVE_DIR) -> dict:
-    """The report's figures: ``reaction_force``, ``probe_resistance``, ``temperature_rise``."""
+    """The report's figures: ``reaction_force``, ``probe_resistance``, ``temperature_rise``,
+    ``by_parameter`` (``rve.tables.plot.plot_table``)."""
     pre = report_prefix(run, root)
     return {"reaction_force": f"{pre}_reaction_force.png", "probe_resistance": f"{pre}_probe_resistance.png",
-            "temperature_rise": f"{pre}_temperature_rise.png"}
+            "temperature_rise": f"{pre}_temperature_rise.png", "by_parameter": f"{pre}_by_parameter.png"}
 
 
 # ============================================================================ pictures

@@ -1,8 +1,9 @@
 """Figures of a lookup table (thesis Figs. 7.4.3-7.4.4 style): ``plot_table``.
 
-Input: a table Dataset and a path prefix; output: three PNG files written atomically with
+Input: a table Dataset and a path prefix; output: four PNG files written atomically with
 matplotlib's Agg canvas (no pyplot state): reaction forces, probe resistances with the
-network R_y and R_c, Joule temperature rises, each against strain (docs/lookup_tables.md).
+network R_y and R_c, Joule temperature rises, each against strain, and the main quantities
+of every combination of the swept parameters side by side (docs/lookup_tables.md).
 """
 from __future__ import annotations
 
@@ -72,9 +73,13 @@ def plot_table(ds: xr.Dataset, out_png_prefix: PathLike, select: Optional[Mappin
     * ``<prefix>_probe_resistance.png``: probe resistance vs strain, one panel per
       probe, one line per mode, plus a panel of the network R_y and R_c;
     * ``<prefix>_temperature_rise.png``: max (solid) and mean (dashed) Joule
-      temperature rise vs strain per probe.
+      temperature rise vs strain per probe;
+    * ``<prefix>_by_parameter.png``: one row per mode, one line per combination of the swept
+      parameters (all of them, not ``select``): the face force along the mode's loading,
+      R_c, and the friction dissipation (a frictional table) or the first probe's Joule rise.
 
-    Swept parameters are fixed at ``select`` (default: their first values). Returns the paths.
+    Swept parameters are fixed at ``select`` (default: their first values) in the first three.
+    Returns the paths.
     """
     prefix = str(out_png_prefix)
     sub, note = _select_first(ds, select)
@@ -127,4 +132,55 @@ def plot_table(ds: xr.Dataset, out_png_prefix: PathLike, select: Optional[Mappin
                     color=color, label=f"mean, {m}")
         _label(ax, f"{p}", "temperature rise [K]", legend=7)
     paths.append(_finish(fig, "Joule temperature rise vs strain", note, prefix + "_temperature_rise.png"))
+    paths.append(_plot_by_parameter(ds, prefix + "_by_parameter.png"))
     return paths
+
+
+def _loading(force: xr.DataArray) -> tuple[str, str]:
+    """The side and component of a mode's face force (side, component, strain, ...) with the
+    largest range over the strain path: the one that carries the mode's loading."""
+    extra = [d for d in force.dims if d not in ("side", "component", "strain")]
+    f = force.isel({d: 0 for d in extra}) if extra else force
+    spread = (f.max("strain") - f.min("strain")).fillna(-1.0)
+    i, j = np.unravel_index(int(np.argmax(spread.transpose("side", "component").values)), spread.shape)
+    return str(spread["side"].values[i]), str(spread["component"].values[j])
+
+
+def _combinations(ds: xr.Dataset) -> list[tuple[dict, str]]:
+    """Every combination of the swept parameters as ``(selection, label)``."""
+    import itertools
+
+    extra = [d for d in lead_dims(ds) if d not in ("mode", "strain")]
+    if not extra:
+        return [({}, "")]
+    out = []
+    for point in itertools.product(*(list(ds[d].values) for d in extra)):
+        sel = dict(zip(extra, point))
+        out.append((sel, ", ".join(f"{d} = {v:g}" if isinstance(v, (float, np.floating)) else f"{d} = {v}"
+                                   for d, v in sel.items())))
+    return out
+
+
+def _plot_by_parameter(ds: xr.Dataset, path: PathLike) -> Path:
+    modes, strain = list(ds["mode"].values), ds["strain"].values
+    third = "friction_dissipated_energy" if "friction_dissipated_energy" in ds else "temperature_rise_max"
+    fig, axes = _figure(len(modes), 3)
+    for r, m in enumerate(modes):
+        side, comp = _loading(ds["reaction_force"].sel(mode=m))
+        for k, (sel, label) in enumerate(_combinations(ds)):
+            sub = ds.sel(sel).sel(mode=m)
+            kw = dict(color=f"C{k % 10}", marker="o", ms=3, label=label or None)
+            axes[r, 0].plot(strain, sub["reaction_force"].sel(side=side, component=comp).values, **kw)
+            axes[r, 1].plot(strain, sub["contact_resistance"].values, **kw)
+            y = sub[third] if third != "temperature_rise_max" else sub[third].isel(probe=0)
+            axes[r, 2].plot(strain, y.values, **kw)
+        _label(axes[r, 0], f"{m}: face {side}, component {comp}", "force [N]")
+        _label(axes[r, 1], f"{m}: network R_c", "resistance [ohm]")
+        _label(axes[r, 2], f"{m}: " + ("friction dissipated" if third != "temperature_rise_max"
+                                       else f"Joule rise, {ds['probe'].values[0]}"),
+               "energy [N mm]" if third != "temperature_rise_max" else "temperature rise [K]")
+    if len(_combinations(ds)) > 1:
+        axes[0, 0].legend(fontsize=7)
+    return _finish(fig, "The swept parameters side by side" if len(_combinations(ds)) > 1 else
+                   "Loading force, contact resistance and " + ("friction" if third != "temperature_rise_max" else
+                                                               "Joule rise"), "", path)

@@ -1,0 +1,153 @@
+"""Cost of the pipeline's strain steps with friction against the same steps without it: the
+jobs Snakemake runs (``rve.homogenisation.jobs.strain_job``), on the thesis weave.
+
+A run spec (default: ``plain_weave_friction`` of ``configs/pipeline.yaml``, the thesis plain
+weave at 12 elements per fibril on the quasi-static path) is swept over ``friction_coefficient``
+in {0, mu}. Each combination's relaxed state is built once (``fabric_job``, ``relax_job``: the
+relaxation is frictionless, so both have the same x), or taken from ``--relaxed MU0 MU``.
+Then, ``--runs`` rounds, alternating the two sides, each side a fresh process that runs strain
+steps 1..``--steps`` of ``--mode`` from its relaxed state, the step chain of the pipeline.
+Prints per run and step the wall and CPU time of the step, its iterations and the stick/slip
+counts, then per step and over the chain the median wall and CPU times of each side and their
+ratios (friction / frictionless), and the peak RSS.
+
+    nice -n 10 python benchmarks/friction_step_cost.py [--mu 0.2] [--mode shear] [--steps 2]
+        [--runs 3] [--run plain_weave_friction] [--work DIR] [--relaxed MU0.nc MU.nc]
+
+A side's worker: ``python benchmarks/friction_step_cost.py --worker SPEC.json COMBO STATE``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _harness import ROOT, interleave, median, peak, run_json, worker_env  # noqa: E402
+
+
+def _spec(run: str, mu: float) -> dict:
+    spec = dict(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
+    spec["sweep"] = {"friction_coefficient": [0.0, float(mu)]}
+    return spec
+
+
+def _relaxed(spec: dict, combo: str, work: Path) -> Path:
+    from rve.homogenisation.jobs import fabric_job, relax_job
+
+    d = work / combo
+    d.mkdir(parents=True, exist_ok=True)
+    out = d / "relaxed.nc"
+    if not out.exists():
+        fabric_job(d / "initial.nc", d / "fabric.log", spec, combo)
+        t0 = time.process_time()
+        relax_job(d / "initial.nc", out, d / "relax.log", spec, combo)
+        print(f"relaxed {combo}: {time.process_time() - t0:.1f} s CPU -> {out}", file=sys.stderr, flush=True)
+    return out
+
+
+def worker(spec_file: str, combo: str, state: str, mode: str, steps: int, out_dir: str) -> None:
+    """Steps 1..steps of ``mode`` from ``state``; one JSON line with each step's figures."""
+    from rve.homogenisation.checkpoint import load_state
+    from rve.homogenisation.jobs import strain_job
+
+    spec = json.loads(Path(spec_file).read_text())
+    prev, recs = Path(state), []
+    for step in range(1, steps + 1):
+        out = Path(out_dir) / f"{mode}_{step:02d}.nc"
+        t0, c0 = time.perf_counter(), time.process_time()
+        strain_job(prev, out, Path(out_dir) / f"{mode}_{step:02d}.log", spec, combo, mode, step)
+        rec = {"step": step, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+        st = load_state(out)
+        info = st.solver or {}
+        rec.update(converged=bool(info.get("converged")), residual_N=float(info.get("residual_N", np.nan)),
+                   iterations=sum(int(s.get("iterations", 0)) for s in info.get("substeps", [])) or info.get("iterations"),
+                   contact_points=int(st.contact_count))
+        fr = info.get("friction") or {}
+        rec.update({k: fr[k] for k in ("stick", "slip", "dissipated") if k in fr})
+        recs.append(rec)
+        prev = out
+    print(json.dumps({"steps": recs}, default=float))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--worker", nargs=3, metavar=("SPEC", "COMBO", "STATE"))
+    ap.add_argument("--out", help="(worker) the directory of its states")
+    ap.add_argument("--run", default="plain_weave_friction")
+    ap.add_argument("--mu", type=float, default=0.2)
+    ap.add_argument("--mode", default="shear")
+    ap.add_argument("--steps", type=int, default=2)
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--work", help="where the relaxed states and the step states go (default: a temporary dir)")
+    ap.add_argument("--algorithm-7-1", action="store_true",
+                    help="also time the frictionless steps on the default path (strain.path: algorithm_7_1)")
+    ap.add_argument("--relaxed", nargs=2, metavar=("MU0", "MU"), help="the two relaxed states, if built already")
+    a = ap.parse_args()
+    if a.worker:
+        return worker(*a.worker, a.mode, a.steps, a.out)
+    work = Path(a.work or tempfile.mkdtemp(prefix="friction_step_cost_"))
+    work.mkdir(parents=True, exist_ok=True)
+    spec = _spec(a.run, a.mu)
+    from rve.homogenisation.sweeps import combo_ids
+
+    c0, c1 = combo_ids(spec)
+    states = [Path(p) for p in a.relaxed] if a.relaxed else [_relaxed(spec, c, work) for c in (c0, c1)]
+    spec_file = work / "spec.json"
+    spec_file.write_text(json.dumps(spec))
+
+    def side(name, spec_path, combo, state):
+        def run(k):
+            out = work / "runs" / f"{name}_{k}"
+            out.mkdir(parents=True, exist_ok=True)
+            return run_json([sys.executable, __file__, "--worker", spec_path, combo, state, "--mode", a.mode,
+                             "--steps", a.steps, "--out", out], env=worker_env())
+        return run
+
+    names = {"frictionless": (spec_file, c0, states[0]), f"mu={a.mu:g}": (spec_file, c1, states[1])}
+    if a.algorithm_7_1:
+        alg = dict(spec, overrides=[*(spec.get("overrides") or []), "strain.path=algorithm_7_1"])
+        (work / "spec_algorithm_7_1.json").write_text(json.dumps(alg))
+        names["frictionless, Algorithm 7.1"] = (work / "spec_algorithm_7_1.json", c0, states[0])
+    recs = interleave({n: side(n.split(",")[0] + ("_alg" if "," in n else ""), *cs) for n, cs in names.items()},
+                      a.runs)
+    for name, rs in recs.items():
+        for k, r in enumerate(rs):
+            for s in r.get("steps", []):
+                print(json.dumps({"side": name, "run": k, **s}, default=lambda v: round(float(v), 4)))
+            if "error" in r:
+                print(json.dumps({"side": name, "run": k, "error": r["error"]}))
+    fl, fr = recs["frictionless"], recs[f"mu={a.mu:g}"]
+    alg = recs.get("frictionless, Algorithm 7.1")
+    print(f"{a.run}, {a.mode} steps 1..{a.steps}, mu = 0 against mu = {a.mu:g} ({a.runs} runs each, alternating):")
+    for step in range(1, a.steps + 1):
+        def per(rs, key):
+            return float(np.median([r["steps"][step - 1][key] for r in rs if "error" not in r]))
+        w0, w1, p0, p1 = per(fl, "wall_s"), per(fr, "wall_s"), per(fl, "cpu_s"), per(fr, "cpu_s")
+        print(f"  step {step}: median {w0:.1f} s wall / {p0:.1f} s CPU frictionless, {w1:.1f} s wall / {p1:.1f} s CPU "
+              f"with friction: ratio {w1 / w0:.2f} wall, {p1 / p0:.2f} CPU")
+    if alg:
+        for step in range(1, a.steps + 1):
+            w = float(np.median([r["steps"][step - 1]["wall_s"] for r in alg if "error" not in r]))
+            p = float(np.median([r["steps"][step - 1]["cpu_s"] for r in alg if "error" not in r]))
+            print(f"  step {step} frictionless on the Algorithm 7.1 path (driven + damped phases): median {w:.1f} s "
+                  f"wall / {p:.1f} s CPU")
+    for rs in (fl, fr) + ((alg,) if alg else ()):
+        for r in rs:
+            if "error" not in r:
+                r["chain_wall_s"] = sum(s["wall_s"] for s in r["steps"])
+                r["chain_cpu_s"] = sum(s["cpu_s"] for s in r["steps"])
+    w0, w1 = median(fl, "chain_wall_s"), median(fr, "chain_wall_s")
+    p0, p1 = median(fl, "chain_cpu_s"), median(fr, "chain_cpu_s")
+    print(f"  the chain: median {w0:.1f} s wall / {p0:.1f} s CPU frictionless, {w1:.1f} s wall / {p1:.1f} s CPU with "
+          f"friction: ratio {w1 / w0:.2f} wall, {p1 / p0:.2f} CPU; peak RSS {max(peak(fl, 'process_rss_mib'), peak(fr, 'process_rss_mib')):.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
