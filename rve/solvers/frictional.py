@@ -49,6 +49,12 @@ matrix to a symmetric factorisation).
      then (``fallback=True``) the residual path of before from the better state: the capped
      Newton (``rve.solvers.minimize.capped_newton``), then pseudo-transient continuation.
 
+  A start already within ``direct_atol`` (N; default 1e4 atol) of equilibrium (the re-solve after a commit)
+  goes to the corrector first, and to the predictor only if it stalls. The first pass's
+  predictor stages stop after ``predictor_iter`` iterations each (the trust region crawls on
+  the law's corner, while Newton converges from |F| ~ 1e-4 in 3 iterations); the retry's
+  predictor has ``max_iter``.
+
   ``FrictionalResult`` (a ``NewtonResult``): ``iterations`` all linear-solve iterations
   (predictor + corrector + fallback), ``residuals`` the exact |F| at the start, after every
   predictor stage and after every corrector iteration, ``rounds`` (predictor stages),
@@ -154,7 +160,7 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
                      refreeze: bool = True, predictor_rtol: float = 1e-4, retry_rtol: float = 1e-6,
                      max_rounds: int = 4, load_rtol: float = 0.05, corrector_iter: int = 12,
                      freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None,
-                     smoothing=(1.0,)):
+                     smoothing=(1.0,), predictor_iter: int = 150, direct_atol: Optional[float] = None):
     """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
     fr = friction_of(system)
     if fr is None:
@@ -162,13 +168,25 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     x = np.array(x, float, copy=True)
     system.rebuild(x)
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
+    if out.residuals[0] <= (1e4 * atol if direct_atol is None else direct_atol):
+        # a start next to an equilibrium (the re-solve after a commit): Newton alone, since
+        # the smoothed predictor stage would first move the state off to its own solution
+        xs, nres = _corrector(system, x, t, out, atol, rtol, corrector_iter, backend)
+        if nres.converged:
+            out.u, out.converged, out.method = nres.u, True, "newton"
+            return xs, out
+        if np.isfinite(nres.residuals[-1]) and nres.residuals[-1] < nres.residuals[0]:
+            x = xs
     first = fr._committed_loads is not None and freeze == "committed"
     for ptol in (predictor_rtol, retry_rtol):
         # the retry goes on from the corrector's start with the law itself
         etas = (tuple(float(v) for v in smoothing if v > 0) if ptol == predictor_rtol else ()) + (0.0,)
         for i, eta in enumerate(etas):
             tol = ptol * 10.0 ** (len(etas) - 1 - i)      # a decade looser per smoother stage
-            x = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, refreeze,
+            # the first pass hands over to Newton after predictor_iter iterations: the law's
+            # corner makes the trust region crawl, while Newton converges from far less close
+            its = min(max_iter, predictor_iter) if ptol == predictor_rtol else max_iter
+            x = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, its, refreeze,
                            max_rounds, load_rtol, first, step_cap, backend, eta)
             first = False
         first = False
