@@ -344,3 +344,24 @@ def test_impact_with_sphere_friction_resumes_bit_for_bit(tmp_path, monkeypatch, 
     monkeypatch.setattr(SphereFriction, "restore", lambda self, x_, arrays: None)
     bad = impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck)
     assert not np.array_equal(bad.state["x"], ref.state["x"])
+
+
+@pytest.mark.slow
+def test_impact_with_projectile_friction_alone_resumes_bit_for_bit(tmp_path, frictional_impact):
+    """mu = 0, mu_p = 0.3 (the sphere's driver alone, no fibril friction term): killed at
+    step 50 and resumed, the same state and sphere friction work bit for bit."""
+    _, x, info, _ = frictional_impact
+    cfg = load_config(IMPACT, TINY + ["time.t_end=0.03 ms", "time.steps=60", "friction.projectile=0.3"])
+    ref = impact.solve(cfg, x_start=x, relax_info=info, record=True)
+    assert ref.model.fabric.term.friction is None
+    assert "friction_work_mJ" in ref.summary["energies_mJ"] and ref.summary["energies_mJ"]["friction_work_sphere_mJ"] > 0
+    ck = tmp_path / "checkpoint.npz"
+    with pytest.raises(SceneFailure):
+        impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck, stop_after_steps=50)
+    with np.load(ck) as d:
+        assert not any(k.startswith("friction/") and not k.startswith("friction/sphere/") for k in d.files)
+    res = impact.solve(cfg, x_start=x, relax_info=info, record=True, checkpoint=ck)
+    assert res.summary["resumed_from_ms"] > 0
+    for k in ("x", "w", "T"):
+        assert np.array_equal(res.state[k], ref.state[k])
+    assert res.summary["energies_mJ"] == ref.summary["energies_mJ"]
