@@ -5,6 +5,8 @@ final state and balance series, and compare two saved runs bit for bit.
     python benchmarks/friction_dynamic.py run impact --mu 0.2 --case tiny --out a.npz
     python benchmarks/friction_dynamic.py run induced --mu 0 --case small --out b.npz
     python benchmarks/friction_dynamic.py same a.npz b.npz
+    python benchmarks/friction_dynamic.py run impact --mu 0.2 --case small --set friction.projectile=0.2
+      (friction at the projectile's sphere contact as well: docs/impact.md "Friction at the projectile")
 
 ``run`` loads the scene config of the ``rve`` it imports (so it runs unchanged against a
 tree without the ``friction`` section when ``--mu 0``: no friction key is set then), on the

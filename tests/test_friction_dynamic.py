@@ -2,7 +2,9 @@
 docs/induced_deformation.md "Friction"): the config section, mu = 0 builds no friction term,
 the unsymmetric frictional stage matrix through the kept stage factorisations, kill and
 resume of the impact with friction bit for bit, and the energy balance that closes with
-the friction terms and not without them."""
+the friction terms and not without them; the same for the friction at the projectile's
+sphere contact (rve.scenes.impact.friction; docs/impact.md "Friction at the projectile"),
+with its FD tangent in the whole system and the stage Newton's quadratic rate."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -209,3 +211,157 @@ def test_induced_energy_balance_closes_with_the_friction_terms():
     for k in ("mechanical", "total"):
         assert e[k] <= 1.5 * e0[k]
         assert off[k] >= 2.5 * e0[k]
+
+
+# ----------------------------------------------------------------------------- friction at the projectile
+#: both frictions: the fibrils over the last 22 of the 60 steps, the projectile's nose from step 33
+SPHERE = FRICTIONAL + ["friction.projectile=0.3"]
+
+
+def test_projectile_friction_key_default_off_and_validated():
+    cfg = load_config(IMPACT)
+    assert cfg.friction.projectile == 0.0
+    with pytest.raises(ConfigError, match=r"friction.projectile = 2.5: must be >= 0 and <= 2"):
+        load_config(IMPACT, ["friction.projectile=2.5"])
+    with pytest.raises(ConfigError, match=r"friction.projectile"):
+        load_config(IMPACT, ["friction.projectile=-0.1"])
+    # mu_p = 0 (with or without friction between the fibrils): no sphere friction term, the
+    # frictionless 9 x 9 pair blocks
+    for sets in (TINY, TINY + ["friction.coefficient=0.2"]):
+        p = impact.setup(load_config(IMPACT, sets))
+        assert p.system.sphere.friction is None and p.system.sphere.n_local == 3
+        assert p.friction is None or isinstance(p.friction, DynamicFriction)
+    # mu_p > 0 alone: the sphere driver, no fibril friction; the relaxation stays frictionless
+    cfg = load_config(IMPACT, TINY + ["friction.projectile=0.3"])
+    p = impact.setup(cfg)
+    assert p.system.sphere.friction.mu == 0.3 and p.system.sphere.n_local == 5
+    assert p.friction.term is None and p.friction.sphere is not None and p.fabric.term.friction is None
+    assert impact.setup(cfg, "relax").system.sphere.friction is None
+
+
+@pytest.fixture(scope="module")
+def sphere_frictional_impact(frictional_impact):
+    _, x, info, _ = frictional_impact          # the same (frictionless) relaxation
+    cfg = load_config(IMPACT, SPHERE)
+    return cfg, x, info, impact.solve(cfg, x_start=x, relax_info=info, record=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("regime", ["stick", "slip"])
+def test_impact_system_jacobian_with_sphere_friction_fd(sphere_frictional_impact, regime):
+    """The whole ImpactSystem's tangent with friction at the sphere contact, in the columns of
+    the projectile's end nodes (centre and directors) and of the chords its pairs touch,
+    against central differences at a trial state from the last committed history: moved on
+    along the velocity (the pairs slip further) or back against it (they stick, unloading)."""
+    _, _, _, ref = sphere_frictional_impact
+    sysm, x, w = ref.model, ref.state["x"], ref.state["w"]
+    fr = sysm.sphere.friction
+    xt = x + (2e-4 if regime == "slip" else -1e-4) * w
+    st = fr.state(sysm.sphere_local(xt))
+    on = st.normal > 0
+    assert on.sum() >= 4
+    assert (st.slip[on].all() if regime == "slip" else st.stick[on].all())
+    F, Fx, _ = sysm.evaluate(xt, w, 0.03)
+    pairs = np.flatnonzero(on)
+    fab = sysm.fabric.layout.dofs("r", np.unique(np.r_[sysm.sphere.node_a[pairs], sysm.sphere.node_b[pairs]]))
+    ends = sysm.nf + sysm.projectile.layout.dofs("mech", sysm.ends)
+    cols = np.r_[ends, fab]
+    J = fd_jacobian(lambda v: sysm.evaluate(v, w, 0.03, jacobian=False)[0], xt, cols, eps=1e-7)
+    A = Fx.toarray()[:, cols]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    # the friction couples the chords to the projectile's directors
+    assert np.abs(Fx.toarray()[np.ix_(fab, sysm._g_end.ravel())]).max() > 0
+    if regime == "slip":
+        assert not is_symmetric(Fx)
+
+
+@pytest.mark.slow
+def test_stage_newton_is_quadratic_with_sphere_friction(sphere_frictional_impact):
+    """A full-Newton SDIRK2 step (4 nominal steps long, so that Newton has something to do)
+    of the tiny impact from its last state, the nose's pairs slipping: every stage converges
+    quadratically (measured orders 2.1 and 1.9 above round-off, three iterations to 5e-14)."""
+    from rve.model import RowScaledSystem
+    from rve.solvers.dirk import dirk_step
+    from rve.solvers.newton import convergence_rates
+
+    _, _, _, ref = sphere_frictional_impact
+    sysm, x, w = ref.model, ref.state["x"], ref.state["w"]
+    h = 2e-3
+    rs = RowScaledSystem(sysm, sysm.row_scales(h, x, w))
+    x1, _, info = dirk_step(rs, 2, x, w, 0.03, h, dict(atol=1e-300, rtol=1e-13, max_iter=20), jacobian_reuse=False)
+    assert sysm.sphere.friction.state(sysm.sphere_local(x1)).slip.sum() >= 4
+    for res in info.stage_residuals:
+        # the orders of the steps that end above the round-off floor (~1e-14 here)
+        rates = [q for q, r in zip(convergence_rates(res), res[2:]) if r > 1e-12 * res[0]]
+        assert res[-1] <= 1e-13 * res[0] and len(res) <= 5 and rates and max(rates) > 1.8, (res, rates)
+
+
+@pytest.mark.slow
+def test_impact_energy_balance_closes_with_the_sphere_friction_work(sphere_frictional_impact):
+    """With friction at the fibrils and at the projectile (mu = mu_p = 0.3): the mechanical
+    balance's residual is a small part of the friction work with the sphere's work in it,
+    and most of the sphere's work without it; its work and the return maps' estimate agree
+    to first order in h; the projectile's momentum balance (the friction force on the centre
+    in the sphere force) closes as it does without."""
+    from rve.model.balances import impact_balance_errors
+
+    _, _, _, ref = sphere_frictional_impact
+    bal = {k: np.asarray(v) for k, v in ref.summary["history"]["balances"].items()}
+    e = impact_balance_errors(bal)
+    W_f, W_s = e["friction_work_mJ"], e["friction_work_sphere_mJ"]
+    D_s, E_s = e["friction_dissipated_sphere_mJ"], e["friction_elastic_energy_sphere_mJ"]
+    assert W_s > 0.3 * W_f and W_s > 0.3 * abs(e["delta_mechanical_energy_mJ"])   # the sphere's friction matters
+    res = np.abs(e["series"]["mechanical_residual"]).max()
+    assert res <= 0.02 * W_f
+    off = impact_balance_errors({k: v for k, v in bal.items() if not k.endswith("_friction_sphere")
+                                 and k not in ("friction_dissipated_sphere", "energy_friction_sphere")})
+    assert "friction_work_sphere_mJ" not in off
+    assert np.abs(off["series"]["mechanical_residual"]).max() >= 0.5 * W_s
+    assert abs(W_s - (D_s + E_s)) <= 0.1 * W_s
+    assert e["momentum_projectile"] <= 5e-3
+
+
+@pytest.mark.slow
+def test_impact_with_sphere_friction_resumes_bit_for_bit(tmp_path, monkeypatch, sphere_frictional_impact):
+    """Killed at step 50 (the nose's pairs slipping) and resumed from the checkpoint: the
+    same state and friction work bit for bit; without the sphere's history it differs."""
+    from rve.scenes.impact.friction import SphereFriction
+
+    cfg, x, info, ref = sphere_frictional_impact
+    ck = tmp_path / "checkpoint.npz"
+    with pytest.raises(SceneFailure):
+        impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck, stop_after_steps=50)
+    with np.load(ck) as d:
+        assert float(d["friction/sphere/dissipated"]) > 0 and d["friction/sphere/keys"].shape[0] > 0
+    saved = ck.read_bytes()
+    res = impact.solve(cfg, x_start=x, relax_info=info, record=True, checkpoint=ck)
+    assert res.summary["resumed_from_ms"] > 0
+    for k in ("x", "w", "T"):
+        assert np.array_equal(res.state[k], ref.state[k])
+    for k in ("friction_work_sphere_mJ", "friction_dissipated_sphere_mJ", "friction_work_mJ"):
+        assert res.summary["energies_mJ"][k] == ref.summary["energies_mJ"][k]
+    ck.write_bytes(saved)
+    monkeypatch.setattr(SphereFriction, "restore", lambda self, x_, arrays: None)
+    bad = impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck)
+    assert not np.array_equal(bad.state["x"], ref.state["x"])
+
+
+@pytest.mark.slow
+def test_impact_with_projectile_friction_alone_resumes_bit_for_bit(tmp_path, frictional_impact):
+    """mu = 0, mu_p = 0.3 (the sphere's driver alone, no fibril friction term): killed at
+    step 50 and resumed, the same state and sphere friction work bit for bit."""
+    _, x, info, _ = frictional_impact
+    cfg = load_config(IMPACT, TINY + ["time.t_end=0.03 ms", "time.steps=60", "friction.projectile=0.3"])
+    ref = impact.solve(cfg, x_start=x, relax_info=info, record=True)
+    assert ref.model.fabric.term.friction is None
+    assert "friction_work_mJ" in ref.summary["energies_mJ"] and ref.summary["energies_mJ"]["friction_work_sphere_mJ"] > 0
+    ck = tmp_path / "checkpoint.npz"
+    with pytest.raises(SceneFailure):
+        impact.solve(cfg, x_start=x, relax_info=info, record=False, checkpoint=ck, stop_after_steps=50)
+    with np.load(ck) as d:
+        assert not any(k.startswith("friction/") and not k.startswith("friction/sphere/") for k in d.files)
+    res = impact.solve(cfg, x_start=x, relax_info=info, record=True, checkpoint=ck)
+    assert res.summary["resumed_from_ms"] > 0
+    for k in ("x", "w", "T"):
+        assert np.array_equal(res.state[k], ref.state[k])
+    assert res.summary["energies_mJ"] == ref.summary["energies_mJ"]

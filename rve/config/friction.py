@@ -10,6 +10,10 @@ Contract
   ``warp-weft`` and ``weft-warp`` are one key), ``stiffness`` eps_T / P* (the tangential
   penalty relative to the normal one, > 0). ``law_args()`` is ``(coefficient, stiffness,
   ((family_a, family_b, mu), ...))``, the arguments of ``rve.model.terms.friction.FrictionLaw``.
+* :class:`ImpactFrictionSection`: the impact's ``friction`` section, the above plus
+  ``projectile`` mu_p of the projectile-fibril sphere contact (0 <= mu_p <= 2, default 0:
+  frictionless; its own key, not the fibrils' coefficient: docs/impact.md "Friction at the
+  projectile"), with the same ``stiffness``.
 * :class:`CapstanConfig`: a fibril wrapped over a clamped thick straight fibril (a rigid
   cylinder), tension T1 held at one end, the other end pulled until the wrap slides.
 * :class:`FrictionCrossingConfig`: one crossing of two fibrils pressed together, one end
@@ -28,7 +32,7 @@ from pydantic import Field, field_validator
 from .fields import Angle, Dimensionless, Force, Integer, Length, Penalty, SceneConfig, Section, Stress
 from .sections import Newton
 
-__all__ = ["FrictionSection", "FIBRIL_FAMILIES", "MAX_FRICTION_COEFFICIENT", "CapstanConfig",
+__all__ = ["FrictionSection", "ImpactFrictionSection", "FIBRIL_FAMILIES", "MAX_FRICTION_COEFFICIENT", "CapstanConfig",
            "FrictionCrossingConfig"]
 
 #: the fibril families a pair coefficient may name (the yarn directions of rve.fabrics)
@@ -64,6 +68,13 @@ class FrictionSection(Section):
     def law_args(self) -> tuple:
         pairs = tuple((*k.split("-"), float(mu)) for k, mu in self.pairs.items())
         return float(self.coefficient), float(self.stiffness), pairs
+
+
+class ImpactFrictionSection(FrictionSection):
+    projectile: Dimensionless = Field(
+        0.0, ge=0, le=MAX_FRICTION_COEFFICIENT,
+        description="Coulomb coefficient mu_p of the projectile-fibril (sphere) contact (0: none; not the fibrils' "
+                    "coefficient: Table 8.2 gives none)")
 
 
 class CapstanGeometry(Section):

@@ -10,7 +10,7 @@ from typing import Literal, Optional, Union
 
 from pydantic import Field, field_validator, model_validator
 
-from .friction import FrictionSection
+from .friction import ImpactFrictionSection
 from .fields import (
     CircuitConductance, ContactConductance, CurrentDensity, DampingCoefficient, Density, Dimensionless,
     ElectricConductivity, HeatTransferCoefficient, Integer, Length, MagneticField, Penalty, SceneConfig, Section,
@@ -180,9 +180,10 @@ class ImpactConfig(SceneConfig):
     relaxation: ImpactRelaxation
     time: ImpactTime
     newton: ImpactNewton
-    friction: FrictionSection = Field(
-        default_factory=FrictionSection,
-        description="Coulomb friction between fibrils (rve.config.friction; default mu = 0: frictionless)")
+    friction: ImpactFrictionSection = Field(
+        default_factory=ImpactFrictionSection,
+        description="Coulomb friction between fibrils and at the projectile (rve.config.friction; default mu = 0 "
+                    "and mu_p = 0: frictionless)")
     output: SceneOutput
     end_temperature: Temperature = Field("0 K", description="T held at every fibril end (T-bar)")
     label: Optional[str] = Field(None, description="free text for the outputs")

@@ -122,7 +122,11 @@ def balance_errors(s: dict) -> dict:
     the work of the friction forces ∫P_friction (W_f) is dissipated work beside ∫P_damping in
     the mechanical and total balances; ``friction_work_mJ`` W_f, ``friction_dissipated_mJ`` the
     return maps' dissipated energy D and ``friction_elastic_energy_mJ`` the springs' energy
-    E_T at the end (W_f = D + E_T up to the first-order error of the return map's estimate)."""
+    E_T at the end (W_f = D + E_T up to the first-order error of the return map's estimate).
+    With friction at the projectile's sphere contact (``power_friction_sphere``,
+    ``friction_dissipated_sphere``, ``energy_friction_sphere``; rve.scenes.impact.friction):
+    W_f, D and E_T are the sums of both frictions', and ``friction_work_sphere_mJ``,
+    ``friction_dissipated_sphere_mJ``, ``friction_elastic_energy_sphere_mJ`` the sphere's."""
     t = np.asarray(s["t"], float)
     g = {k: np.asarray(v, float) for k, v in s.items() if k != "terminal_currents"}
     I_in = g["current_in"]
@@ -131,12 +135,15 @@ def balance_errors(s: dict) -> dict:
     elec = np.abs(P_el - g["power_joule"] - g["power_contact_joule"] - g["power_lorentz"])
     Em = g["energy_kinetic"] + g["energy_strain"] + g["energy_contact"]
     W_d = _cumtrapz(t, g["power_damping"])
-    if "power_friction" in g:
-        # friction (rve.scenes.dynamic_friction): the work taken from the motion by the
-        # friction forces, by the trapezoid rule like every other power here (the return
-        # maps' dissipated energy plus the springs' energy is a backward-Euler estimate of
-        # the same work: first order in h, docs/impact.md "Friction between fibrils")
-        W_f = _cumtrapz(t, g["power_friction"])
+    fric = [k for k in ("", "_sphere") if "power_friction" + k in g]
+    if fric:
+        # friction (rve.scenes.dynamic_friction, rve.scenes.impact.friction): the work taken
+        # from the motion by the friction forces, by the trapezoid rule like every other
+        # power here (the return maps' dissipated energy plus the springs' energy is a
+        # backward-Euler estimate of the same work: first order in h, docs/impact.md
+        # "Friction between fibrils")
+        W_fk = {k: _cumtrapz(t, g["power_friction" + k]) for k in fric}
+        W_f = sum(W_fk.values())
         W_dis = W_d + W_f
     else:
         W_dis = W_d
@@ -160,8 +167,13 @@ def balance_errors(s: dict) -> dict:
         "work_lorentz_mJ": float(W_L[-1]), "work_circuit_mJ": float(W_el[-1]), "joule_heat_mJ": float(Q_J[-1]),
         "damping_mJ": float(W_d[-1]), "delta_mechanical_energy_mJ": float(dEm[-1]),
         **({"friction_work_mJ": float(W_f[-1]),
-            "friction_dissipated_mJ": float(g["friction_dissipated"][-1] - g["friction_dissipated"][0]),
-            "friction_elastic_energy_mJ": float(g["energy_friction"][-1])} if "power_friction" in g else {}),
+            "friction_dissipated_mJ": sum(float(g["friction_dissipated" + k][-1] - g["friction_dissipated" + k][0])
+                                          for k in fric),
+            "friction_elastic_energy_mJ": sum(float(g["energy_friction" + k][-1]) for k in fric)} if fric else {}),
+        **({"friction_work_sphere_mJ": float(W_fk["_sphere"][-1]),
+            "friction_dissipated_sphere_mJ": float(g["friction_dissipated_sphere"][-1]
+                                                   - g["friction_dissipated_sphere"][0]),
+            "friction_elastic_energy_sphere_mJ": float(g["energy_friction_sphere"][-1])} if "_sphere" in fric else {}),
         "series": {"mechanical_residual": dEm + W_dis - W_L, "thermal_residual": dH + Q_out - Q_J,
                    "total_residual": W_el - dEm - W_dis - Q_J - W_cj, "charge_residual": I_in - g["current_out"]
                    - g["current_leak"], "electrical_residual": P_el - g["power_joule"] - g["power_contact_joule"]

@@ -19,6 +19,11 @@ Table 8.2; no heat transfer to the projectile, see docs/impact.md).
   ``structure_version`` counts the rebuilds.
 * ``evaluate(x, w, t, jacobian)``: fabric + projectile + sphere contact, exact tangents;
   ``constraints(t)`` both parts' (projectile dofs shifted); ``admissible`` both.
+* With friction at the sphere contact (``sphere.friction``): a pair's block couples the end
+  node's directors as well (15 x 15: centre, d1, d2, a, b; ``sphere.n_local``), and
+  ``frames(x)`` (2, 2, 3) are the end nodes' directors; ``sphere_local(x)`` the unknowns of
+  every pair (for the friction driver's commit). Without it the pattern is the frictionless
+  one, bit for bit.
 * ``split(u)`` -> (u_fabric, u_projectile); ``row_scales(h, x, w)`` both parts';
   ``sphere_terms(x, jacobian)`` the sphere term alone (F (n,), act, K);
   ``sphere_forces(x)`` force on each end node (2, 3), N;
@@ -54,6 +59,8 @@ class ImpactSystem:
         lf, lp = fabric.layout, projectile.layout
         self._r_fab = lf.dofs("r").reshape(-1, 3)  # (n_nodes_f, 3)
         self._r_end = self.nf + lp.dofs("r", self.ends).reshape(-1, 3)  # (2, 3)
+        self._g_end = self.nf + np.stack([lp.dofs("g1", self.ends).reshape(-1, 3),
+                                          lp.dofs("g2", self.ends).reshape(-1, 3)], axis=1)  # (2, 2, 3)
         self.params = fabric.params
         self.structure_version = 0
         self.stats = {"sphere_s": 0.0, "sphere_rebuilds": 0, "compose_s": 0.0}
@@ -69,6 +76,15 @@ class ImpactSystem:
         """(end-node centres (2, 3), fabric centroids (n_nodes_f, 3)) of a state."""
         x = np.asarray(x, float)
         return x[self._r_end], x[self._r_fab]
+
+    def frames(self, x):
+        """The end nodes' directors (2, 2, 3) of a state."""
+        return np.asarray(x, float)[self._g_end]
+
+    def sphere_local(self, x):
+        """The local unknowns (P, n_local, 3) of every sphere pair at ``x``."""
+        c, r = self.positions(x)
+        return self.sphere.local(c, r, self.frames(x))
 
     @property
     def mesh(self):
@@ -90,20 +106,24 @@ class ImpactSystem:
         self.fabric.rebuild(xf)
         t0 = time.perf_counter()
         c, r = self.positions(x)
-        self.sphere.rebuild(c, r)
+        self.sphere.rebuild(c, r, self.frames(x))
         self.stats["sphere_rebuilds"] += 1
         self._x_rebuild = (c.copy(), r.copy())
-        # sphere pair dofs: (centre r, node a r, node b r)
+        # sphere pair dofs: (centre r, [director 1, director 2,] node a r, node b r)
         sp_ = self.sphere
-        self.sphere_dofs = np.concatenate([self._r_end[sp_.centre], self._r_fab[sp_.node_a], self._r_fab[sp_.node_b]],
-                                          axis=1)  # (P, 9)
+        own = [self._r_end[sp_.centre]]
+        if sp_.n_local == 5:
+            own += [self._g_end[sp_.centre, 0], self._g_end[sp_.centre, 1]]
+        self.sphere_dofs = np.concatenate(own + [self._r_fab[sp_.node_a], self._r_fab[sp_.node_b]],
+                                          axis=1)  # (P, 3 n_local)
+        L = self.sphere_dofs.shape[1]
         Mf = sp.csr_matrix(self.fabric.mass())
         if not Mf.has_sorted_indices:  # the union needs sorted rows (the fabric's arrays stay as they are)
             Mf = Mf.copy()
             Mf.sort_indices()
         self._build_union(Mf)
-        self._pos_sphere = self._positions_of(self.sphere_dofs.repeat(9, axis=1).ravel(),
-                                              np.tile(self.sphere_dofs, (1, 9)).ravel()).reshape(-1, 81)
+        self._pos_sphere = self._positions_of(self.sphere_dofs.repeat(L, axis=1).ravel(),
+                                              np.tile(self.sphere_dofs, (1, L)).ravel()).reshape(-1, L * L)
         Mp = sp.csr_matrix(self.projectile.mass())
         data = np.zeros(self.nnz)
         self._add(data, Mf, 0)
@@ -121,10 +141,11 @@ class ImpactSystem:
         union are recorded for ``_add``."""
         nf, n = self.nf, self.n
         sd = self.sphere_dofs
+        m = sd.shape[1] - 6          # the projectile's dofs of a pair (3, or 9 with friction)
         pd = nf + np.arange(self.np_)
         # fabric rows x projectile columns: (fabric dof, end dof) of every pair
-        fr = np.repeat(sd[:, 3:], 3, axis=1).ravel()
-        fc = np.tile(sd[:, :3], (1, 6)).ravel()
+        fr = np.repeat(sd[:, m:], m, axis=1).ravel()
+        fc = np.tile(sd[:, :m], (1, 6)).ravel()
         key = np.unique(fr.astype(np.int64) * n + fc)
         er, ec = key // n, key % n
         cnt_f = np.diff(Mf.indptr).astype(np.int64)
@@ -132,7 +153,7 @@ class ImpactSystem:
         # projectile rows: all projectile dofs + the fabric dofs of the pairs (the end rows)
         p_rows, p_cols = [], []
         for i, d in enumerate(pd):
-            extra = sd[(sd[:, :3] == d).any(axis=1), 3:].ravel()
+            extra = sd[(sd[:, :m] == d).any(axis=1), m:].ravel()
             cols = np.unique(np.concatenate([extra.astype(np.int64), pd]))
             p_rows.append(np.full(cols.size, d))
             p_cols.append(cols)
@@ -203,17 +224,18 @@ class ImpactSystem:
         return bool(self.fabric.admissible(xf) and self.projectile.admissible(xp))
 
     def sphere_terms(self, x, jacobian: bool = True):
-        """The sphere contact alone: (F (n,), act, K (Pa, 9, 9) or None)."""
+        """The sphere contact alone: (F (n,), act, K (Pa, L, L) or None), L = 3 n_local."""
         c, r = self.positions(x)
-        act, Fl, K = self.sphere.forms(c, r, jacobian)
+        act, Fl, K = self.sphere.forms(c, r, jacobian, self.frames(x))
         F = np.zeros(self.n)
         if act.size:
-            F = np.bincount(self.sphere_dofs[act].ravel(), weights=Fl.reshape(act.size, 9).ravel(), minlength=self.n)
+            F = np.bincount(self.sphere_dofs[act].ravel(), weights=Fl.reshape(act.size, -1).ravel(),
+                            minlength=self.n)
         return F, act, K
 
     def sphere_forces(self, x) -> np.ndarray:
         c, r = self.positions(x)
-        return self.sphere.forces_on_centres(c, r)
+        return self.sphere.forces_on_centres(c, r, self.frames(x))
 
     def sphere_energy(self, x) -> float:
         c, r = self.positions(x)

@@ -20,12 +20,22 @@ fibril's.
   one point at the closest point);
 * ``gaps``, ``energy``, ``forces_on_centres`` (N, (n_centres, 3));
 * ``centre``/``element``/``node_a``/``node_b``: the pair table (fibril-mesh node numbers).
+
+Friction (``friction=(mu, stiffness)``, mu > 0; ``self.friction`` a
+``rve.model.terms.sphere_friction.SphereFrictionTerm``, else None): the local unknowns of a
+pair are then ``(centre, director 1, director 2, a, b)`` (``n_local`` = 5 nodes of 3; 3
+without friction), ``rebuild`` and ``forms`` take the end nodes' directors ``frames``
+(n_centres, 2, 3), ``forms`` returns F (Pa, 5, 3) and K (Pa, 15, 15) with the friction of
+the active pairs added (the directors' rows carry its moment), and ``rebuild`` carries the
+friction history to the new table (``SphereFrictionTerm.on_rebuild``). ``local(centres,
+r_fabric, frames, sel)`` the unknowns (P, n_local, 3) of pairs ``sel``.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ...physics.sphere_contact_forms import sphere_segment_energy, sphere_segment_forces, sphere_segment_gaps
+from .sphere_friction import SphereFrictionTerm
 
 __all__ = ["sphere_candidates", "SphereContactTerm"]
 
@@ -52,7 +62,7 @@ def sphere_candidates(centres, seg_a, seg_b, cutoff: float):
 class SphereContactTerm:
     name = "sphere_contact"
 
-    def __init__(self, mesh, radius: float, penalty: float, margin: float, n_centres: int = 2):
+    def __init__(self, mesh, radius: float, penalty: float, margin: float, n_centres: int = 2, friction=None):
         if not radius > 0 or not penalty > 0 or not margin >= 0:
             raise ValueError("sphere contact needs radius > 0, penalty > 0, margin >= 0")
         self.mesh = mesh
@@ -64,6 +74,12 @@ class SphereContactTerm:
         self.centre = np.zeros(0, np.int64)
         self.element = np.zeros(0, np.int64)
         self._set_pairs(self.centre, self.element)
+        self.friction = None if friction is None else SphereFrictionTerm(self, *friction)
+
+    @property
+    def n_local(self) -> int:
+        """Local nodes of a pair: (centre, a, b), with friction (centre, d1, d2, a, b)."""
+        return 3 if self.friction is None else 5
 
     def _set_pairs(self, ci, ej):
         mesh = self.mesh
@@ -77,12 +93,24 @@ class SphereContactTerm:
     def n_pairs(self) -> int:
         return int(self.centre.size)
 
-    def rebuild(self, centres, r_fabric) -> int:
-        """New pair table at the centres (n_centres, 3) and fibril node positions (n_nodes, 3)."""
+    def rebuild(self, centres, r_fabric, frames=None) -> int:
+        """New pair table at the centres (n_centres, 3) and fibril node positions (n_nodes, 3)
+        (with friction: its history carried over, ``frames`` the end nodes' directors)."""
         r = np.asarray(r_fabric, float)
         ci, ej = sphere_candidates(centres, r[self.mesh.conn[:, 0]], r[self.mesh.conn[:, -1]], self.cutoff)
         self._set_pairs(ci, ej)
+        if self.friction is not None:
+            self.friction.on_rebuild(self.local(centres, r, frames))
         return self.n_pairs
+
+    def local(self, centres, r_fabric, frames, sel=None) -> np.ndarray:
+        """The local unknowns (P, n_local, 3) of pairs ``sel`` (all by default)."""
+        p, a, b = self._ends(centres, r_fabric, sel)
+        if self.friction is None:
+            return np.stack([p, a, b], axis=1)
+        ci = self.centre if sel is None else self.centre[sel]
+        f = np.asarray(frames, float)[ci]
+        return np.stack([p, f[:, 0], f[:, 1], a, b], axis=1)
 
     def _ends(self, centres, r_fabric, sel=None):
         ci, na, nb = self.centre, self.node_a, self.node_b
@@ -105,18 +133,30 @@ class SphereContactTerm:
             return 0.0
         return sphere_segment_energy(*self._ends(centres, r_fabric), self.gap_radius, self.k)
 
-    def forms(self, centres, r_fabric, jacobian: bool = True):
-        """``(act, F (Pa, 3, 3), K (Pa, 9, 9) or None)`` of the active pairs."""
+    def forms(self, centres, r_fabric, jacobian: bool = True, frames=None):
+        """``(act, F (Pa, n_local, 3), K (Pa, 3 n_local, 3 n_local) or None)`` of the active
+        pairs (with friction: its forces added, ``frames`` the end nodes' directors)."""
         act = self.active_pairs(centres, r_fabric)
+        m = self.n_local
         if act.size == 0:
-            return act, np.zeros((0, 3, 3)), (np.zeros((0, 9, 9)) if jacobian else None)
+            return act, np.zeros((0, m, 3)), (np.zeros((0, 3 * m, 3 * m)) if jacobian else None)
         F, K = sphere_segment_forces(*self._ends(centres, r_fabric, act), self.gap_radius[act], self.k[act],
                                      jacobian)
-        return act, F, (K.reshape(act.size, 9, 9) if jacobian else None)
+        if self.friction is None:
+            return act, F, (K.reshape(act.size, 9, 9) if jacobian else None)
+        # the normal form's nodes (centre, a, b) are local nodes 0, 3, 4
+        nodes = np.array([0, 3, 4])
+        Rf, Kf = self.friction.forces(self.local(centres, r_fabric, frames, act), act, jacobian)
+        Rf[:, nodes] += F
+        if not jacobian:
+            return act, Rf, None
+        Kf[np.ix_(np.arange(act.size), nodes, np.arange(3), nodes, np.arange(3))] += K
+        return act, Rf, Kf.reshape(act.size, 3 * m, 3 * m)
 
-    def forces_on_centres(self, centres, r_fabric) -> np.ndarray:
-        """Contact force (N) acting on every sphere centre, (n_centres, 3)."""
-        act, F, _ = self.forms(centres, r_fabric, jacobian=False)
+    def forces_on_centres(self, centres, r_fabric, frames=None) -> np.ndarray:
+        """Contact force (N) acting on every sphere centre, (n_centres, 3) (with friction:
+        normal and friction force)."""
+        act, F, _ = self.forms(centres, r_fabric, jacobian=False, frames=frames)
         out = np.zeros((self.n_centres, 3))
         np.add.at(out, self.centre[act], -F[:, 0, :])
         return out

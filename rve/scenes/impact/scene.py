@@ -24,9 +24,11 @@ chunk boundary and resumed from when present (same config digest).
 + the summary (docs/impact.md).
 Friction (``cfg.friction``, some mu > 0; ``ImpactProblem.friction``, a
 ``rve.scenes.dynamic_friction.DynamicFriction``): between the fibrils in the impact phase only
-(the relaxation and the sphere contact stay frictionless); the history is committed after
-every accepted step, before the balances (which then include the friction terms) and the
-rebuilds, and is part of the checkpoint (and of its digest). mu = 0: the frictionless scene.
+(the relaxation stays frictionless); the history is committed after every accepted step,
+before the balances (which then include the friction terms) and the rebuilds, and is part
+of the checkpoint (and of its digest). mu = 0: the frictionless scene. At the sphere contact
+(``friction.projectile`` mu_p > 0, impact phase only; ``rve.scenes.impact.friction``): the
+same, ``ImpactProblem.friction`` then an ``ImpactFriction`` of both drivers.
 
 Sampled yarns: the warp yarns nearest y = -R_p/2 (``minus_y``) and +R_p/2 (``plus_y``) of the
 projectile axis, and the warp yarn j = 0 (``edge``, the -y edge).
@@ -60,6 +62,7 @@ from .thermal import ImpactThermal
 from ..rebuild import ChunkedRebuild
 from ..thermal_post import ThermalPostSolver
 from ..dynamic_friction import DynamicFriction, FrictionBalances, contact_params_with_friction
+from .friction import ImpactFriction, SphereFriction, sphere_friction_args
 from ..induced.scene import warp_circuit
 from ...fabrics.taut import chord_clearance, taut_weave, weave_with_chord_clearance
 from ..protocol import SceneFailure, SceneResult
@@ -87,6 +90,8 @@ def config_digest(cfg, sections=("geometry", "warp", "weft", "material", "projec
     impact speed excluded)."""
     d = {k: cfg.model_dump(mode="json")[k] for k in sections}
     d.get("relaxation", {}).pop("state_file", None)
+    if d.get("friction", {}).get("projectile", None) == 0.0:   # the fibril-friction runs keep their digests
+        d["friction"].pop("projectile")
     # the factorisation backend changes round-off only (docs/engine.md "Unsymmetric stage matrices": states equal to
     # 4e-15 between superlu_pruned and PARDISO): a checkpoint resumes on another backend
     d.get("newton", {}).pop("linear_backend", None)
@@ -112,8 +117,9 @@ class ImpactProblem:
     ends: np.ndarray
     sampled: dict
     info: dict = field(default_factory=dict)
-    #: the friction between fibrils (``rve.scenes.dynamic_friction``), None when frictionless
-    friction: DynamicFriction | None = None
+    #: the friction between fibrils (``rve.scenes.dynamic_friction``) and at the projectile
+    #: (``rve.scenes.impact.friction.ImpactFriction`` when mu_p > 0), None when frictionless
+    friction: DynamicFriction | ImpactFriction | None = None
 
     @property
     def fabric(self) -> ContactSystem:
@@ -182,7 +188,8 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
                      circuits=pcirc)
     xp = np.zeros(proj.n)
     proj.nodal(xp)[:, :9] = pmesh.X0
-    sphere = SphereContactTerm(mesh, pr.radius, k.penalty, k.margin)
+    sphere = SphereContactTerm(mesh, pr.radius, k.penalty, k.margin,
+                               friction=None if relaxing else sphere_friction_args(cfg.friction))
     x0 = np.concatenate([xf, xp])
     system = ImpactSystem(fabric, proj, sphere, x0)
     # sampled warp yarns
@@ -195,8 +202,10 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
             "B_kT": [float(v) for v in B], "projectile_length_mm": Lp, "projectile_bottom_mm": list(bottom),
             "projectile_mass_g": float(pr.density * parea * Lp), "sampled_warp_y_mm":
                 {k_: float(ywarp[v]) for k_, v in sampled.items()}}
+    friction = ImpactFriction.of(DynamicFriction.of(fabric, weave.direction, lambda x_: system.split(x_)[0]),
+                                 SphereFriction.of(system))
     return ImpactProblem(system, weave, x0, circuit_in, circuit_leak, pcirc, dirichlet_V, ends.ravel(), ends, sampled,
-                         info, DynamicFriction.of(fabric, weave.direction, lambda x_: system.split(x_)[0]))
+                         info, friction)
 
 
 def _integrator_options(cfg, sysm=None, extra: dict | None = None) -> dict:
