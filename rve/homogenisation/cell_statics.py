@@ -89,14 +89,17 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
     x = np.asarray(x, float).reshape(-1)
     info = {"converged": False, "iterations": 0, "residuals": [], "reason": "", "method": "friction",
             "rounds": []}
-    for _ in range(FRICTIONAL_ROUNDS):
+    for k in range(FRICTIONAL_ROUNDS):
         system.rebuild(x)
         before = set(zip(*_active(system, x)))
         # the incremental-potential predictor and the exact Newton corrector
         # (``rve.solvers.frictional.frictional_solve``): on the thesis weave the plain residual
-        # Newton took ~36x the frictionless step, the predictor-corrector 1.3-1.5x (docs/contact.md)
+        # Newton took ~36x the frictionless step, the predictor-corrector 1.3-1.5x (docs/contact.md).
+        # A later round starts at a committed equilibrium whose material points moved, with the
+        # stick/slip set settled: Newton first (the predictor only if it stalls)
         xs, _, res, _ = frictional_static_step(system, x, np.zeros(system.n), 0.0, {
-            "atol": atol, "rtol": 1e-14, "max_iter": int(max_iter)}, method="potential")
+            "atol": atol, "rtol": 1e-14, "max_iter": int(max_iter), "direct_atol": np.inf if k else None},
+            method="potential")
         how, its, converged, residuals, reason = "potential", int(res.iterations), bool(res.converged), \
             res.residuals, res.reason
         if not converged:
