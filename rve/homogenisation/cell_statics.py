@@ -95,10 +95,11 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
         # the incremental-potential predictor and the exact Newton corrector
         # (``rve.solvers.frictional.frictional_solve``): on the thesis weave the plain residual
         # Newton took ~36x the frictionless step, the predictor-corrector 1.3-1.5x (docs/contact.md).
-        # A later round starts at a committed equilibrium whose material points moved, with the
-        # stick/slip set settled: Newton first (the predictor only if it stalls)
+        # A later round starts at a committed equilibrium whose material points moved: the
+        # law's predictor stage alone (the smoothed stage would first move the state off to
+        # its own solution, |F| ~ 2e-2 N on the thesis weave, for the law's stage to bring back)
         xs, _, res, _ = frictional_static_step(system, x, np.zeros(system.n), 0.0, {
-            "atol": atol, "rtol": 1e-14, "max_iter": int(max_iter), "direct_atol": np.inf if k else None},
+            "atol": atol, "rtol": 1e-14, "max_iter": int(max_iter), "smoothing": () if k else (1.0,)},
             method="potential")
         how, its, converged, residuals, reason = "potential", int(res.iterations), bool(res.converged), \
             res.residuals, res.reason

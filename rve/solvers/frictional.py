@@ -84,12 +84,13 @@ log = logging.getLogger("rve.solvers.frictional")
 
 def frictional_static_step(system, x, w, t: float, newton_opts: Optional[dict] = None, method: str = "newton"):
     """One static step from the held friction history; commits it on convergence.
-    ``newton_opts`` (``method="potential"``): ``atol``, ``rtol``, ``max_iter`` and
-    ``direct_atol`` of ``frictional_solve``."""
+    ``newton_opts`` (``method="potential"``): ``atol``, ``rtol``, ``max_iter``,
+    ``direct_atol`` and ``smoothing`` of ``frictional_solve``."""
     if method == "potential":
         opts = dict(newton_opts or {})
         xs, res = frictional_solve(system, x, t, atol=opts.get("atol", 1e-9), rtol=opts.get("rtol", 1e-14),
-                                   max_iter=opts.get("max_iter", 200), direct_atol=opts.get("direct_atol"))
+                                   max_iter=opts.get("max_iter", 200), direct_atol=opts.get("direct_atol"),
+                                   smoothing=opts.get("smoothing", (1.0,)))
         ws = np.zeros(system.n)
     elif method == "newton":
         xs, ws, res = static_solve(system, x, w, t, newton_opts)
