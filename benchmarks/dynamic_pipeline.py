@@ -95,13 +95,15 @@ def main(argv=None) -> None:
     ap.add_argument("--baseline", required=True, help="the other source tree (e.g. a worktree of main)")
     ap.add_argument("--runs", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--sides", nargs="+", default=["baseline", "this"], choices=["baseline", "this"],
+                    help="run only these trees (the ratio needs both)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     this = Path(__file__).resolve().parents[1]
     trees = {"baseline": Path(a.baseline).resolve(), "this": this}
     recs = {t: {k: [] for k in trees} for t in a.targets}
     for k in range(a.runs):
-        order = ["baseline", "this"] if k % 2 == 0 else ["this", "baseline"]
+        order = [n for n in (["baseline", "this"] if k % 2 == 0 else ["this", "baseline"]) if n in a.sides]
         for target in a.targets:
             for name in order:
                 rec = run_target(trees[name], target, a.jobs)
@@ -109,12 +111,14 @@ def main(argv=None) -> None:
                 print(f"[{target}] run {k + 1} {name} ({trees[name]}): {_line(rec)}", flush=True)
     for target in a.targets:
         med = {}
-        for name in trees:
+        for name in a.sides:
             ok = [r for r in recs[target][name] if r["returncode"] == 0]
             med[name] = {key: float(np.median([r[key] for r in ok])) if ok else float("nan")
                          for key in ("wall_s", "cpu_s", "peak_rss_mb")}
             print(f"[{target}] {name}: median of {len(ok)} runs: wall {med[name]['wall_s']:.1f} s, CPU "
                   f"{med[name]['cpu_s']:.1f} s, peak RSS {med[name]['peak_rss_mb']:.0f} MB")
+        if len(med) < 2:
+            continue
         b, t = med["baseline"], med["this"]
         print(f"[{target}] ratio this / baseline: wall {t['wall_s'] / b['wall_s']:.3f}, CPU "
               f"{t['cpu_s'] / b['cpu_s']:.3f}, peak RSS {t['peak_rss_mb'] / b['peak_rss_mb']:.3f}")
