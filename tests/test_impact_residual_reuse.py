@@ -61,3 +61,36 @@ def test_stage_mass_products_on_the_nonzeros_give_the_same_bits():
     for _ in range(3):
         w = rng.standard_normal(sysm.n)
         assert np.array_equal(st.Mv @ w, st.M @ w)
+
+
+def test_impact_union_by_the_index_kernels_equals_the_numpy_one(monkeypatch):
+    """ImpactSystem's union of fabric, sphere-pair and projectile entries built with the
+    compiled index loops (rve.kernels.index.copy_rows / csr_positions / rows_increasing)
+    has exactly the structure, fabric positions and sphere-pair positions of the numpy
+    reference, at a state with the projectile on the fabric; an entry outside it raises."""
+    import pytest
+
+    from rve.kernels import numba_available
+
+    if not numba_available():
+        pytest.skip("numba not installed")
+    cfg = load_config("configs/scenes/impact.yaml", TINY)
+    problem = impact.setup(cfg, "impact")
+    sysm = problem.system
+    x = problem.x0.copy()
+    # push the projectile onto the fabric so that sphere pairs exist
+    xp = sysm.projectile.nodal(sysm.split(x)[1])
+    xp[:, 2] -= 0.5
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        sysm.rebuild(x)
+        fab_pos = next(iter(sysm._maps.values()))[2]
+        rows = np.repeat(np.arange(sysm.n), np.diff(sysm.indptr))
+        probe = sysm._positions_of(rows[::7], sysm.indices[::7])
+        out[path] = (sysm.indptr.copy(), sysm.indices.copy(), fab_pos.copy(), sysm._pos_sphere.copy(), probe)
+        with pytest.raises(RuntimeError):
+            sysm._positions_of(np.array([0]), np.array([sysm.n - 1]))
+    assert out["numba"][3].size > 0
+    for a, b in zip(out["numpy"], out["numba"]):
+        assert np.array_equal(a, b)

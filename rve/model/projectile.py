@@ -31,6 +31,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from ..kernels import index_kernels
+
 from ..fem.mesh import fibril_mesh, straight_fibril
 
 __all__ = ["projectile_mesh", "ImpactSystem"]
@@ -142,9 +144,16 @@ class ImpactSystem:
         indptr = np.concatenate([[0], np.cumsum(counts)])
         nnz = int(indptr[-1])
         indices = np.empty(nnz, np.int64)
-        rows_f = np.repeat(np.arange(nf), cnt_f)
-        pos_f = np.arange(Mf.nnz) + (indptr[:-1][:nf] - Mf.indptr[:-1].astype(np.int64))[rows_f]
-        indices[pos_f] = Mf.indices
+        # the compiled index loops (rve.kernels.index) where they run: the same integers
+        # without the (nnz,) int64 temporaries, whose fresh pages made this the costliest
+        # part of a rebuild in the impact process (docs/engine.md "Dynamic scenes: round 2")
+        ix = index_kernels()
+        if ix is not None:
+            pos_f = ix.copy_rows(Mf.indptr, Mf.indices, indptr, indices)
+        else:
+            rows_f = np.repeat(np.arange(nf), cnt_f)
+            pos_f = np.arange(Mf.nnz) + (indptr[:-1][:nf] - Mf.indptr[:-1].astype(np.int64))[rows_f]
+            indices[pos_f] = Mf.indices
         if er.size:
             start_e = indptr[er] + cnt_f[er]
             rank = np.arange(er.size) - np.concatenate([[0], np.cumsum(cnt_e)])[er]
@@ -155,17 +164,32 @@ class ImpactSystem:
         self.indptr = indptr.astype(np.int32) if nnz < 2**31 else indptr
         self.indices = indices.astype(np.int32)
         self.nnz = nnz
-        rows = np.repeat(np.arange(n), counts)
-        self._keys = rows * n + indices
         self._maps = {id(Mf.indices): (Mf.indices, Mf.indptr, pos_f)}
         self._maps_content = {}
+        if ix is not None:
+            self._keys = None
+            if not ix.rows_increasing(self.indptr, self.indices):  # pragma: no cover - construction invariant
+                raise RuntimeError("ImpactSystem: the union pattern is not sorted / has duplicates")
+            return
+        rows = np.repeat(np.arange(n), counts)
+        self._keys = rows * n + indices
         if np.any(np.diff(self._keys) <= 0):  # pragma: no cover - construction invariant
             raise RuntimeError("ImpactSystem: the union pattern is not sorted / has duplicates")
 
     def _positions_of(self, rows, cols):
-        keys = np.asarray(rows, np.int64) * self.n + np.asarray(cols, np.int64)
-        pos = np.searchsorted(self._keys, keys)
-        if keys.size and (pos.max() >= self.nnz or not np.array_equal(self._keys[pos], keys)):
+        """Positions of the entries (rows, cols) in the union's data array (row-major sorted
+        keys: a binary search per entry, within its row by the compiled loop)."""
+        ix = index_kernels()
+        if ix is not None:
+            pos, ok = ix.csr_positions(self.indptr, self.indices, rows, cols)
+        else:
+            keys = np.asarray(rows, np.int64) * self.n + np.asarray(cols, np.int64)
+            if self._keys is None:
+                counts = np.diff(self.indptr)
+                self._keys = np.repeat(np.arange(self.n, dtype=np.int64), counts) * self.n + self.indices
+            pos = np.searchsorted(self._keys, keys)
+            ok = not keys.size or (pos.max() < self.nnz and np.array_equal(self._keys[pos], keys))
+        if not ok:
             raise RuntimeError("ImpactSystem: a matrix entry outside the union pattern (structure changed "
                                "without a rebuild)")
         return pos
