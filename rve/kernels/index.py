@@ -34,6 +34,10 @@ them with ``==``). Integer arrays are int64 unless stated; the callers
   indices, rows, cols)`` -> ``(pos, ok)``, ``rows_increasing(indptr, indices)`` -> bool: the
   impact system's union of the fabric, sphere-pair and projectile entries
   (``rve.model.projectile.ImpactSystem``) without its (nnz,) int64 key array.
+* ``gather_axpy(out, data, c, gather)``, ``gather_axpy_masked(out, data, c, mask, indices,
+  gather)``: ``out += c * data[gather]`` and ``out += (c * (data * mask[indices]))[gather]``,
+  the stage matrix's restricted sum (``rve.solvers.system.FreeDofs.combine``) on the kept
+  entries alone, without the (nnz,) temporaries.
 """
 from __future__ import annotations
 
@@ -41,7 +45,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["sorted_positions", "upper_entries", "scatter_sum", "row_gather", "union_slots", "union_columns",
-           "copy_rows", "csr_positions", "rows_increasing"]
+           "copy_rows", "csr_positions", "rows_increasing", "gather_axpy", "gather_axpy_masked"]
 
 
 @njit(cache=True, nogil=True)
@@ -205,3 +209,19 @@ def rows_increasing(indptr, indices) -> bool:
             if indices[k] <= indices[k - 1]:
                 return False
     return True
+
+
+@njit(cache=True, nogil=True)
+def gather_axpy(out, data, c, gather):
+    """``out += c * data[gather]`` (the same products and sums, entry by entry)."""
+    for j in range(gather.size):
+        out[j] += c * data[gather[j]]
+
+
+@njit(cache=True, nogil=True)
+def gather_axpy_masked(out, data, c, mask, indices, gather):
+    """``out += (c * (data * mask[indices]))[gather]`` (the same products and sums, entry by
+    entry, for the gathered entries only)."""
+    for j in range(gather.size):
+        g = gather[j]
+        out[j] += c * (data[g] * mask[indices[g]])
