@@ -35,6 +35,12 @@ import os
 
 for _k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "RVE_PARDISO_THREADS"):   # as the Snakefile's jobs
     os.environ.setdefault(_k, "1")
+try:  # the allocator as in the scenes' job bodies (a tree without it: its defaults)
+    from rve.process import keep_freed_memory
+
+    keep_freed_memory()
+except ImportError:
+    pass
 
 import argparse  # noqa: E402
 import json  # noqa: E402
