@@ -13,8 +13,9 @@ reference-cycle garbage, whose finalisers Python does not promise to run at exit
 files are closed and flushed by the code that writes them (``rve.io.atomic``), logging
 by its own ``atexit`` handler. ``RVE_FAST_EXIT=0`` turns it off.
 
-``keep_freed_memory() -> bool`` (called by the job bodies of the dynamic scenes,
-``rve.scenes.impact.jobs`` and ``rve.scenes.induced.jobs``): glibc's allocator keeps the
+``keep_freed_memory() -> bool`` (called first in the dynamic scenes' Snakemake jobs,
+workflow/rules/impact.smk and induced_deformation.smk, and by the benchmarks that profile
+them): glibc's allocator keeps the
 memory the process frees for its next allocations (``mallopt``: blocks up to 32 MiB from the
 heap instead of fresh ``mmap`` regions, the heap's top returned to the system only beyond
 1 GiB free, 64 MiB of padding per heap growth). Every time step of these scenes allocates and
@@ -22,7 +23,7 @@ frees arrays of 1-50 MB (stage matrices, union structures, tangents); with glibc
 each of them comes back as fresh pages whose first touch is a page fault, and on the shared
 machine those faults cost the processes a fifth of their CPU time as system time (measured:
 the impact's first 40 steps, ~210k minor faults and 2.6-5.8 s system time of 15-19 s CPU,
-against ~90k and 1.1-1.9 s with these settings; docs/engine.md "Dynamic scenes: round 2").
+against ~90k and 1.1-1.9 s with these settings; docs/engine.md "Dynamic scenes: rebuilds, page faults").
 No arithmetic changes. Linux/glibc only (False elsewhere, and with ``RVE_KEEP_FREED=0``).
 """
 from __future__ import annotations

@@ -200,7 +200,7 @@ class UnionPattern:
     #: limit) cost far more than the sort in a long-running process. Measured in the impact
     #: (5,184 nodes: 27M node pairs, 240 MB of tables per build), first 40 steps: 2.5 s per
     #: union build with fresh tables against 0.05 s sorted, the rebuilds 5.8 -> 1.7 s CPU of
-    #: 18.8 s (docs/engine.md "Dynamic scenes: round 2"); in a fresh small process the
+    #: 18.8 s (docs/engine.md "Dynamic scenes: rebuilds, page faults"); in a fresh small process the
     #: tables took 0.02 s, so the cost is the first touch of fresh pages in a big process.
     dense_limit = 2 ** 23
 

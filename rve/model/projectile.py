@@ -146,7 +146,7 @@ class ImpactSystem:
         indices = np.empty(nnz, np.int64)
         # the compiled index loops (rve.kernels.index) where they run: the same integers
         # without the (nnz,) int64 temporaries, whose fresh pages made this the costliest
-        # part of a rebuild in the impact process (docs/engine.md "Dynamic scenes: round 2")
+        # part of a rebuild in the impact process (docs/engine.md "Dynamic scenes: rebuilds, page faults")
         ix = index_kernels()
         if ix is not None:
             pos_f = ix.copy_rows(Mf.indptr, Mf.indices, indptr, indices)

@@ -19,7 +19,6 @@ from pathlib import Path
 from ...config.loader import load_config
 from ...io.atomic import atomic_path, atomic_write_text
 from ...io.provenance import to_jsonable
-from ...process import keep_freed_memory
 from ..protocol import job_log
 from .scene import config_digest, load_or_relax, run
 
@@ -31,7 +30,6 @@ def impact_job(config_path, out_dir, summary_path, log_path, overrides=(), relax
     ``overrides``), outputs under ``out_dir``, the summary written atomically to
     ``summary_path``, the log to ``log_path``; ``relaxed`` the relaxed-state file to use
     (made if missing); ``relax_only``: only the relaxation (the summary is its record)."""
-    keep_freed_memory()
     with job_log(log_path):
         ov = list(overrides)
         if relaxed is not None:

@@ -10,7 +10,6 @@ from pathlib import Path
 
 from ...config.loader import load_config
 from ...io.atomic import atomic_path, atomic_write_text
-from ...process import keep_freed_memory
 from ..protocol import job_log
 from ..registry import run_scene
 
@@ -21,7 +20,6 @@ def orientation_job(config_path, orientation: str, out_dir, summary_path, log_pa
     """One Snakemake job (workflow/rules/induced_deformation.smk): the scene of ``config_path``
     with ``field.orientation = orientation`` (+ ``overrides``), outputs under ``out_dir``,
     the summary written (atomically) to ``summary_path``, the log to ``log_path``."""
-    keep_freed_memory()
     with job_log(log_path):
         cfg = load_config(config_path, [f"field.orientation={orientation}", *overrides])
         summary = run_scene(cfg, out_dir)
