@@ -94,3 +94,28 @@ def test_impact_union_by_the_index_kernels_equals_the_numpy_one(monkeypatch):
     assert out["numba"][3].size > 0
     for a, b in zip(out["numpy"], out["numba"]):
         assert np.array_equal(a, b)
+
+
+def test_segments_not_carried_free_their_factorisations(monkeypatch):
+    """A restart that does not carry the held factorisation (a checkpoint boundary) releases
+    the previous segment's (JacobianReuse.release: factor and backend gone), so a run holds one
+    factorisation at a time; the released objects keep their counts."""
+    from rve.solvers.newton import JacobianReuse
+
+    made = []
+    init = JacobianReuse.__init__
+
+    def record(self, *a, **k):
+        init(self, *a, **k)
+        made.append(self)
+
+    monkeypatch.setattr(JacobianReuse, "__init__", record)
+    cfg = load_config("configs/scenes/impact.yaml", TINY + ["time.checkpoint_every=10"])
+    x, info = impact.relax(cfg)
+    made.clear()
+    s = impact.solve(cfg, x_start=x, relax_info=info, record=False).summary
+    assert s["steps_accepted"] == 40
+    assert len(made) >= 4    # one per segment (a carried one replaces the segment's own)
+    assert sum(r.factorizations > 0 for r in made) >= 4    # a fresh one after every boundary
+    # at the end only the last segment's factorisation is held
+    assert sum(r._backend is not None or r.factor is not None for r in made) <= 1

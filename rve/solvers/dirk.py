@@ -1160,6 +1160,12 @@ def integrate(
             if previous is not None and not getattr(rebuild, "fresh", False):
                 stepper.carry_from(previous, factorisation=reuse.across_restarts,
                                    predictor=predictor_across_restarts)
+            if previous is not None and previous.reuse is not None and previous.reuse is not stepper.reuse:
+                # the previous segment's factorisation is not carried: free it now (``reusers``
+                # keeps the object for the run's counts; with its factor and PARDISO instance it
+                # held the memory of one full-size factorisation per checkpoint boundary of the
+                # impact, ~0.2 GB each, to the end of the run)
+                previous.reuse.release()
             if stepper.reuse is not None and all(r is not stepper.reuse for r in reusers):
                 reusers.append(stepper.reuse)
             final = t_stop >= float(t_end)
