@@ -18,6 +18,16 @@ the projectile velocity history (mm/ms, and relative to the speed) or of the def
 histories (mm, and relative to the largest deflection), at the common accepted-step times
 (the runs use the same nominal grid), the final values, the balance errors of both, and the
 wall per step of both (their ratio; for a timing, interleave runs with farm-bench).
+
+    python benchmarks/dynamic_compare.py results BASE_TREE OTHER_TREE
+
+``results``: the outputs of the Snakemake targets ``impact`` and ``induced_deformation``
+(``results/impact/full``, ``results/induced_deformation/B1..B3``) of two source trees (e.g.
+after ``benchmarks/dynamic_pipeline.py``): the projectile's centre-of-mass velocity history
+(``impact.nc``, every accepted step) and the mean and the largest warp deflection histories
+of every orientation (``induced_deformation.nc``, the stored states) at the common times, as
+the largest difference (and relative to the speed / the largest deflection), the final
+values, and the summaries' balance errors side by side.
 """
 from __future__ import annotations
 
@@ -25,6 +35,12 @@ import os
 
 for _k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "RVE_PARDISO_THREADS"):   # as the Snakefile's jobs
     os.environ.setdefault(_k, "1")
+try:  # the allocator as in the scenes' job bodies (a tree without it: its defaults)
+    from rve.process import keep_freed_memory
+
+    keep_freed_memory()
+except ImportError:
+    pass
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -149,6 +165,66 @@ def do_diff(a):
               f"factorisations {ref_meta['factorizations']} -> {meta['factorizations']}")
 
 
+def _nc(path, *names):
+    import xarray as xr
+
+    with xr.open_dataset(path) as ds:
+        return {n: np.asarray(ds[n].values) for n in names}
+
+
+def _balances(path) -> dict:
+    s = json.loads(Path(path).read_text())
+    return {k: float(v) for k, v in s.get("balance_errors", {}).items() if isinstance(v, (int, float))}
+
+
+def _print_balances(ba: dict, bb: dict) -> None:
+    print("  balances: " + ", ".join(f"{k} {ba[k]:.3g} -> {bb[k]:.3g}" for k in ba if k in bb))
+
+
+def _warp_deflections(path):
+    import xarray as xr
+
+    with xr.open_dataset(path) as ds:
+        warp = [i for i, n in enumerate(ds["fibril"].values) if str(n).startswith("warp")]
+        pos = np.asarray(ds["position"].values, float)[:, warp]           # (time, warp, node, xyz)
+        t = np.asarray(ds["time"].values, float)
+    X = pos - pos[:1]
+    return t, X.reshape(len(t), -1, 3).mean(axis=1), np.linalg.norm(X, axis=-1).reshape(len(t), -1).max(axis=1)
+
+
+def do_results(a):
+    base, other = Path(a.base), Path(a.other)
+    imp = "results/impact/full"
+    if (base / imp / "impact.nc").exists() and (other / imp / "impact.nc").exists():
+        A = _nc(base / imp / "impact.nc", "step_time", "projectile_com_velocity")
+        B = _nc(other / imp / "impact.nc", "step_time", "projectile_com_velocity")
+        ia, ib = _common(A["step_time"], B["step_time"])
+        va, vb = A["projectile_com_velocity"][ia], B["projectile_com_velocity"][ib]
+        d = float(np.abs(va - vb).max())
+        speed = float(np.abs(va[:, 2]).max())
+        print(f"[impact] {len(ia)} common step times (of {len(A['step_time'])} / {len(B['step_time'])}), up to "
+              f"t = {A['step_time'][ia[-1]]:.6g} ms: projectile v_com max |difference| {d:.3e} mm/ms "
+              f"({d / speed:.2e} of the speed {speed:.4g}); final {np.round(va[-1], 7).tolist()} -> "
+              f"{np.round(vb[-1], 7).tolist()}")
+        _print_balances(_balances(base / imp / "summary.json"), _balances(other / imp / "summary.json"))
+    for o in ("B1", "B2", "B3"):
+        d_ = f"results/induced_deformation/{o}"
+        fa, fb = base / d_ / "induced_deformation.nc", other / d_ / "induced_deformation.nc"
+        if not (fa.exists() and fb.exists()):
+            continue
+        ta, ma, xa = _warp_deflections(fa)
+        tb, mb, xb = _warp_deflections(fb)
+        ia, ib = _common(ta, tb)
+        dm = float(np.abs(ma[ia] - mb[ib]).max())
+        dx = float(np.abs(xa[ia] - xb[ib]).max())
+        print(f"[induced {o}] {len(ia)} common stored times up to t = {ta[ia[-1]]:.6g} ms: mean warp deflection "
+              f"max |difference| {dm:.3e} mm (any component; {dm / float(np.abs(ma).max()):.2e} of its max "
+              f"{float(np.abs(ma).max()):.4g}), largest deflection {dx:.3e} mm ({dx / float(xa.max()):.2e} of "
+              f"{float(xa.max()):.4g}); final mean {np.round(ma[ia[-1]], 4).tolist()} -> "
+              f"{np.round(mb[ib[-1]], 4).tolist()}, largest {xa[ia[-1]]:.4f} -> {xb[ib[-1]]:.4f}")
+        _print_balances(_balances(base / d_ / "summary.json"), _balances(other / d_ / "summary.json"))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -163,8 +239,11 @@ def main():
     r.add_argument("--out", required=True)
     d = sub.add_parser("diff")
     d.add_argument("files", nargs="+")
+    rr = sub.add_parser("results")
+    rr.add_argument("base")
+    rr.add_argument("other")
     a = ap.parse_args()
-    (do_run if a.cmd == "run" else do_diff)(a)
+    {"run": do_run, "diff": do_diff, "results": do_results}[a.cmd](a)
 
 
 if __name__ == "__main__":

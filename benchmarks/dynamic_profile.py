@@ -13,7 +13,7 @@ projectile is on the fabric there: the gap of 0.2 mm closes after about 14 steps
 of its 3000 steps of 5 µs.
 
 ``--baseline TREE``: the same profile run first in a fresh process on another source tree
-(``PYTHONPATH=TREE``, e.g. today's main), then on this one; printed as the ratio of the CPU
+(``PYTHONPATH=TREE``, its configs, e.g. today's main), then on this one; printed as the ratio of the CPU
 per step and of each phase (this tree / baseline).
 
 ``--opt KEY=VALUE``: scene integrator options (``rve.solvers.dirk.integrator_options`` flat
@@ -35,6 +35,12 @@ import os
 
 for _k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "RVE_PARDISO_THREADS"):   # as the Snakefile's jobs
     os.environ.setdefault(_k, "1")
+try:  # the allocator as in the scenes' job bodies (a tree without it: its defaults)
+    from rve.process import keep_freed_memory
+
+    keep_freed_memory()
+except ImportError:
+    pass
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -223,7 +229,9 @@ def run_baseline(tree: str) -> dict:
         path = os.path.join(tmp, "baseline.json")
         env = dict(os.environ, PYTHONPATH=os.path.abspath(tree))
         print(f"[baseline] PYTHONPATH={env['PYTHONPATH']}", flush=True)
-        subprocess.run([sys.executable, os.path.abspath(__file__)] + argv + ["--json", path], env=env, check=True)
+        # in the baseline tree: its configs (a scene config may name options that tree lacks)
+        subprocess.run([sys.executable, os.path.abspath(__file__)] + argv + ["--json", path], env=env, check=True,
+                       cwd=os.path.abspath(tree))
         with open(path) as fh:
             return json.load(fh)
 

@@ -462,3 +462,40 @@ def test_index_kernels_build_the_same_union_on_the_weave(monkeypatch):
         a, b = getattr(ua, name), getattr(ub, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
     assert np.array_equal(Ja.indices, Jb.indices) and _rel(Jb.data, Ja.data) < RTOL  # the contact kernels' rounding
+
+
+@needs_numba
+def test_min_det_kernel_equals_the_reference(monkeypatch):
+    """The compiled admissibility test (``rve.kernels.beam.min_det_F``) gives
+    ``BeamBasis.min_det_F`` to rounding on the 80-fibril weave at a perturbed state, and
+    ``BeamModel.admissible`` says the same on both paths, also where an element is folded
+    (det F < 0 at some point)."""
+    from pathlib import Path
+
+    from rve.config.loader import load_config
+    from rve.kernels.beam import min_det_F
+    from rve.scenes.fabric_relax import setup
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "configs/scenes/plain_weave_relax.yaml",
+                      ["mesh.elements=12"])
+    _, system, x = setup(cfg)
+    model = system.base
+    rng = np.random.default_rng(5)
+    for amp in (0.0, 0.01, 0.3):
+        y = x + amp * rng.standard_normal(x.size) * system.mech
+        ref = model.basis.min_det_F(model.nodal(y))
+        got = min_det_F(model.basis.D, model.nodal(y), model.basis.mesh.conn)
+        assert abs(got - ref) <= 1e-13 * max(1.0, abs(ref))
+        verdict = {}
+        for path in ("numpy", "numba"):
+            monkeypatch.setenv("RVE_KERNELS", path)
+            verdict[path] = model.admissible(y)
+        assert verdict["numpy"] == verdict["numba"] == (ref > 0.0)
+    # a folded element: one director of one node reversed
+    y = x.copy()
+    model.nodal(y)[0, 3:6] *= -1.0
+    ref = model.basis.min_det_F(model.nodal(y))
+    assert ref < 0.0
+    assert abs(min_det_F(model.basis.D, model.nodal(y), model.basis.mesh.conn) - ref) <= 1e-13 * abs(ref)
+    monkeypatch.setenv("RVE_KERNELS", "numba")
+    assert not model.admissible(y)

@@ -43,3 +43,20 @@ def test_install_is_idempotent_and_can_be_turned_off(monkeypatch):
     assert process.install_fast_exit() is False
     monkeypatch.setenv(process.FAST_EXIT_ENV, "1")
     assert process.install_fast_exit() is True and process.install_fast_exit() is True
+
+
+def test_keep_freed_memory_is_applied_on_glibc_and_can_be_turned_off(monkeypatch):
+    """rve.process.keep_freed_memory sets glibc's mallopt parameters (True on Linux/glibc) in a
+    fresh process, and does nothing with RVE_KEEP_FREED=0."""
+    import platform
+    import subprocess
+    import sys
+
+    code = "from rve.process import keep_freed_memory as k; print(k())"
+    env = dict(__import__("os").environ)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
+        assert out.stdout.strip() == "True"
+    env["RVE_KEEP_FREED"] = "0"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

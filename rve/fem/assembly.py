@@ -195,8 +195,14 @@ class UnionPattern:
     """Union CSR structure of an ``ElementPattern`` and pair elements (module docstring)."""
 
     #: node-pair tables (int8 + 2 int32 per node pair, allocated lazily: only the touched
-    #: pages cost) while n_nodes^2 <= this; beyond, sorted keys and binary search
-    dense_limit = 2 ** 25
+    #: pages cost) while n_nodes^2 <= this; beyond, sorted keys and binary search. Equal to
+    #: ``keep_tables_limit``: tables made afresh for every union (n_nodes^2 beyond that
+    #: limit) cost far more than the sort in a long-running process. Measured in the impact
+    #: (5,184 nodes: 27M node pairs, 240 MB of tables per build), first 40 steps: 2.5 s per
+    #: union build with fresh tables against 0.05 s sorted, the rebuilds 5.8 -> 1.7 s CPU of
+    #: 18.8 s (docs/engine.md "Dynamic scenes: rebuilds, page faults"); in a fresh small process the
+    #: tables took 0.02 s, so the cost is the first touch of fresh pages in a big process.
+    dense_limit = 2 ** 23
 
     def __init__(self, pattern: ElementPattern, local: np.ndarray, comps: np.ndarray):
         b, Nn = pattern.block, pattern.n_nodes

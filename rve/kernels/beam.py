@@ -20,7 +20,7 @@ from numba import njit
 
 from ..threads import run_chunked
 
-__all__ = ["neo_hookean_element_forces", "MIN_CHUNK"]
+__all__ = ["neo_hookean_element_forces", "min_det_F", "MIN_CHUNK"]
 
 #: elements per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
 MIN_CHUNK = 256
@@ -152,3 +152,40 @@ def neo_hookean_element_forces(D, W, U, mu, lam, want_tangent: bool = True, want
     with np.errstate(invalid="ignore", divide="ignore"):
         run_chunked(E, chunk, MIN_CHUNK)
     return (R, K.reshape(E, naf, 3, naf, 3) if want_tangent else None, dR if want_dmu else None)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _min_det(D, X, conn, nn):
+    """min over elements and quadrature points of det F, F[i, J] = sum_a D[J, a] U[a, i]
+    with U[3 k + c, i] = X[conn[e, k], 3 c + i] (``BeamBasis.element_values``)."""
+    E, nq = D.shape[0], D.shape[1]
+    out = np.inf
+    F = np.empty((3, 3))
+    for e in range(E):
+        for q in range(nq):
+            for i in range(3):
+                for J in range(3):
+                    s = 0.0
+                    for k in range(nn):
+                        node = conn[e, k]
+                        for c in range(3):
+                            s += D[e, q, J, 3 * k + c] * X[node, 3 * c + i]
+                    F[i, J] = s
+            a, b, c_ = F[0, 0], F[0, 1], F[0, 2]
+            d, e_, f = F[1, 0], F[1, 1], F[1, 2]
+            g, h, i_ = F[2, 0], F[2, 1], F[2, 2]
+            det = a * (e_ * i_ - f * h) - b * (d * i_ - f * g) + c_ * (d * h - e_ * g)
+            if det < out:
+                out = det
+    return out
+
+
+def min_det_F(D, X, conn) -> float:
+    """``BeamBasis.min_det_F`` (the reference: ``det3`` of ``deformation_gradient``) in one
+    compiled pass over the quadrature points, reading the nodal state ``X`` (n_nodes, >= 9)
+    through the connectivity instead of gathering the element arrays: the admissibility test
+    of every stage Newton trial point, where the gather, the batched matmul and the
+    determinant's temporaries cost about as much as a residual's beam kernel. Equal to the
+    reference to rounding (the 3 x 3 products are summed in another order)."""
+    return float(_min_det(np.ascontiguousarray(D, dtype=np.float64), np.ascontiguousarray(X, dtype=np.float64),
+                          np.ascontiguousarray(conn, dtype=np.int64), int(conn.shape[1])))

@@ -30,13 +30,22 @@ them with ``==``). Integer arrays are int64 unless stated; the callers
 * ``union_columns(nodeJ, isbase, b, ci, Qc, Qo)``: the column patterns of the pair-component
   rows (``Qc``: b columns of a base block, ``ci`` of a pair-only one) and of the other rows
   (``Qo``: the base blocks only), in key order.
+* ``copy_rows(src_indptr, src_indices, indptr, indices)`` -> ``pos``, ``csr_positions(indptr,
+  indices, rows, cols)`` -> ``(pos, ok)``, ``rows_increasing(indptr, indices)`` -> bool: the
+  impact system's union of the fabric, sphere-pair and projectile entries
+  (``rve.model.projectile.ImpactSystem``) without its (nnz,) int64 key array.
+* ``gather_axpy(out, data, c, gather)``, ``gather_axpy_masked(out, data, c, mask, indices,
+  gather)``: ``out += c * data[gather]`` and ``out += (c * (data * mask[indices]))[gather]``,
+  the stage matrix's restricted sum (``rve.solvers.system.FreeDofs.combine``) on the kept
+  entries alone, without the (nnz,) temporaries.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-__all__ = ["sorted_positions", "upper_entries", "scatter_sum", "row_gather", "union_slots", "union_columns"]
+__all__ = ["sorted_positions", "upper_entries", "scatter_sum", "row_gather", "union_slots", "union_columns",
+           "copy_rows", "csr_positions", "rows_increasing", "gather_axpy", "gather_axpy_masked"]
 
 
 @njit(cache=True, nogil=True)
@@ -141,3 +150,78 @@ def union_columns(nodeJ, isbase, b, ci, Qc, Qo):
             for c in range(nC):
                 Qc[qc + c] = j0 + ci[c]
             qc += nC
+
+
+@njit(cache=True, nogil=True)
+def _copy_rows(src_indptr, src_indices, indptr, indices, pos):
+    for r in range(src_indptr.size - 1):
+        a, b = src_indptr[r], src_indptr[r + 1]
+        s = indptr[r] - a
+        for k in range(a, b):
+            pos[k] = s + k
+            indices[s + k] = src_indices[k]
+
+
+def copy_rows(src_indptr, src_indices, indptr, indices) -> np.ndarray:
+    """The rows of a CSR structure (``src_indptr``, ``src_indices``) copied to the start of
+    the same rows of a larger one (``indptr``: every row at least as long), returning their
+    positions there: ``pos = np.arange(nnz) + (indptr[:m] - src_indptr[:m])[rows]`` (rows the
+    row of every source entry, m the source's rows) and ``indices[pos] = src_indices``."""
+    pos = np.empty(int(src_indptr[-1]), np.int64)
+    _copy_rows(np.asarray(src_indptr, np.int64), src_indices, np.asarray(indptr, np.int64), indices, pos)
+    return pos
+
+
+@njit(cache=True, nogil=True)
+def _csr_positions(indptr, indices, rows, cols, pos):
+    for k in range(rows.size):
+        r, c = rows[k], cols[k]
+        lo, hi = indptr[r], indptr[r + 1]
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if indices[mid] < c:
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo >= indptr[r + 1] or indices[lo] != c:
+            return False
+        pos[k] = lo
+    return True
+
+
+def csr_positions(indptr, indices, rows, cols):
+    """``(pos, ok)``: the positions of the entries (rows, cols) in a CSR structure whose rows
+    are sorted without repeats; ``ok`` False when one of them is not in it (``pos`` then not
+    to be used). The same integers as ``np.searchsorted(keys, rows * n + cols)`` with
+    ``keys = row * n + col`` of every stored entry (sorted: row-major)."""
+    rows = np.ascontiguousarray(rows, np.int64)
+    pos = np.empty(rows.size, np.int64)
+    ok = _csr_positions(np.asarray(indptr, np.int64), indices, rows, np.ascontiguousarray(cols, np.int64), pos)
+    return pos, bool(ok)
+
+
+@njit(cache=True, nogil=True)
+def rows_increasing(indptr, indices) -> bool:
+    """True when every row of a CSR structure has strictly increasing columns
+    (``np.all(np.diff(row * n + col) > 0)`` of the entries)."""
+    for r in range(indptr.size - 1):
+        for k in range(indptr[r] + 1, indptr[r + 1]):
+            if indices[k] <= indices[k - 1]:
+                return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def gather_axpy(out, data, c, gather):
+    """``out += c * data[gather]`` (the same products and sums, entry by entry)."""
+    for j in range(gather.size):
+        out[j] += c * data[gather[j]]
+
+
+@njit(cache=True, nogil=True)
+def gather_axpy_masked(out, data, c, mask, indices, gather):
+    """``out += (c * (data * mask[indices]))[gather]`` (the same products and sums, entry by
+    entry, for the gathered entries only)."""
+    for j in range(gather.size):
+        g = gather[j]
+        out[j] += c * (data[g] * mask[indices[g]])

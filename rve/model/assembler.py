@@ -260,9 +260,10 @@ class ContactAssembler:
             if not hit:
                 self._fw_cache = (ev.Fw, u.csr(u.data_of(ev.Fw)))
             Fw = self._fw_cache[1]
+        elif Kw is not None and act.size:
+            # one compiled pass (UnionPattern.pair_data) where Fw lies on the base pattern: the
+            # same bits as data_of(Fw) + bincount (0 + a = a, and a + b = b + a exactly)
+            Fw = u.csr(u.pair_data(act, Kw, ev.Fw))
         else:
-            dw = u.data_of(ev.Fw)
-            if Kw is not None and act.size:
-                dw += np.bincount(u.slots[act].ravel(), weights=Kw.ravel(), minlength=u.nnz)
-            Fw = u.csr(dw)
+            Fw = u.csr(u.data_of(ev.Fw))
         return F, u.csr(dx), Fw

@@ -169,7 +169,14 @@ class BeamModel:
         return idx, val
 
     def admissible(self, x) -> bool:
-        """det F > 0 at every quadrature point (same as ``basis.min_det_F(x) > 0``)."""
+        """det F > 0 at every quadrature point (same as ``basis.min_det_F(x) > 0``); by the
+        compiled pass (``rve.kernels.beam.min_det_F``) when ``rve.kernels.use_numba()``."""
+        from ..kernels import use_numba
+
+        if use_numba():
+            from ..kernels.beam import min_det_F
+
+            return bool(min_det_F(self.basis.D, self.nodal(x), self.basis.mesh.conn) > 0.0)
         U = self.basis.element_values(self.nodal(x))
         F = np.matmul(self.basis.D, U[:, None, :, :])  # F^T, same determinant
         return bool(det3(F).min() > 0.0)

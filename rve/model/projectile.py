@@ -36,6 +36,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from ..kernels import index_kernels
+
 from ..fem.mesh import fibril_mesh, straight_fibril
 
 __all__ = ["projectile_mesh", "ImpactSystem"]
@@ -65,6 +67,7 @@ class ImpactSystem:
         self.structure_version = 0
         self.stats = {"sphere_s": 0.0, "sphere_rebuilds": 0, "compose_s": 0.0}
         self._maps = {}
+        self._maps_content = {}
         self.rebuild(np.zeros(self.n) if x is None else x)
 
     # ------------------------------------------------------------------ helpers
@@ -162,9 +165,16 @@ class ImpactSystem:
         indptr = np.concatenate([[0], np.cumsum(counts)])
         nnz = int(indptr[-1])
         indices = np.empty(nnz, np.int64)
-        rows_f = np.repeat(np.arange(nf), cnt_f)
-        pos_f = np.arange(Mf.nnz) + (indptr[:-1][:nf] - Mf.indptr[:-1].astype(np.int64))[rows_f]
-        indices[pos_f] = Mf.indices
+        # the compiled index loops (rve.kernels.index) where they run: the same integers
+        # without the (nnz,) int64 temporaries, whose fresh pages made this the costliest
+        # part of a rebuild in the impact process (docs/engine.md "Dynamic scenes: rebuilds, page faults")
+        ix = index_kernels()
+        if ix is not None:
+            pos_f = ix.copy_rows(Mf.indptr, Mf.indices, indptr, indices)
+        else:
+            rows_f = np.repeat(np.arange(nf), cnt_f)
+            pos_f = np.arange(Mf.nnz) + (indptr[:-1][:nf] - Mf.indptr[:-1].astype(np.int64))[rows_f]
+            indices[pos_f] = Mf.indices
         if er.size:
             start_e = indptr[er] + cnt_f[er]
             rank = np.arange(er.size) - np.concatenate([[0], np.cumsum(cnt_e)])[er]
@@ -175,16 +185,32 @@ class ImpactSystem:
         self.indptr = indptr.astype(np.int32) if nnz < 2**31 else indptr
         self.indices = indices.astype(np.int32)
         self.nnz = nnz
+        self._maps = {id(Mf.indices): (Mf.indices, Mf.indptr, pos_f)}
+        self._maps_content = {}
+        if ix is not None:
+            self._keys = None
+            if not ix.rows_increasing(self.indptr, self.indices):  # pragma: no cover - construction invariant
+                raise RuntimeError("ImpactSystem: the union pattern is not sorted / has duplicates")
+            return
         rows = np.repeat(np.arange(n), counts)
         self._keys = rows * n + indices
-        self._maps = {id(Mf.indices): (Mf.indices, Mf.indptr, pos_f)}
         if np.any(np.diff(self._keys) <= 0):  # pragma: no cover - construction invariant
             raise RuntimeError("ImpactSystem: the union pattern is not sorted / has duplicates")
 
     def _positions_of(self, rows, cols):
-        keys = np.asarray(rows, np.int64) * self.n + np.asarray(cols, np.int64)
-        pos = np.searchsorted(self._keys, keys)
-        if keys.size and (pos.max() >= self.nnz or not np.array_equal(self._keys[pos], keys)):
+        """Positions of the entries (rows, cols) in the union's data array (row-major sorted
+        keys: a binary search per entry, within its row by the compiled loop)."""
+        ix = index_kernels()
+        if ix is not None:
+            pos, ok = ix.csr_positions(self.indptr, self.indices, rows, cols)
+        else:
+            keys = np.asarray(rows, np.int64) * self.n + np.asarray(cols, np.int64)
+            if self._keys is None:
+                counts = np.diff(self.indptr)
+                self._keys = np.repeat(np.arange(self.n, dtype=np.int64), counts) * self.n + self.indices
+            pos = np.searchsorted(self._keys, keys)
+            ok = not keys.size or (pos.max() < self.nnz and np.array_equal(self._keys[pos], keys))
+        if not ok:
             raise RuntimeError("ImpactSystem: a matrix entry outside the union pattern (structure changed "
                                "without a rebuild)")
         return pos
@@ -195,12 +221,22 @@ class ImpactSystem:
             return
         hit = self._maps.get(id(A.indices))
         if hit is None or hit[0] is not A.indices or hit[1] is not A.indptr:
+            # a matrix with new index arrays on a structure seen before (the relaxation's
+            # row-scaled constant damping operator is a new CSR at every evaluation): its
+            # positions by the structure's content instead of a binary search of every entry
+            # in the union's keys (measured: most of the relaxation's evaluations)
+            ckey = (off, A.shape, A.nnz, hash(A.indptr.tobytes()), hash(A.indices.tobytes()))
             if hit is not None and hit[0].shape == A.indices.shape and np.array_equal(hit[0], A.indices) \
                     and np.array_equal(hit[1], A.indptr):
                 pos = hit[2]
+            elif ckey in self._maps_content:
+                pos = self._maps_content[ckey]
             else:
                 rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)) + off
                 pos = self._positions_of(rows, A.indices.astype(np.int64) + off)
+                if len(self._maps_content) > 16:
+                    self._maps_content.clear()
+                self._maps_content[ckey] = pos
             if len(self._maps) > 16:
                 self._maps.clear()
             hit = self._maps[id(A.indices)] = (A.indices, A.indptr, pos)

@@ -201,6 +201,15 @@ class JacobianReuse:
             log.debug("modified Newton: factorisation dropped (%s)", reason)
         self.factor = None
 
+    def release(self) -> None:
+        """Free the held factorisation and the backend's memory (a PARDISO instance's MKL
+        arrays) for good: the owner is done with this object (a restart that does not carry
+        it), but its counts stay readable. Not counted as a refactor."""
+        self.factor = None
+        backend, self._backend = self._backend, None
+        if backend is not None and hasattr(backend, "release"):
+            backend.release()
+
     def _time(self, what: str, dt: float) -> None:
         old = self.cost[what]
         self.cost[what] = dt if old is None else 0.7 * old + 0.3 * dt

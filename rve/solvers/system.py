@@ -57,6 +57,7 @@ from typing import Protocol, Tuple, runtime_checkable
 import numpy as np
 import scipy.sparse as sp
 
+from ..kernels import index_kernels
 from .backends.base import same_structure as _same_structure
 
 __all__ = ["DynamicSystem", "ContactRelaxable", "DeadLoad", "FreeDofs", "friction_of", "massless_dofs", "mech_mask", "scale_columns"]
@@ -226,8 +227,17 @@ class FreeDofs:
             out = self.assemble([self.triplets(A, c, None if m is None else np.asarray(m) != 0) for A, c, m in mats])
             return out if fmt == "csc" else out.tocsr()
         gather, indices, indptr = self._plan(base, fmt)
+        ix = index_kernels()
         if len(mats) == 1 and mats[0][1] == 1.0 and (mats[0][2] is None or np.all(mats[0][2] == 1.0)):
             data = base.data[gather]
+        elif ix is not None:
+            # the same products and sums per kept entry, in the same order (rve.kernels.index)
+            data = np.zeros(gather.size)
+            for A, c, m in mats:
+                if m is None or np.all(m == 1.0):
+                    ix.gather_axpy(data, A.data, float(c), gather)
+                else:
+                    ix.gather_axpy_masked(data, A.data, float(c), np.asarray(m, float), A.indices, gather)
         else:
             data = np.zeros(base.nnz)
             for A, c, m in mats:

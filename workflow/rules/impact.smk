@@ -44,7 +44,10 @@ rule impact_relax:
         out=lambda wc: scene_layout.impact_dir(wc.case),
     threads: 1
     run:
+        from rve.process import keep_freed_memory
         from rve.scenes.impact.jobs import impact_job
+
+        keep_freed_memory()  # the allocator reuses freed memory (rve/process.py)
 
         impact_job(input.scene, params.out, output.record, log[0], params.overrides,
                    relaxed=output.state, relax_only=True)
@@ -69,7 +72,10 @@ rule impact_full:
     resources:
         mem_mb=config["resources"]["impact_mem_mb"],
     run:
+        from rve.process import keep_freed_memory
         from rve.scenes.impact.jobs import impact_job
+
+        keep_freed_memory()  # the allocator reuses freed memory (rve/process.py)
 
         impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
                    relaxed=input.relaxed)
@@ -91,7 +97,10 @@ rule impact_sweep_point:
         out=lambda wc: scene_layout.impact_sweep_dir(wc.current),
     threads: 1
     run:
+        from rve.process import keep_freed_memory
         from rve.scenes.impact.jobs import impact_job
+
+        keep_freed_memory()  # the allocator reuses freed memory (rve/process.py)
 
         impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
                    relaxed=input.relaxed)
@@ -137,7 +146,10 @@ rule impact_velocity_point:
         out=lambda wc: scene_layout.impact_velocity_dir(wc.impact_speed),
     threads: 1
     run:
+        from rve.process import keep_freed_memory
         from rve.scenes.impact.jobs import impact_job
+
+        keep_freed_memory()  # the allocator reuses freed memory (rve/process.py)
 
         impact_job(input.scene, params.out, output.summary, log[0], params.overrides,
                    relaxed=input.relaxed)

@@ -46,7 +46,10 @@ rule induced_deformation_orientation:
     resources:
         mem_mb=config["resources"]["induced_mem_mb"],
     run:
+        from rve.process import keep_freed_memory
         from rve.scenes.induced.jobs import orientation_job
+
+        keep_freed_memory()  # the allocator reuses freed memory (rve/process.py)
 
         orientation_job(input.scene, wildcards.induced_orientation, params.out, output.summary,
                         log[0], params.overrides)
@@ -96,7 +99,10 @@ rule induced_current_point:
     resources:
         mem_mb=config["resources"]["induced_mem_mb"],
     run:
+        from rve.process import keep_freed_memory
         from rve.scenes.induced.jobs import orientation_job
+
+        keep_freed_memory()  # the allocator reuses freed memory (rve/process.py)
 
         orientation_job(input.scene, params.orientation, params.out, output.summary, log[0], params.overrides)
 
