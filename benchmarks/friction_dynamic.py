@@ -174,7 +174,7 @@ def side(args) -> int:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
-        fig = Figure(figsize=(11, 3.4))
+        fig = Figure(figsize=(12, 3.4))
         FigureCanvasAgg(fig)
         axes = fig.subplots(1, 3)
         for k, r in enumerate(runs):
@@ -189,7 +189,7 @@ def side(args) -> int:
             ax.set_ylabel(ylabel)
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)
-        fig.subplots_adjust(left=0.07, right=0.98, bottom=0.15, top=0.82, wspace=0.35)
+        fig.subplots_adjust(left=0.075, right=0.98, bottom=0.15, top=0.82, wspace=0.42)
         fig.suptitle("Impact with and without friction")
         fig.savefig(args.png, dpi=110)
         print(f"figure: {args.png}")
