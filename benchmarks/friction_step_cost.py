@@ -110,13 +110,13 @@ def main():
                              "--steps", a.steps, "--out", out], env=worker_env())
         return run
 
-    names = {"frictionless": (spec_file, c0, states[0]), f"mu={a.mu:g}": (spec_file, c1, states[1])}
+    sides = {"frictionless": side("frictionless", spec_file, c0, states[0]),
+             f"mu={a.mu:g}": side(f"mu={a.mu:g}", spec_file, c1, states[1])}
     if a.algorithm_7_1:
         alg = dict(spec, overrides=[*(spec.get("overrides") or []), "strain.path=algorithm_7_1"])
         (work / "spec_algorithm_7_1.json").write_text(json.dumps(alg))
-        names["frictionless, Algorithm 7.1"] = (work / "spec_algorithm_7_1.json", c0, states[0])
-    recs = interleave({n: side(n.split(",")[0] + ("_alg" if "," in n else ""), *cs) for n, cs in names.items()},
-                      a.runs)
+        sides["frictionless, Algorithm 7.1"] = side("algorithm_7_1", work / "spec_algorithm_7_1.json", c0, states[0])
+    recs = interleave(sides, a.runs)
     for name, rs in recs.items():
         for k, r in enumerate(rs):
             for s in r.get("steps", []):

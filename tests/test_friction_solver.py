@@ -125,3 +125,23 @@ def test_frictionless_system_is_refused(weave):
     s = mechanics_system(fab, mesh, cfg, base, 0.0, x0)
     with pytest.raises(ValueError, match="no friction"):
         frictional_solve(s, x0)
+
+
+def test_start_next_to_an_equilibrium_goes_to_newton_alone(weave):
+    """A committed equilibrium is off balance by the commit's material-point shift only; a
+    solve from there (a later round of the static solve) is Newton alone: no predictor
+    iteration, and it ends on a root of the exact residual."""
+    cfg, _, _, _, _, target = weave
+    atol = cfg.strain.static_atol
+    s = _system(weave)
+    y = target(weave[3], 1, 2)
+    s.rebuild(y)
+    x1, res = frictional_solve(s, y, 0.0, atol=atol, rtol=1e-12)
+    assert res.converged and res.predictor_iterations > 0
+    s.term.friction.commit(x1)
+    s.rebuild(x1)
+    r0 = _free_residual(s, x1)
+    assert atol < r0 <= 1e4 * atol          # off balance after the commit, within direct_atol
+    x2, res = frictional_solve(s, x1, 0.0, atol=atol, rtol=1e-12)
+    assert res.converged and res.method == "newton" and res.predictor_iterations == 0 and res.rounds == 0
+    assert _free_residual(s, x2) <= atol

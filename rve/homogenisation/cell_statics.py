@@ -93,8 +93,8 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
         system.rebuild(x)
         before = set(zip(*_active(system, x)))
         # the incremental-potential predictor and the exact Newton corrector
-        # (``rve.solvers.frictional.frictional_solve``): on the thesis weave the plain residual
-        # Newton took ~36x the frictionless step, the predictor-corrector 1.3-1.5x (docs/contact.md).
+        # (``rve.solvers.frictional.frictional_solve``): the plain residual Newton did not
+        # converge over a whole increment of the thesis weave (docs/contact.md "Cost on a weave").
         # A later round starts at a committed equilibrium whose material points moved: the
         # law's predictor stage alone (the smoothed stage would first move the state off to
         # its own solution, |F| ~ 2e-2 N on the thesis weave, for the law's stage to bring back)

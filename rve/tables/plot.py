@@ -164,10 +164,11 @@ def _combinations(ds: xr.Dataset) -> list[tuple[dict, str]]:
 def _plot_by_parameter(ds: xr.Dataset, path: PathLike) -> Path:
     modes, strain = list(ds["mode"].values), ds["strain"].values
     third = "friction_dissipated_energy" if "friction_dissipated_energy" in ds else "temperature_rise_max"
+    combos = _combinations(ds)
     fig, axes = _figure(len(modes), 3)
     for r, m in enumerate(modes):
         side, comp = _loading(ds["reaction_force"].sel(mode=m))
-        for k, (sel, label) in enumerate(_combinations(ds)):
+        for k, (sel, label) in enumerate(combos):
             sub = ds.sel(sel).sel(mode=m)
             kw = dict(color=f"C{k % 10}", marker="o", ms=3, label=label or None)
             axes[r, 0].plot(strain, sub["reaction_force"].sel(side=side, component=comp).values, **kw)
@@ -179,8 +180,8 @@ def _plot_by_parameter(ds: xr.Dataset, path: PathLike) -> Path:
         _label(axes[r, 2], f"{m}: " + ("friction dissipated" if third != "temperature_rise_max"
                                        else f"Joule rise, {ds['probe'].values[0]}"),
                "energy [N mm]" if third != "temperature_rise_max" else "temperature rise [K]")
-    if len(_combinations(ds)) > 1:
+    if len(combos) > 1:
         axes[0, 0].legend(fontsize=7)
-    return _finish(fig, "The swept parameters side by side" if len(_combinations(ds)) > 1 else
+    return _finish(fig, "The swept parameters side by side" if len(combos) > 1 else
                    "Loading force, contact resistance and " + ("friction" if third != "temperature_rise_max" else
                                                                "Joule rise"), "", path)
