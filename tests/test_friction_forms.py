@@ -74,6 +74,20 @@ def test_return_mapping_cone_tangency_and_balance():
         assert np.all(st.dissipation >= -1e-15) and np.all(st.dissipation[st.stick] == 0.0)
 
 
+@pytest.mark.parametrize("mu, ratio", [(1.5, 0.05), (0.2, 50.0), (0.5, 2.0)])
+def test_commit_changes_no_force(mu, ratio):
+    """The history committed at a state (material point moved to the closest point, the
+    elastic gap kept) gives that state the same friction forces, in stick, slip and a mix:
+    a converged state stays an equilibrium after its commit."""
+    X, sp, s_bar, anchor = _pairs()
+    R, _, st, f = _forces(X, sp, s_bar, anchor, mu, ratio, jac=False)
+    assert np.abs(st.s_bar - s_bar).max() > 1e-3                 # the material points do move
+    R2_, _, st2, _ = _forces(X, sp, st.s_bar, st.anchor, mu, ratio, jac=False)
+    # (the anchor is a difference of positions: its rounding is |X| eps kT ~ 1e-14 N)
+    np.testing.assert_allclose(R2_, R, rtol=0, atol=1e-12 * np.abs(R).max())
+    assert np.abs(st2.dissipation).max() <= 1e-14 * max(np.abs(st.dissipation).max(), 1e-300) + 1e-300
+
+
 def test_no_gap_history_gives_no_force():
     X, sp, _, _ = _pairs()
     geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
@@ -118,14 +132,23 @@ def test_frozen_potential_gradient_and_hessian(regime, mu, ratio):
 
 
 def test_frozen_potential_at_its_own_loads_is_the_law():
-    """With the loads frozen at the state itself the potential's forces are the return
-    map's (friction_forces), in stick and in slip; psi is continuous at the cone."""
+    """With the loads and the material point frozen at the state itself (``moved_history``
+    to the closest points) the potential's forces are the return map's (friction_forces),
+    in stick and in slip; with the material point left where the history has it they are
+    not (the law applies the force at the current closest point); psi is continuous at the
+    cone."""
+    from rve.physics.friction_forms import moved_history
+
     X, sp, s_bar, anchor = _pairs()
     f0, n0 = _loads_at(X, sp)
+    sm = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2)).s_minus
+    s_star, a_star = moved_history(X, sp, s_bar, anchor, sm)
     for mu, ratio in ((1.5, 0.05), (0.2, 50.0), (0.5, 2.0)):
         R_law = _forces(X, sp, s_bar, anchor, mu, ratio, jac=False)[0]
-        _, R, _ = _frozen(X, sp, s_bar, anchor, mu, ratio, f0, n0, jac=False)
+        _, R, _ = _frozen(X, sp, s_star, a_star, mu, ratio, f0, n0, jac=False)
         np.testing.assert_allclose(R, R_law, rtol=0, atol=1e-14 * np.abs(R_law).max())
+        _, R_old, _ = _frozen(X, sp, s_bar, anchor, mu, ratio, f0, n0, jac=False)
+        assert np.abs(R_old - R_law).max() > 1e-6 * np.abs(R_law).max()
     # psi on both sides of the stick limit |e| = mu f0 / kT (one point, the gap scaled)
     from rve.physics.friction_forms import tangential_gap
 

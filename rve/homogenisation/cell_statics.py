@@ -82,10 +82,8 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
     map rebuilds and pseudo-transient continuation (``relax_to_equilibrium``, method energy,
     which commits too), both from the same held history. Each round ends with a map rebuild at
     the solution (history carried by key); a new active pair starts another round, and so does
-    a committed state whose residual exceeds ``atol``: the commit moves every point's material
-    point on the - chord to the current closest point, i.e. the point where its friction force
-    acts, so a converged state is off equilibrium by O(|t| |ds|) after it (7.7e-7 N on the CI
-    weave); the next committed solve from there takes 1-2 Newton iterations."""
+    a committed state whose residual exceeds ``atol`` (the commit itself changes no force:
+    ``rve.physics.friction_forms``, the force acts at the current closest point)."""
     x = np.asarray(x, float).reshape(-1)
     info = {"converged": False, "iterations": 0, "residuals": [], "reason": "", "method": "friction",
             "rounds": []}
@@ -95,9 +93,9 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
         # the incremental-potential predictor and the exact Newton corrector
         # (``rve.solvers.frictional.frictional_solve``): the plain residual Newton did not
         # converge over a whole increment of the thesis weave (docs/contact.md "Cost on a weave").
-        # A later round starts at a committed equilibrium whose material points moved: the
-        # law's predictor stage alone (the smoothed stage would first move the state off to
-        # its own solution, |F| ~ 2e-2 N on the thesis weave, for the law's stage to bring back)
+        # A later round starts next to a committed equilibrium: the law's predictor stage
+        # alone (the smoothed stage would first move the state off to its own solution,
+        # |F| ~ 2e-2 N on the thesis weave, for the law's stage to bring back)
         xs, _, res, _ = frictional_static_step(system, x, np.zeros(system.n), 0.0, {
             "atol": atol, "rtol": 1e-14, "max_iter": int(max_iter), "smoothing": () if k else (1.0,)},
             method="potential")

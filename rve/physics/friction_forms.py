@@ -22,9 +22,13 @@ from - to +, distance ``rho``).
   force ``f = w phi'(g)`` (N), the trial force ``kT e`` sticks where ``kT |e| <= mu f``,
   else it slips: ``t = mu f e / |e|``. Inactive points (g <= 0): ``t = 0``.
 * **Residual** (internal-force sign, the - side gets the opposite force): the force on the
-  + material point is ``-t``, on the - material point ``+t``, distributed with ``cb``:
-  ``R_k = cb_k t``.
-* **Tangent** ``K_kl = cb_k dt/dX_l`` with, per point, ``Q_l = c_l I - d ds_l^T``
+  + material point is ``-t``, on the - side ``+t`` at the *current* closest point ``s-``
+  (where the fibrils touch), distributed with the current weights ``c = (1 - s+, s+,
+  -(1 - s-), -s-)``: ``R_k = c_k t``. So a commit (the material point moved to ``s-``, the
+  anchor so that ``u`` is unchanged) changes no force: a converged state stays an
+  equilibrium under its own history.
+* **Tangent** ``K_kl = c_k dt/dX_l + t dc_k/dX_l`` (``dc/dX_l = (0, 0, ds_l, -ds_l)``) with,
+  per point, ``Q_l = c_l I - d ds_l^T``
   (``dj/dX_l`` of the current jump, ``d = b- - a-``, ``c`` the current weights),
   ``de/dX_l = cb_l P - (n.u / rho) P Q_l - (1/rho) n e^T Q_l`` (``P = I - n n^T``),
   stick: ``dt/dX_l = kT de/dX_l``; slip: ``dt/dX_l = mu e_hat df/dX_l + (mu f/|e|)
@@ -41,9 +45,11 @@ from - to +, distance ``rho``).
   ``kT |e0| <= mu f0``), ``mu f0 |e0| - (mu f0)^2 / (2 kT)`` (slip). So
   ``sum_p psi(e0_p(X))`` is a convex potential whose gradient is ``R_k = cb_k t`` and
   whose Hessian is ``K_kl = cb_k cb_l D`` with ``D = kT P0`` (stick),
-  ``(mu f0/|e0|)(P0 - e_hat e_hat^T)`` (slip): symmetric, positive semi-definite. At
-  loads frozen at the state itself (``f0 = f(X)``, ``n0 = n(X)``) it is the residual of
-  the law above.
+  ``(mu f0/|e0|)(P0 - e_hat e_hat^T)`` (slip): symmetric, positive semi-definite. The
+  material point is frozen with the loads: ``moved_history(X, s_plus, s_bar, anchor,
+  s_star)`` is the history with the material point at ``s_star`` and the same ``u`` at
+  ``X``. At loads and point frozen at the state itself (``f0 = f(X)``, ``n0 = n(X)``,
+  ``s_star = s-(X)``) the potential's gradient is the residual of the law above.
 """
 from __future__ import annotations
 
@@ -52,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
-           "tangential_gap", "frozen_potential"]
+           "tangential_gap", "frozen_potential", "moved_history"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -67,6 +73,15 @@ def start_history(X, s_plus, s_minus):
     material point is the closest point ``s_minus`` (P, G), ``anchor = -j(X; s_minus)``."""
     cb = material_weights(s_plus, s_minus)
     return np.array(s_minus, float, copy=True), -np.einsum("pgk,pki->pgi", cb, X)
+
+
+def moved_history(X, s_plus, s_bar, anchor, s_star):
+    """``(s_star, anchor')``: the history (``s_bar`` (P, G), ``anchor`` (P, G, 3)) with its
+    material point moved to ``s_star`` (P, G) and the trial gap ``u`` at chord ends ``X``
+    (P, 4, 3) unchanged, ``anchor' = anchor + j(X; s_bar) - j(X; s_star)``."""
+    jb = np.einsum("pgk,pki->pgi", material_weights(s_plus, s_bar), X)
+    js = np.einsum("pgk,pki->pgi", material_weights(s_plus, s_star), X)
+    return np.array(s_star, float, copy=True), np.asarray(anchor, float) + jb - js
 
 
 @dataclass
@@ -140,7 +155,7 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True)
     active = geo.active & (f > 0.0) & (mu > 0.0)
     cb, u, un, e = _trial(geo, X, s_bar, anchor)
     en, stick, slip, t = _return_map(e, f, kT, mu, active)
-    R = np.einsum("pgk,pgi->pki", cb, t)
+    R = np.einsum("pgk,pgi->pki", geo.c, t)
     if not jacobian:
         return R, None
     P_, G_ = f.shape
@@ -166,8 +181,11 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True)
     df = -(kN * mu)[..., None, None] * geo.c[..., None] * n[:, :, None, :]  # (P, G, 4, 3) = mu df/dX_l
     slip_df = np.where(slip[..., None, None, None], ehat[:, :, None, :, None] * df[:, :, :, None, :], 0.0)
     dT = dT + np.where(slip[..., None, None, None], slip_dE + slip_df, 0.0)
-    # K_kilj = sum_g cb_gk dT_g,l,i,j
-    K = np.einsum("pgk,pglij->pkilj", cb, dT, optimize=True)
+    # K_kilj = sum_g c_gk dT_g,l,i,j + t_gi dc_gk/dX_lj, dc/dX_l = (0, 0, ds_l, -ds_l)
+    K = np.einsum("pgk,pglij->pkilj", geo.c, dT, optimize=True)
+    tds = np.einsum("pgi,pglj->pilj", t, geo.ds)
+    K[:, 2] += tds
+    K[:, 3] -= tds
     return R, K
 
 

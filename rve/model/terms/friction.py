@@ -33,7 +33,9 @@ friction and normal force, stick and slip counts).
 
 Frozen loads (the predictor of ``rve.solvers.frictional``): ``freeze(x)`` (or
 ``freeze(None)``: the loads of the last committed state) fixes the normal force ``f0`` and
-normal ``n0`` of every point by point key; until ``unfreeze()`` the term's forces are those
+normal ``n0`` of every point by point key, and the point of the - chord the friction force
+acts on (the closest point at ``x``: the history's material point moved there with the
+same trial gap, ``friction_forms.moved_history``); until ``unfreeze()`` the term's forces are those
 of the convex incremental potential ``sum psi(e0)`` (``rve.physics.friction_forms.
 frozen_potential``) on every pair with a frozen load (also pairs not in contact now, so the
 potential and its gradient are smooth in x), ``potential(x)`` its value (added to the
@@ -49,7 +51,7 @@ import numpy as np
 
 from ...physics.contact_forms import penalty_law
 from ...physics.friction_forms import (friction_forces, friction_state, frozen_potential, material_weights,
-                                      start_history, tangential_gap)
+                                      moved_history, start_history, tangential_gap)
 
 __all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
 
@@ -194,8 +196,7 @@ class FrictionTerm:
         if P and not hit.all():
             self.share_along_fibrils(x, receivers=~hit.reshape(P, G), geo=geo)
         if self._frozen is not None:
-            self._frozen = self._loads_by_key(old_keys, self._frozen["f0"], self._frozen["n0"],
-                                              self._frozen["s_plus"])
+            self._frozen = self._loads_by_key(old_keys, self._frozen)
 
     def _loads(self, geo, sel):
         c = self.contact
@@ -227,6 +228,7 @@ class FrictionTerm:
                                  np.array(geo.s_plus, float))
         self.last = st
         self.s_bar, self.anchor = st.s_bar, st.anchor
+        self._committed_history = (self.s_bar.copy(), self.anchor.copy())
         self.share_along_fibrils(x, receivers=st.normal <= 0.0)
         d = float(st.dissipation.sum())
         self.dissipated += d
@@ -304,42 +306,54 @@ class FrictionTerm:
     def frozen(self) -> bool:
         return self._frozen is not None
 
-    def _loads_by_key(self, keys_from, f, n, s_plus) -> dict:
-        """Loads given per point of ``keys_from`` re-expressed on the current map's points
-        (a point not among them: no load)."""
+    def _loads_by_key(self, keys_from, loads) -> dict:
+        """Frozen loads given per point of ``keys_from`` (a dict of per-point arrays)
+        re-expressed on the current map's points (a point not among them: no load, and the
+        held history)."""
         P, G = self.s_bar.shape
         idx = match_rows(self.keys, keys_from) if keys_from is not None else np.full(P * G, -1)
         hit = idx >= 0
-        f0, n0, sp0 = np.zeros(P * G), np.zeros((P * G, 3)), np.full(P * G, 0.5)
-        f0[hit] = np.asarray(f, float).reshape(-1)[idx[hit]]
-        n0[hit] = np.asarray(n, float).reshape(-1, 3)[idx[hit]]
-        sp0[hit] = np.asarray(s_plus, float).reshape(-1)[idx[hit]]
-        return {"f0": f0.reshape(P, G), "n0": n0.reshape(P, G, 3), "s_plus": sp0.reshape(P, G)}
+        out = {"f0": np.zeros(P * G), "n0": np.zeros((P * G, 3)), "s_plus": np.full(P * G, 0.5),
+               "s_bar": self.s_bar.reshape(-1).copy(), "anchor": self.anchor.reshape(-1, 3).copy()}
+        for k, v in out.items():
+            v[hit] = np.asarray(loads[k], float).reshape((-1,) + v.shape[1:])[idx[hit]]
+        return {k: v.reshape((P, G) + v.shape[1:]) for k, v in out.items()}
 
     def freeze(self, x=None) -> None:
-        """Freeze the normal force and normal of every point at state ``x`` (None: at the last
-        committed state, by point key; before any commit, an error)."""
+        """Freeze the normal force and normal of every point, and the point its friction acts
+        on, at state ``x`` (None: at the last committed state, by point key, where the
+        material point is that point; before any commit, an error)."""
         if x is None:
             if self._committed_loads is None:
                 raise ValueError("freeze(None): no committed state yet")
-            self._frozen = self._loads_by_key(*self._committed_loads)
+            keys, f, n, s_plus = self._committed_loads
+            by_key = {"f0": f, "n0": n, "s_plus": s_plus, "s_bar": self._committed_history[0],
+                      "anchor": self._committed_history[1]}
+            self._frozen = self._loads_by_key(keys, by_key)
             return
         self._frozen = self.loads_at(x)
 
     def loads_at(self, x) -> dict:
         """The loads of every point of the map at ``x``: ``f0`` (P, G) the normal forces (0
-        out of contact), ``n0`` (P, G, 3) the normals (0 out of contact), ``s_plus``. The
-        geometry is evaluated on the pairs in contact only (the compiled gaps select them)."""
+        out of contact), ``n0`` (P, G, 3) the normals (0 out of contact), ``s_plus``, and the
+        held history with its material point moved to the closest point at ``x`` (``s_bar``,
+        ``anchor``; unchanged out of contact). The geometry is evaluated on the pairs in
+        contact only (the compiled gaps select them)."""
         c = self.contact
         P, G = self.s_bar.shape
         sel = np.flatnonzero((np.asarray(c.gaps(x)) > 0.0).any(axis=1))
         f0, n0 = np.zeros((P, G)), np.zeros((P, G, 3))
+        s_bar, anchor = self.s_bar.copy(), self.anchor.copy()
         if sel.size:
             geo = c.geometry(x, sel)
             f, _, _ = self._loads(geo, sel)
             f0[sel] = f
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
-        return {"f0": f0, "n0": n0, "s_plus": np.array(np.broadcast_to(c.map.s_plus, (P, G)), float)}
+            sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
+            s_bar[sel], anchor[sel] = moved_history(self._ends(x, sel), geo.s_plus, self.s_bar[sel],
+                                                    self.anchor[sel], sm)
+        return {"f0": f0, "n0": n0, "s_plus": np.array(np.broadcast_to(c.map.s_plus, (P, G)), float),
+                "s_bar": s_bar, "anchor": anchor}
 
     def unfreeze(self) -> None:
         """Back to the exact law (the frozen loads dropped, no smoothing)."""
@@ -357,7 +371,7 @@ class FrictionTerm:
         fz = self._frozen
         w = np.broadcast_to(np.asarray(self.contact.weight[sel], float)[:, None], fz["f0"][sel].shape)
         kT = w * float(self.law.stiffness) * float(self.contact.params.penalty)
-        return frozen_potential(self._ends(x, sel), fz["s_plus"][sel], self.s_bar[sel], self.anchor[sel],
+        return frozen_potential(self._ends(x, sel), fz["s_plus"][sel], fz["s_bar"][sel], fz["anchor"][sel],
                                 fz["f0"][sel], fz["n0"][sel], kT, self.mu_pair[sel], jacobian, self.smoothing)
 
     def potential(self, x) -> float:
