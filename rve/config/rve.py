@@ -330,10 +330,6 @@ class RVEConfig(SceneConfig):
         if self.boundary != "pinned":
             raise ValueError(f"boundary = {self.boundary!r} with {mu}: friction is available in the pinned cell "
                              "only (boundary: pinned, or friction.coefficient: 0)")
-        if self.strain.follow_branch:
-            raise ValueError(f"strain.follow_branch = true with {mu}: the branch test balances the potential "
-                             "against the clamps' work, which friction's dissipation breaks (strain.follow_branch: "
-                             "false)")
         return self
 
     @model_validator(mode="after")

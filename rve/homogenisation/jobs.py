@@ -426,7 +426,7 @@ def probe_record(state_file: PathLike, spec: Mapping, combo: str = BASE_COMBO,
                            "stick_points": int(fs.get("stick", 0)), "slip_points": int(fs.get("slip", 0))}
     branch = st.solver.get("branch")
     if branch:   # the step's equilibrium-path test (rve.homogenisation.branch), for the table's attributes
-        rec["state"]["branch"] = {k: branch.get(k) for k in BRANCH_COUNTS + ("kept",)}
+        rec["state"]["branch"] = {k: branch.get(k) for k in BRANCH_COUNTS + ("kept", "untested")}
     return rec
 
 

@@ -296,7 +296,8 @@ PERIODIC_RESISTANCES = (
 
 def _branch_attributes(records: Sequence[Mapping]) -> dict:
     """``branch_jumps``, ``branch_limit_points``, ``branch_detections``, ``branch_false_alarms``,
-    ``branch_limit_points_passed`` (by the continuation): JSON {mode: count summed over the mode's steps} of the records' equilibrium-path tests
+    ``branch_limit_points_passed`` (by the continuation), ``branch_untested_steps`` (steps of a
+    frictional path, which have no energy test): JSON {mode: count summed over the mode's steps} of the records' equilibrium-path tests
     (``state.branch``, rve.homogenisation.branch); empty when no record carries one."""
     per: dict = {}
     for rec in records:
@@ -306,10 +307,14 @@ def _branch_attributes(records: Sequence[Mapping]) -> dict:
         m = per.setdefault(str(rec["mode"]), {})
         for k in ("branch_jumps", "limit_points", "detections", "false_alarms", "limit_points_passed"):
             m[k] = m.get(k, 0) + int(b.get(k) or 0)
+        m["untested"] = m.get("untested", 0) + int(bool(b.get("untested")))
     if not per:
         return {}
     name = {"branch_jumps": "branch_jumps", "limit_points": "branch_limit_points", "detections": "branch_detections",
-            "false_alarms": "branch_false_alarms", "limit_points_passed": "branch_limit_points_passed"}
+            "false_alarms": "branch_false_alarms", "limit_points_passed": "branch_limit_points_passed",
+            "untested": "branch_untested_steps"}
+    if not any(c.get("untested") for c in per.values()):
+        name.pop("untested")     # a frictionless table's attributes stay as they are
     return {attr: json.dumps({mode: c[k] for mode, c in sorted(per.items())}, sort_keys=True)
             for k, attr in name.items()}
 
