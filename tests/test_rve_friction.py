@@ -392,6 +392,27 @@ def test_pullout_moves_the_pulled_ends_and_friction_resists_the_sliding(tmp_path
     assert 0 < curves[0.3][0]["dissipated"] < curves[0.3][1]["dissipated"]
 
 
+def test_pullout_past_the_contact_entering_the_map_converges(tmp_path):
+    """The tiny cell's yarn pulled 0.4 mm in 4 steps at mu = 0.3: past u = 0.135 mm a contact
+    pair enters the map while the yarn slides; every step ends on an equilibrium
+    (|F| <= 1e-9 N), the pulled ends on their targets, the dissipation growing."""
+    from rve.homogenisation.jobs import fabric_job, pullout_job, relax_job
+
+    spec = _spec(0.3, static_max_iter=400)
+    spec["scene"]["pullout"] = {"yarn": "warp", "position": "-1 mm", "displacement": "0.4 mm", "steps": 4}
+    fabric_job(tmp_path / "initial.nc", None, spec)
+    relax_job(tmp_path / "initial.nc", tmp_path / "relaxed.nc", None, spec)
+    prev, dissipated = tmp_path / "relaxed.nc", 0.0
+    for i in range(1, 5):
+        st = pullout_job(prev, tmp_path / f"pullout_{i:02d}.nc", None, spec, "base", i)
+        po = st.solver["pullout"]
+        assert st.solver["converged"] and st.solver["residual_N"] <= 1e-9
+        assert po["dissipated"] > dissipated
+        dissipated = po["dissipated"]
+        prev = tmp_path / f"pullout_{i:02d}.nc"
+    assert po["released_displacement"] > 0.3      # the yarn came out at its free end
+
+
 @pytest.mark.long
 @pytest.mark.slow
 def test_killed_frictional_run_resumes_with_an_identical_table(tmp_path):
