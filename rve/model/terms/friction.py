@@ -276,8 +276,11 @@ class FrictionTerm:
         rows = self._rows()
         P = rows.size
         keys = self._map_keys()
-        geo = c.geometry(x)
-        s_new, a_new = start_history(self._local(x, rows), None, geo.s_minus, weights=geo.material_weights)
+        geo = c.geometry(x) if P else None
+        if P:
+            s_new, a_new = start_history(self._local(x, rows), None, geo.s_minus, weights=geo.material_weights)
+        else:
+            s_new, a_new = np.zeros((0, G)), np.zeros((0, G, 3))
         hit = np.zeros(P * G, bool)
         if self.keys is not None and P:
             idx = match_rows(keys, self.keys)
