@@ -6,7 +6,7 @@ Contract (the scene protocol, rve.scenes.protocol)
   ``FrictionCrossingConfig`` (rve.config.friction) and the dofs the path moves;
 * ``solve(cfg) -> SceneResult``: the indentation, then the tangential cycle of the slider's
   ends 0 -> U -> -U -> U; ``summary["path"]`` per step: ``u`` (end displacement, mm),
-  ``slip`` (the contact point's tangential displacement, mm), ``force`` (the supports'
+  ``slip`` (the contact point's tangential displacement, mm, ``contact_point``), ``force`` (the supports'
   tangential force on the slider, N), ``normal`` (total contact normal force, N),
   ``dissipated`` (N mm, the step's), ``stick``/``slip_points``, ``newton`` (residual
   history); and ``stiffness`` (the point tangential stiffness w eps_T P*, N/mm, w the weight
@@ -36,10 +36,11 @@ from ..model import BeamMaterial, BeamModel, DirichletBC
 from ..model.contact_model import ContactSystem
 from ..model.terms.contact import ContactParams
 from ..physics.contact_curve import curve_basis
+from ..physics.contact_smooth import hermite_basis
 from .frictional import friction_law, initial_state, reaction, step
 from .protocol import SceneFailure, SceneResult
 
-__all__ = ["setup", "solve", "run", "load_path", "point_weight"]
+__all__ = ["setup", "solve", "run", "load_path", "point_weight", "contact_point"]
 
 log = logging.getLogger("rve.scenes.friction_crossing")
 
@@ -62,12 +63,25 @@ def setup(cfg):
     system = ContactSystem(model, params, initial_state(mesh, lay))
     mid = cfg.mesh.elements // 2
     ca, cb = mesh.conn[mid, 0], mesh.conn[mid, -1]
-    # the slider's contact point, the centre of its middle element: its x displacement is the
-    # Lagrange interpolant of that element's nodes there (p = 1: the mean of the ends)
+    nodes, weights = contact_point(system, mid)
     parts = {"z": lay.dofs("r", [a, b], comp=2), "x": lay.dofs("r", [a, b], comp=0),
-             "contact_x": lay.dofs("r", [ca, cb], comp=0), "point_x": lay.dofs("r", mesh.conn[mid], comp=0),
-             "point_w": curve_basis(cfg.mesh.order, np.array(0.5))[0], "slider_element": mid}
+             "contact_x": lay.dofs("r", [ca, cb], comp=0), "point_x": lay.dofs("r", nodes, comp=0),
+             "point_w": weights, "slider_element": mid}
     return system, parts
+
+
+def contact_point(system, element: int):
+    """``(nodes, weights)``: the position of the contact point at the centre of the slider's
+    ``element`` as the contact geometry has it, ``sum weights * r[nodes]``: the chord's
+    midpoint (the end nodes), the Lagrange curve's point (the element's nodes), or the
+    Hermite curve's (the element's stencil)."""
+    term, conn = system.term, system.mesh.conn
+    if term.smooth:
+        st = term.passes.stencil
+        return st.nodes[element], hermite_basis(np.array(0.5))[0] @ st.S[element]
+    if term.curve:
+        return conn[element], curve_basis(system.mesh.order, np.array(0.5))[0]
+    return conn[element, [0, -1]], np.array([0.5, 0.5])
 
 
 def point_weight(system, element: int) -> float:
