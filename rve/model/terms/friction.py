@@ -10,24 +10,32 @@ pairs of those fibril families (unordered), ``stiffness`` eps_T / P*: the tangen
 per unit length relative to the normal one. ``enabled`` is False when every mu is 0 (the
 contact term then carries no friction at all: the frictionless results bit for bit).
 
-``FrictionTerm(contact, law)`` is owned by a ``ContactTerm`` of the chord geometry
-(``contact.friction``); the contact term calls
+``FrictionTerm(contact, law)`` is owned by a ``ContactTerm`` of any contact geometry
+(``contact.friction``). Its points are those of the term's *rows*: the map pairs on the
+chords, the two half passes' oriented rows on the curves (``HalfPasses``: a's points pressed
+on b), each row with G points, M local nodes (the chord ends; a's then b's element nodes or
+stencils) and its own history; the forces of a pair's rows are folded into the pair's local
+layout. The contact term calls
 
 * ``on_rebuild(x)`` after every map rebuild: the history of every point of the new map by
-  point key (``ContactTerm._point_keys``: + element, point index, - element, shift); a
+  point key (``ContactTerm._point_keys``: + element, point index, - element, shift; on the
+  curves a's element, the point, b's element, the shift); a
   point whose key was in the old map keeps its history, a new point takes the history of
   the same + point on a neighbouring element of the same - fibril when that one is in
   contact at ``x`` (``share_along_fibrils``), else it starts at ``x`` with no elastic gap
   (its material point the closest point at ``x``);
 * ``add_to(x, act, R, Kx, Kw, jacobian)``: the friction residual and tangent of the active
-  pairs added to the contact term's local arrays (the mechanical block of the chord ends).
+  pairs added to the contact term's local arrays (the mechanical block of the chord ends, or
+  of every local node on the curves).
 
 Drivers call ``commit(x)`` at every converged state (the history becomes that state's, the
 points out of contact take that of a point in contact on the same + point and - fibril, and
 the dissipated energy is accumulated in ``dissipated``); ``record()`` / ``seed(record)``
 carry the history to another system or through a checkpoint (by point key);
 ``set_families(labels)`` names the family of every fibril (default: one family);
-``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``);
+``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``, per row);
+``material_weights(s_bar)`` and ``local_nodes(v)`` the rows' material weights and local
+values of a nodal field (the dynamic scenes' friction power);
 ``last`` the return mapping of the last committed state and ``points()`` its summary (total
 friction and normal force, stick and slip counts).
 
