@@ -100,7 +100,7 @@ def test_penalty_gradient_and_tangent(order):
 def _take(geo, i):
     from rve.physics.contact_curve import CurveGeometry
 
-    return CurveGeometry(**{k: v[i:i + 1] for k, v in geo.__dict__.items()})
+    return CurveGeometry(**{k: (None if v is None else v[i:i + 1]) for k, v in geo.__dict__.items()})
 
 
 @pytest.mark.parametrize("order", [1, 2])

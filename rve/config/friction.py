@@ -16,6 +16,7 @@ Contract
   projectile"), with the same ``stiffness``.
 * :class:`CapstanConfig`: a fibril wrapped over a clamped thick straight fibril (a rigid
   cylinder), tension T1 held at one end, the other end pulled until the wrap slides.
+  Both scenes' ``contact.geometry`` is ``chord`` (default), ``curve`` or ``smooth``.
 * :class:`FrictionCrossingConfig`: one crossing of two fibrils pressed together, one end
   pair moved tangentially in a load-unload cycle (stick, slip, hysteresis).
 Named in ``rve.scenes.registry.SCENES``; the scenes are ``rve.scenes.capstan`` and
@@ -101,6 +102,9 @@ class CapstanMesh(Section):
 class FrictionContact(Section):
     penalty: Penalty = Field("10 N/mm^2", gt=0, description="P*: penalty line load per unit overlap")
     n_gp: Integer = Field(2, ge=1, description="contact points per element pair")
+    geometry: Literal["chord", "curve", "smooth"] = Field(
+        "chord", description="contact geometry (rve.model.terms.contact.ContactParams.geometry): the elements' "
+                             "chords, their Lagrange centroid curves (two half passes) or the C1 Hermite curve")
 
 
 class FrictionMaterial(Section):

@@ -313,16 +313,13 @@ class RVEConfig(SceneConfig):
 
     @model_validator(mode="after")
     def _friction_paths(self):
-        """Friction exists on the chord geometry of the pinned cell's strain path, penalty
-        enforcement, without the branch test (docs/contact.md 'Friction in the RVE pipeline');
-        any other combination is an error naming the key."""
+        """Friction exists on the pinned cell's strain path (every contact geometry), penalty
+        enforcement (docs/contact.md 'Friction in the RVE pipeline'); any other combination is
+        an error naming the key."""
         if not self.has_friction:
             return self
         mu = f"friction.coefficient = {self.friction.coefficient:g}" + (
             f", friction.pairs = {dict(self.friction.pairs)}" if self.friction.pairs else "")
-        if self.contact.geometry != "chord":
-            raise ValueError(f"contact.geometry = {self.contact.geometry!r} with {mu}: friction is implemented on "
-                             "the chord contact geometry only (contact.geometry: chord, or friction.coefficient: 0)")
         if self.contact.enforcement != "penalty":
             raise ValueError(f"contact.enforcement = {self.contact.enforcement!r} with {mu}: the augmented "
                              "Lagrangian's multiplier updates are not a load path for the friction history "

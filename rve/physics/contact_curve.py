@@ -49,6 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Optional
 
 import numpy as np
 
@@ -168,7 +169,15 @@ class CurveGeometry(PointKinematics):
     """Kinematics of the points of P oriented pairs (G points each) on the centroid curves:
     :class:`~rve.physics.contact_forms.PointKinematics` (ds zero where s_b is clamped),
     plus s_a, s_b (P, G); A (P, G) = t.t - [[r]].t'; owned (P, G) bool; Na (P, G, nn) (or
-    (G, nn)), Nb, dNb (P, G, nn)."""
+    (G, nn)), Nb, dNb (P, G, nn) (the Lagrange basis of the scalar fields).
+
+    What the friction of the points reads (``rve.physics.friction_forms``): ``dc_ds``
+    (P, G, M) = d c / d s_b (zero on the a side, minus the b side's basis derivative), so
+    ``sum_k dc_ds_k X_k = -dq/ds``; ``material_weights(s)`` (P, G, M): the weights of the
+    jump between the a points and the b points at parameters ``s`` (the a side's weights of
+    ``c``, minus b's basis at ``s``: Lagrange, or on the smooth curve the Hermite basis
+    times the stencil matrix ``Sb`` (P, 4, Ms); ``Sb`` None: the Lagrange curve);
+    ``s_plus``, ``s_minus``: s_a and s_b under the chord's names."""
 
     s_a: np.ndarray
     s_b: np.ndarray
@@ -177,6 +186,30 @@ class CurveGeometry(PointKinematics):
     Na: np.ndarray
     Nb: np.ndarray
     dNb: np.ndarray
+    dc_ds: Optional[np.ndarray] = None
+    Sb: Optional[np.ndarray] = None
+
+    @property
+    def s_plus(self) -> np.ndarray:
+        return self.s_a
+
+    @property
+    def s_minus(self) -> np.ndarray:
+        return self.s_b
+
+    def minus_basis(self, s) -> np.ndarray:
+        """b's basis at parameters ``s`` (P, G): (P, G, M/2) (Lagrange, or Hermite times ``Sb``)."""
+        s = np.asarray(s, float)
+        if self.Sb is None:
+            return curve_basis(self.Nb.shape[-1] - 1, s)[0]
+        from .contact_smooth import hermite_basis  # (contact_smooth builds on this module)
+
+        return np.matmul(hermite_basis(s)[0], self.Sb)
+
+    def material_weights(self, s_bar) -> np.ndarray:
+        half = self.c.shape[-1] // 2
+        plus = np.broadcast_to(self.c[..., :half], np.shape(s_bar) + (half,))
+        return np.concatenate([plus, -self.minus_basis(s_bar)], axis=-1)
 
 
 def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_prev) -> CurveGeometry:
@@ -222,7 +255,7 @@ def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_pr
     ds *= interior[..., None, None]
     active = owned & (g > 0.0) & (rho > _TINY)
     return CurveGeometry(s_a=np.broadcast_to(s_a, (P, G)), s_b=s_b, j=j, rho=rho, n=n, g=g, c=c, ds=ds,
-                         A=A, owned=owned, active=active, Na=Na, Nb=Nb, dNb=dNb)
+                         A=A, owned=owned, active=active, Na=Na, Nb=Nb, dNb=dNb, dc_ds=-m)
 
 
 def curve_penalty_energy(geo: CurveGeometry, weight, penalty, onset: float = 0.0) -> float:

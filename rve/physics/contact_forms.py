@@ -83,6 +83,8 @@ __all__ = [
 ]
 
 _CM = np.array([0.0, 0.0, 1.0, -1.0])  # d(d)/dX coefficients, with d = b- - a- (sign: -C^T)
+#: d c / d s- of the chord weights c = (1 - s+, s+, -(1 - s-), -s-)
+_DC_DS = np.array([0.0, 0.0, 1.0, -1.0])
 
 
 def effective_radius(R_plus, R_minus):
@@ -140,6 +142,18 @@ class ChordGeometry(PointKinematics):
     s_plus: np.ndarray
     s_minus: np.ndarray
     dd: np.ndarray
+
+    def material_weights(self, s_bar) -> np.ndarray:
+        """``(P, G, 4)`` weights of the chord ends in the jump between the + points and the
+        - points at ``s_bar`` (P, G): ``(1 - s+, s+, -(1 - s_bar), -s_bar)`` (the friction's
+        material points, ``rve.physics.friction_forms``)."""
+        sb = np.asarray(s_bar, float)
+        return np.stack([1.0 - self.s_plus, self.s_plus, -(1.0 - sb), -sb], axis=-1)
+
+    @property
+    def dc_ds(self) -> np.ndarray:
+        """``(P, G, 4)`` derivative of ``c`` in the closest point ``s-``: (0, 0, 1, -1)."""
+        return np.broadcast_to(_DC_DS, self.c.shape)
 
 
 def chord_geometry(ap, bp, am, bm, s_plus, gap_radius, s_minus=None) -> ChordGeometry:

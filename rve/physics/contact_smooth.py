@@ -32,7 +32,9 @@ Contract
   at a free end: at an end that continues into a neighbour the curve is C¹ and the closest
   point moves with the nodes, so the interior formula applies; ``c`` (P, G, M)
   and ``ds`` (P, G, M, 3) over the M = 2 (3 nn) stencil slots of the row: a's stencil, then
-  b's), so ``curve_penalty_forces`` and ``curve_scalar_jump`` apply unchanged. ``Na``,
+  b's), so ``curve_penalty_forces`` and ``curve_scalar_jump`` apply unchanged; ``dc_ds``
+  and ``Sb`` (b's stencil matrices) give the friction its material weights
+  (``CurveGeometry.material_weights``: ``H(s) S_b`` on b's stencil). ``Na``,
   ``Nb``, ``dNb`` are the Lagrange basis of the scalar fields (T, V) at s_a, s_b, placed in
   the element's own slots of the stencil (``SmoothStencil.own``; zero elsewhere).
 """
@@ -258,4 +260,4 @@ def smooth_geometry(order: int, Ya, Sa, Yb, Sb, s_a, gap_radius, has_next, t_nex
     Na, _ = _lagrange_in_stencil(order, np.broadcast_to(s_a, (P, G)), own_a, Ms)
     Nb, dNb = _lagrange_in_stencil(order, s_b, own_b, Ms)
     return CurveGeometry(s_a=np.broadcast_to(s_a, (P, G)), s_b=s_b, j=j, rho=rho, n=n, g=g, c=c, ds=ds,
-                         A=A, owned=owned, active=active, Na=Na, Nb=Nb, dNb=dNb)
+                         A=A, owned=owned, active=active, Na=Na, Nb=Nb, dNb=dNb, dc_ds=-m, Sb=Sb)

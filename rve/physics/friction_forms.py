@@ -4,32 +4,40 @@ penalty with slip by return mapping, and its exact (unsymmetric) consistent tang
 
 Contract
 --------
-Pure, vectorised functions over ALL contact points of the chord geometry at once (P pairs,
-G points; conventions of ``rve.physics.contact_forms``: chord ends ``X = (a+, b+, a-, b-)``,
-points at ``s+`` on the + chord, current closest points ``s-`` on the - chord, normal ``n``
-from - to +, distance ``rho``).
+Pure, vectorised functions over ALL contact points of a contact geometry at once (P pairs
+or oriented rows, G points, M local nodes ``X`` (P, M, 3)): the chord (M = 4, ``X = (a+,
+b+, a-, b-)``, ``rve.physics.contact_forms``), the Lagrange centroid curve (M = 2 nn, the
+nodes of a then of b, ``rve.physics.contact_curve``) and the smooth Hermite curve (M = 2 Ms,
+the stencils of a then of b, ``rve.physics.contact_smooth``). The + side is the side of the
+points (the chord's + element, a curve row's a), the - side the side of their current
+closest points ``s-`` (s_b). What the geometry ``geo`` supplies: ``c`` (P, G, M) the
+current weights of the jump ``j = p - q(s-) = sum_k c_k X_k``, ``ds`` (P, G, M, 3) =
+d s- / d X, ``n`` from - to +, ``rho``, ``j``, ``active``, ``s_minus``, ``dc_ds`` (P, G, M) =
+dc / ds- (so ``sum_k dc_ds_k X_k = -dq/ds``), and ``material_weights(s)`` (P, G, M): the
+weights of the jump between the + points and the - points at parameters ``s`` (equal to
+``c`` at ``s = s-``). Chord: ``c = (1 - s+, s+, -(1 - s-), -s-)``, ``dc_ds = (0, 0, 1, -1)``.
 
 * **History** of a point (from the last converged state): ``s_bar``, the *material* point
-  of the - chord that was in contact then, and ``anchor`` (3,) = ``e_n - j_n``, its elastic
-  tangential gap minus the jump ``j_n = p - q(s_bar)`` of the two material points then.
-  ``start_history(X, s_minus)`` is the history of points with no elastic gap.
+  of the - side that was in contact then (a parameter of the - element, continued beyond
+  [0, 1] by its polynomial), and ``anchor`` (3,) = ``e_n - j_n``, its elastic tangential
+  gap minus the jump ``j_n = p - q(s_bar)`` of the two material points then.
+  ``start_history(X, s_plus, s_minus)`` is the history of points with no elastic gap.
 * **Trial gap**: ``u = anchor + j(X; s_bar)`` with ``j(X; s_bar) = sum_k cb_k X_k``,
-  ``cb = (1 - s+, s+, -(1 - s_bar), -s_bar)``: the elastic gap of the last converged state
-  plus the relative displacement of the two material points since then.
-  ``e = (I - n n^T) u`` its part in the current tangent plane (so the friction force is
-  tangent to the contact at every state).
+  ``cb = material_weights(s_bar)`` (chord: ``(1 - s+, s+, -(1 - s_bar), -s_bar)``): the
+  elastic gap of the last converged state plus the relative displacement of the two material
+  points since then. ``e = (I - n n^T) u`` its part in the current tangent plane (so the
+  friction force is tangent to the contact at every state).
 * **Return mapping**: with the point stiffness ``kT = w eps_T`` (N/mm) and the point normal
   force ``f = w phi'(g)`` (N), the trial force ``kT e`` sticks where ``kT |e| <= mu f``,
   else it slips: ``t = mu f e / |e|``. Inactive points (g <= 0): ``t = 0``.
 * **Residual** (internal-force sign, the - side gets the opposite force): the force on the
   + material point is ``-t``, on the - side ``+t`` at the *current* closest point ``s-``
-  (where the fibrils touch), distributed with the current weights ``c = (1 - s+, s+,
-  -(1 - s-), -s-)``: ``R_k = c_k t``. So a commit (the material point moved to ``s-``, the
-  anchor so that ``u`` is unchanged) changes no force: a converged state stays an
-  equilibrium under its own history.
-* **Tangent** ``K_kl = c_k dt/dX_l + t dc_k/dX_l`` (``dc/dX_l = (0, 0, ds_l, -ds_l)``) with,
-  per point, ``Q_l = c_l I - d ds_l^T``
-  (``dj/dX_l`` of the current jump, ``d = b- - a-``, ``c`` the current weights),
+  (where the fibrils touch), distributed with the current weights ``c``: ``R_k = c_k t``.
+  So a commit (the material point moved to ``s-``, the anchor so that ``u`` is unchanged)
+  changes no force: a converged state stays an equilibrium under its own history.
+* **Tangent** ``K_kl = c_k dt/dX_l + t dc_k/dX_l`` (``dc_k/dX_l = dc_ds_k ds_l^T``) with,
+  per point, ``Q_l = c_l I + jd ds_l^T`` (``dj/dX_l`` of the current jump, ``jd = sum_k
+  dc_ds_k X_k = -dq/ds`` at ``s-``; chord: ``jd = -(b- - a-)``),
   ``de/dX_l = cb_l P - (n.u / rho) P Q_l - (1/rho) n e^T Q_l`` (``P = I - n n^T``),
   stick: ``dt/dX_l = kT de/dX_l``; slip: ``dt/dX_l = mu e_hat df/dX_l + (mu f/|e|)
   (I - e_hat e_hat^T) de/dX_l`` with ``df/dX_l = -w phi''(g) c_l n^T``. Unsymmetric in
@@ -50,6 +58,9 @@ from - to +, distance ``rho``).
   s_star)`` is the history with the material point at ``s_star`` and the same ``u`` at
   ``X``. At loads and point frozen at the state itself (``f0 = f(X)``, ``n0 = n(X)``,
   ``s_star = s-(X)``) the potential's gradient is the residual of the law above.
+  ``start_history``, ``moved_history`` and ``frozen_potential`` take the chord's ``s_plus``
+  or, on any geometry, ``weights``: a function ``s -> (P, G, M)`` material weights (e.g.
+  ``geo.material_weights``; ``s_plus`` is then not read).
 """
 from __future__ import annotations
 
@@ -62,25 +73,35 @@ __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
-    """``cb`` (P, G, 4): the weights of the chord ends in the jump of the material points."""
+    """``cb`` (P, G, 4): the weights of the chord ends in the jump of the material points
+    (``ChordGeometry.material_weights``)."""
     sp_ = np.asarray(s_plus, float)
     sb = np.asarray(s_bar, float)
     return np.stack([1.0 - sp_, sp_, -(1.0 - sb), -sb], axis=-1)
 
 
-def start_history(X, s_plus, s_minus):
-    """``(s_bar, anchor)`` of points with no elastic gap at chord ends ``X`` (P, 4, 3): the
-    material point is the closest point ``s_minus`` (P, G), ``anchor = -j(X; s_minus)``."""
-    cb = material_weights(s_plus, s_minus)
+def _weights_of(s_plus, weights):
+    """The material weights function: ``weights`` itself, or the chord's of ``s_plus``."""
+    if weights is not None:
+        return weights
+    return lambda s: material_weights(s_plus, s)
+
+
+def start_history(X, s_plus, s_minus, weights=None):
+    """``(s_bar, anchor)`` of points with no elastic gap at local nodes ``X`` (P, M, 3): the
+    material point is the closest point ``s_minus`` (P, G), ``anchor = -j(X; s_minus)``
+    (``weights``: module docstring)."""
+    cb = _weights_of(s_plus, weights)(s_minus)
     return np.array(s_minus, float, copy=True), -np.einsum("pgk,pki->pgi", cb, X)
 
 
-def moved_history(X, s_plus, s_bar, anchor, s_star):
+def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None):
     """``(s_star, anchor')``: the history (``s_bar`` (P, G), ``anchor`` (P, G, 3)) with its
-    material point moved to ``s_star`` (P, G) and the trial gap ``u`` at chord ends ``X``
-    (P, 4, 3) unchanged, ``anchor' = anchor + j(X; s_bar) - j(X; s_star)``."""
-    jb = np.einsum("pgk,pki->pgi", material_weights(s_plus, s_bar), X)
-    js = np.einsum("pgk,pki->pgi", material_weights(s_plus, s_star), X)
+    material point moved to ``s_star`` (P, G) and the trial gap ``u`` at local nodes ``X``
+    (P, M, 3) unchanged, ``anchor' = anchor + j(X; s_bar) - j(X; s_star)``."""
+    wf = _weights_of(s_plus, weights)
+    jb = np.einsum("pgk,pki->pgi", wf(s_bar), X)
+    js = np.einsum("pgk,pki->pgi", wf(s_star), X)
     return np.array(s_star, float, copy=True), np.asarray(anchor, float) + jb - js
 
 
@@ -103,7 +124,7 @@ class FrictionPoints:
 
 
 def _trial(geo, X, s_bar, anchor):
-    cb = material_weights(geo.s_plus, s_bar)
+    cb = geo.material_weights(s_bar)
     jb = np.einsum("pgk,pki->pgi", cb, X)
     u = anchor + jb
     un = np.einsum("pgi,pgi->pg", geo.n, u)
@@ -127,7 +148,7 @@ def _return_map(e, f, kT, mu, active):
 
 
 def friction_state(geo, X, s_bar, anchor, f, kT, mu) -> FrictionPoints:
-    """Return mapping at chord ends ``X`` (P, 4, 3) from the history (``s_bar`` (P, G),
+    """Return mapping at local nodes ``X`` (P, M, 3) from the history (``s_bar`` (P, G),
     ``anchor`` (P, G, 3)); ``f`` (P, G) the point normal forces (zero where inactive),
     ``kT`` (P, G) the point tangential stiffnesses, ``mu`` (P,) or (P, G)."""
     mu = _per_point(mu, f.shape)
@@ -146,11 +167,12 @@ def _per_point(mu, shape):
 
 
 def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True):
-    """Friction residual (P, 4, 3) and tangent (P, 4, 3, 4, 3) (None without jacobian).
+    """Friction residual (P, M, 3) and tangent (P, M, 3, M, 3) (None without jacobian).
 
-    ``geo`` the ``ChordGeometry`` of the pairs at ``X`` (P, 4, 3); history ``s_bar``,
-    ``anchor``; per point ``f`` the normal force and ``kN`` its stiffness ``w phi''(g)``
-    (zero where inactive), ``kT`` the tangential stiffness; ``mu`` (P,) or (P, G)."""
+    ``geo`` the geometry of the points at local nodes ``X`` (P, M, 3) (module docstring);
+    history ``s_bar``, ``anchor``; per point ``f`` the normal force and ``kN`` its stiffness
+    ``w phi''(g)`` (zero where inactive), ``kT`` the tangential stiffness; ``mu`` (P,) or
+    (P, G)."""
     mu = _per_point(mu, f.shape)
     active = geo.active & (f > 0.0) & (mu > 0.0)
     cb, u, un, e = _trial(geo, X, s_bar, anchor)
@@ -162,9 +184,10 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True)
     I3 = np.eye(3)
     n = geo.n
     rho = np.where(active, geo.rho, 1.0)
-    d = X[:, 3] - X[:, 2]
-    # Q_l = c_l I - d ds_l^T: (P, G, 4, 3, 3)
-    Q = geo.c[..., None, None] * I3 - d[:, None, None, :, None] * geo.ds[:, :, :, None, :]
+    dc_ds = geo.dc_ds
+    jd = np.einsum("pgk,pki->pgi", dc_ds, X)       # dj/ds- = -dq/ds at the closest point
+    # Q_l = c_l I + jd ds_l^T: (P, G, M, 3, 3)
+    Q = geo.c[..., None, None] * I3 + jd[:, :, None, :, None] * geo.ds[:, :, :, None, :]
     Pn = I3 - n[..., :, None] * n[..., None, :]
     PQ = np.einsum("pgij,pgljk->pglik", Pn, Q)
     eQ = np.einsum("pgi,pglij->pglj", e, Q)
@@ -178,14 +201,12 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True)
     dT = np.where(stick[..., None, None, None], kT[..., None, None, None] * dE, 0.0)
     slip_dE = a_slip[..., None, None, None] * np.einsum("pgij,pgljk->pglik", proj, dE)
     # df/dX_l = -kN c_l n^T
-    df = -(kN * mu)[..., None, None] * geo.c[..., None] * n[:, :, None, :]  # (P, G, 4, 3) = mu df/dX_l
+    df = -(kN * mu)[..., None, None] * geo.c[..., None] * n[:, :, None, :]  # (P, G, M, 3) = mu df/dX_l
     slip_df = np.where(slip[..., None, None, None], ehat[:, :, None, :, None] * df[:, :, :, None, :], 0.0)
     dT = dT + np.where(slip[..., None, None, None], slip_dE + slip_df, 0.0)
-    # K_kilj = sum_g c_gk dT_g,l,i,j + t_gi dc_gk/dX_lj, dc/dX_l = (0, 0, ds_l, -ds_l)
+    # K_kilj = sum_g c_gk dT_g,l,i,j + t_gi dc_gk/dX_lj, dc_k/dX_l = dc_ds_k ds_l
     K = np.einsum("pgk,pglij->pkilj", geo.c, dT, optimize=True)
-    tds = np.einsum("pgi,pglj->pilj", t, geo.ds)
-    K[:, 2] += tds
-    K[:, 3] -= tds
+    K += np.einsum("pgk,pgilj->pkilj", dc_ds, t[..., :, None, None] * geo.ds[:, :, None, :, :])
     return R, K
 
 
@@ -209,19 +230,21 @@ def _smooth_cone(x, eta):
     return Phi, phi, dphi, over
 
 
-def frozen_potential(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian: bool = True, eta: float = 0.0):
+def frozen_potential(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian: bool = True, eta: float = 0.0,
+                     weights=None):
     """The incremental potential of the points at frozen loads (module docstring):
-    ``(psi (P, G), R (P, 4, 3), K (P, 4, 3, 4, 3) or None)`` at chord ends ``X`` (P, 4, 3)
-    from the history (``s_bar``, ``anchor``), ``s_plus`` (P, G) the + points, the frozen
-    normal forces ``f0`` (P, G) (0: no friction at the point) and normals ``n0`` (P, G, 3),
-    ``kT`` (P, G) and ``mu`` (P,) or (P, G). ``eta > 0``: the corner of the cone rounded
-    (``_smooth_cone``; convex and C^2, the force within ``(1 + eta^2/4) mu f0``), the
-    predictor's continuation towards ``eta = 0``, the law."""
+    ``(psi (P, G), R (P, M, 3), K (P, M, 3, M, 3) or None)`` at local nodes ``X`` (P, M, 3)
+    from the history (``s_bar``, ``anchor``), ``s_plus`` (P, G) the chord's + points (or
+    ``weights``, module docstring), the frozen normal forces ``f0`` (P, G) (0: no friction
+    at the point) and normals ``n0`` (P, G, 3), ``kT`` (P, G) and ``mu`` (P,) or (P, G).
+    ``eta > 0``: the corner of the cone rounded (``_smooth_cone``; convex and C^2, the force
+    within ``(1 + eta^2/4) mu f0``), the predictor's continuation towards ``eta = 0``, the
+    law."""
     f0 = np.asarray(f0, float)
+    cb = _weights_of(s_plus, weights)(s_bar)
     if eta > 0.0:
-        return _frozen_smooth(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian, float(eta))
+        return _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, float(eta))
     mu = _per_point(mu, f0.shape)
-    cb = material_weights(s_plus, s_bar)
     u = anchor + np.einsum("pgk,pki->pgi", cb, X)
     e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
     limit = np.where((f0 > 0.0) & (mu > 0.0), mu * f0, 0.0)
@@ -241,9 +264,8 @@ def frozen_potential(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian: bool = 
     return psi, R, K
 
 
-def _frozen_smooth(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian, eta):
+def _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, eta):
     mu = _per_point(mu, f0.shape)
-    cb = material_weights(s_plus, s_bar)
     u = anchor + np.einsum("pgk,pki->pgi", cb, X)
     e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
     on = (f0 > 0.0) & (mu > 0.0) & (kT > 0.0)

@@ -87,8 +87,8 @@ def setup(cfg):
     bcs_pretension = [DirichletBC(np.concatenate([lay.dofs("r", [a])] + rest), 0.0)]
     E = cfg.material.youngs_modulus
     model = BeamModel(mesh, BeamMaterial(youngs_modulus=E), bcs=bcs_pull)
-    params = ContactParams(penalty=cfg.contact.penalty, n_gp=cfg.contact.n_gp, margin=0.5 * Rc,
-                           friction=friction_law(cfg.friction))
+    params = ContactParams(penalty=cfg.contact.penalty, n_gp=cfg.contact.n_gp, geometry=cfg.contact.geometry,
+                           margin=0.5 * Rc, friction=friction_law(cfg.friction))
     x0 = _wrapped_state(mesh, lay, fib)
     system = ContactSystem(model, params, x0)
     r = lay.as_nodal(x0)[:, :3]

@@ -43,7 +43,6 @@ import dataclasses
 import numpy as np
 
 from ..model.terms.friction import FrictionLaw, match_rows
-from ..physics.friction_forms import material_weights
 
 __all__ = ["contact_params_with_friction", "DynamicFriction", "FrictionBalances"]
 
@@ -121,12 +120,12 @@ class DynamicFriction:
         """The power the friction forces of the last committed state take from the motion
         ``w`` (W = mJ/ms): sum over the points of t . (v+ - v-) at the material points."""
         st, c = self.term.last, self.term.contact
-        if st is None or st.t.size == 0 or c.map is None or c.map.n_pairs != st.t.shape[0]:
+        if st is None or st.t.size == 0 or c.map is None or c.row_pair.size != st.t.shape[0]:
             return 0.0
         if c.map.shift is not None:
             raise ValueError("friction power: periodic shifts are not supported")
-        V = np.stack(c.ends(self.part(w)), axis=1)
-        cb = material_weights(np.broadcast_to(c.map.s_plus, st.s_bar.shape), st.s_bar)
+        V = self.term.local_nodes(self.part(w), shifted=False)
+        cb = self.term.material_weights(st.s_bar)
         return float(np.einsum("pgk,pki,pgi->", cb, V, st.t))
 
     def terms(self, w=None) -> dict:

@@ -6,10 +6,11 @@ Contract (the scene protocol, rve.scenes.protocol)
   ``FrictionCrossingConfig`` (rve.config.friction) and the dofs the path moves;
 * ``solve(cfg) -> SceneResult``: the indentation, then the tangential cycle of the slider's
   ends 0 -> U -> -U -> U; ``summary["path"]`` per step: ``u`` (end displacement, mm),
-  ``slip`` (the contact point's tangential displacement, mm), ``force`` (the supports'
+  ``slip`` (the contact point's tangential displacement, mm, ``contact_point``), ``force`` (the supports'
   tangential force on the slider, N), ``normal`` (total contact normal force, N),
   ``dissipated`` (N mm, the step's), ``stick``/``slip_points``, ``newton`` (residual
-  history); and ``stiffness`` (the point tangential stiffness w eps_T P*, N/mm), ``mu``;
+  history); and ``stiffness`` (the point tangential stiffness w eps_T P*, N/mm, w the weight
+  of the slider's point: ``point_weight``), ``mu``;
 * ``run(cfg, out_dir)``: the summary (and ``crossing_path.json``).
 
 Set-up: the *slider* (fibril 0, the + side of the pair) lies along e2 at height 2R above the
@@ -17,7 +18,9 @@ Set-up: the *slider* (fibril 0, the + side of the pair) lies along e2 at height 
 (all 9 dofs), lowered by ``indentation`` and then moved along e1, so the slider slides
 along the base's axis (the closest point on the base follows; the + point is material). The
 slider has an odd number of elements and one contact point per pair (``n_gp = 1``): one
-point, at the centre of the middle element, touches.
+point, at the centre of the middle element, touches. With ``contact.geometry`` curve or smooth
+the base's own points (the other half pass) touch too unless they are away from the crossing:
+``geometry.base_offset`` puts them there (one base element, its point 0.5 mm from it).
 """
 from __future__ import annotations
 
@@ -32,10 +35,12 @@ from ..fem.mesh import fibril_mesh, straight_fibril
 from ..model import BeamMaterial, BeamModel, DirichletBC
 from ..model.contact_model import ContactSystem
 from ..model.terms.contact import ContactParams
+from ..physics.contact_curve import curve_basis
+from ..physics.contact_smooth import hermite_basis
 from .frictional import friction_law, initial_state, reaction, step
 from .protocol import SceneFailure, SceneResult
 
-__all__ = ["setup", "solve", "run", "load_path"]
+__all__ = ["setup", "solve", "run", "load_path", "point_weight", "contact_point"]
 
 log = logging.getLogger("rve.scenes.friction_crossing")
 
@@ -53,14 +58,40 @@ def setup(cfg):
     held = np.concatenate([lay.dofs("mech", [a, b]), lay.dofs("mech", mesh.fibril_nodes(1))])
     model = BeamModel(mesh, BeamMaterial(youngs_modulus=cfg.material.youngs_modulus),
                       bcs=[DirichletBC(held, 0.0)])
-    params = ContactParams(penalty=cfg.contact.penalty, n_gp=cfg.contact.n_gp, margin=0.5 * R,
-                           friction=friction_law(cfg.friction))
+    params = ContactParams(penalty=cfg.contact.penalty, n_gp=cfg.contact.n_gp, geometry=cfg.contact.geometry,
+                           margin=0.5 * R, friction=friction_law(cfg.friction))
     system = ContactSystem(model, params, initial_state(mesh, lay))
     mid = cfg.mesh.elements // 2
     ca, cb = mesh.conn[mid, 0], mesh.conn[mid, -1]
+    nodes, weights = contact_point(system, mid)
     parts = {"z": lay.dofs("r", [a, b], comp=2), "x": lay.dofs("r", [a, b], comp=0),
-             "contact_x": lay.dofs("r", [ca, cb], comp=0)}
+             "contact_x": lay.dofs("r", [ca, cb], comp=0), "point_x": lay.dofs("r", nodes, comp=0),
+             "point_w": weights, "slider_element": mid}
     return system, parts
+
+
+def contact_point(system, element: int):
+    """``(nodes, weights)``: the position of the contact point at the centre of the slider's
+    ``element`` as the contact geometry has it, ``sum weights * r[nodes]``: the chord's
+    midpoint (the end nodes), the Lagrange curve's point (the element's nodes), or the
+    Hermite curve's (the element's stencil)."""
+    term, conn = system.term, system.mesh.conn
+    if term.smooth:
+        st = term.passes.stencil
+        return st.nodes[element], hermite_basis(np.array(0.5))[0] @ st.S[element]
+    if term.curve:
+        return conn[element], curve_basis(system.mesh.order, np.array(0.5))[0]
+    return conn[element, [0, -1]], np.array([0.5, 0.5])
+
+
+def point_weight(system, element: int) -> float:
+    """The weight (mm) of the contact points of the slider's ``element`` on its - side: the
+    chord's l_e / n_gp; on the curves the half pass's l_e W_k / 2 of the rows whose points
+    are on that element."""
+    term = system.term
+    if term.curve:
+        return float(term.weight[term.passes.a_elem == element].max())
+    return float(term.weight.max())
 
 
 def load_path(amplitude: float, n: int) -> np.ndarray:
@@ -86,13 +117,13 @@ def solve(cfg) -> SceneResult:
         x, res, diss = step(system, x, 0.0, cfg.newton, "friction_crossing", "cycle", k)
         pts = fr.points() if fr is not None else {"normal_force": system.contact_state(x)["total_normal_force"],
                                                    "stick": 0, "slip": 0}
-        path.append({"u": float(u), "slip": float(x[parts["contact_x"]].mean()),
+        path.append({"u": float(u), "slip": float(parts["point_w"] @ x[parts["point_x"]]),
                      "force": float(reaction(system, x, parts["x"]).sum()), "normal": pts["normal_force"],
                      "dissipated": diss, "stick": pts["stick"], "slip_points": pts["slip"],
                      "newton": [float(r) for r in res.residuals]})
     if system.term.map.n_pairs == 0:
         raise SceneFailure("friction_crossing", "no contact pair found", phase="setup")
-    w = float(system.term.weight.max())
+    w = point_weight(system, parts["slider_element"])
     summary = {"mu": float(cfg.friction.coefficient),
                "stiffness": w * float(cfg.friction.stiffness) * float(cfg.contact.penalty),
                "path": path, "wall_time_s": time.perf_counter() - t0}

@@ -262,7 +262,12 @@ class ContactTerm:
         return local
 
     # ------------------------------------------------------------------ multipliers
-    def _point_keys(self) -> np.ndarray:
+    def _point_keys(self, element_b: bool = False) -> np.ndarray:
+        """Keys of the points of every row (``contact_pairs.point_keys``). On the curves a
+        point is named by the fibril it touches (its closest point moves on to the next
+        element); ``element_b`` names the element instead, as on the chords: one key per row
+        and point (the friction history, whose material point is a parameter of that
+        element)."""
         cmap, G = self.map, self.params.n_gp
         lattice = self.lattice
         if self.curve:
@@ -271,7 +276,7 @@ class ContactTerm:
             shift = ps.b_shift - ps.a_shift
             t = None if lattice is None else lattice_translation(
                 shift, lattice, wrap_vectors(self.wrap, self.mesh.n_fibrils)[fib])
-            return point_keys(ps.a_elem, fib, shift, G, translation=t)
+            return point_keys(ps.a_elem, ps.b_elem if element_b else fib, shift, G, translation=t)
         # the chord's closest point stays on its element (clamped): a point is per pair
         t = None if lattice is None else lattice_translation(cmap.shifts, lattice)
         return point_keys(cmap.e_plus, cmap.e_minus, cmap.shifts, G, translation=t)

@@ -144,7 +144,7 @@ class HalfPasses:
     @staticmethod
     def take(geo: CurveGeometry, rows) -> CurveGeometry:
         """The geometry of a subset of its rows."""
-        return CurveGeometry(**{k: np.asarray(v)[rows] for k, v in geo.__dict__.items()})
+        return CurveGeometry(**{k: (None if v is None else np.asarray(v)[rows]) for k, v in geo.__dict__.items()})
 
 
 def point_keys(a_elem, fibril_b, relative_shift, n_gp: int, translation=None) -> np.ndarray:

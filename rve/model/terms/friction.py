@@ -10,24 +10,32 @@ pairs of those fibril families (unordered), ``stiffness`` eps_T / P*: the tangen
 per unit length relative to the normal one. ``enabled`` is False when every mu is 0 (the
 contact term then carries no friction at all: the frictionless results bit for bit).
 
-``FrictionTerm(contact, law)`` is owned by a ``ContactTerm`` of the chord geometry
-(``contact.friction``); the contact term calls
+``FrictionTerm(contact, law)`` is owned by a ``ContactTerm`` of any contact geometry
+(``contact.friction``). Its points are those of the term's *rows*: the map pairs on the
+chords, the two half passes' oriented rows on the curves (``HalfPasses``: a's points pressed
+on b), each row with G points, M local nodes (the chord ends; a's then b's element nodes or
+stencils) and its own history; the forces of a pair's rows are folded into the pair's local
+layout. The contact term calls
 
 * ``on_rebuild(x)`` after every map rebuild: the history of every point of the new map by
-  point key (``ContactTerm._point_keys``: + element, point index, - element, shift); a
+  point key (``ContactTerm._point_keys``: + element, point index, - element, shift; on the
+  curves a's element, the point, b's element, the shift); a
   point whose key was in the old map keeps its history, a new point takes the history of
   the same + point on a neighbouring element of the same - fibril when that one is in
   contact at ``x`` (``share_along_fibrils``), else it starts at ``x`` with no elastic gap
   (its material point the closest point at ``x``);
 * ``add_to(x, act, R, Kx, Kw, jacobian)``: the friction residual and tangent of the active
-  pairs added to the contact term's local arrays (the mechanical block of the chord ends).
+  pairs added to the contact term's local arrays (the mechanical block of the chord ends, or
+  of every local node on the curves).
 
 Drivers call ``commit(x)`` at every converged state (the history becomes that state's, the
 points out of contact take that of a point in contact on the same + point and - fibril, and
 the dissipated energy is accumulated in ``dissipated``); ``record()`` / ``seed(record)``
 carry the history to another system or through a checkpoint (by point key);
 ``set_families(labels)`` names the family of every fibril (default: one family);
-``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``);
+``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``, per row);
+``material_weights(s_bar)`` and ``local_nodes(v)`` the rows' material weights and local
+values of a nodal field (the dynamic scenes' friction power);
 ``last`` the return mapping of the last committed state and ``points()`` its summary (total
 friction and normal force, stick and slip counts).
 
@@ -49,9 +57,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
+from ...physics.contact_smooth import hermite_basis
 from ...physics.friction_forms import (friction_forces, friction_state, frozen_potential, material_weights,
                                       moved_history, start_history, tangential_gap)
+from .contact_pairs import HalfPasses
 
 __all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
 
@@ -121,13 +132,12 @@ class FrictionTerm:
     name = "friction"
 
     def __init__(self, contact, law: FrictionLaw):
-        if contact.curve:
-            raise ValueError("friction is implemented on the chord contact geometry (contact geometry 'chord')")
         self.contact, self.law = contact, law
         self.family_names = ("fibril",)
         self.fibril_family = np.zeros(contact.mesh.n_fibrils, np.int64)
         self._mu_matrix = law.matrix(self.family_names)
-        #: history of the map's points: keys (P*G, 6), s_bar (P, G), anchor (P, G, 3)
+        #: history of the map's points (rows: the pairs, or the curves' oriented rows):
+        #: keys (rows*G, 6), s_bar (rows, G), anchor (rows, G, 3)
         self.keys = None
         self.s_bar = None
         self.anchor = None
@@ -138,7 +148,7 @@ class FrictionTerm:
         self.last = None
         #: loads of the last committed state by point key: (keys, f, n, s_plus), None before
         self._committed_loads = None
-        #: frozen loads of the map's points (dict f0 (P, G), n0 (P, G, 3), s_plus (P, G)), or None
+        #: frozen loads of the map's points (dict f0 (rows, G), n0 (rows, G, 3), s_plus (rows, G)), or None
         self._frozen = None
         #: the rounding of the cone's corner in the frozen-load potential (0: the law's)
         self.smoothing = 0.0
@@ -169,18 +179,116 @@ class FrictionTerm:
         F = self.fibril_family
         self.mu_pair = self._mu_matrix[F[cmap.fibril_plus], F[cmap.fibril_minus]]
 
-    # ------------------------------------------------------------------ history
-    def _ends(self, x, sel=None) -> np.ndarray:
-        return np.stack(self.contact.ends(x, sel), axis=1)
+    # ------------------------------------------------------------------ the points' rows
+    # A row holds G points of one side pressed on the other: the map pair on the chords,
+    # an oriented row of the half passes on the curves (``contact_pairs.HalfPasses``).
+    def _rows(self, sel=None) -> np.ndarray:
+        """The rows of the map pairs ``sel`` (all by default)."""
+        c = self.contact
+        if c.curve:
+            return c.passes.rows(sel)
+        return np.arange(c.map.n_pairs) if sel is None else np.asarray(sel, np.int64)
 
+    def _mu(self, rows) -> np.ndarray:
+        return self.mu_pair[self.contact.row_pair[rows]]
+
+    def _map_keys(self) -> np.ndarray:
+        # one key per row and point: the material point s_bar is a parameter of the row's -
+        # element (the chord's e-, the curve row's b)
+        return self.contact._point_keys(element_b=True) if self.contact.curve else self.contact._point_keys()
+
+    def _local(self, x, rows, shifted: bool = True) -> np.ndarray:
+        """The rows' local node positions (n, M, 3) at ``x`` (the chord ends; on the curves
+        the nodes of a then of b, each side's element or stencil), the - side (b) translated
+        by its periodic shift (``shifted``; a velocity field takes none)."""
+        c = self.contact
+        if not c.curve:
+            if shifted:
+                return np.stack(c.ends(x, rows), axis=1)
+            r = c.layout.as_nodal(np.asarray(x, float))[:, :3]
+            return np.stack([r[c.map.nodes_plus[rows, 0]], r[c.map.nodes_plus[rows, 1]],
+                             r[c.map.nodes_minus[rows, 0]], r[c.map.nodes_minus[rows, 1]]], axis=1)
+        ps, conn = c.passes, c.mesh.conn
+        r = c.layout.as_nodal(np.asarray(x, float))[:, :3]
+        Xa = r[ps.side_nodes(conn, ps.a_elem[rows])]
+        Xb = r[ps.side_nodes(conn, ps.b_elem[rows])]
+        if shifted:
+            Xa = Xa + ps.a_shift[rows][:, None, :]
+            Xb = Xb + ps.b_shift[rows][:, None, :]
+        return np.concatenate([Xa, Xb], axis=1)
+
+    def _s_plus(self, rows) -> np.ndarray:
+        """The + points' parameters (n, G) of ``rows``."""
+        c = self.contact
+        G = c.params.n_gp
+        if c.curve:
+            return np.broadcast_to(c.passes.s, (np.size(rows), G))
+        return np.broadcast_to(c.map.s_plus, (c.map.n_pairs, G))[rows]
+
+    def _weights(self, rows, s_plus):
+        """``s -> cb`` (n, G', M): the material weights of the rows' points (+ points at
+        ``s_plus`` (n, G'), - material points at ``s``) without a geometry evaluation (the
+        frozen potential); equal to ``geometry.material_weights``."""
+        c = self.contact
+        if not c.curve:
+            return lambda s: material_weights(s_plus, s)
+        ps = c.passes
+        if ps.stencil is None:
+            order = c.mesh.order
+            Na = curve_basis(order, s_plus)[0]
+            return lambda s: np.concatenate([Na, -curve_basis(order, s)[0]], axis=-1)
+        S = ps.stencil.S
+        Sa, Sb = S[ps.a_elem[rows]], S[ps.b_elem[rows]]
+        Ha = np.matmul(hermite_basis(s_plus)[0], Sa)
+        return lambda s: np.concatenate([Ha, -np.matmul(hermite_basis(s)[0], Sb)], axis=-1)
+
+    def _geometry(self, x, rows):
+        """The geometry of ``rows`` at ``x`` (``ChordGeometry`` or ``CurveGeometry``)."""
+        c = self.contact
+        if not c.curve:
+            return c.geometry(x, rows)
+        r = c.layout.as_nodal(np.asarray(x, float))[:, :3]
+        return c.passes.geometry(c.mesh.order, c.mesh.conn, r, c.row_gap_radius(rows), rows)
+
+    def _fold(self, R, K=None):
+        """Row arrays (the curves' 2n oriented rows) in the pairs' local layout (n pairs)."""
+        c = self.contact
+        if not c.curve:
+            return R, K
+        w = R.shape[1] // 2
+        return HalfPasses.fold(R, w), (None if K is None else HalfPasses.fold(K, w, axes=(1, 3)))
+
+    def _place(self, Rl, K5, pos, Rf, Kf):
+        """Add pair arrays ``Rf`` (n, M, 3), ``Kf`` (n, M, 3, M, 3) to the contact term's
+        local arrays ``Rl`` (., m, nC), ``K5`` (., m, nC, m, nC) at pair positions ``pos``:
+        on the chord ends' slots (``endpos``), or on every local node for the curves."""
+        c = self.contact
+        if c.curve:
+            Rl[pos, :, 0:3] += Rf
+            if K5 is not None:
+                K5[pos, :, 0:3, :, 0:3] += Kf
+            return
+        ep = c.endpos
+        Rl[pos[:, None], ep[None, :], 0:3] += Rf
+        if K5 is not None:
+            for k in range(4):
+                for l in range(4):
+                    K5[pos, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
+
+    # ------------------------------------------------------------------ history
     def on_rebuild(self, x) -> None:
         """History of the new map's points (module docstring)."""
         c = self.contact
         self._pair_coefficients()
-        P, G = c.map.n_pairs, c.params.n_gp
-        keys = c._point_keys()
-        geo = c.geometry(x)
-        s_new, a_new = start_history(self._ends(x), geo.s_plus, geo.s_minus)
+        G = c.params.n_gp
+        rows = self._rows()
+        P = rows.size
+        keys = self._map_keys()
+        geo = c.geometry(x) if P else None
+        if P:
+            s_new, a_new = start_history(self._local(x, rows), None, geo.s_minus, weights=geo.material_weights)
+        else:
+            s_new, a_new = np.zeros((0, G)), np.zeros((0, G, 3))
         hit = np.zeros(P * G, bool)
         if self.keys is not None and P:
             idx = match_rows(keys, self.keys)
@@ -198,9 +306,10 @@ class FrictionTerm:
         if self._frozen is not None:
             self._frozen = self._loads_by_key(old_keys, self._frozen)
 
-    def _loads(self, geo, sel):
+    def _loads(self, geo, rows):
         c = self.contact
-        w = np.broadcast_to(np.asarray(c.weight[sel], float)[:, None], geo.g.shape)
+        w = np.asarray(c.weight[rows], float)
+        w = np.broadcast_to(w[:, None] if w.ndim == 1 else w, geo.g.shape)
         _, phi1, phi2 = penalty_law(np.where(geo.active, geo.g, 0.0), float(c.params.penalty), c.onset)
         f = np.where(geo.active, w * phi1, 0.0)
         kN = np.where(geo.active, w * phi2, 0.0)
@@ -208,52 +317,54 @@ class FrictionTerm:
         return f, kN, kT
 
     def state(self, x, sel=None):
-        """``FrictionPoints`` of the map pairs ``sel`` (all by default) at ``x`` from the held
-        history."""
-        sel = np.arange(self.contact.map.n_pairs) if sel is None else np.asarray(sel, np.int64)
-        geo = self.contact.geometry(x, sel)
-        f, _, kT = self._loads(geo, sel)
-        return friction_state(geo, self._ends(x, sel), self.s_bar[sel], self.anchor[sel], f, kT, self.mu_pair[sel])
+        """``FrictionPoints`` of the rows of the map pairs ``sel`` (all by default) at ``x``
+        from the held history (on the curves the oriented rows ``HalfPasses.rows(sel)``)."""
+        rows = self._rows(sel)
+        geo = self._geometry(x, rows)
+        f, _, kT = self._loads(geo, rows)
+        return friction_state(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kT, self._mu(rows))
 
     def commit(self, x) -> float:
         """Make ``x`` (a converged state) the history; returns the energy dissipated since the
         last commit (N mm), added to ``dissipated``."""
         if self.contact.map.n_pairs == 0:
             return 0.0
-        sel = np.arange(self.contact.map.n_pairs)
-        geo = self.contact.geometry(x, sel)
-        f, _, kT = self._loads(geo, sel)
-        st = friction_state(geo, self._ends(x, sel), self.s_bar, self.anchor, f, kT, self.mu_pair)
+        rows = self._rows()
+        geo = self.contact.geometry(x)
+        f, _, kT = self._loads(geo, rows)
+        st = friction_state(geo, self._local(x, rows), self.s_bar, self.anchor, f, kT, self._mu(rows))
         self._committed_loads = (np.array(self.keys, np.int64), np.array(f, float), np.array(geo.n, float),
                                  np.array(geo.s_plus, float))
         self.last = st
         self.s_bar, self.anchor = st.s_bar, st.anchor
         self._committed_history = (self.s_bar.copy(), self.anchor.copy())
-        self.share_along_fibrils(x, receivers=st.normal <= 0.0)
+        self.share_along_fibrils(x, receivers=st.normal <= 0.0, geo=geo)
         d = float(st.dissipation.sum())
         self.dissipated += d
         return d
 
     def share_along_fibrils(self, x, receivers, geo=None) -> None:
-        """The history of the ``receivers`` (P, G) bool points from a *donor*: the point in
+        """The history of the ``receivers`` (rows, G) bool points from a *donor*: the point in
         contact at ``x`` (largest overlap) with the same + point (+ element, point
         index), - fibril and shift, on a neighbouring - element. The donor's material point is
         named by its fibril parameter S = S0(e-) + s_bar h(e-) and re-expressed on the
-        receiver's chord, ``s_bar = (S - S0(e-')) / h(e-')`` (outside [0, 1] until the contact
-        reaches that element: the chord continued), and the receiver keeps the donor's
-        elastic gap at ``x``: ``anchor = e - j'(x; s_bar)``. So a contact that moves on to the
-        next element of the - fibril carries its stick state instead of sticking anew."""
+        receiver's element, ``s_bar = (S - S0(e-')) / h(e-')`` (outside [0, 1] until the
+        contact reaches that element: the element's chord, curve or Hermite cubic continued),
+        and the receiver keeps the donor's elastic gap at ``x``: ``anchor = e - j'(x;
+        s_bar)``. So a contact that moves on to the next element of the - fibril carries its
+        stick state instead of sticking anew."""
         c, mesh = self.contact, self.contact.mesh
         P, G = self.s_bar.shape
+        rows = self._rows()
         geo = c.geometry(x) if geo is None else geo
-        X = self._ends(x)
+        X = self._local(x, rows)
         keys = self.keys
         group = keys.copy()
         group[:, 2] = mesh.elem_fibril[keys[:, 2]]
         _, inv = np.unique(group, axis=0, return_inverse=True)
         inv = inv.ravel()
         rec = np.asarray(receivers, bool).reshape(-1)
-        donor_ok = geo.active.reshape(-1) & ~rec & (np.repeat(self.mu_pair, G) > 0)
+        donor_ok = geo.active.reshape(-1) & ~rec & (np.repeat(self._mu(rows), G) > 0)
         if not donor_ok.any() or not rec.any():
             return
         fN = np.where(geo.active, geo.g, -np.inf).reshape(-1)
@@ -264,7 +375,7 @@ class FrictionTerm:
         lead = order[starts]
         first[inv[lead]] = np.where(donor_ok[lead], lead, -1)
         donor = first[inv]
-        # neighbours along the - fibril only (the chord continued over one element)
+        # neighbours along the - fibril only (the element continued over one element)
         take = rec & (donor >= 0) & (np.abs(keys[:, 2] - keys[np.maximum(donor, 0), 2]) == 1)
         if not take.any():
             return
@@ -277,7 +388,7 @@ class FrictionTerm:
         sb = (S - S0[em[r]]) / h[em[r]]
         e = tangential_gap(geo, X, self.s_bar, self.anchor).reshape(-1, 3)[d]
         pr = r // G
-        cb = material_weights(geo.s_plus.reshape(-1)[r], sb)          # (n, 4)
+        cb = self._weights(pr, geo.s_plus.reshape(-1)[r][:, None])(sb[:, None])[:, 0]     # (n, M)
         jr = np.einsum("nk,nki->ni", cb, X[pr])
         s_flat, a_flat = self.s_bar.reshape(-1).copy(), self.anchor.reshape(-1, 3).copy()
         s_flat[r], a_flat[r] = sb, e - jr
@@ -300,6 +411,17 @@ class FrictionTerm:
         a[hit] = np.asarray(record["anchor"], float).reshape(-1, 3)[idx[hit]]
         self.s_bar, self.anchor = s.reshape(self.s_bar.shape), a.reshape(self.anchor.shape)
         self.dissipated = float(record.get("dissipated", 0.0))
+
+    def material_weights(self, s_bar=None) -> np.ndarray:
+        """``(rows, G, M)``: the weights of the local nodes in the jump between the + points
+        and the - material points ``s_bar`` (rows, G) (default: the held history's)."""
+        rows = self._rows()
+        return self._weights(rows, self._s_plus(rows))(self.s_bar if s_bar is None else s_bar)
+
+    def local_nodes(self, v, shifted: bool = True) -> np.ndarray:
+        """``(rows, M, 3)``: a nodal field ``v`` at every row's local nodes (positions with the
+        - side's periodic shift, ``shifted``; a velocity field without)."""
+        return self._local(v, self._rows(), shifted)
 
     # ------------------------------------------------------------------ frozen loads
     @property
@@ -334,25 +456,25 @@ class FrictionTerm:
         self._frozen = self.loads_at(x)
 
     def loads_at(self, x) -> dict:
-        """The loads of every point of the map at ``x``: ``f0`` (P, G) the normal forces (0
-        out of contact), ``n0`` (P, G, 3) the normals (0 out of contact), ``s_plus``, and the
-        held history with its material point moved to the closest point at ``x`` (``s_bar``,
-        ``anchor``; unchanged out of contact). The geometry is evaluated on the pairs in
-        contact only (the compiled gaps select them)."""
+        """The loads of every point of the map at ``x``: ``f0`` (rows, G) the normal forces (0
+        out of contact), ``n0`` (rows, G, 3) the normals (0 out of contact), ``s_plus``, and
+        the held history with its material point moved to the closest point at ``x``
+        (``s_bar``, ``anchor``; unchanged out of contact). The geometry is evaluated on the
+        rows in contact only (the gaps select them)."""
         c = self.contact
         P, G = self.s_bar.shape
         sel = np.flatnonzero((np.asarray(c.gaps(x)) > 0.0).any(axis=1))
         f0, n0 = np.zeros((P, G)), np.zeros((P, G, 3))
         s_bar, anchor = self.s_bar.copy(), self.anchor.copy()
         if sel.size:
-            geo = c.geometry(x, sel)
+            geo = self._geometry(x, sel)
             f, _, _ = self._loads(geo, sel)
             f0[sel] = f
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
             sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
-            s_bar[sel], anchor[sel] = moved_history(self._ends(x, sel), geo.s_plus, self.s_bar[sel],
-                                                    self.anchor[sel], sm)
-        return {"f0": f0, "n0": n0, "s_plus": np.array(np.broadcast_to(c.map.s_plus, (P, G)), float),
+            s_bar[sel], anchor[sel] = moved_history(self._local(x, sel), None, self.s_bar[sel], self.anchor[sel], sm,
+                                                    weights=geo.material_weights)
+        return {"f0": f0, "n0": n0, "s_plus": np.array(self._s_plus(np.arange(P)), float),
                 "s_bar": s_bar, "anchor": anchor}
 
     def unfreeze(self) -> None:
@@ -361,18 +483,26 @@ class FrictionTerm:
         self.smoothing = 0.0
 
     def frozen_loads(self) -> dict:
-        """The frozen loads (copies): ``f0`` (P, G), ``n0`` (P, G, 3), ``s_plus`` (P, G)."""
+        """The frozen loads (copies): ``f0`` (rows, G), ``n0`` (rows, G, 3), ``s_plus`` (rows, G)."""
         return {k: np.array(v) for k, v in self._frozen.items()}
 
     def _frozen_pairs(self) -> np.ndarray:
-        return np.flatnonzero((self._frozen["f0"] > 0.0).any(axis=1) & (self.mu_pair > 0.0))
+        fp = self.contact._pairs_of_rows(self._frozen["f0"] > 0.0)
+        return fp[self.mu_pair[fp] > 0.0]
 
     def _frozen_forms(self, x, sel, jacobian: bool):
+        """``(psi (rows, G), R, K)`` of the frozen potential on the map pairs ``sel``, R and K
+        in the pairs' local layout."""
         fz = self._frozen
-        w = np.broadcast_to(np.asarray(self.contact.weight[sel], float)[:, None], fz["f0"][sel].shape)
+        rows = self._rows(sel)
+        w = np.asarray(self.contact.weight[rows], float)
+        w = np.broadcast_to(w[:, None] if w.ndim == 1 else w, fz["f0"][rows].shape)
         kT = w * float(self.law.stiffness) * float(self.contact.params.penalty)
-        return frozen_potential(self._ends(x, sel), fz["s_plus"][sel], fz["s_bar"][sel], fz["anchor"][sel],
-                                fz["f0"][sel], fz["n0"][sel], kT, self.mu_pair[sel], jacobian, self.smoothing)
+        sp_ = fz["s_plus"][rows]
+        psi, R, K = frozen_potential(self._local(x, rows), sp_, fz["s_bar"][rows], fz["anchor"][rows],
+                                     fz["f0"][rows], fz["n0"][rows], kT, self._mu(rows), jacobian, self.smoothing,
+                                     weights=self._weights(rows, sp_))
+        return (psi,) + self._fold(R, K)
 
     def potential(self, x) -> float:
         """The incremental potential (N mm) at ``x`` of the frozen loads (0 when none are frozen)."""
@@ -390,7 +520,7 @@ class FrictionTerm:
         if fp.size == 0:
             return act, R, Kx, Kw
         c = self.contact
-        m, nC, ep = c.m, c.nC, c.endpos
+        m, nC = c.m, c.nC
         act = np.asarray(act, np.int64)
         where = np.full(c.map.n_pairs, -1, np.int64)
         where[act] = np.arange(act.size)
@@ -402,34 +532,34 @@ class FrictionTerm:
         if act.size:
             Rl[:act.size] = np.asarray(R, float).reshape(act.size, m, nC)
         _, Rf, Kf = self._frozen_forms(x, fp, jacobian)
-        Rl[fpos[:, None], ep[None, :], 0:3] += Rf
-        Rout = Rl.reshape(allp.size, -1)
         if not jacobian:
-            return allp, Rout, None, Kw
+            self._place(Rl, None, fpos, Rf, None)
+            return allp, Rl.reshape(allp.size, -1), None, Kw
         if extra.size:
             K5 = np.zeros((allp.size, m, nC, m, nC))
             if act.size:
                 K5[:act.size] = np.asarray(Kx, float).reshape(act.size, m, nC, m, nC)
         else:
             K5 = np.array(Kx, float).reshape(allp.size, m, nC, m, nC)
-        for k in range(4):
-            for l in range(4):
-                K5[fpos, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
+        self._place(Rl, K5, fpos, Rf, Kf)
         if Kw is not None and extra.size:
             Kw_all = np.zeros((allp.size,) + np.shape(Kw)[1:])
             if act.size:
                 Kw_all[:act.size] = Kw
             Kw = Kw_all
-        return allp, Rout, K5.reshape(allp.size, -1), Kw
+        return allp, Rl.reshape(allp.size, -1), K5.reshape(allp.size, -1), Kw
 
     # ------------------------------------------------------------------ forms
     def forces(self, x, sel, jacobian: bool):
-        """Friction residual (len(sel), 4, 3) and tangent (len(sel), 4, 3, 4, 3) of map pairs
-        ``sel`` at ``x`` (chord ends a+, b+, a-, b-)."""
+        """Friction residual (len(sel), M, 3) and tangent (len(sel), M, 3, M, 3) of map pairs
+        ``sel`` at ``x`` in the pairs' local layout (the chord ends a+, b+, a-, b-; on the
+        curves the e+ side's nodes, then the e- side's, both half passes folded)."""
+        rows = self._rows(sel)
         geo = self.contact.geometry(x, sel)
-        f, kN, kT = self._loads(geo, sel)
-        return friction_forces(geo, self._ends(x, sel), self.s_bar[sel], self.anchor[sel], f, kN, kT,
-                               self.mu_pair[sel], jacobian)
+        f, kN, kT = self._loads(geo, rows)
+        R, K = friction_forces(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kN, kT,
+                               self._mu(rows), jacobian)
+        return self._fold(R, K)
 
     def add_to(self, x, act, R, Kx, Kw, jacobian: bool):
         """The contact term's ``forms`` output with the friction of its active pairs added."""
@@ -439,15 +569,12 @@ class FrictionTerm:
             return act, R, Kx, Kw
         c = self.contact
         Rf, Kf = self.forces(x, act, jacobian)
-        m, nC, Pa, ep = c.m, c.nC, act.size, c.endpos
+        m, nC, Pa = c.m, c.nC, act.size
         Rl = np.array(R, float).reshape(Pa, m, nC)
-        Rl[:, ep, 0:3] += Rf
+        K5 = np.array(Kx, float).reshape(Pa, m, nC, m, nC) if jacobian else None
+        self._place(Rl, K5, np.arange(Pa), Rf, Kf)
         if not jacobian:
             return act, Rl.reshape(R.shape), None, Kw
-        K5 = np.array(Kx, float).reshape(Pa, m, nC, m, nC)
-        for k in range(4):
-            for l in range(4):
-                K5[:, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
         return act, Rl.reshape(R.shape), K5.reshape(Kx.shape), Kw
 
     def points(self) -> dict:

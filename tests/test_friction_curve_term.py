@@ -1,0 +1,193 @@
+"""The friction term on the curve and smooth contact geometries in the assembled contact
+system (the crossing scene with ``contact.geometry`` curve / smooth): the assembled tangent
+against central differences in stick and in slip (both half passes, the slider's and the
+base's points), unsymmetric in slip and solved on the LU path; a commit changes no force;
+the history follows rebuilds and records by point key; the frozen loads are a potential of
+the assembled system."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rve.config.loader import load_config
+from rve.scenes import friction_crossing
+from rve.solvers.linear import is_symmetric, sparse_solve
+from rve.testing import fd_jacobian
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_friction_term import _slid  # noqa: E402
+
+CASES = [("curve", 1), ("curve", 2), ("curve", 3), ("smooth", 1), ("smooth", 2)]
+
+
+def _case(geometry, order, cycle_steps=2, u=0.006, extra=()):
+    """The crossing on the curve geometry, slid to ``u``: with the base's element centred
+    under the crossing both half passes touch (the slider's point pressed on the base, the
+    base's point pressed on the slider)."""
+    return _slid([f"contact.geometry={geometry}", f"mesh.order={order}", "friction.stiffness=0.2", *extra],
+                 cycle_steps=cycle_steps, u=u)
+
+
+def _cols(system, cfg):
+    """The mechanical dofs of the slider's middle element and of the base's element."""
+    mesh, lay = system.mesh, system.layout
+    nodes = np.concatenate([mesh.conn[cfg.mesh.elements // 2], mesh.conn[cfg.mesh.elements]])
+    return lay.dofs("mech", nodes)
+
+
+#: the slider's contact element moved back (both points stick) or on (both slip; p = 1 is
+#: stiffer, its normal forces and so its stick lengths mu f / kT ten times those of p >= 2)
+SHIFT = {"stick": -0.0002, "slip": 0.002}
+SLIP_P1 = 0.01
+
+
+def _trial(parts, x, regime, order=2):
+    y = x.copy()
+    y[parts["point_x"]] += SLIP_P1 if (regime == "slip" and order == 1) else SHIFT[regime]
+    return y
+
+
+@pytest.mark.parametrize("geometry, order", CASES)
+@pytest.mark.parametrize("regime", ["stick", "slip"])
+def test_assembled_tangent_exact(geometry, order, regime):
+    cfg, system, parts, x = _case(geometry, order)
+    fr = system.term.friction
+    assert fr.last.normal.shape == (2, 1) and np.all(fr.last.normal > 0)   # both half passes touch
+    y = _trial(parts, x, regime, order)
+    st = fr.state(y)
+    assert getattr(st, regime).sum() == 2, (st.stick, st.slip)
+    w = np.zeros(system.n)
+    F, Fx, _ = system.evaluate(y, w, 0.0)
+    cols = _cols(system, cfg)
+    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], y, cols, eps=1e-7)
+    A = Fx.toarray()[:, cols]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    if regime == "slip":
+        assert not is_symmetric(Fx)
+        b = np.random.default_rng(0).normal(size=system.n)
+        free = np.setdiff1d(np.arange(system.n), system.constraints(0.0)[0])
+        K = Fx[free][:, free]
+        du = sparse_solve(K, b[free])
+        assert np.linalg.norm(K @ du - b[free]) <= 1e-8 * np.linalg.norm(b[free])
+
+
+@pytest.mark.parametrize("geometry, order", [("curve", 2), ("smooth", 2)])
+def test_commit_changes_no_force(geometry, order):
+    """A commit at a state (the history moved to the current closest points, the elastic
+    gap kept) leaves the residual there as it was, in slip and in stick."""
+    for regime in ("slip", "stick"):
+        cfg, system, parts, x = _case(geometry, order)
+        fr = system.term.friction
+        y = _trial(parts, x, regime, order)
+        assert getattr(fr.state(y), regime).sum() == 2
+        w = np.zeros(system.n)
+        F0 = system.evaluate(y, w, 0.0, jacobian=False)[0]
+        s0 = fr.s_bar.copy()
+        fr.commit(y)
+        assert np.abs(fr.s_bar - s0).max() > 1e-5
+        F1 = system.evaluate(y, w, 0.0, jacobian=False)[0]
+        np.testing.assert_allclose(F1, F0, rtol=0, atol=1e-12 * np.abs(F0).max())
+
+
+@pytest.mark.parametrize("geometry, order", [("curve", 2), ("smooth", 2)])
+def test_history_survives_rebuilds_and_records(geometry, order):
+    cfg, system, parts, x = _case(geometry, order, cycle_steps=1, u=0.001)
+    fr = system.term.friction
+    assert fr.last.stick.sum() == 2 and np.abs(fr.last.t).max() > 0
+    assert fr.keys.shape == (2 * system.term.map.n_pairs * cfg.contact.n_gp, 6)
+    assert np.unique(fr.keys, axis=0).shape[0] == fr.keys.shape[0]     # one key per row and point
+    w = np.zeros(system.n)
+    x2 = x.copy()
+    x2[parts["x"]] += 0.0002
+    F_before = system.evaluate(x2, w, 0.0, jacobian=False)[0]
+    system.rebuild(x)
+    assert np.array_equal(system.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
+    rec = fr.record()
+    other = friction_crossing.setup(cfg)[0]
+    other.rebuild(x)
+    assert not np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
+    other.term.friction.seed(rec)
+    assert np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
+    far = x.copy()
+    lay = system.layout
+    far.reshape(-1, lay.block)[system.mesh.fibril_nodes(0), 2] += 1.0
+    system.rebuild(far)
+    assert system.term.map.n_pairs == 0 and system.term.friction.keys.shape[0] == 0
+    system.rebuild(x)
+    assert np.abs(system.term.friction.state(x).t).max() == 0.0
+
+
+def test_history_carried_to_the_next_element_of_the_base():
+    """The base in two elements with its node under the crossing: the slider's point
+    changes element pair as it slides; at every commit the row of the neighbouring base
+    element takes the same material point (by its fibril parameter) and elastic gap, so the
+    contact keeps its stick state across the node: the cycle's forces and dissipation are
+    those of the one-element base (its point away from the crossing in both)."""
+    steps = 6
+    out = []
+    for base in (["geometry.base_elements=2"], ["geometry.base_offset=0.5 mm"]):
+        cfg = load_config("configs/scenes/crossing.yaml",
+                          [f"load.steps_per_leg={steps}", "contact.geometry=curve", "mesh.order=2",
+                           "friction.stiffness=0.01", *base])
+        out.append(friction_crossing.solve(cfg).summary["path"])
+    two, one = out
+    F2, F1 = np.array([p["force"] for p in two]), np.array([p["force"] for p in one])
+    assert min(p["stick"] for p in two[:2]) == 1 and max(p["slip_points"] for p in two) == 1
+    np.testing.assert_allclose(F2, F1, rtol=0, atol=1e-9 * np.abs(F1).max())
+    D2, D1 = sum(p["dissipated"] for p in two), sum(p["dissipated"] for p in one)
+    assert D1 > 0
+    assert D2 == pytest.approx(D1, rel=1e-9)
+
+
+@pytest.mark.parametrize("geometry, order", [("curve", 2), ("smooth", 2)])
+@pytest.mark.parametrize("case", ["stick", "slip", "separated"])
+def test_frozen_loads_are_a_potential_of_the_assembled_system(geometry, order, case):
+    """With the loads frozen (FrictionTerm.freeze) the assembled residual is the gradient of
+    system.energy and its tangent the exact Hessian on the curves' local nodes, also where
+    the fibrils have separated; a rebuild carries the frozen loads by point key."""
+    cfg, system, parts, x = _case(geometry, order)
+    fr = system.term.friction
+    fr.freeze(None)
+    f0 = fr.frozen_loads()["f0"]
+    assert (f0 > 0).sum() == 2
+    y = _trial(parts, x, "slip" if case == "separated" else case, order)
+    if case == "separated":
+        lay, mesh = system.layout, system.mesh
+        y.reshape(-1, lay.block)[mesh.fibril_nodes(0), 2] += 0.03
+        assert system.active_pairs(y).size == 0
+    w = np.zeros(system.n)
+    F, Fx, _ = system.evaluate(y, w, 0.0)
+    cols = _cols(system, cfg)
+    assert np.abs(F[cols]).max() > 1e-6
+    # (eps 1e-5: at 1e-7 the rounding of the beams' energy alone gives 1e-6 of the largest
+    # entry at p = 2, with or without friction)
+    g = fd_jacobian(lambda v: np.array([system.energy(v)]), y, cols, eps=1e-5)[0]
+    np.testing.assert_allclose(F[cols], g, rtol=1e-5, atol=1e-6 * np.abs(F[cols]).max())
+    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], y, cols, eps=1e-7)
+    A = Fx.toarray()[:, cols]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    e0 = system.energy(y)
+    system.rebuild(y)
+    assert system.energy(y) == pytest.approx(e0, rel=1e-12)
+    np.testing.assert_array_equal(fr.frozen_loads()["f0"], f0)
+
+
+@pytest.mark.parametrize("geometry, order", [("curve", 2), ("smooth", 1)])
+def test_frozen_at_its_own_loads_is_the_law(geometry, order):
+    """Loads frozen at the state itself (``freeze(x)``, the material point moved to the
+    closest points with the loads): the assembled residual is the law's."""
+    cfg, system, parts, x = _case(geometry, order)
+    fr = system.term.friction
+    w = np.zeros(system.n)
+    for regime in ("stick", "slip"):
+        y = _trial(parts, x, regime, order)
+        assert getattr(fr.state(y), regime).sum() == 2
+        F_law = system.evaluate(y, w, 0.0, jacobian=False)[0]
+        fr.freeze(y)
+        F_fz = system.evaluate(y, w, 0.0, jacobian=False)[0]
+        fr.unfreeze()
+        np.testing.assert_allclose(F_fz, F_law, rtol=0, atol=1e-12 * np.abs(F_law).max())
+        fr.freeze(None)
+        assert np.abs(system.evaluate(y, w, 0.0, jacobian=False)[0] - F_law).max() > 1e-6 * np.abs(F_law).max()
+        fr.unfreeze()
