@@ -176,8 +176,8 @@ def picture(args) -> str:
         panels.append((f"mu = {rec['mu']:g}, t = {rec['t_end_ms']:g} ms: drift {rec['drift_end_mm']:.2f} mm, "
                        f"speed {rec['speed_end_mm_per_ms']:.1e} mm/ms", tubes(x)))
     clim = [0.0, max(float(s.point_data["drift"].max()) for _, s in panels[1:])]
-    views = (((0.55, -0.85, 0.6), (0.0, 0.0, 1.0), 1.25), ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0), 1.0))
-    w, h = 560, 420
+    views = (((0.55, -0.85, 0.6), (0.0, 0.0, 1.0), 1.5), ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0), 1.45))
+    w, h = 560, 380
     pl = pv.Plotter(off_screen=True, shape=(len(views), len(panels)), window_size=[w * len(panels), h * len(views)],
                     border=False)
     pl.set_background("white")
@@ -185,11 +185,11 @@ def picture(args) -> str:
         for j, (title, surf) in enumerate(panels):
             pl.subplot(i, j)
             pl.add_mesh(surf.copy(), scalars="drift", cmap="viridis", clim=clim, smooth_shading=True,
-                        show_scalar_bar=(i == 0 and j == len(panels) - 1),
+                        show_scalar_bar=(i == len(views) - 1 and j == len(panels) - 1),
                         scalar_bar_args={"title": "centroid drift (mm)", "color": "black", "n_labels": 3,
-                                         "fmt": "%.2f"})
-            if i == 0:
-                pl.add_text(title, font_size=8, color="black")
+                                         "fmt": "%.2f", "position_x": 0.2, "position_y": 0.05, "width": 0.6,
+                                         "height": 0.08})
+            pl.add_text(title if i == 0 else "seen along -y", font_size=8, color="black")
             pl.view_vector(view, viewup=up)
             pl.reset_camera()
             pl.camera.zoom(zoom)
