@@ -8,7 +8,8 @@ Contract (the scene protocol, rve.scenes.protocol)
 (``rve.model.projectile``: fabric ``ContactSystem`` + projectile ``BeamModel`` + sphere
 contact) of the validated ``ImpactConfig`` with its boundary conditions and the crimped
 start state (projectile above the weave centre, at rest). ``phase="relax"``: the same dofs,
-B off, the projectile held, the fabric damped by ``relaxation.damping``.
+B off, the projectile held, the fabric damped by ``relaxation.damping``, the fibril friction
+only with ``relaxation.friction`` (never the sphere's).
 ``relax(cfg) -> (x, info)``: damped dynamic relaxation of the fabric with the projectile
 present and at rest (``info`` a ``RelaxInfo``: drift, speed, mechanical balance, and with
 ``relaxation.friction`` the friction history); ``load_or_relax(cfg, path)`` reuses a saved
