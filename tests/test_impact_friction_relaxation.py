@@ -188,3 +188,23 @@ def test_friction_holds_the_straight_weave_that_slides_without_it():
     assert held["max_centroid_drift_mm"] < 0.5 * free["max_centroid_drift_mm"]
     assert held["max_centroid_speed_mm_per_ms"] < 0.1 * free["max_centroid_speed_mm_per_ms"]
     assert held["friction_points"]["stick"] > held["friction_points"]["slip"]
+
+
+def test_impact_from_the_frictional_relaxation_resumes_bit_for_bit(relaxed, tmp_path, monkeypatch):
+    """Killed and resumed, the impact continues from its checkpoint's history (which grew from
+    the relaxed one), not from the relaxed state's again: the same bits as the run through."""
+    from rve.scenes.protocol import SceneFailure
+
+    cfg, _, x, info = relaxed
+    kw = dict(x_start=x, relax_info=info, record=False, t_end=0.01, steps=20)
+    ref = impact.solve(cfg, **kw)
+    ck = tmp_path / "checkpoint.npz"
+    with pytest.raises(SceneFailure):
+        impact.solve(cfg, checkpoint=ck, stop_after_steps=10, **kw)
+    seeds = []
+    real = scene.seed_impact_friction
+    monkeypatch.setattr(scene, "seed_impact_friction", lambda *a: (seeds.append(1), real(*a)))
+    res = impact.solve(cfg, checkpoint=ck, **kw)
+    assert res.summary["resumed_from_ms"] > 0 and not seeds
+    for k in ("x", "w", "T"):
+        assert np.array_equal(res.state[k], ref.state[k]), k
