@@ -76,7 +76,7 @@ def test_option_off_is_the_frictionless_relaxation_bit_for_bit():
     x, info = impact.relax(cfg)
     assert info["max_centroid_drift_mm"] > 0.1
     assert np.array_equal(x, x_ref)
-    assert info.friction is None and info["friction"] is False
+    assert info.friction is None and info["with_friction"] is False
 
 
 def test_history_starts_without_gap_and_is_committed_every_step(monkeypatch):
@@ -96,7 +96,7 @@ def test_history_starts_without_gap_and_is_committed_every_step(monkeypatch):
 
     monkeypatch.setattr(DynamicFriction, "commit", counting)
     x, info = impact.relax(cfg)
-    assert info["friction"] is True
+    assert info["with_friction"] is True
     assert len(committed) == info["steps"] >= 5
     assert np.array_equal(committed[-1], x)
     h = info.friction

@@ -23,9 +23,10 @@ Contract
   works (``delta_mechanical_energy_mJ``, ``damping_mJ``, ``friction_work_mJ``,
   ``friction_dissipated_mJ``, ``friction_elastic_energy_mJ``), and with friction the stick
   and slip counts of the last commit (``FrictionTerm.points``).
-* ``RelaxInfo(info, friction=None)``: the relaxation's summary (a dict, JSON-able) with the
-  friction history of the relaxed state as plain arrays (``friction``: the names
-  ``friction/...`` of ``DynamicFriction.arrays``; None without friction).
+* ``RelaxInfo(info, friction=None)``: the relaxation's summary (a dict, JSON-able;
+  ``with_friction`` says whether it carried the friction) with the friction history of the
+  relaxed state as plain arrays in the attribute ``friction`` (the names ``friction/...`` of
+  ``DynamicFriction.arrays``; None without friction).
 * ``seed_impact_friction(friction, x, arrays)``: the impact's fibril friction (the scene's
   ``DynamicFriction`` or ``ImpactFriction``) seeded with the relaxed state's history, after
   the impact's first map rebuild at ``x``: the points of the relaxed map keep their history

@@ -292,7 +292,7 @@ def relax(cfg, progress: bool = False):
             "max_displacement_mm": disp, "wall_time_s": time.perf_counter() - wall0,
             "cpu_time_s": time.process_time() - cpu0,
             "active_pairs": int(sysm.fabric.active_pairs(sysm.split(x)[0]).size),
-            "friction": friction is not None, **rec.summary()}
+            "with_friction": friction is not None, **rec.summary()}
     log.info("relaxation: %s", info)
     return x, RelaxInfo(info, None if friction is None else friction.arrays())
 
