@@ -130,6 +130,11 @@ class ImpactRelaxation(Section):
                                         description="fabric damping during the relaxation (decay rate gamma/rho)")
     state_file: Optional[str] = Field(None, description="relaxed state (.npz) to load instead of relaxing; "
                                                         "written by the relaxation if missing")
+    friction: bool = Field(
+        False, description="the relaxation carries the fibril friction of the friction section (its mu, pairs, "
+                           "stiffness; not the projectile's mu_p), its history committed every accepted step and "
+                           "handed to the impact run (docs/impact.md 'Relaxation with friction'); false: the "
+                           "frictionless relaxation")
 
 
 class ImpactTime(Section):

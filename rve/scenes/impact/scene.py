@@ -8,10 +8,13 @@ Contract (the scene protocol, rve.scenes.protocol)
 (``rve.model.projectile``: fabric ``ContactSystem`` + projectile ``BeamModel`` + sphere
 contact) of the validated ``ImpactConfig`` with its boundary conditions and the crimped
 start state (projectile above the weave centre, at rest). ``phase="relax"``: the same dofs,
-B off, the projectile held, the fabric damped by ``relaxation.damping``.
+B off, the projectile held, the fabric damped by ``relaxation.damping``, the fibril friction
+only with ``relaxation.friction`` (never the sphere's).
 ``relax(cfg) -> (x, info)``: damped dynamic relaxation of the fabric with the projectile
-present and at rest; ``load_or_relax(cfg, path)`` reuses a saved relaxed state
-(``relaxed_state.npz``: x, config digest of the sections it depends on).
+present and at rest (``info`` a ``RelaxInfo``: drift, speed, mechanical balance, and with
+``relaxation.friction`` the friction history); ``load_or_relax(cfg, path)`` reuses a saved
+relaxed state (``relaxed_state.npz``: x, config digest of the sections it depends on, the
+friction history as ``friction/...`` arrays).
 ``solve(cfg, x_start=None, ...) -> SceneResult``: from the relaxed state, the projectile gets
 ``-speed e_z``, B on (a step at t = 0); SDIRK (``time.stages``) over ``time.t_end`` in chunks
 of ``contact.rebuild_every`` nominal steps (both contact maps rebuilt before every chunk,
@@ -23,8 +26,11 @@ chunk boundary and resumed from when present (same config digest).
 ``run(cfg, out_dir) -> dict``: load_or_relax + solve + outputs (``rve.scenes.impact.outputs``)
 + the summary (docs/impact.md).
 Friction (``cfg.friction``, some mu > 0; ``ImpactProblem.friction``, a
-``rve.scenes.dynamic_friction.DynamicFriction``): between the fibrils in the impact phase only
-(the relaxation stays frictionless); the history is committed after every accepted step,
+``rve.scenes.dynamic_friction.DynamicFriction``): between the fibrils in the impact phase, and
+in the relaxation with ``relaxation.friction`` (``rve.scenes.impact.relaxation``: the history
+starts at the start state with no elastic gap, is committed after every accepted step, and
+is saved with the relaxed state and its digest; the impact then starts from it, else afresh
+at its start state); the history is committed after every accepted step,
 before the balances (which then include the friction terms) and the rebuilds, and is part
 of the checkpoint (and of its digest). mu = 0: the frictionless scene. At the sphere contact
 (``friction.projectile`` mu_p > 0, impact phase only; ``rve.scenes.impact.friction``): the
@@ -63,6 +69,7 @@ from ..rebuild import ChunkedRebuild
 from ..thermal_post import ThermalPostSolver
 from ..dynamic_friction import DynamicFriction, FrictionBalances, contact_params_with_friction
 from .friction import ImpactFriction, SphereFriction, sphere_friction_args
+from .relaxation import RelaxationRecorder, RelaxInfo, relaxation_friction, seed_impact_friction
 from ..induced.scene import warp_circuit
 from ...fabrics.taut import chord_clearance, taut_weave, weave_with_chord_clearance
 from ..protocol import SceneFailure, SceneResult
@@ -88,8 +95,16 @@ def config_digest(cfg, sections=("geometry", "warp", "weft", "material", "projec
                                  "relaxation")) -> str:
     """sha256 of the config sections a relaxed state depends on (relaxation.state_file and the
     impact speed excluded)."""
-    d = {k: cfg.model_dump(mode="json")[k] for k in sections}
+    dump = cfg.model_dump(mode="json")
+    d = {k: dump[k] for k in sections}
     d.get("relaxation", {}).pop("state_file", None)
+    if "relaxation" in d:
+        # a frictionless relaxation (the option off, or every fibril mu = 0) keeps the digests
+        # it had; a frictional one depends on the fibrils' law (not on the projectile's mu_p)
+        if relaxation_friction(cfg):
+            d.setdefault("friction", {k: v for k, v in dump["friction"].items() if k != "projectile"})
+        else:
+            d["relaxation"].pop("friction", None)
     if d.get("friction", {}).get("projectile", None) == 0.0:   # the fibril-friction runs keep their digests
         d["friction"].pop("projectile")
     # the factorisation backend changes round-off only (docs/engine.md "Unsymmetric stage matrices": states equal to
@@ -165,9 +180,10 @@ def setup(cfg, phase: str = "impact") -> ImpactProblem:
                      circuits=circuit_in + circuit_leak)
     k = cfg.contact
     params = contact_params(k, k.rebuild_every)
-    if not relaxing:
-        # the relaxation stays frictionless: its crimped start is an exact equilibrium at
-        # rest, so friction would change nothing there (docs/impact.md "Friction between fibrils")
+    if not relaxing or cfg.relaxation.friction:
+        # the relaxation is frictionless unless asked: its crimped start is an exact
+        # equilibrium at rest, where friction changes nothing; the straight reference slides
+        # off its crossings without it (docs/impact.md "Relaxation with friction")
         params = contact_params_with_friction(params, cfg.friction)
     xf = np.zeros(base.n)
     base.nodal(xf)[:, :9] = weave.x0
@@ -235,8 +251,11 @@ def _initial_w(sysm, x, scale, nopts, t=0.0, w=None):
 
 
 def relax(cfg, progress: bool = False):
-    """Damped dynamic relaxation (B off, projectile held); returns (x, info)."""
+    """Damped dynamic relaxation (B off, projectile held); returns (x, info), ``info`` a
+    ``RelaxInfo`` (with ``relaxation.friction``: the relaxed state's friction history in
+    ``info.friction``)."""
     wall0 = time.perf_counter()
+    cpu0 = time.process_time()
     problem = setup(cfg, "relax")
     sysm = problem.system
     r = cfg.relaxation
@@ -252,10 +271,16 @@ def relax(cfg, progress: bool = False):
             log.info("relaxation t = %.4g ms", t)
 
     hook = ChunkedRebuild(sysm, r.t_end, r.steps, cfg.contact.rebuild_every, 0.5 * cfg.contact.margin, at_boundary)
+    # the fibril friction (relaxation.friction): its history starts at the start state with no
+    # elastic gap (the first map rebuild) and the accepted step is the history of the next
+    friction = problem.friction if relaxation_friction(cfg) else None
+    rec = RelaxationRecorder(problem, friction)
     try:
         hook.rebuild(x)
+        rec.record(0.0, x, w)
+        on_step = rec.on_step if friction is None else friction.on_step(rec.on_step)
         res = integrate(RowScaledSystem(sysm, scale), x, w, 0.0, r.t_end, r.steps, stages=tab.stages,
-                        newton_opts=nopts, consistent=False, rebuild=hook, **iopts)
+                        newton_opts=nopts, on_step=on_step, consistent=False, rebuild=hook, **iopts)
         x, w = res.x, res.w
         at_boundary(res.t, x, w)
     except IntegrationFailure as exc:
@@ -265,9 +290,11 @@ def relax(cfg, progress: bool = False):
     disp = float(np.abs((x - problem.x0)[sysm.mech]).max())
     info = {"steps": res.steps, "rejected": res.rejected, "max_velocity_mm_per_ms": vmax,
             "max_displacement_mm": disp, "wall_time_s": time.perf_counter() - wall0,
-            "active_pairs": int(sysm.fabric.active_pairs(sysm.split(x)[0]).size)}
+            "cpu_time_s": time.process_time() - cpu0,
+            "active_pairs": int(sysm.fabric.active_pairs(sysm.split(x)[0]).size),
+            "with_friction": friction is not None, **rec.summary()}
     log.info("relaxation: %s", info)
-    return x, info
+    return x, RelaxInfo(info, None if friction is None else friction.arrays())
 
 
 def load_or_relax(cfg, path: Path | None):
@@ -276,19 +303,22 @@ def load_or_relax(cfg, path: Path | None):
 
     digest = config_digest(cfg)
     if path is not None and Path(path).exists():
-        d = np.load(path, allow_pickle=False)
-        if str(d["digest"]) == digest:
-            info = json.loads(str(d["info"]))
-            info["loaded_from"] = str(path)
-            return d["x"], info
-        log.warning("relaxed state %s is for another config (digest %s != %s): relaxing again", path,
-                    str(d["digest"]), digest)
+        with np.load(path, allow_pickle=False) as d:
+            if str(d["digest"]) == digest:
+                info = json.loads(str(d["info"]))
+                info["loaded_from"] = str(path)
+                fr = {k: d[k].copy() for k in d.files if k.startswith("friction/")}
+                return d["x"].copy(), RelaxInfo(info, fr or None)
+            log.warning("relaxed state %s is for another config (digest %s != %s): relaxing again", path,
+                        str(d["digest"]), digest)
     x, info = relax(cfg)
     if path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(Path(path)) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, x=x, digest=np.array(digest), info=np.array(json.dumps(info)))
+                # the friction history (relaxation.friction) as plain arrays beside the state
+                np.savez(fh, x=x, digest=np.array(digest), info=np.array(json.dumps(info)),
+                         **(info.friction or {}))
     return x, info
 
 
@@ -365,6 +395,13 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
         tracemalloc.start()
     if x_start is None:
         x_start, relax_info = relax(cfg)
+    carried = None
+    if relaxation_friction(cfg):
+        # the impact continues from the frictional relaxation's stick state, not afresh
+        carried = getattr(relax_info, "friction", None)
+        if carried is None:
+            raise ValueError("relaxation.friction: the impact needs the relaxed state's friction history "
+                             "(relax_info as relax or load_or_relax return it)")
     problem = setup(cfg, "impact")
     sysm = problem.system
     t_end = float(cfg.time.t_end if t_end is None else t_end)
@@ -387,6 +424,8 @@ def solve(cfg, *, x_start=None, relax_info=None, record: bool = True, t_end: flo
             if problem.friction is not None:
                 if resumed is not None:
                     problem.friction.restore(x, ck.friction_arrays)
+                elif carried is not None:
+                    seed_impact_friction(problem.friction, x, carried)
                 # the accepted step is the friction history of the next (committed before
                 # the balances read it and before a map rebuild carries it)
                 on_step = problem.friction.on_step(rec.on_step)
