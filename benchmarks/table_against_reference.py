@@ -1,0 +1,33 @@
+"""One table against a reference table on the work-precision study's measures
+(``rve.studies.work_precision.run_errors``: the range measure, and the magnitude measure
+beside it; max over labels, strains and modes) with the acceptance targets.
+
+    python benchmarks/table_against_reference.py RUN/table.nc REFERENCE/table.nc
+
+Prints per targeted quantity the two errors, the range error per mode and whether the target
+is met; the quantities not comparable with their reason.
+"""
+from __future__ import annotations
+
+import sys
+
+from rve.studies.work_precision import TARGETS, run_errors
+from rve.tables import open_table
+
+
+def main(run_path: str, ref_path: str) -> int:
+    e = run_errors(open_table(run_path), open_table(ref_path))
+    print(f"{'quantity':22s} {'range':>9s} {'magnitude':>10s} {'target':>7s}  met   range by mode")
+    for q, target in TARGETS.items():
+        if q not in e["range"]:
+            continue
+        r, m = e["range"][q], e["magnitude"].get(q, float("nan"))
+        modes = ", ".join(f"{k} {100 * v:.3g} %" for k, v in e["range_by_mode"].get(q, {}).items())
+        print(f"{q:22s} {100 * r:8.3g} % {100 * m:8.3g} % {100 * target:6.3g} %  {'yes' if r <= target else 'no ':3s}   {modes}")
+    for q, why in e["not_compared"].items():
+        print(f"{q:22s} not compared: {why}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(*sys.argv[1:3]))
