@@ -114,7 +114,8 @@ class StrainPath(Section):
         "algorithm_7_1", description="how a step moves the cell: algorithm_7_1 (the thesis: driven dynamics, damped "
                                      "relaxation, static solve) or quasi_static (substeps sub-increments, each the "
                                      "affine increment as predictor and a static solve; with friction each is one "
-                                     "committed backward-Euler step of the slip, docs/contact.md)")
+                                     "committed backward-Euler step of the slip, docs/contact.md; in the periodic "
+                                     "cell, which has no dynamic phases, algorithm_7_1 is one such increment)")
     substeps: Integer = Field(2, ge=1, le=50, description="sub-increments of a quasi_static step")
     cycle_modes: list[Literal["uniaxial", "shear", "uniaxial_y", "trellis"]] = Field(
         [], description="modes that also get a loading-unloading cycle from the relaxed state: cycle_steps steps "
@@ -313,9 +314,9 @@ class RVEConfig(SceneConfig):
 
     @model_validator(mode="after")
     def _friction_paths(self):
-        """Friction exists on the chord geometry of the pinned cell's strain path, penalty
-        enforcement, without the branch test (docs/contact.md 'Friction in the RVE pipeline');
-        any other combination is an error naming the key."""
+        """Friction exists on the chord geometry of the strain path (pinned or periodic cell,
+        penalty or augmented Lagrangian), without the branch test (docs/contact.md 'Friction
+        in the RVE pipeline'); any other combination is an error naming the key."""
         if not self.has_friction:
             return self
         mu = f"friction.coefficient = {self.friction.coefficient:g}" + (
@@ -323,13 +324,6 @@ class RVEConfig(SceneConfig):
         if self.contact.geometry != "chord":
             raise ValueError(f"contact.geometry = {self.contact.geometry!r} with {mu}: friction is implemented on "
                              "the chord contact geometry only (contact.geometry: chord, or friction.coefficient: 0)")
-        if self.contact.enforcement != "penalty":
-            raise ValueError(f"contact.enforcement = {self.contact.enforcement!r} with {mu}: the augmented "
-                             "Lagrangian's multiplier updates are not a load path for the friction history "
-                             "(contact.enforcement: penalty, or friction.coefficient: 0)")
-        if self.boundary != "pinned":
-            raise ValueError(f"boundary = {self.boundary!r} with {mu}: friction is available in the pinned cell "
-                             "only (boundary: pinned, or friction.coefficient: 0)")
         if self.strain.follow_branch:
             raise ValueError(f"strain.follow_branch = true with {mu}: the branch test balances the potential "
                              "against the clamps' work, which friction's dissipation breaks (strain.follow_branch: "

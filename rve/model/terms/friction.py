@@ -124,6 +124,11 @@ class FrictionTerm:
         if contact.curve:
             raise ValueError("friction is implemented on the chord contact geometry (contact geometry 'chord')")
         self.contact, self.law = contact, law
+        #: P* of the law as configured: eps_T = stiffness * this, whatever P* the augmented
+        #: Lagrangian's penalty increase (``ContactTerm.set_penalty``) sets meanwhile, so that the
+        #: stick length stays the law's and the loop's return to the configured P* (line loads
+        #: unchanged) changes no friction force either
+        self.penalty = float(contact.params.penalty)
         self.family_names = ("fibril",)
         self.fibril_family = np.zeros(contact.mesh.n_fibrils, np.int64)
         self._mu_matrix = law.matrix(self.family_names)
@@ -204,7 +209,7 @@ class FrictionTerm:
         _, phi1, phi2 = penalty_law(np.where(geo.active, geo.g, 0.0), float(c.params.penalty), c.onset)
         f = np.where(geo.active, w * phi1, 0.0)
         kN = np.where(geo.active, w * phi2, 0.0)
-        kT = w * float(self.law.stiffness) * float(c.params.penalty)
+        kT = w * float(self.law.stiffness) * self.penalty
         return f, kN, kT
 
     def state(self, x, sel=None):
@@ -370,7 +375,7 @@ class FrictionTerm:
     def _frozen_forms(self, x, sel, jacobian: bool):
         fz = self._frozen
         w = np.broadcast_to(np.asarray(self.contact.weight[sel], float)[:, None], fz["f0"][sel].shape)
-        kT = w * float(self.law.stiffness) * float(self.contact.params.penalty)
+        kT = w * float(self.law.stiffness) * self.penalty
         return frozen_potential(self._ends(x, sel), fz["s_plus"][sel], fz["s_bar"][sel], fz["anchor"][sel],
                                 fz["f0"][sel], fz["n0"][sel], kT, self.mu_pair[sel], jacobian, self.smoothing)
 
