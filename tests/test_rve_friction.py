@@ -44,8 +44,6 @@ def test_friction_is_off_by_default_and_the_section_validates():
 @pytest.mark.parametrize("extra, key", [
     ({"contact": {"geometry": "curve"}, "mesh": {"elements": 8, "order": 2}}, "contact.geometry = 'curve'"),
     ({"contact": {"geometry": "smooth"}, "mesh": {"elements": 8, "order": 2}}, "contact.geometry = 'smooth'"),
-    ({"contact": {"enforcement": "augmented_lagrangian"}}, "contact.enforcement = 'augmented_lagrangian'"),
-    ({"boundary": "periodic", "fabric": {"kind": "plain", "rows": [1]}}, "boundary = 'periodic'"),
     ({"strain": {**TINY["strain"], "follow_branch": True}}, "strain.follow_branch = true"),
 ])
 def test_friction_refuses_what_it_does_not_support(extra, key):
