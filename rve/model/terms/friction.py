@@ -7,8 +7,10 @@ Contract
 ``FrictionLaw(coefficient, stiffness, pairs)``: the validated law. ``coefficient`` mu of
 every pair of fibrils, ``pairs`` ``((family_a, family_b, mu), ...)`` overrides it for the
 pairs of those fibril families (unordered), ``stiffness`` eps_T / P*: the tangential penalty
-per unit length relative to the normal one. ``enabled`` is False when every mu is 0 (the
-contact term then carries no friction at all: the frictionless results bit for bit).
+per unit length relative to the normal one (P* as configured when the term is built,
+``FrictionTerm.penalty``; the augmented Lagrangian's penalty increase does not change it).
+``enabled`` is False when every mu is 0 (the contact term then carries no friction at all:
+the frictionless results bit for bit).
 
 ``FrictionTerm(contact, law)`` is owned by a ``ContactTerm`` of the chord geometry
 (``contact.friction``); the contact term calls
