@@ -273,6 +273,7 @@ def _job(kind, spec, a, b, step=0):
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
+@pytest.mark.long
 @pytest.mark.slow
 def test_periodic_al_friction_jobs_resume_bit_identical(tmp_path):
     """The periodic cell with the augmented Lagrangian and friction through the jobs: the

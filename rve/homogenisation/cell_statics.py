@@ -93,7 +93,7 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
     fr = friction_of(system)
     info = {"converged": False, "iterations": 0, "residuals": [], "reason": "", "method": "friction",
             "rounds": []}
-    committed = np.inf
+    residual = np.inf
     for k in range(FRICTIONAL_ROUNDS):
         system.rebuild(x)
         before = set(zip(*_active(system, x)))
@@ -115,14 +115,14 @@ def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
         info["converged"], info["reason"] = converged, reason
         system.rebuild(x)
         after = set(zip(*_active(system, x)))
-        committed = free_residual(system, x)
+        residual = free_residual(system, x)
         st = fr.state(x)
         info["rounds"].append({"method": how, "iterations": its, "converged": converged,
-                               "new_active_pairs": len(after - before), "residual_N": committed,
+                               "new_active_pairs": len(after - before), "residual_N": residual,
                                "stick": int(st.stick.sum()), "slip": int(st.slip.sum())})
-        if not converged or (after <= before and committed <= atol):
+        if not converged or (after <= before and residual <= atol):
             break
-    info["converged"] = bool(info["converged"] and committed <= atol)
+    info["converged"] = bool(info["converged"] and residual <= atol)
     return x, info
 
 
