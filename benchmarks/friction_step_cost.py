@@ -12,7 +12,11 @@ counts, then per step and over the chain the median wall and CPU times of each s
 ratios (friction / frictionless), and the peak RSS.
 
     nice -n 10 python benchmarks/friction_step_cost.py [--mu 0.2] [--mode shear] [--steps 2]
-        [--runs 3] [--run plain_weave_friction] [--work DIR] [--relaxed MU0.nc MU.nc]
+        [--runs 3] [--run plain_weave_friction] [--set KEY=VALUE ...] [--work DIR] [--relaxed MU0.nc MU.nc]
+
+The periodic cell with the augmented Lagrangian (docs/contact.md "Friction with the augmented
+Lagrangian and the periodic cell"): ``--run work_precision_geometry --set
+strain.follow_branch=false --steps 1 --runs 1``.
 
 A side's worker: ``python benchmarks/friction_step_cost.py --worker SPEC.json COMBO STATE``.
 """
@@ -32,9 +36,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _harness import ROOT, interleave, median, peak, run_json, worker_env  # noqa: E402
 
 
-def _spec(run: str, mu: float) -> dict:
+def _spec(run: str, mu: float, extra=()) -> dict:
     spec = dict(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
     spec["sweep"] = {"friction_coefficient": [0.0, float(mu)]}
+    if extra:
+        spec["overrides"] = [*(spec.get("overrides") or []), *extra]
     return spec
 
 
@@ -88,13 +94,16 @@ def main():
     ap.add_argument("--work", help="where the relaxed states and the step states go (default: a temporary dir)")
     ap.add_argument("--algorithm-7-1", action="store_true",
                     help="also time the frictionless steps on the default path (strain.path: algorithm_7_1)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="an override added to the run's (repeatable), e.g. strain.follow_branch=false for a run "
+                         "whose config follows the branch, which friction refuses")
     ap.add_argument("--relaxed", nargs=2, metavar=("MU0", "MU"), help="the two relaxed states, if built already")
     a = ap.parse_args()
     if a.worker:
         return worker(*a.worker, a.mode, a.steps, a.out)
     work = Path(a.work or tempfile.mkdtemp(prefix="friction_step_cost_"))
     work.mkdir(parents=True, exist_ok=True)
-    spec = _spec(a.run, a.mu)
+    spec = _spec(a.run, a.mu, a.set)
     from rve.homogenisation.sweeps import combo_ids
 
     c0, c1 = combo_ids(spec)

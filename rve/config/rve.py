@@ -114,7 +114,8 @@ class StrainPath(Section):
         "algorithm_7_1", description="how a step moves the cell: algorithm_7_1 (the thesis: driven dynamics, damped "
                                      "relaxation, static solve) or quasi_static (substeps sub-increments, each the "
                                      "affine increment as predictor and a static solve; with friction each is one "
-                                     "committed backward-Euler step of the slip, docs/contact.md)")
+                                     "committed backward-Euler step of the slip, docs/contact.md; in the periodic "
+                                     "cell, which has no dynamic phases, algorithm_7_1 is one such increment)")
     substeps: Integer = Field(2, ge=1, le=50, description="sub-increments of a quasi_static step")
     cycle_modes: list[Literal["uniaxial", "shear", "uniaxial_y", "trellis"]] = Field(
         [], description="modes that also get a loading-unloading cycle from the relaxed state: cycle_steps steps "
@@ -309,24 +310,6 @@ class RVEConfig(SceneConfig):
         if self.strain.cycle_modes and self.boundary != "pinned":
             raise ValueError(f"strain.cycle_modes = {self.strain.cycle_modes}: loading-unloading cycles are "
                              f"available in the pinned cell only (boundary = {self.boundary!r})")
-        return self
-
-    @model_validator(mode="after")
-    def _friction_paths(self):
-        """Friction exists on the pinned cell's strain path (every contact geometry), penalty
-        enforcement (docs/contact.md 'Friction in the RVE pipeline'); any other combination is
-        an error naming the key."""
-        if not self.has_friction:
-            return self
-        mu = f"friction.coefficient = {self.friction.coefficient:g}" + (
-            f", friction.pairs = {dict(self.friction.pairs)}" if self.friction.pairs else "")
-        if self.contact.enforcement != "penalty":
-            raise ValueError(f"contact.enforcement = {self.contact.enforcement!r} with {mu}: the augmented "
-                             "Lagrangian's multiplier updates are not a load path for the friction history "
-                             "(contact.enforcement: penalty, or friction.coefficient: 0)")
-        if self.boundary != "pinned":
-            raise ValueError(f"boundary = {self.boundary!r} with {mu}: friction is available in the pinned cell "
-                             "only (boundary: pinned, or friction.coefficient: 0)")
         return self
 
     @model_validator(mode="after")

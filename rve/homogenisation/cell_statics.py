@@ -6,9 +6,9 @@
 * :func:`static_minimize` -- static equilibrium as a local minimum of the potential
   (trust-region Newton, inertia check, energy as merit), then a map rebuild that must find
   no newly active pair; ``(x, info)``; a system with friction has no potential: its static
-  residual is solved from the held friction history and the history committed
-  (``rve.solvers.frictional.frictional_static_step``; where its Newton fails, the capped
-  Newton of ``rve.solvers.relaxation``, method ``"energy"``), each round ended by a map rebuild;
+  residual is solved from the held friction history (``rve.solvers.frictional.frictional_solve``),
+  each round ended by a map rebuild, and the solution committed unless ``commit=False``
+  (the Uzawa loop of ``multipliers.equilibrium`` commits once, at its converged state);
 * :func:`static_polish` -- bounded capped-step Newton solves, |F| never increases;
 * :func:`free_residual` -- |F(x, 0)| on the free dofs (N);
 * :func:`trellis_gradient` -- the picture frame's in-plane deformation gradient.
@@ -19,9 +19,8 @@ import logging
 
 import numpy as np
 
-from ..solvers.frictional import friction_of, frictional_static_step
+from ..solvers.frictional import friction_of, frictional_solve
 from ..solvers.minimize import capped_newton, minimize_energy
-from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 
 __all__ = ["strain_levels", "cycle_levels", "static_minimize", "static_polish", "free_residual", "trellis_gradient"]
 
@@ -45,14 +44,21 @@ def cycle_levels(cfg) -> np.ndarray:
     return np.array(up + up[-2::-1])
 
 
-def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
+def static_minimize(system, x, atol: float, max_iter: int, commit: bool = True) -> tuple:
     """Static equilibrium as a local minimum of the potential (``rve.solvers.minimize.minimize_energy``:
     trust-region Newton with an inertia check, the energy as merit, centroid steps capped,
     map rebuilt as fibrils move; docs/relaxation.md), from a state near it (plain Newton
-    first), then a map rebuild that must find no newly active pair. Returns ``(x, info)``."""
+    first), then a map rebuild that must find no newly active pair. Returns ``(x, info)``.
+    With friction: the residual from the held history (``_static_frictional``), the solution
+    committed when it converged and ``commit`` (False: the caller commits, e.g.
+    ``multipliers.equilibrium`` once after its Uzawa loop)."""
     x = np.asarray(x, float).reshape(-1)
-    if friction_of(system) is not None:
-        return _static_frictional(system, x, atol, max_iter)
+    fr = friction_of(system)
+    if fr is not None:
+        xs, info = _static_frictional(system, x, atol, max_iter)
+        if commit and info["converged"]:
+            info["dissipated"] = float(fr.commit(xs))
+        return xs, info
     system.rebuild(x)
     before = set(zip(*_active(system, x)))
     xs, _, res = minimize_energy(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter), sigma0=0.0,
@@ -69,59 +75,54 @@ def static_minimize(system, x, atol: float, max_iter: int) -> tuple:
     return xs, info
 
 
-#: committed static solves of a frictional step, each after a map rebuild, until no new pair
-#: is active and the committed state is an equilibrium
+#: static solves of a frictional step from its held history, each after a map rebuild, until
+#: no new pair is active and the state is an equilibrium
 FRICTIONAL_ROUNDS = 6
 
 
 def _static_frictional(system, x, atol: float, max_iter: int) -> tuple:
-    """The static residual of a frictional system from its held history: the public frictional
-    step (``rve.solvers.frictional.frictional_static_step``, method ``potential``: the
-    incremental-potential predictor, then Newton with the unsymmetric tangent on the LU path,
-    the history committed at the solution); where it fails, the capped Newton with
-    map rebuilds and pseudo-transient continuation (``relax_to_equilibrium``, method energy,
-    which commits too), both from the same held history. Each round ends with a map rebuild at
-    the solution (history carried by key); a new active pair starts another round, and so does
-    a committed state whose residual exceeds ``atol`` (the commit itself changes no force:
-    ``rve.physics.friction_forms``, the force acts at the current closest point)."""
+    """The static residual of a frictional system from its held history, not committed
+    (``static_minimize``): ``rve.solvers.frictional.frictional_solve`` (the
+    incremental-potential predictor, then Newton with the unsymmetric tangent on the LU path;
+    its own capped-Newton and pseudo-transient fallback); where it fails, once more with the
+    smoothed predictor stage from the same start. Each round ends with a map rebuild at the
+    solution (history carried by key); a new active pair, or a residual above ``atol`` at the
+    rebuilt map, starts another round from the same held history. ``rounds`` records the
+    stick and slip counts of the return map at every round's solution."""
     x = np.asarray(x, float).reshape(-1)
+    fr = friction_of(system)
     info = {"converged": False, "iterations": 0, "residuals": [], "reason": "", "method": "friction",
             "rounds": []}
+    residual = np.inf
     for k in range(FRICTIONAL_ROUNDS):
         system.rebuild(x)
         before = set(zip(*_active(system, x)))
-        # the incremental-potential predictor and the exact Newton corrector
-        # (``rve.solvers.frictional.frictional_solve``): the plain residual Newton did not
-        # converge over a whole increment of the thesis weave (docs/contact.md "Cost on a weave").
-        # A later round starts next to a committed equilibrium: the law's predictor stage
-        # alone (the smoothed stage would first move the state off to its own solution,
-        # |F| ~ 2e-2 N on the thesis weave, for the law's stage to bring back)
-        xs, _, res, _ = frictional_static_step(system, x, np.zeros(system.n), 0.0, {
-            "atol": atol, "rtol": 1e-14, "max_iter": int(max_iter), "smoothing": () if k else (1.0,)},
-            method="potential")
+        # a later round starts next to an equilibrium of the same history: the law's
+        # predictor stage alone (the smoothed stage would first move the state off to its
+        # own solution, |F| ~ 2e-2 N on the thesis weave, for the law's stage to bring back)
+        xs, res = frictional_solve(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter),
+                                   smoothing=() if k else (1.0,))
         how, its, converged, residuals, reason = "potential", int(res.iterations), bool(res.converged), \
             res.residuals, res.reason
-        if not converged:
-            log.info("frictional static solve: %s; capped Newton from the same history", res.reason)
-            out = relax_to_equilibrium(system, x, np.zeros(system.n), RelaxSettings(
-                duration=0.0, steps=1, method="energy", static_atol=atol, static_max_iter=int(max_iter)))
-            xs, converged = out.x, bool(out.static_converged)
-            how, its = "capped newton", its + int(out.static_newton_iterations)
-            residuals, reason = out.static_result.residuals, out.static_result.reason
+        if not converged and k:
+            log.info("frictional static solve: %s; again with the smoothed stage from the same history", res.reason)
+            xs, res = frictional_solve(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter))
+            how, its, converged = "potential (smoothed)", its + int(res.iterations), bool(res.converged)
+            residuals, reason = res.residuals, res.reason
         x = np.asarray(xs, float)
         info["iterations"] += its
         info["residuals"] = [float(v) for v in residuals][-6:]
         info["converged"], info["reason"] = converged, reason
         system.rebuild(x)
         after = set(zip(*_active(system, x)))
-        committed = free_residual(system, x)
-        pts = friction_of(system).points() if converged else {}
+        residual = free_residual(system, x)
+        st = fr.state(x)
         info["rounds"].append({"method": how, "iterations": its, "converged": converged,
-                               "new_active_pairs": len(after - before), "committed_residual_N": committed,
-                               "stick": int(pts.get("stick", 0)), "slip": int(pts.get("slip", 0))})
-        if not converged or (after <= before and committed <= atol):
+                               "new_active_pairs": len(after - before), "residual_N": residual,
+                               "stick": int(st.stick.sum()), "slip": int(st.slip.sum())})
+        if not converged or (after <= before and residual <= atol):
             break
-    info["converged"] = bool(info["converged"] and committed <= atol)
+    info["converged"] = bool(info["converged"] and residual <= atol)
     return x, info
 
 

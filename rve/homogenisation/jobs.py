@@ -320,7 +320,7 @@ def recomputed_residual(cfg, fab, mesh, x, multipliers=None, friction=None) -> f
     if cfg.boundary == "periodic":
         from .periodic import periodic_free_residual
 
-        return periodic_free_residual(cfg, fab, mesh, x, multipliers=multipliers)
+        return periodic_free_residual(cfg, fab, mesh, x, multipliers=multipliers, friction=friction)
     xf = np.asarray(x, float).reshape(-1)
     system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
     seed_multipliers(system, multipliers)

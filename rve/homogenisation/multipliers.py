@@ -22,6 +22,16 @@ record untouched, so the penalty path is bit-identical.
   converge ends the loop (the multipliers of an unconverged state are not updated). The
   step's ``converged`` stays the solve's (an equilibrium at the current multipliers); an
   overlap still above the tolerance (``al_max_iter`` reached) is ``met: false`` and a warning.
+
+  **Friction** (``rve.solvers.system.friction_of(system)`` not None): ``solve`` must not commit
+  the friction history (``cell_statics.static_minimize(..., commit=False)``); ``equilibrium``
+  commits it once, at the converged solve's state after the loop (P* back at its configured
+  value, the line loads unchanged: the commit changes no force), and records the energy it
+  dissipated as ``info["dissipated"]``. So every Uzawa re-solve of a step is the frictional
+  solve from the same held history, that of the last committed state (the previous step or
+  sub-increment): a multiplier update moves the normal loads, not the load path, and a commit
+  inside the loop would turn each update into a backward-Euler step of its own. With the
+  penalty the single solve is committed the same way. An unconverged solve is not committed.
 """
 from __future__ import annotations
 
@@ -29,6 +39,7 @@ import logging
 import time
 
 from ..solvers.augmented import AugmentedLagrangian
+from ..solvers.system import friction_of
 
 __all__ = ["multiplier_record", "seed_multipliers", "equilibrium"]
 
@@ -56,9 +67,10 @@ def seed_multipliers(system, record) -> None:
 
 
 def equilibrium(system, solve, x):
-    """``solve`` in the Uzawa loop (module docstring); ``(x, info)``."""
+    """``solve`` in the Uzawa loop, then the friction commit (module docstring); ``(x, info)``."""
     if not getattr(system, "augmented", False):
-        return solve(x)
+        x, info = solve(x)
+        return x, _commit(system, x, info)
     loop = AugmentedLagrangian(system)
     solves, iterations, walls = 0, [], []
     while True:
@@ -83,4 +95,14 @@ def equilibrium(system, solve, x):
     if pen > loop.tolerance:   # an equilibrium at these multipliers, not yet the impenetrable limit
         log.warning("augmented Lagrangian: largest overlap %.2e R above al_tolerance %.1e R after %d updates%s",
                     pen, loop.tolerance, loop.updates, "" if info.get("converged") else " (the solve did not converge)")
-    return x, info
+    return x, _commit(system, x, info)
+
+
+def _commit(system, x, info):
+    """The friction history committed at a converged solve's ``x`` (module docstring)."""
+    fr = friction_of(system)
+    if fr is None or not info.get("converged", False):
+        return info
+    info = dict(info)
+    info["dissipated"] = float(fr.commit(x))
+    return info

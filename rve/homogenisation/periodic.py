@@ -40,6 +40,7 @@ with the images.)
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 
@@ -49,6 +50,7 @@ from ..fabrics.setup import contact_params
 from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, ContactSystem
 from ..model.periodic import PeriodicSystem, fibril_end_ties
+from ..solvers.system import friction_of
 from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .multipliers import equilibrium, seed_multipliers
 
@@ -74,13 +76,22 @@ def gauge_dofs(ties, mesh, fields=("mech",)) -> np.ndarray:
     return np.concatenate([lay.dofs("r", first[:1]), lay.dofs("g1", first, comp=2)])
 
 
-def periodic_system(cfg, fab, mesh, x_full, F, damping: float = 0.0, params=None) -> PeriodicSystem:
+def periodic_system(cfg, fab, mesh, x_full, F, damping: float = 0.0, params=None,
+                    friction: bool = False) -> PeriodicSystem:
     """The reduced mechanics system of the cell at macro gradient ``F`` (module docstring),
     its contact map built at the reduced dofs of the full state ``x_full`` (its image nodes
-    placed by ``F``)."""
+    placed by ``F``). With ``friction`` and a config whose friction is on, the contact term
+    carries the friction law (every fibril's family its yarn direction) and a history that
+    starts at ``x_full`` with no elastic gap (seed it: ``strain.seed_friction``); the
+    relaxation's system has none."""
+    from .strain import friction_law
+
     m = cfg.material
     params = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False) \
         if params is None else params
+    law = friction_law(cfg) if friction else None
+    if law is not None:
+        params = dataclasses.replace(params, friction=law)
     mat = BeamMaterial(m.youngs_modulus, m.poisson_ratio, m.density, damping=float(damping))
     base = BeamModel(mesh, mat, disk_points=cfg.mesh.disk_points, axial_points=cfg.mesh.axial_points)
     x_full = np.asarray(x_full, float).reshape(-1)
@@ -89,6 +100,9 @@ def periodic_system(cfg, fab, mesh, x_full, F, damping: float = 0.0, params=None
     psys = PeriodicSystem(full, ties, gauge_dofs(ties, mesh), 0.0, F=F, contact_images=cfg.cell.contact_images)
     # the map at the state the reduced dofs describe (the images where F puts them)
     psys.rebuild(psys.restrict(x_full))
+    fr = friction_of(psys)
+    if fr is not None:
+        fr.set_families([fab.yarns[int(y)].direction for y in fab.fibril_yarn])
     return psys
 
 
@@ -139,13 +153,31 @@ def cell_gradient(fab, mesh, x_full) -> np.ndarray:
     return out
 
 
-def periodic_free_residual(cfg, fab, mesh, x_full, F=None, multipliers=None) -> float:
+def periodic_free_residual(cfg, fab, mesh, x_full, F=None, multipliers=None, friction=None) -> float:
     """|F| on the free reduced dofs (N) of a full state (its own gradient unless given), at
-    its contact ``multipliers`` (a record, augmented Lagrangian; None: none)."""
+    its contact ``multipliers`` (a record, augmented Lagrangian; None: none) and with its
+    friction history (``friction``, a record; None with the config's friction on: every
+    contact starts at the state with no elastic gap, i.e. no friction force)."""
+    from .strain import seed_friction
+
     F = cell_gradient(fab, mesh, x_full) if F is None else F
-    psys = periodic_system(cfg, fab, mesh, x_full, F)
+    psys = periodic_system(cfg, fab, mesh, x_full, F, friction=True)
+    xr = psys.restrict(np.asarray(x_full, float).reshape(-1))
     seed_multipliers(psys, multipliers)
-    return free_residual(psys, psys.restrict(np.asarray(x_full, float).reshape(-1)))
+    seed_friction(psys, friction, xr)
+    return free_residual(psys, xr)
+
+
+def periodic_friction_start(cfg, fab, mesh, x_full):
+    """The friction history of the relaxed cell (at F = I) with no elastic gap anywhere,
+    committed there, image pairs included (keyed by their lattice translation); None
+    without friction."""
+    psys = periodic_system(cfg, fab, mesh, x_full, np.eye(3), friction=True)
+    fr = friction_of(psys)
+    if fr is None:
+        return None
+    fr.commit(psys.restrict(np.asarray(x_full, float).reshape(-1)))
+    return fr.record()
 
 
 def periodic_relax(cfg, fab, mesh, x0):
@@ -213,14 +245,22 @@ def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
     return x
 
 
-def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_range=None, multipliers=None):
+def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_range=None, multipliers=None,
+                         friction=None):
     """One strain step of the periodic cell from ``x_prev`` (full, n_nodes x 9) at strain
     eps_{step-1} to eps_step (module docstring), or between the strains ``eps_range = (from,
     to)`` (a part of the step, ``strain.follow_branch``; ``step`` labels the record).
     ``origin`` (the relaxed state) is not used: the cell's strain is its macro gradient,
     exact by construction. ``multipliers``: the contact multipliers of ``x_prev`` (the static
-    solve is in the Uzawa loop, ``multipliers.equilibrium``). Returns ``(x (n_nodes, 9), full
+    solve is in the Uzawa loop, ``multipliers.equilibrium``). ``friction``: the friction
+    history of ``x_prev`` (with the config's friction on): the static solve is the frictional
+    residual from it, committed once at the Uzawa loop's converged state. With ``strain.path:
+    quasi_static`` the step is ``strain.substeps`` sub-increments of F, each the affine
+    predictor and that static solve (with friction one committed backward-Euler step of the
+    slip each), on one system (``set_macro``); otherwise one. Returns ``(x (n_nodes, 9), full
     system, info)``."""
+    from .strain import friction_summary, seed_friction
+
     del origin
     sp_ = cfg.strain
     if not 1 <= step <= sp_.steps:
@@ -228,20 +268,44 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     t0 = time.perf_counter()
     levels = strain_levels(cfg)
     eps_from, eps_to = (float(levels[step - 1]), float(levels[step])) if eps_range is None else map(float, eps_range)
-    F_prev, F_next = macro_gradient(mode, eps_from), macro_gradient(mode, eps_to)
-    dF = F_next @ np.linalg.inv(F_prev)
+    n = int(sp_.substeps) if sp_.path == "quasi_static" else 1
+    subs = [eps_from + (eps_to - eps_from) * k / n for k in range(n)] + [eps_to]
     x_prev = np.asarray(x_prev, float).reshape(mesh.n_nodes, 9)
     held = int(mesh.node_offsets[0])
-    x_pred = _affine_predictor(x_prev, dF, x_prev[held, :3])
-    psys = periodic_system(cfg, fab, mesh, x_pred, F_next)
-    xr = psys.restrict(x_pred.reshape(-1))
+    centre = x_prev[held, :3]
+
     def static(xv):   # the energy minimiser, then the Newton polish close to the tolerance
-        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter)
+        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter, commit=False)
         xm, si["converged"], si["polish"] = newton_polish(psys, xm, si["converged"], sp_.static_atol)
         return xm, si
 
-    seed_multipliers(psys, multipliers)
-    xs, sinfo = equilibrium(psys, static, xr)
+    psys, fr, d_start, sub_info, x_full = None, None, 0.0, [], x_prev
+    for k in range(1, n + 1):
+        t1 = time.perf_counter()
+        F_prev, F_next = macro_gradient(mode, subs[k - 1]), macro_gradient(mode, subs[k])
+        x_pred = _affine_predictor(x_full, F_next @ np.linalg.inv(F_prev), centre)
+        if psys is None:
+            psys = periodic_system(cfg, fab, mesh, x_pred, F_next, friction=True)
+            xr = psys.restrict(x_pred.reshape(-1))
+            seed_multipliers(psys, multipliers)
+            seed_friction(psys, friction, xr)
+            fr = friction_of(psys)
+            d_start = 0.0 if fr is None else float(fr.dissipated)
+        else:
+            psys.set_macro(F_next)
+            xr = psys.restrict(x_pred.reshape(-1))
+            psys.rebuild(xr)
+        xs, sinfo = equilibrium(psys, static, xr)
+        x_full = full_state(psys, xs)
+        sinfo["wall_s"] = time.perf_counter() - t1
+        if n > 1:
+            sub_info.append({"strain": float(subs[k]), "converged": bool(sinfo["converged"]),
+                             "iterations": int(sinfo.get("iterations") or 0), "wall_s": sinfo["wall_s"]})
+        if not sinfo["converged"]:
+            if n > 1:
+                log.warning("%s step %d (periodic): sub-increment %d of %d (strain %g) did not converge", mode,
+                            step, k, n, subs[k])
+            break
     sinfo["wall_s"] = time.perf_counter() - t0
     info = {"mode": mode, "step": int(step), "strain": eps_to,
             "strain_increment": eps_to - eps_from, "boundary": "periodic",
@@ -249,10 +313,14 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
             "residual_N": free_residual(psys, xs), "energy_mJ": float(psys.energy(xs)),
             "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
             "reaction_force": cell_reactions(fab, psys, xs), "wall_s": time.perf_counter() - t0}
+    if n > 1:
+        info.update({"path": "quasi_static", "substeps": sub_info})
+    if fr is not None:
+        info["friction"] = friction_summary(psys, d_start)
     if not info["converged"]:
         log.warning("%s step %d (periodic): static solve did not reach %.1e N (|F| = %.3e N)", mode, step,
                     sp_.static_atol, info["residual_N"])
-    return full_state(psys, xs), psys.full, info
+    return x_full, psys.full, info
 
 
 def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float, multipliers=None) -> tuple:

@@ -211,6 +211,6 @@ def pullout_step(cfg, fab, mesh, x_prev, origin, step: int, friction=None):
     if "start" in info:
         info["pullout"]["start"] = info.pop("start")
     if fr is not None:
-        info["friction"] = friction_summary(system, d_start, sinfo)
+        info["friction"] = friction_summary(system, d_start)
     info["wall_s"] = time.perf_counter() - t_start
     return x, system, info

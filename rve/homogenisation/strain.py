@@ -156,25 +156,25 @@ def friction_start(cfg, fab, mesh, x):
     None without friction."""
     if friction_law(cfg) is None:
         return None
+    if getattr(cfg, "boundary", "pinned") == "periodic":
+        from .periodic import periodic_friction_start
+
+        return periodic_friction_start(cfg, fab, mesh, x)
     system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, np.asarray(x, float).reshape(-1))
     friction_of(system).commit(np.asarray(x, float).reshape(-1))
     return friction_record(system)
 
 
-def friction_summary(system, start_dissipated: float = 0.0, static_info=None) -> dict:
+def friction_summary(system, start_dissipated: float = 0.0) -> dict:
     """The friction of the last committed state of ``system``: total friction and normal
-    force of the contact points (N), stick and slip counts, the energy dissipated since the
-    start of the path (``dissipated``, N mm) and by this step (``step_dissipated``). With
-    ``static_info`` (the step's frictional static solve) the counts are those of its first
-    round, the increment itself: the later rounds are the small re-solves after the commit
-    (``cell_statics``), in which a point that slides on the Coulomb cone sticks."""
+    force of the contact points (N), stick and slip counts (the return map of the last
+    increment: its static solve is committed once, ``multipliers.equilibrium``), the energy
+    dissipated since the start of the path (``dissipated``, N mm) and by this step
+    (``step_dissipated``)."""
     fr = friction_of(system)
     if fr is None:
         return {}
     out = fr.points()
-    rounds = (static_info or {}).get("rounds") or []
-    if rounds and "slip" in rounds[0]:
-        out.update({"stick": int(rounds[0]["stick"]), "slip": int(rounds[0]["slip"])})
     out.update({"dissipated": float(fr.dissipated), "step_dissipated": float(fr.dissipated - start_dissipated)})
     return out
 
@@ -328,7 +328,7 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
 
         def part(x, e_from, e_to, whole=False, lam=multipliers):
             return periodic_strain_step(cfg, fab, mesh, x, origin, mode, step, None if whole else (e_from, e_to),
-                                        multipliers=lam)
+                                        multipliers=lam, friction=friction)
 
         def energy(system, x, e):
             return periodic_energy(cfg, fab, mesh, x, mode, e, multipliers if system is None else multiplier_record(system))
@@ -455,7 +455,7 @@ def _quasi_static_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps
             "path": "quasi_static", "substeps": []}
 
     def static(xs):
-        return static_minimize(system, xs, sp_.static_atol, sp_.static_max_iter)
+        return static_minimize(system, xs, sp_.static_atol, sp_.static_max_iter, commit=False)
 
     sinfo = {"converged": True}
     for k in range(1, n + 1):
@@ -479,7 +479,7 @@ def _quasi_static_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps
     info["converged"] = bool(sinfo["converged"])
     info["residual_N"] = free_residual(system, x)
     if fr is not None:
-        info["friction"] = friction_summary(system, d_start, sinfo)
+        info["friction"] = friction_summary(system, d_start)
     info["wall_s"] = time.perf_counter() - t_start
     if not info["converged"]:
         log.warning("%s step %d: static solve did not reach %.1e N (|F| = %.3e N)", mode, step, sp_.static_atol,
@@ -553,7 +553,7 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     t0 = time.perf_counter()
     if sp_.static_method == "energy":
         def static(xs):
-            return static_minimize(sys2, xs, sp_.static_atol, sp_.static_max_iter)
+            return static_minimize(sys2, xs, sp_.static_atol, sp_.static_max_iter, commit=False)
     else:
         def static(xs):
             return static_polish(sys2, xs, sp_.static_atol, sp_.static_rounds, sp_.static_max_iter)
@@ -564,7 +564,7 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     info["converged"] = bool(sinfo["converged"])
     info["residual_N"] = free_residual(sys2, x2)
     if friction_of(sys2) is not None:
-        info["friction"] = friction_summary(sys2, d_start, sinfo)
+        info["friction"] = friction_summary(sys2, d_start)
     info["wall_s"] = time.perf_counter() - t_start
     if not info["converged"]:
         log.warning("%s step %d: static solve did not reach %.1e N (|F| = %.3e N)", mode, step, sp_.static_atol,

@@ -36,6 +36,15 @@ of the cell (N/mm):
 
 which is the Hill-Mandel average: at an equilibrium of the reduced dofs the derivative
 of the total potential with respect to F is ``A P`` (``tests/test_periodic.py``).
+
+Friction (a ``ContactSystem`` whose term carries a ``FrictionTerm``): ``friction_view`` is
+a :class:`ReducedFriction`, the term's friction taking reduced states (expanded before every
+call that reads a state: ``commit``, ``freeze``, ``loads_at``, ``state``,
+``share_along_fibrils``; everything else is the term's), so the frictional solvers
+(``rve.solvers.frictional``) run on the cell unchanged. The history is keyed by point as in
+any cell; a pair with a periodic image carries its lattice translation in the key, and its
+- chord ends are the image's (``ContactTerm.ends``), so the friction forces act on the
+image, i.e. on the master's nodes through the tie, and are internal to the cell.
 """
 from __future__ import annotations
 
@@ -46,7 +55,8 @@ import scipy.sparse as sp
 
 from ..fem.assembly import DofLayout
 
-__all__ = ["PeriodicTies", "fibril_end_ties", "PeriodicSystem", "polar_rotation", "in_plane_gradient"]
+__all__ = ["PeriodicTies", "fibril_end_ties", "PeriodicSystem", "ReducedFriction", "polar_rotation",
+           "in_plane_gradient"]
 
 
 @dataclass(frozen=True)
@@ -147,6 +157,40 @@ class _Reduction:
         inv, indices, indptr, nnz = self._plan(A)
         data = np.bincount(inv, weights=A.data, minlength=nnz)
         return sp.csr_matrix((data, indices, indptr), shape=(self.n_red, self.n_red))
+
+
+class ReducedFriction:
+    """A ``FrictionTerm`` of the full system seen through the reduced dofs of a
+    ``PeriodicSystem`` (module docstring): the methods that read a state expand it first;
+    every other attribute (read or set) is the term's."""
+
+    def __init__(self, system, term):
+        object.__setattr__(self, "_system", system)
+        object.__setattr__(self, "_term", term)
+
+    def __getattr__(self, name):
+        return getattr(self._term, name)
+
+    def __setattr__(self, name, value):
+        setattr(self._term, name, value)
+
+    def _full(self, x):
+        return None if x is None else self._system.expand(x)
+
+    def commit(self, x) -> float:
+        return self._term.commit(self._full(x))
+
+    def freeze(self, x=None) -> None:
+        self._term.freeze(self._full(x))
+
+    def loads_at(self, x) -> dict:
+        return self._term.loads_at(self._full(x))
+
+    def state(self, x, sel=None):
+        return self._term.state(self._full(x), sel)
+
+    def share_along_fibrils(self, x, receivers, geo=None) -> None:
+        self._term.share_along_fibrils(self._full(x), receivers, geo)
 
 
 class PeriodicSystem:
@@ -290,6 +334,13 @@ class PeriodicSystem:
 
     def contact_state(self, x) -> dict:
         return self.full.contact_state(self.expand(x))
+
+    @property
+    def friction_view(self):
+        """The full system's friction on the reduced dofs (``ReducedFriction``), None without
+        friction (``rve.solvers.system.friction_of``)."""
+        fr = getattr(getattr(self.full, "term", None), "friction", None)
+        return None if fr is None else ReducedFriction(self, fr)
 
     # the augmented Lagrangian protocol of rve.solvers.augmented, on the full system
     @property

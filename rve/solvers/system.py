@@ -318,7 +318,11 @@ def scale_columns(A, mask: np.ndarray):
 def friction_of(system):
     """The friction of ``system`` (``system.term.friction``: the ``FrictionTerm`` of a contact
     system's term), None when it has none: what a solver asks before it chooses the energy
-    minimiser (a potential) or the frictional residual (none)."""
+    minimiser (a potential) or the frictional residual (none). A system whose state vector
+    is not the contact term's (``rve.model.periodic.PeriodicSystem``: reduced dofs) gives its
+    own view as ``friction_view``, the same object taking its states."""
+    if hasattr(type(system), "friction_view"):
+        return system.friction_view
     term = getattr(system, "term", None)
     return getattr(term, "friction", None) if term is not None else None
 

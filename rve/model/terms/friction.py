@@ -7,8 +7,10 @@ Contract
 ``FrictionLaw(coefficient, stiffness, pairs)``: the validated law. ``coefficient`` mu of
 every pair of fibrils, ``pairs`` ``((family_a, family_b, mu), ...)`` overrides it for the
 pairs of those fibril families (unordered), ``stiffness`` eps_T / P*: the tangential penalty
-per unit length relative to the normal one. ``enabled`` is False when every mu is 0 (the
-contact term then carries no friction at all: the frictionless results bit for bit).
+per unit length relative to the normal one (P* as configured when the term is built,
+``FrictionTerm.penalty``; the augmented Lagrangian's penalty increase does not change it).
+``enabled`` is False when every mu is 0 (the contact term then carries no friction at all:
+the frictionless results bit for bit).
 
 ``FrictionTerm(contact, law)`` is owned by a ``ContactTerm`` of any contact geometry
 (``contact.friction``). Its points are those of the term's *rows*: the map pairs on the
@@ -133,6 +135,11 @@ class FrictionTerm:
 
     def __init__(self, contact, law: FrictionLaw):
         self.contact, self.law = contact, law
+        #: P* of the law as configured: eps_T = stiffness * this, whatever P* the augmented
+        #: Lagrangian's penalty increase (``ContactTerm.set_penalty``) sets meanwhile, so that the
+        #: stick length stays the law's and the loop's return to the configured P* (line loads
+        #: unchanged) changes no friction force either
+        self.penalty = float(contact.params.penalty)
         self.family_names = ("fibril",)
         self.fibril_family = np.zeros(contact.mesh.n_fibrils, np.int64)
         self._mu_matrix = law.matrix(self.family_names)
@@ -313,7 +320,7 @@ class FrictionTerm:
         _, phi1, phi2 = penalty_law(np.where(geo.active, geo.g, 0.0), float(c.params.penalty), c.onset)
         f = np.where(geo.active, w * phi1, 0.0)
         kN = np.where(geo.active, w * phi2, 0.0)
-        kT = w * float(self.law.stiffness) * float(c.params.penalty)
+        kT = w * float(self.law.stiffness) * self.penalty
         return f, kN, kT
 
     def state(self, x, sel=None):
@@ -497,7 +504,7 @@ class FrictionTerm:
         rows = self._rows(sel)
         w = np.asarray(self.contact.weight[rows], float)
         w = np.broadcast_to(w[:, None] if w.ndim == 1 else w, fz["f0"][rows].shape)
-        kT = w * float(self.law.stiffness) * float(self.contact.params.penalty)
+        kT = w * float(self.law.stiffness) * self.penalty
         sp_ = fz["s_plus"][rows]
         psi, R, K = frozen_potential(self._local(x, rows), sp_, fz["s_bar"][rows], fz["anchor"][rows],
                                      fz["f0"][rows], fz["n0"][rows], kT, self._mu(rows), jacobian, self.smoothing,

@@ -1,0 +1,398 @@
+"""Friction with the augmented Lagrangian and in the periodic cell (docs/contact.md "Friction
+with the augmented Lagrangian and the periodic cell"): a frictional step's Uzawa re-solves all
+start from the step's held history, which is committed once per sub-increment after the loop;
+the state is a root of the exact frictional residual at its multipliers; the multipliers and the
+history go through the checkpoint (a resumed step bit for bit); a periodic cell's history of a
+pair across a cell face is carried by its lattice key; mu = 0 is the frictionless path bit for
+bit."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+TOL = 1e-5   # al_tolerance: tight enough that the strain steps below need Uzawa updates
+ATOL = 1e-9
+
+
+#: yarns of two rows of two fibrils, which touch along their length, so that pairs in contact
+#: cross the faces of a periodic cell (a lattice translation in their keys; with one fibril per
+#: yarn, or one row of two, no neighbours across a face touch)
+STACKED = [2, 2]
+
+
+def _scene(boundary, enforcement, mu, substeps=2, rows=(1,), **strain):
+    scene = {"scene": "rve", "boundary": boundary, "fabric": {"kind": "plain", "rows": list(rows)},
+             "mesh": {"elements": 6},
+             "contact": {"onset": 0.05, "penalty": 50.0, "enforcement": enforcement, "al_tolerance": TOL},
+             "relaxation": {"static_atol": ATOL},
+             "strain": {"modes": ["shear"], "total": 0.1, "steps": 2, "static_atol": ATOL, "follow_branch": False,
+                        "path": "quasi_static", "substeps": substeps, **strain},
+             "output": {"pictures": False}}
+    if mu is not None:
+        scene["friction"] = {"coefficient": mu}
+    return scene
+
+
+def _cfg(*args, **kw):
+    from rve.config import validate_config
+
+    return validate_config(_scene(*args, **kw))
+
+
+_RELAXED = {}
+
+
+def _relaxed(cfg):
+    """(fab, mesh, x0, multipliers, friction record) of the relaxed cell (cached per config)."""
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import friction_start, relax_fabric
+
+    key = json.dumps(cfg.model_dump(mode="json"), sort_keys=True, default=str)
+    if key not in _RELAXED:
+        fab, mesh = fabric_and_mesh(cfg)
+        x0, sys0, info = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+        assert info["converged"]
+        _RELAXED[key] = (fab, mesh, x0, multiplier_record(sys0), friction_start(cfg, fab, mesh, x0))
+    return _RELAXED[key]
+
+
+def _fresh_residual(cfg, fab, mesh, x, multipliers, friction):
+    from rve.homogenisation.jobs import recomputed_residual
+
+    return recomputed_residual(cfg, fab, mesh, x, multipliers, friction)
+
+
+def _fresh_dissipation(cfg, fab, mesh, x, multipliers, friction):
+    """The return map's dissipation at ``x`` from the history ``friction`` (a record), on a
+    system built from scratch at ``x`` (summed over its points)."""
+    from rve.homogenisation.multipliers import seed_multipliers
+    from rve.homogenisation.strain import mech_system, seed_friction
+    from rve.solvers.system import friction_of
+
+    xf = np.asarray(x, float).reshape(-1)
+    if cfg.boundary == "periodic":
+        from rve.homogenisation.periodic import cell_gradient, periodic_system
+
+        system = periodic_system(cfg, fab, mesh, xf, cell_gradient(fab, mesh, xf), friction=True)
+        xs = system.restrict(xf)
+    else:
+        system, xs = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf), xf
+    seed_multipliers(system, multipliers)
+    seed_friction(system, friction, xs)
+    return float(friction_of(system).state(xs).dissipation.sum())
+
+
+class _Commits:
+    """Counts ``FrictionTerm.commit`` calls (monkeypatched)."""
+
+    def __init__(self, monkeypatch):
+        from rve.model.terms.friction import FrictionTerm
+
+        self.n = 0
+        original = FrictionTerm.commit
+
+        def counted(term, x):
+            self.n += 1
+            return original(term, x)
+
+        monkeypatch.setattr(FrictionTerm, "commit", counted)
+
+
+# --------------------------------------------------------------------------- the augmented Lagrangian
+@pytest.mark.parametrize("boundary", ["pinned", "periodic"])
+def test_al_step_with_friction_is_a_frictional_root_at_the_tolerance(boundary, monkeypatch):
+    """One quasi-static shear step (one sub-increment, so the held history is the input's):
+    converged with Uzawa updates, the largest overlap below al_tolerance, the state a root of
+    the exact frictional residual from the held history and from the committed one (the
+    commit changes no force), the history committed exactly once although the loop re-solved,
+    and the step's dissipation > 0 equal to the return map's from the held history at the
+    state, recomputed on a system built from scratch."""
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import friction_record, strain_step
+
+    cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    commits = _Commits(monkeypatch)
+    x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    al = info["static"]["augmented_lagrangian"]
+    assert info["converged"] and al["met"] and al["updates"] >= 1 and al["solves"] == al["updates"] + 1
+    assert commits.n == 1
+    assert system.max_penetration(x.reshape(-1)) <= TOL
+    lam, fr1 = multiplier_record(system), friction_record(system)
+    assert np.any(lam[1] > 0)
+    assert _fresh_residual(cfg, fab, mesh, x, lam, fr0) <= ATOL          # the equation solved
+    assert _fresh_residual(cfg, fab, mesh, x, lam, fr1) <= ATOL          # after the commit
+    assert _fresh_residual(cfg, fab, mesh, x, lam, None) > 1e3 * ATOL    # friction holds the state
+    d = info["friction"]["step_dissipated"]
+    assert d > 0 and d == pytest.approx(info["static"]["dissipated"], rel=1e-12)
+    assert d == pytest.approx(_fresh_dissipation(cfg, fab, mesh, x, lam, fr0), rel=1e-9)
+
+
+def test_every_sub_increment_is_committed_once(monkeypatch):
+    """With two sub-increments and an Uzawa loop in each: two commits, and the dissipation
+    accumulated over them."""
+    from rve.homogenisation.strain import strain_step
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=2)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    commits = _Commits(monkeypatch)
+    x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    assert info["converged"] and info["static"]["augmented_lagrangian"]["solves"] >= 2
+    assert commits.n == 2
+    assert info["friction"]["dissipated"] > info["static"]["dissipated"] > 0
+
+
+def test_eps_t_is_the_configured_penalty_while_the_loop_raises_it():
+    """The Uzawa loop's penalty increase changes the normal law's P*, not the friction law's
+    tangential stiffness: the friction forces at a state are the same before and after a
+    set_penalty that keeps the line loads (the loop's return to the configured P*)."""
+    from rve.homogenisation.multipliers import seed_multipliers
+    from rve.homogenisation.strain import friction_record, mech_system, seed_friction, strain_step
+    from rve.solvers.system import friction_of
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x, system, _ = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    xf = x.reshape(-1)
+    fresh = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
+    seed_multipliers(fresh, (system.term.multiplier_record()))
+    seed_friction(fresh, fr0, xf)
+    fr = friction_of(fresh)
+    t0 = fr.state(xf).t
+    assert np.abs(t0).max() > 0
+    fresh.set_penalty(16.0 * fresh.penalty, xf)    # line loads kept at xf
+    np.testing.assert_allclose(fr.state(xf).t, t0, rtol=0, atol=1e-12 * np.abs(t0).max())
+    assert fr.penalty == cfg.contact.penalty
+
+
+def test_al_multipliers_and_history_through_the_checkpoint_give_a_bit_identical_step(tmp_path):
+    """Step 2 from the stored step 1 (multipliers and friction history read from the file)
+    equals step 2 from the in-memory records bit for bit; without the history it differs."""
+    from rve.homogenisation.checkpoint import State, load_state, write_state
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import friction_record, strain_step
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x1, sys1, _ = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    lam1, fr1 = multiplier_record(sys1), friction_record(sys1)
+    path = write_state(tmp_path / "s1.nc", State(x=x1, w=np.zeros_like(x1), origin=x0, kind="strained", mode="shear",
+                                                  step=1, multipliers=lam1, friction=fr1), fab, mesh)
+    back = load_state(path)
+    for k in ("keys", "s_bar", "anchor"):
+        np.testing.assert_array_equal(back.friction[k], fr1[k])
+    assert back.friction["dissipated"] == fr1["dissipated"]
+    np.testing.assert_array_equal(back.multipliers[1], lam1[1])
+    xa, sa, ia = strain_step(cfg, fab, mesh, x1, x0, "shear", 2, multipliers=lam1, friction=fr1)
+    xb, sb, ib = strain_step(cfg, fab, mesh, back.x, back.origin, "shear", 2, multipliers=back.multipliers,
+                             friction=back.friction)
+    assert ia["converged"]
+    np.testing.assert_array_equal(xa, xb)
+    np.testing.assert_array_equal(multiplier_record(sa)[1], multiplier_record(sb)[1])
+    ra, rb = friction_record(sa), friction_record(sb)
+    for k in ("keys", "s_bar", "anchor"):
+        np.testing.assert_array_equal(ra[k], rb[k])
+    assert ra["dissipated"] == rb["dissipated"]
+    xc, _, _ = strain_step(cfg, fab, mesh, x1, x0, "shear", 2, multipliers=lam1, friction=None)
+    assert np.abs(xc - xa).max() > 1e-9
+
+
+# --------------------------------------------------------------------------- the periodic cell
+def _image_points(record):
+    return np.flatnonzero((np.asarray(record["keys"])[:, 3:5] != 0).any(axis=1))
+
+
+def test_periodic_history_of_a_pair_across_a_cell_face_is_carried_by_key():
+    """After a periodic shear step with friction some points of pairs with a periodic image
+    (a lattice translation in the key) carry a friction force; a system built from scratch
+    at the stored state and macro gradient (other shifts in mm: the gradient moved the
+    images) seeded by key gives those points the same force, and a map rebuild at the
+    state keeps their history bit for bit."""
+    from rve.homogenisation.periodic import macro_gradient, periodic_system
+    from rve.homogenisation.strain import friction_record, seed_friction, strain_step
+    from rve.model.terms.friction import match_rows
+    from rve.solvers.system import friction_of
+
+    cfg = _cfg("periodic", "penalty", 0.3, rows=STACKED)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    assert _image_points(fr0).size > 0
+    x1, full1, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, friction=fr0)
+    assert info["converged"] and info["residual_N"] <= ATOL
+    rec = friction_record(full1)
+    term1 = full1.term.friction
+    t1 = term1.last.t.reshape(-1, 3)
+    img = _image_points(rec)
+    loaded = img[np.linalg.norm(t1[img], axis=1) > 0]
+    assert loaded.size > 0
+    xf = x1.reshape(-1)
+    psys = periodic_system(cfg, fab, mesh, xf, macro_gradient("shear", info["strain"]), friction=True)
+    xr = psys.restrict(xf)
+    seed_friction(psys, rec, xr)
+    fr = friction_of(psys)
+    at = match_rows(rec["keys"][loaded], fr.keys)
+    assert np.all(at >= 0)
+    np.testing.assert_array_equal(fr.s_bar.reshape(-1)[at], rec["s_bar"][loaded])
+    np.testing.assert_array_equal(fr.anchor.reshape(-1, 3)[at], rec["anchor"][loaded])
+    t2 = fr.state(xr).t.reshape(-1, 3)
+    # the committed anchor is e - j with |j| ~ the fibrils' distance and e ~ t/kT far smaller:
+    # the trial gap anchor + j is known to the rounding of positions, a few ulp of max |x|
+    kt = fr.law.stiffness * fr.penalty * float(np.max(fr.contact.weight))
+    np.testing.assert_allclose(t2[at], t1[loaded], rtol=0, atol=16 * np.finfo(float).eps * kt * np.abs(xf).max())
+    s_bar, anchor = fr.s_bar.copy(), fr.anchor.copy()
+    psys.rebuild(xr)
+    at2 = match_rows(rec["keys"][loaded], fr.keys)
+    np.testing.assert_array_equal(fr.s_bar.reshape(-1)[at2], s_bar.reshape(-1)[at])
+    np.testing.assert_array_equal(fr.anchor.reshape(-1, 3)[at2], anchor.reshape(-1, 3)[at])
+
+
+_JOB = """
+import json, sys
+from rve.homogenisation.jobs import fabric_job, relax_job, strain_job
+kind, spec, a, b, step = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3], sys.argv[4], int(sys.argv[5])
+if kind == "fabric":
+    fabric_job(b, None, spec)
+elif kind == "relax":
+    relax_job(a, b, None, spec)
+else:
+    strain_job(a, b, None, spec, "base", "shear", step)
+"""
+
+
+def _job(kind, spec, a, b, step=0):
+    """One job in its own process, as Snakemake runs it."""
+    proc = subprocess.run([sys.executable, "-c", _JOB, kind, json.dumps(spec), str(a), str(b), str(step)],
+                          capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                                               "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+@pytest.mark.long
+@pytest.mark.slow
+def test_periodic_al_friction_jobs_resume_bit_identical(tmp_path):
+    """The periodic cell with the augmented Lagrangian and friction through the jobs: the
+    relaxed state carries the history of the image pairs too, both steps are stored
+    equilibria with their multipliers and history (the probe job's recomputed residual), and
+    step 2 rerun in a new process from the stored step 1 (a killed run resumed) is the same
+    file content bit for bit."""
+    from rve.homogenisation.checkpoint import load_state
+    from rve.homogenisation.jobs import recomputed_residual
+    from rve.homogenisation.sweeps import load_run_config
+    from rve.fabrics.setup import fabric_and_mesh
+
+    spec = {"scene_config": None, "overrides": [],
+            "scene": _scene("periodic", "augmented_lagrangian", 0.3, substeps=1, rows=STACKED)}
+    a = tmp_path / "a"
+    a.mkdir()
+    _job("fabric", spec, "", a / "initial.nc")
+    _job("relax", spec, a / "initial.nc", a / "relaxed.nc")
+    _job("strain", spec, a / "relaxed.nc", a / "shear_01.nc", 1)
+    _job("strain", spec, a / "shear_01.nc", a / "shear_02.nc", 2)
+    cfg = load_run_config(spec)
+    fab, mesh = fabric_and_mesh(cfg)
+    relaxed = load_state(a / "relaxed.nc")
+    assert relaxed.friction["dissipated"] == 0.0 and _image_points(relaxed.friction).size > 0
+    d = 0.0
+    for i in (1, 2):
+        st = load_state(a / f"shear_{i:02d}.nc")
+        assert st.solver["converged"] and st.solver["static"]["augmented_lagrangian"]["met"]
+        assert recomputed_residual(cfg, fab, mesh, st.x, st.multipliers, st.friction) <= ATOL
+        assert st.friction["dissipated"] > d
+        d = st.friction["dissipated"]
+    b = tmp_path / "b"
+    b.mkdir()
+    shutil.copy(a / "shear_01.nc", b / "shear_01.nc")
+    _job("strain", spec, b / "shear_01.nc", b / "shear_02.nc", 2)
+    sa, sb = load_state(a / "shear_02.nc"), load_state(b / "shear_02.nc")
+    np.testing.assert_array_equal(sa.x, sb.x)
+    for k in ("keys", "s_bar", "anchor"):
+        np.testing.assert_array_equal(sa.friction[k], sb.friction[k])
+    assert sa.friction["dissipated"] == sb.friction["dissipated"]
+    np.testing.assert_array_equal(sa.multipliers[1], sb.multipliers[1])
+    assert sa.reaction_force == sb.reaction_force
+
+
+def _rotation(mu, theta=0.05):
+    """The relaxed periodic cell turned rigidly by ``theta`` about z (F = R, the affine map
+    about the held node), friction from the relaxed history; ``(P0, R, P at the turned
+    state, P after the static solve, the friction force there)``."""
+    from rve.homogenisation.cell_statics import static_minimize
+    from rve.homogenisation.multipliers import equilibrium
+    from rve.homogenisation.periodic import _affine_predictor, periodic_system
+    from rve.homogenisation.strain import seed_friction
+    from rve.solvers.system import friction_of
+
+    cfg = _cfg("periodic", "penalty", mu, rows=STACKED)
+    fab, mesh, x0, _, fr0 = _relaxed(cfg)
+    p0 = periodic_system(cfg, fab, mesh, x0, np.eye(3))
+    P0 = p0.macro_stress(p0.restrict(x0.reshape(-1)))
+    c, s = np.cos(theta), np.sin(theta)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    held = int(mesh.node_offsets[0])
+    xt = _affine_predictor(x0, R, x0[held, :3])
+    psys = periodic_system(cfg, fab, mesh, xt, R, friction=True)
+    xr = psys.restrict(xt.reshape(-1))
+    seed_friction(psys, fr0, xr)
+    fr = friction_of(psys)
+    t_pred = 0.0 if fr is None else float(np.abs(fr.state(xr).t).max())
+    P_pred = psys.macro_stress(xr)
+    xs, info = equilibrium(psys, lambda v: static_minimize(psys, v, ATOL, 400, commit=False), xr)
+    assert info["converged"]
+    return P0, R, P_pred, psys.macro_stress(xs), t_pred
+
+
+def test_rigid_rotation_without_friction_is_objective():
+    """The rigidly turned relaxed cell without friction is an equilibrium with P = R P0 (the
+    check of the rotation below)."""
+    P0, R, P_pred, P_solved, t_pred = _rotation(0.0)
+    scale = np.abs(P0).max()
+    assert t_pred == 0.0
+    assert np.abs(P_pred - R @ P0).max() <= 1e-12 * scale
+    assert np.abs(P_solved - R @ P0).max() <= 1e-10 * scale
+
+
+@pytest.mark.xfail(strict=True, reason="the friction law's trial gap is not objective: its anchor is a fixed "
+                                       "spatial vector and the centre-line jump p - q includes rho n, which a "
+                                       "rigid rotation turns, so every point slips by rho |n - (n.n')n'| and the "
+                                       "solved cell keeps friction forces (docs/contact.md: several % of |P0| at 0.05 rad); "
+                                       "rve/physics/friction_forms.py, docs/contact.md")
+def test_rigid_rotation_with_friction_gives_the_frictionless_macro_stress():
+    """Friction from the relaxed history: the turned cell should carry no friction force and
+    P = R P0 (the friction forces of pairs across the faces enter P as the normal forces of
+    those pairs do, so any spurious slip shows there)."""
+    P0, R, _, P_solved, t_pred = _rotation(0.3)
+    assert t_pred > 0
+    assert np.abs(P_solved - R @ P0).max() <= 1e-6 * np.abs(P0).max()
+
+
+# --------------------------------------------------------------------------- mu = 0
+@pytest.mark.parametrize("boundary, enforcement", [("pinned", "augmented_lagrangian"),
+                                                   ("periodic", "augmented_lagrangian"), ("periodic", "penalty")])
+def test_mu_zero_is_the_frictionless_path_bit_for_bit(boundary, enforcement):
+    """friction.coefficient: 0 with the augmented Lagrangian / in the periodic cell builds no
+    friction term: the step's state and multipliers equal those of the config without the
+    section, bit for bit, and carry no history."""
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import friction_record, strain_step
+
+    out = []
+    for mu in (0.0, None):
+        cfg = _cfg(boundary, enforcement, mu)
+        assert not cfg.has_friction
+        fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+        assert fr0 is None
+        x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=None)
+        assert "friction" not in info and friction_record(system) is None
+        out.append((x0, x, multiplier_record(system), info.get("reaction_force")))
+    (a0, a, la, ra), (b0, b, lb, rb) = out
+    np.testing.assert_array_equal(a0, b0)
+    np.testing.assert_array_equal(a, b)
+    if la is not None:
+        np.testing.assert_array_equal(la[1], lb[1])
+    assert ra == rb
