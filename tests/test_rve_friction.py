@@ -502,3 +502,35 @@ def test_frictional_step_with_follow_branch_is_solved_once_and_marked_untested()
             miss = work - (Pb - Pa + friction_of(sb).dissipated)
             rel.append(abs(miss) / abs(work))
     assert min(rel) > 2 * 0.05 and rel[1] > 0.5 * rel[0]
+
+
+def test_cycle_table_records_each_steps_path_test():
+    """``cycle_branch_jumps`` / ``cycle_branch_limit_points``: the equilibrium-path test of
+    every cycle state (its record's ``branch``), NaN for an untested (frictional) step and for
+    the relaxed start, per swept combination."""
+    from types import SimpleNamespace
+
+    import xarray as xr
+
+    from rve.tables.cycles import add_cycle_variables
+
+    def state(mu, step, branch):
+        cyc = {"steps": 2, "strain": 0.05 * (2 - abs(2 - step)), "work_rate": 1.0, "energy": 0.1}
+        if step == 1:
+            cyc["start"] = {"strain": 0.0, "work_rate": 0.0, "energy": 0.0, "dissipated": 0.0}
+        return SimpleNamespace(kind="cycle", mode="shear", step=step, params={"friction_coefficient": mu},
+                               solver={"cycle": cyc, "converged": True, "branch": branch}, friction=None,
+                               reaction_force={})
+
+    tested = {"branch_jumps": 1, "limit_points": 2, "detections": 4}
+    untested = {"branch_jumps": 0, "limit_points": 0, "untested": "friction"}
+    ds = xr.Dataset(coords={"friction_coefficient": ("friction_coefficient", [0.0, 0.3]),
+                            "side": ["x-", "x+", "y-", "y+"]}, attrs={"swept_parameters": "friction_coefficient"})
+    out = add_cycle_variables(ds, [state(0.0, 1, {"branch_jumps": 0, "limit_points": 0}), state(0.0, 2, tested),
+                                   state(0.3, 1, untested), state(0.3, 2, untested)])
+    j = out["cycle_branch_jumps"].sel(cycle_mode="shear")
+    lp = out["cycle_branch_limit_points"].sel(cycle_mode="shear")
+    np.testing.assert_array_equal(j.sel(friction_coefficient=0.0).values, [np.nan, 0.0, 1.0])
+    np.testing.assert_array_equal(lp.sel(friction_coefficient=0.0).values, [np.nan, 0.0, 2.0])
+    assert np.isnan(j.sel(friction_coefficient=0.3).values).all()
+    assert out["cycle_branch_jumps"].attrs["units"] == "1"

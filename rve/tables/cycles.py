@@ -16,6 +16,8 @@ Contract
   cycle_friction_dissipated  (cycle_mode, cycle_step, *swept)                 N mm
   cycle_reaction_force       (cycle_mode, cycle_step, *swept, side, component) N
   cycle_converged            (cycle_mode, cycle_step, *swept)                 1
+  cycle_branch_jumps         (cycle_mode, cycle_step, *swept)                 1
+  cycle_branch_limit_points  (cycle_mode, cycle_step, *swept)                 1
   cycle_work                 (cycle_mode, *swept)                             N mm
   cycle_potential_change     (cycle_mode, *swept)                             N mm
   cycle_dissipated_energy    (cycle_mode, *swept)                             N mm
@@ -28,7 +30,11 @@ Contract
   friction's return-map dissipation over the cycle (``FrictionTerm.dissipated``, 0 without
   friction). The balance ``cycle_work = cycle_potential_change + cycle_dissipated_energy``
   holds to the trapezoid rule's error on a quasi-static path (``strain.path: quasi_static``;
-  tests/test_rve_friction.py checks it converges with the step).
+  tests/test_rve_friction.py checks it converges with the step). ``cycle_branch_jumps`` and
+  ``cycle_branch_limit_points`` are the step's equilibrium-path test (``strain.follow_branch``,
+  ``rve.homogenisation.branch``): jumps to another equilibrium that following the branch
+  avoided, and limit points where the branch ended and the jump was kept; NaN where the step
+  was not tested (the option off, or a frictional step) and at step 0.
 * :func:`plot_cycles` ``(ds, path)``: the loops, one panel per cycled mode, one line per
   combination of the swept parameters (labelled by them), with the dissipated energy.
 * :func:`cycle_report_job` ``(table, outputs, log)``: the rule ``rve_cycle_report``.
@@ -63,6 +69,10 @@ CYCLE_VARIABLES = {
                              "fibril ends on one side of the RVE during the cycle"),
     "cycle_converged": (("cycle_step",), DIMENSIONLESS, "1 if the cycle state is a static equilibrium, 0 if it "
                         "was kept unconverged"),
+    "cycle_branch_jumps": (("cycle_step",), DIMENSIONLESS, "jumps to another equilibrium avoided by following the "
+                           "branch in the cycle step (NaN: the step was not tested)"),
+    "cycle_branch_limit_points": (("cycle_step",), DIMENSIONLESS, "limit points of the branch in the cycle step, "
+                                  "where the jump to another equilibrium was kept (NaN: the step was not tested)"),
     "cycle_work": ((), "N mm", "work of the clamps over the closed loading-unloading cycle (trapezoid rule over "
                    "the cycle's steps: the area of the cycle_work_rate loop)"),
     "cycle_potential_change": ((), "N mm", "stored potential energy at the end of the cycle minus at its start"),
@@ -93,7 +103,8 @@ def add_cycle_variables(ds: xr.Dataset, states: Sequence) -> xr.Dataset:
             for p in pnames}
     shape = (len(modes), n_steps + 1) + tuple(ds.sizes[p] for p in pnames)
     arr = {k: np.full(shape, np.nan) for k in ("cycle_strain", "cycle_work_rate", "cycle_energy",
-                                               "cycle_friction_dissipated", "cycle_converged")}
+                                               "cycle_friction_dissipated", "cycle_converged",
+                                               "cycle_branch_jumps", "cycle_branch_limit_points")}
     reac = np.full(shape + (len(sides), 3), np.nan)
     start_d = np.full((len(modes),) + shape[2:], np.nan)
     last_d = {}
@@ -118,6 +129,10 @@ def add_cycle_variables(ds: xr.Dataset, states: Sequence) -> xr.Dataset:
             for side, vec in (rf or {}).items():
                 if side in sides:
                     reac[idx + (sides.index(side),)] = np.asarray(vec, float)
+        branch = st.solver.get("branch") or {}
+        if branch and not branch.get("untested"):
+            arr["cycle_branch_jumps"][(m, int(st.step)) + pidx] = float(branch.get("branch_jumps") or 0)
+            arr["cycle_branch_limit_points"][(m, int(st.step)) + pidx] = float(branch.get("limit_points") or 0)
         last_d[(m,) + pidx] = max(last_d.get((m,) + pidx, (-1, 0.0)), (int(st.step), dissipated))
     arr["cycle_friction_dissipated"] -= start_d[:, None]
     lead = ("cycle_mode", "cycle_step") + tuple(pnames)
