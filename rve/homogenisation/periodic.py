@@ -84,7 +84,7 @@ def periodic_system(cfg, fab, mesh, x_full, F, damping: float = 0.0, params=None
     carries the friction law (every fibril's family its yarn direction) and a history that
     starts at ``x_full`` with no elastic gap (seed it: ``strain.seed_friction``); the
     relaxation's system has none."""
-    from .strain import friction_law
+    from .friction_history import friction_law
 
     m = cfg.material
     params = contact_params(cfg.contact, rebuild_every=cfg.strain.rebuild_every, conduction=False) \
@@ -158,7 +158,7 @@ def periodic_free_residual(cfg, fab, mesh, x_full, F=None, multipliers=None, fri
     its contact ``multipliers`` (a record, augmented Lagrangian; None: none) and with its
     friction history (``friction``, a record; None with the config's friction on: every
     contact starts at the state with no elastic gap, i.e. no friction force)."""
-    from .strain import seed_friction
+    from .friction_history import seed_friction
 
     F = cell_gradient(fab, mesh, x_full) if F is None else F
     psys = periodic_system(cfg, fab, mesh, x_full, F, friction=True)
@@ -259,7 +259,7 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     predictor and that static solve (with friction one committed backward-Euler step of the
     slip each), on one system (``set_macro``); otherwise one. Returns ``(x (n_nodes, 9), full
     system, info)``."""
-    from .strain import friction_summary, seed_friction
+    from .friction_history import friction_summary, seed_friction
 
     del origin
     sp_ = cfg.strain

@@ -82,6 +82,7 @@ from ..solvers.frictional import friction_of
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .cell_statics import cycle_levels, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .continuation import periodic_arc, pinned_arc
+from .friction_history import friction_law, friction_record, friction_summary, seed_friction
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "cycle_levels", "affine_velocity", "free_residual",
@@ -117,39 +118,6 @@ def mech_system(fab, mesh, cfg, damping: float, x, end_velocity=None, twist_gaug
     return system
 
 
-def friction_law(cfg):
-    """The ``FrictionLaw`` of the config's ``friction`` section, None when every mu is 0 (the
-    frictionless path, bit for bit)."""
-    if not getattr(cfg, "has_friction", False):
-        return None
-    from ..model.terms.friction import FrictionLaw
-
-    return FrictionLaw(*cfg.friction.law_args())
-
-
-def friction_record(system):
-    """The friction history of ``system`` (``FrictionTerm.record()``), None without friction."""
-    fr = friction_of(system)
-    return None if fr is None else fr.record()
-
-
-def seed_friction(system, record, x) -> None:
-    """The friction history of ``system``'s current map (built at ``x``) from ``record`` by
-    point key; a point not in the record takes the history of its neighbour along the -
-    fibril (``FrictionTerm.share_along_fibrils``, as at a map rebuild), else it keeps the
-    start it has (no elastic gap at ``x``). No-op without friction or record."""
-    fr = friction_of(system)
-    if fr is None or record is None:
-        return
-    from ..model.terms.friction import match_rows
-
-    fr.seed(record)
-    if fr.keys is not None and len(fr.keys):
-        new = match_rows(fr.keys, record["keys"]) < 0
-        if new.any():
-            fr.share_along_fibrils(np.asarray(x, float).reshape(-1), receivers=new.reshape(fr.s_bar.shape))
-
-
 def friction_start(cfg, fab, mesh, x):
     """The friction history of a state with no elastic gap anywhere (the relaxed state: the
     relaxation is frictionless, friction starts on the strain path), committed at ``x``;
@@ -163,20 +131,6 @@ def friction_start(cfg, fab, mesh, x):
     system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, np.asarray(x, float).reshape(-1))
     friction_of(system).commit(np.asarray(x, float).reshape(-1))
     return friction_record(system)
-
-
-def friction_summary(system, start_dissipated: float = 0.0) -> dict:
-    """The friction of the last committed state of ``system``: total friction and normal
-    force of the contact points (N), stick and slip counts (the return map of the last
-    increment: its static solve is committed once, ``multipliers.equilibrium``), the energy
-    dissipated since the start of the path (``dissipated``, N mm) and by this step
-    (``step_dissipated``)."""
-    fr = friction_of(system)
-    if fr is None:
-        return {}
-    out = fr.points()
-    out.update({"dissipated": float(fr.dissipated), "step_dissipated": float(fr.dissipated - start_dissipated)})
-    return out
 
 
 def _settings(duration, steps, k, rtol, max_iter, atol, static, static_rounds=4, static_max_iter=80):

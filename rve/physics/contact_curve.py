@@ -53,6 +53,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..fem.hermite import hermite_basis
 from ..fem.lagrange import lagrange_basis, lagrange_nodes
 from .contact_forms import PointKinematics, penalty_law, point_loads
 
@@ -202,8 +203,6 @@ class CurveGeometry(PointKinematics):
         s = np.asarray(s, float)
         if self.Sb is None:
             return curve_basis(self.Nb.shape[-1] - 1, s)[0]
-        from .contact_smooth import hermite_basis  # (contact_smooth builds on this module)
-
         return np.matmul(hermite_basis(s)[0], self.Sb)
 
     def material_weights(self, s_bar) -> np.ndarray:

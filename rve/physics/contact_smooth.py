@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fem.hermite import hermite_basis
 from .contact_curve import END_SNAP, CurveGeometry, curve_basis
 
 __all__ = ["SmoothStencil", "hermite_basis", "smooth_stencil", "hermite_deviation", "project_to_hermite",
@@ -52,18 +53,6 @@ __all__ = ["SmoothStencil", "hermite_basis", "smooth_stencil", "hermite_deviatio
 _TINY = 1e-300
 #: max over [0, 1] of |h10| and of |h11| (4/27 at s = 1/3, 2/3)
 HERMITE_BOUND = 4.0 / 27.0
-
-
-def hermite_basis(s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cubic Hermite basis (h00, h01, h10, h11) and its first and second s-derivatives at
-    ``s`` (any shape) -> three arrays (..., 4)."""
-    s = np.asarray(s, float)
-    s2, s3 = s * s, s * s * s
-    one = np.ones_like(s)
-    H = np.stack([2 * s3 - 3 * s2 + 1, -2 * s3 + 3 * s2, s3 - 2 * s2 + s, s3 - s2], axis=-1)
-    dH = np.stack([6 * s2 - 6 * s, -6 * s2 + 6 * s, 3 * s2 - 4 * s + one, 3 * s2 - 2 * s], axis=-1)
-    d2H = np.stack([12 * s - 6, -12 * s + 6, 6 * s - 4, 6 * s - 2], axis=-1)
-    return H, dH, d2H
 
 
 @dataclass(frozen=True)
