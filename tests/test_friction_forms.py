@@ -61,6 +61,73 @@ def test_friction_tangent_matches_finite_differences(regime, mu, ratio, frozen):
         assert np.abs(K - KT).max() > 1e-3 * np.abs(K).max()
 
 
+def _turned_history(X, sp):
+    """A history committed at a nearby state X0 with its - chord direction there, and X0."""
+    from rve.physics.friction_forms import chord_direction
+
+    rng = np.random.default_rng(7)
+    X0 = X + rng.normal(size=X.shape) * 0.02
+    g0 = chord_geometry(*(X0[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    s_bar, anchor = start_history(X0, sp, g0.s_minus)
+    d_ref = chord_direction(X0, g0.material_weights, s_bar.shape)[0]
+    return s_bar, anchor, d_ref
+
+
+def _forces_turned(X, sp, s_bar, anchor, d_ref, mu, ratio, jac=True):
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    w = np.full(geo.g.shape, 0.05)
+    _, p1, p2 = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
+    f = np.where(geo.active, w * p1, 0.0)
+    kN = np.where(geo.active, w * p2, 0.0)
+    R, K = friction_forces(geo, X, s_bar, anchor, f, kN, w * ratio * PEN, np.full(X.shape[0], mu), jac,
+                           d_ref=d_ref)
+    st = friction_state(geo, X, s_bar, anchor, f, w * ratio * PEN, np.full(X.shape[0], mu), d_ref=d_ref)
+    return R, K, st, f
+
+
+@pytest.mark.parametrize("mu, ratio", [(1.5, 0.05), (0.2, 50.0), (0.5, 2.0)])
+def test_turned_anchor_tangent_matches_finite_differences(mu, ratio):
+    """With the anchor turned with the - chord (``d_ref`` of another state) the tangent,
+    the turn's derivative included, matches differences of the residual."""
+    X, sp, _, _ = _pairs()
+    s_bar, anchor, d_ref = _turned_history(X, sp)
+    R, K, st, f = _forces_turned(X, sp, s_bar, anchor, d_ref, mu, ratio)
+    assert int((f > 0).sum()) >= 5 and np.abs(R).max() > 1e-4
+    Kfd = fd_nodes(lambda Y: _forces_turned(Y, sp, s_bar, anchor, d_ref, mu, ratio, False)[0], X)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
+
+
+def test_turned_anchor_makes_a_rigid_rotation_slip_free():
+    """History committed with no elastic gap, then every pair rotated rigidly by 0.2 rad about
+    an axis across its - chord (two such axes): with the anchor turned with the chord the
+    friction force is zero (no slip happened); left unturned it is not (the stored -j_n, the
+    length of the radii, reads as a tangential gap). A rotation about the - chord's own axis,
+    which positions cannot tell from the + side sliding around it, still reads as a slip."""
+    from rve.physics.friction_forms import chord_direction
+    from scipy.spatial.transform import Rotation
+
+    X, sp, _, _ = _pairs()
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    s_bar, anchor = start_history(X, sp, geo.s_minus)
+    d_ref = chord_direction(X, geo.material_weights, s_bar.shape)[0]
+    h = d_ref[:, 0]                                    # (P, 3): one - chord per pair
+    a1 = np.cross(h, [0.0, 0.0, 1.0])
+    a1 /= np.linalg.norm(a1, axis=1)[:, None]
+    a2 = np.cross(h, a1)
+    f_scale = np.abs(geo.g).max() * 0.05 * PEN
+    for axes, objective in ((a1, True), (a2, True), (h, False)):
+        Rm = Rotation.from_rotvec(0.2 * axes).as_matrix()            # (P, 3, 3)
+        centre = X.mean(axis=1, keepdims=True)
+        Xr = np.einsum("pij,pkj->pki", Rm, X - centre) + centre
+        R_turn = _forces_turned(Xr, sp, s_bar, anchor, d_ref, 0.3, 1.0, False)[0]
+        R_fixed = _forces_turned(Xr, sp, s_bar, anchor, None, 0.3, 1.0, False)[0]
+        assert np.abs(R_fixed).max() > 0.1 * 0.3 * f_scale
+        if objective:
+            assert np.abs(R_turn).max() <= 1e-12 * f_scale
+        else:
+            assert np.abs(R_turn).max() > 0.1 * 0.3 * f_scale
+
+
 def test_return_mapping_cone_tangency_and_balance():
     X, sp, s_bar, anchor = _pairs()
     geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
@@ -196,3 +263,55 @@ def test_smoothed_potential_gradient_hessian_and_limit(eta):
     R_law = fp(X, e=0.0)[1]
     R_tiny = fp(X, e=1e-7)[1]
     np.testing.assert_allclose(R_tiny, R_law, rtol=0, atol=1e-5 * np.abs(R_law).max())
+
+
+def _frozen_turned(X, sp, s_bar, anchor, f0, n0, mu, ratio, turn, jac=True, eta=0.0):
+    from rve.physics.friction_forms import frozen_potential
+
+    kT = np.full(f0.shape, 0.05 * ratio * PEN)
+    return frozen_potential(X, sp, s_bar, anchor, f0, n0, kT, np.full(X.shape[0], mu), jac, eta, turn=turn)
+
+
+@pytest.mark.parametrize("eta", [0.0, 0.5])
+@pytest.mark.parametrize("mu, ratio", [(1.5, 0.05), (0.2, 50.0), (0.5, 2.0)])
+def test_frozen_turn_is_a_potential_and_at_its_own_state_the_law(mu, ratio, eta):
+    """The frozen potential with the anchor's turn (matrix weights ``cb I + Dw Jd``): its
+    forces are its gradient and its tangent its Hessian (symmetric, positive semi-definite);
+    frozen at the state itself (loads, point, turn: ``moved_history`` with ``d_ref``,
+    ``frozen_turn``) its forces are the law's, the couple included."""
+    from rve.physics.friction_forms import frozen_turn, moved_history
+
+    X, sp, _, _ = _pairs()
+    s_bar, anchor, d_ref = _turned_history(X, sp)
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    f0, n0 = _loads_at(X, sp)
+    s_star, a_star, _ = moved_history(X, sp, s_bar, anchor, geo.s_minus, d_ref=d_ref)
+    Dw, Jd, d = frozen_turn(X, geo.material_weights, geo.n, geo.rho, geo.active)
+    a_f = a_star - np.einsum("pgij,pgj->pgi", Jd, d)
+    turn = (Dw, Jd)
+    if eta == 0.0:
+        R_law = _forces_turned(X, sp, s_bar, anchor, d_ref, mu, ratio, jac=False)[0]
+        R_fz = _frozen_turned(X, sp, s_star, a_f, f0, n0, mu, ratio, turn, jac=False)[1]
+        np.testing.assert_allclose(R_fz, R_law, rtol=0, atol=1e-12 * np.abs(R_law).max())
+    # away from the freeze state: gradient and Hessian by differences
+    Y = X + 0.002
+    psi, R, K = _frozen_turned(Y, sp, s_star, a_f, f0, n0, mu, ratio, turn, eta=eta)
+    Rfd = fd_nodes(lambda Z: _frozen_turned(Z, sp, s_star, a_f, f0, n0, mu, ratio, turn, False, eta)[0].sum(axis=1), Y)
+    np.testing.assert_allclose(R, Rfd, rtol=1e-6, atol=1e-7 * np.abs(R).max())
+    Kfd = fd_nodes(lambda Z: _frozen_turned(Z, sp, s_star, a_f, f0, n0, mu, ratio, turn, False, eta)[1], Y)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
+    A = K.reshape(K.shape[0], 12, 12)
+    np.testing.assert_allclose(A, np.swapaxes(A, 1, 2), atol=1e-13 * np.abs(A).max())
+    assert np.linalg.eigvalsh(A).min() >= -1e-12 * np.abs(A).max()
+
+
+@pytest.mark.parametrize("mu, ratio", [(1.5, 0.05), (0.2, 50.0), (0.5, 2.0)])
+def test_commit_with_the_turn_changes_no_force(mu, ratio):
+    """With the anchor turning with the chord, the history committed at a state (material
+    point, anchor and chord direction there) gives that state the same forces, the couple
+    included."""
+    X, sp, _, _ = _pairs()
+    s_bar, anchor, d_ref = _turned_history(X, sp)
+    R, _, st, _ = _forces_turned(X, sp, s_bar, anchor, d_ref, mu, ratio, jac=False)
+    R2_, _, _, _ = _forces_turned(X, sp, st.s_bar, st.anchor, st.d_ref, mu, ratio, jac=False)
+    np.testing.assert_allclose(R2_, R, rtol=0, atol=1e-12 * np.abs(R).max())

@@ -43,6 +43,8 @@ contact_friction_key        friction_point, point_key    1        key of each fr
                                                                   (friction only)
 contact_friction_s_bar      friction_point               1        its - side material point
 contact_friction_anchor     friction_point, xyz          mm       elastic gap minus the jump
+contact_friction_d_ref      friction_point, xyz          1        the - chord's direction
+                                                                  the anchor is stored in
 ==========================  ===========================  =======  ==========================
 
 Attributes: ``rve_state_format``, ``kind`` (initial | relaxed | strained), ``mode``,
@@ -204,6 +206,10 @@ def _contact_arrays(state: State, contact) -> dict:
         data["contact_friction_anchor"] = (("friction_point", "xyz"), np.asarray(fr["anchor"], float),
                                            {"long_name": "elastic tangential gap minus the jump of the material "
                                                          "points", "units": "mm"})
+        if fr.get("d_ref") is not None:
+            data["contact_friction_d_ref"] = (("friction_point", "xyz"), np.asarray(fr["d_ref"], float),
+                                              {"long_name": "unit direction of the - chord the anchor is stored "
+                                                            "in (the anchor turns with the chord)"})
     return data
 
 
@@ -306,6 +312,8 @@ def _friction_record(ds):
     return {"keys": np.asarray(ds["contact_friction_key"].values, np.int64),
             "s_bar": np.asarray(ds["contact_friction_s_bar"].values, float),
             "anchor": np.asarray(ds["contact_friction_anchor"].values, float),
+            "d_ref": (np.asarray(ds["contact_friction_d_ref"].values, float) if "contact_friction_d_ref" in ds
+                      else None),
             "dissipated": float(ds.attrs.get("friction_dissipated", 0.0))}
 
 

@@ -20,13 +20,22 @@ weights of the jump between the + points and the - points at parameters ``s`` (e
 * **History** of a point (from the last converged state): ``s_bar``, the *material* point
   of the - side that was in contact then (a parameter of the - element, continued beyond
   [0, 1] by its polynomial), and ``anchor`` (3,) = ``e_n - j_n``, its elastic tangential
-  gap minus the jump ``j_n = p - q(s_bar)`` of the two material points then.
+  gap minus the jump ``j_n = p - q(s_bar)`` of the two material points then, and
+  ``d_ref`` (3,), the unit direction of the - element's chord then (``chord_direction``).
   ``start_history(X, s_plus, s_minus)`` is the history of points with no elastic gap.
-* **Trial gap**: ``u = anchor + j(X; s_bar)`` with ``j(X; s_bar) = sum_k cb_k X_k``,
-  ``cb = material_weights(s_bar)`` (chord: ``(1 - s+, s+, -(1 - s_bar), -s_bar)``): the
-  elastic gap of the last converged state plus the relative displacement of the two material
-  points since then. ``e = (I - n n^T) u`` its part in the current tangent plane (so the
-  friction force is tangent to the contact at every state).
+* **Trial gap**: ``u = R anchor + j(X; s_bar)`` with ``j(X; s_bar) = sum_k cb_k X_k``,
+  ``cb = material_weights(s_bar)`` (chord: ``(1 - s+, s+, -(1 - s_bar), -s_bar)``), and
+  ``R`` the smallest rotation that turns ``d_ref`` into the - chord's current direction
+  ``h = d/|d|`` (Rodrigues: ``R a = a + v x a + v x (v x a)/(1 + c)``, ``v = d_ref x h``,
+  ``c = d_ref . h``; ``d_ref`` None: ``R = I``): the elastic gap of the last converged state
+  plus the relative displacement of the two material points since then, the stored part
+  turned with the - element. Why ``R``: the anchor holds ``-j_n``, a vector of the length of
+  the two radii along the old normal; left unturned, a rigid rotation of the pair about an
+  axis across the - fibril would read as a tangential slip of (angle x radii), far above the
+  stick length. ``R`` makes the gap objective under every rotation but the one about the -
+  fibril's own axis, which positions alone cannot tell from the + side sliding around it
+  (the capstan) and which counts as sliding. ``e = (I - n n^T) u`` its part in the current
+  tangent plane (so the friction force is tangent to the contact at every state).
 * **Return mapping**: with the point stiffness ``kT = w eps_T`` (N/mm) and the point normal
   force ``f = w phi'(g)`` (N), the trial force ``kT e`` sticks where ``kT |e| <= mu f``,
   else it slips: ``t = mu f e / |e|``. Inactive points (g <= 0): ``t = 0``.
@@ -38,12 +47,14 @@ weights of the jump between the + points and the - points at parameters ``s`` (e
 * **Tangent** ``K_kl = c_k dt/dX_l + t dc_k/dX_l`` (``dc_k/dX_l = dc_ds_k ds_l^T``) with,
   per point, ``Q_l = c_l I + jd ds_l^T`` (``dj/dX_l`` of the current jump, ``jd = sum_k
   dc_ds_k X_k = -dq/ds`` at ``s-``; chord: ``jd = -(b- - a-)``),
-  ``de/dX_l = cb_l P - (n.u / rho) P Q_l - (1/rho) n e^T Q_l`` (``P = I - n n^T``),
+  ``de/dX_l = P du_l - (n.u / rho) P Q_l - (1/rho) n e^T Q_l`` (``P = I - n n^T``,
+  ``du_l = cb_l I + J (I - h h^T) D_l / |d|``, ``J = d(R anchor)/dh``, ``D`` the weights of
+  the chord direction ``d = sum_k D_k X_k``),
   stick: ``dt/dX_l = kT de/dX_l``; slip: ``dt/dX_l = mu e_hat df/dX_l + (mu f/|e|)
   (I - e_hat e_hat^T) de/dX_l`` with ``df/dX_l = -w phi''(g) c_l n^T``. Unsymmetric in
   slip (the ``df`` column and the projection).
 * ``friction_state`` also returns what a step commits: the new history at the state
-  (``s_bar`` = the current closest point, ``anchor = t/kT - j``) and the dissipated energy
+  (``s_bar`` = the current closest point, ``anchor = t/kT - j``, ``d_ref = h``) and the dissipated energy
   ``t . (e - t/kT)`` of every point (the work of the force on the slip of the return map).
 * **Incremental potential at frozen loads** (``frozen_potential``; the predictor of the
   frictional static step, ``rve.solvers.frictional``): with the normal force ``f0`` and
@@ -55,8 +66,8 @@ weights of the jump between the + points and the - points at parameters ``s`` (e
   whose Hessian is ``K_kl = cb_k cb_l D`` with ``D = kT P0`` (stick),
   ``(mu f0/|e0|)(P0 - e_hat e_hat^T)`` (slip): symmetric, positive semi-definite. The
   material point is frozen with the loads: ``moved_history(X, s_plus, s_bar, anchor,
-  s_star)`` is the history with the material point at ``s_star`` and the same ``u`` at
-  ``X``. At loads and point frozen at the state itself (``f0 = f(X)``, ``n0 = n(X)``,
+  s_star, d_ref=...)`` is the history with the material point at ``s_star``, the anchor
+  turned by ``R`` (and ``d_ref`` the chord's direction at ``X``), the same ``u`` at ``X``. At loads and point frozen at the state itself (``f0 = f(X)``, ``n0 = n(X)``,
   ``s_star = s-(X)``) the potential's gradient is the residual of the law above.
   ``start_history``, ``moved_history`` and ``frozen_potential`` take the chord's ``s_plus``
   or, on any geometry, ``weights``: a function ``s -> (P, G, M)`` material weights (e.g.
@@ -69,7 +80,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
-           "tangential_gap", "frozen_potential", "moved_history"]
+           "tangential_gap", "frozen_potential", "moved_history", "chord_direction", "turned_anchor", "frozen_turn"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -95,14 +106,74 @@ def start_history(X, s_plus, s_minus, weights=None):
     return np.array(s_minus, float, copy=True), -np.einsum("pgk,pki->pgi", cb, X)
 
 
-def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None):
-    """``(s_star, anchor')``: the history (``s_bar`` (P, G), ``anchor`` (P, G, 3)) with its
-    material point moved to ``s_star`` (P, G) and the trial gap ``u`` at local nodes ``X``
-    (P, M, 3) unchanged, ``anchor' = anchor + j(X; s_bar) - j(X; s_star)``."""
+def chord_direction(X, weights_fn, shape):
+    """``(h, D, |d|)``: the unit direction ``h`` (P, G, 3) of the - element's chord (its end
+    points ``q(1) - q(0)``) at local nodes ``X`` (P, M, 3), the weights ``D`` (P, G, M) of
+    ``d = sum_k D_k X_k`` and ``|d|`` (P, G); ``weights_fn`` the material weights ``s ->
+    (P, G, M)``, ``shape`` (P, G)."""
+    D = weights_fn(np.zeros(shape)) - weights_fn(np.ones(shape))   # the - side enters the jump with -N
+    d = np.einsum("pgk,pki->pgi", D, X)
+    dn = np.sqrt(np.einsum("pgi,pgi->pg", d, d))
+    return d / np.where(dn > 0, dn, 1.0)[..., None], D, dn
+
+
+def _skew(a):
+    """``S(a)`` (..., 3, 3) with ``S(a) y = a x y``."""
+    z = np.zeros(a.shape[:-1])
+    return np.stack([np.stack([z, -a[..., 2], a[..., 1]], -1), np.stack([a[..., 2], z, -a[..., 0]], -1),
+                     np.stack([-a[..., 1], a[..., 0], z], -1)], -2)
+
+
+def turned_anchor(anchor, d_ref, h, jacobian: bool = False):
+    """``R anchor`` (P, G, 3), ``R`` the smallest rotation from ``d_ref`` to ``h`` (module
+    docstring), and with ``jacobian`` its derivative ``J = d(R anchor)/dh`` (P, G, 3, 3)
+    (``d_ref`` None: ``anchor``, ``J`` None)."""
+    a = np.asarray(anchor, float)
+    if d_ref is None:
+        return (a, None) if jacobian else a
+    r = np.asarray(d_ref, float)
+    v = np.cross(r, h)
+    c1 = 1.0 + np.einsum("pgi,pgi->pg", r, h)
+    w = np.cross(v, a)
+    z = np.cross(v, w)
+    out = a + w + z / c1[..., None]
+    if not jacobian:
+        return out
+    Sr, Sa = _skew(r), _skew(a)
+    dw = -Sa @ Sr
+    dz = -_skew(w) @ Sr + _skew(v) @ dw
+    J = dw + dz / c1[..., None, None] - z[..., :, None] * r[..., None, :] / (c1 * c1)[..., None, None]
+    return out, J
+
+
+def frozen_turn(X, weights_fn, n, rho, active):
+    """``(Dw, Jd, d)``: the turn of the anchor frozen at local nodes ``X`` (P, M, 3) for
+    ``frozen_potential(turn=(Dw, Jd))``: ``Dw`` (P, G, M) the weights of the - chord ``d``
+    (P, G, 3), ``Jd = J0 (I - h h^T) / |d|`` with ``J0 = -S(a) S(h)`` the derivative of the
+    smallest rotation from ``h`` at ``h`` applied to ``a = -rho n`` (the points' normals ``n``
+    and distances ``rho``; zero where not ``active``), so that the frozen potential's gradient
+    at ``X`` carries the law's couple ``rho h x (n x t) / |d|``."""
+    h, Dw, dn = chord_direction(X, weights_fn, np.shape(rho))
+    a = -np.where(active, rho, 0.0)[..., None] * n
+    J0 = -_skew(a) @ _skew(h)
+    Pi = np.eye(3) - h[..., :, None] * h[..., None, :]
+    Jd = (J0 @ Pi) / np.where(dn > 0, dn, 1.0)[..., None, None]
+    return Dw, Jd, h * dn[..., None]
+
+
+def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None, d_ref=None):
+    """``(s_star, anchor')`` (and ``d_ref'`` when ``d_ref`` is given): the history
+    (``s_bar`` (P, G), ``anchor`` (P, G, 3), ``d_ref`` (P, G, 3)) with its material point
+    moved to ``s_star`` (P, G), its anchor turned with the - chord to its direction at
+    ``X`` (``d_ref'``) and the trial gap ``u`` at local nodes ``X`` (P, M, 3) unchanged,
+    ``anchor' = R anchor + j(X; s_bar) - j(X; s_star)``."""
     wf = _weights_of(s_plus, weights)
     jb = np.einsum("pgk,pki->pgi", wf(s_bar), X)
     js = np.einsum("pgk,pki->pgi", wf(s_star), X)
-    return np.array(s_star, float, copy=True), np.asarray(anchor, float) + jb - js
+    if d_ref is None:
+        return np.array(s_star, float, copy=True), np.asarray(anchor, float) + jb - js
+    h = chord_direction(X, wf, np.shape(s_bar))[0]
+    return np.array(s_star, float, copy=True), turned_anchor(anchor, d_ref, h) + jb - js, h
 
 
 @dataclass
@@ -110,8 +181,9 @@ class FrictionPoints:
     """Per point (P, G): ``t`` (P, G, 3) the friction force (on the - material point; the +
     side gets -t); ``slip`` bool (active and slipping), ``stick`` bool (active and
     sticking); ``e`` (P, G, 3) the trial tangential gap; the committed history at this
-    state ``s_bar``, ``anchor``; ``dissipation`` (P, G) the energy of the return map's slip
-    (N mm); ``normal`` (P, G) the point normal forces."""
+    state ``s_bar``, ``anchor``, ``d_ref`` (None when the history has none);
+    ``dissipation`` (P, G) the energy of the return map's slip (N mm); ``normal`` (P, G)
+    the point normal forces."""
 
     t: np.ndarray
     slip: np.ndarray
@@ -121,21 +193,24 @@ class FrictionPoints:
     anchor: np.ndarray
     dissipation: np.ndarray
     normal: np.ndarray
+    d_ref: np.ndarray = None
 
 
-def _trial(geo, X, s_bar, anchor):
+def _trial(geo, X, s_bar, anchor, d_ref=None):
     cb = geo.material_weights(s_bar)
     jb = np.einsum("pgk,pki->pgi", cb, X)
-    u = anchor + jb
+    u = turned_anchor(anchor, d_ref, chord_direction(X, geo.material_weights, np.shape(s_bar))[0]) \
+        if d_ref is not None else anchor
+    u = u + jb
     un = np.einsum("pgi,pgi->pg", geo.n, u)
     e = u - un[..., None] * geo.n
     return cb, u, un, e
 
 
-def tangential_gap(geo, X, s_bar, anchor) -> np.ndarray:
+def tangential_gap(geo, X, s_bar, anchor, d_ref=None) -> np.ndarray:
     """The trial tangential gap ``e`` (P, G, 3) at ``X`` from the history: at the state the
     history was committed at, the elastic gap of every contact point."""
-    return _trial(geo, X, s_bar, anchor)[3]
+    return _trial(geo, X, s_bar, anchor, d_ref)[3]
 
 
 def _return_map(e, f, kT, mu, active):
@@ -147,18 +222,20 @@ def _return_map(e, f, kT, mu, active):
     return en, stick, slip, scale[..., None] * e
 
 
-def friction_state(geo, X, s_bar, anchor, f, kT, mu) -> FrictionPoints:
+def friction_state(geo, X, s_bar, anchor, f, kT, mu, d_ref=None) -> FrictionPoints:
     """Return mapping at local nodes ``X`` (P, M, 3) from the history (``s_bar`` (P, G),
-    ``anchor`` (P, G, 3)); ``f`` (P, G) the point normal forces (zero where inactive),
-    ``kT`` (P, G) the point tangential stiffnesses, ``mu`` (P,) or (P, G)."""
+    ``anchor`` (P, G, 3), ``d_ref`` (P, G, 3) or None); ``f`` (P, G) the point normal forces
+    (zero where inactive), ``kT`` (P, G) the point tangential stiffnesses, ``mu`` (P,) or
+    (P, G)."""
     mu = _per_point(mu, f.shape)
     active = geo.active & (f > 0.0) & (mu > 0.0)
-    _, _, _, e = _trial(geo, X, s_bar, anchor)
+    _, _, _, e = _trial(geo, X, s_bar, anchor, d_ref)
     _, stick, slip, t = _return_map(e, f, kT, mu, active)
     el = np.where(active[..., None], t / np.where(kT > 0, kT, 1.0)[..., None], 0.0)
     diss = np.where(slip, np.einsum("pgi,pgi->pg", t, e - el), 0.0)
+    h = None if d_ref is None else chord_direction(X, geo.material_weights, np.shape(s_bar))[0]
     return FrictionPoints(t=t, slip=slip, stick=stick, e=e, s_bar=np.array(geo.s_minus, float, copy=True),
-                          anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float))
+                          anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float), d_ref=h)
 
 
 def _per_point(mu, shape):
@@ -166,18 +243,22 @@ def _per_point(mu, shape):
     return np.broadcast_to(mu[:, None] if mu.ndim == 1 else mu, shape)
 
 
-def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True):
+def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True, d_ref=None):
     """Friction residual (P, M, 3) and tangent (P, M, 3, M, 3) (None without jacobian).
 
     ``geo`` the geometry of the points at local nodes ``X`` (P, M, 3) (module docstring);
-    history ``s_bar``, ``anchor``; per point ``f`` the normal force and ``kN`` its stiffness
-    ``w phi''(g)`` (zero where inactive), ``kT`` the tangential stiffness; ``mu`` (P,) or
-    (P, G)."""
+    history ``s_bar``, ``anchor``, ``d_ref`` (None: no turn); per point ``f`` the normal
+    force and ``kN`` its stiffness ``w phi''(g)`` (zero where inactive), ``kT`` the
+    tangential stiffness; ``mu`` (P,) or (P, G)."""
     mu = _per_point(mu, f.shape)
     active = geo.active & (f > 0.0) & (mu > 0.0)
-    cb, u, un, e = _trial(geo, X, s_bar, anchor)
+    cb, u, un, e = _trial(geo, X, s_bar, anchor, d_ref)
     en, stick, slip, t = _return_map(e, f, kT, mu, active)
     R = np.einsum("pgk,pgi->pki", geo.c, t)
+    if d_ref is not None:   # the couple of the turned anchor (module docstring)
+        h, D, dn = chord_direction(X, geo.material_weights, f.shape)
+        C = _couple(geo, t, h, dn, active)
+        R = R + np.einsum("pgk,pgi->pki", D, C)
     if not jacobian:
         return R, None
     P_, G_ = f.shape
@@ -194,6 +275,11 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True)
     dE = (cb[..., None, None] * Pn[:, :, None]
           - (un / rho)[..., None, None, None] * PQ
           - n[:, :, None, :, None] * eQ[:, :, :, None, :] / rho[..., None, None, None])
+    if d_ref is not None:   # the turned anchor: du_l += J (I - h h^T) D_l / |d|
+        h, D, dn = chord_direction(X, geo.material_weights, (P_, G_))
+        _, J = turned_anchor(anchor, d_ref, h, jacobian=True)
+        Jd = J @ (I3 - h[..., :, None] * h[..., None, :]) / np.where(dn > 0, dn, 1.0)[..., None, None]
+        dE = dE + D[..., None, None] * (Pn @ Jd)[:, :, None]
     # stick: kT dE; slip: mu e_hat df^T + (mu f/|e|)(I - e_hat e_hat^T) dE
     ehat = e / np.where(en > 0, en, 1.0)[..., None]
     proj = I3 - ehat[..., :, None] * ehat[..., None, :]
@@ -207,7 +293,42 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True)
     # K_kilj = sum_g c_gk dT_g,l,i,j + t_gi dc_gk/dX_lj, dc_k/dX_l = dc_ds_k ds_l
     K = np.einsum("pgk,pglij->pkilj", geo.c, dT, optimize=True)
     K += np.einsum("pgk,pgilj->pkilj", dc_ds, t[..., :, None, None] * geo.ds[:, :, None, :, :])
+    if d_ref is not None:
+        K += np.einsum("pgk,pglij->pkilj", D, _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active))
     return R, K
+
+
+def _couple(geo, t, h, dn, active):
+    """``C = rho h x (n x t) / |d|`` (P, G, 3): the force pair ``(-C, +C)`` on the - chord's
+    ends whose moment is the part across the - fibril of ``rho n x t``, the moment of the
+    friction force about the - centre line (the work of turning the anchor with the chord)."""
+    rho = np.where(active, geo.rho, 0.0)
+    M = np.cross(geo.n, t)
+    return (rho / np.where(dn > 0, dn, 1.0))[..., None] * np.cross(h, M)
+
+
+def _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active):
+    """``dC/dX_l`` (P, G, M, 3, 3) of ``_couple`` (``Q_l = dj/dX_l``, ``dT`` = dt/dX_l)."""
+    I3 = np.eye(3)
+    n = geo.n
+    inv_d = 1.0 / np.where(dn > 0, dn, 1.0)
+    r = np.where(active, rho, 0.0)
+    M = np.cross(n, t)
+    hM = np.cross(h, M)                                          # h x (n x t)
+    Pn = I3 - n[..., :, None] * n[..., None, :]
+    Pi = I3 - h[..., :, None] * h[..., None, :]
+    Sh, Sn, St, SM = _skew(h), _skew(n), _skew(t), _skew(M)
+    drho = np.einsum("pgi,pglij->pglj", n, Q)                      # (P, G, M, 3)
+    dn_ = np.einsum("pgij,pgljk->pglik", Pn, Q) / np.where(active, rho, 1.0)[..., None, None, None]
+    dh = D[..., None, None] * (Pi * inv_d[..., None, None])[:, :, None]          # (P, G, M, 3, 3)
+    # d(h x (n x t)) = -S(M) dh - S(h) S(t) dn + S(h) S(n) dt
+    dhM = (-np.einsum("pgij,pgljk->pglik", SM, dh) - np.einsum("pgij,pgljk->pglik", Sh @ St, dn_)
+           + np.einsum("pgij,pgljk->pglik", Sh @ Sn, dT))
+    out = (inv_d[..., None, None, None] * (hM[:, :, None, :, None] * drho[:, :, :, None, :]
+                                           + r[..., None, None, None] * dhM)
+           - (r * inv_d * inv_d)[..., None, None, None] * hM[:, :, None, :, None]
+           * (D[..., None] * h[:, :, None, :])[:, :, :, None, :])
+    return np.where(active[..., None, None, None], out, 0.0)
 
 
 def _smooth_cone(x, eta):
@@ -231,7 +352,7 @@ def _smooth_cone(x, eta):
 
 
 def frozen_potential(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian: bool = True, eta: float = 0.0,
-                     weights=None):
+                     weights=None, turn=None):
     """The incremental potential of the points at frozen loads (module docstring):
     ``(psi (P, G), R (P, M, 3), K (P, M, 3, M, 3) or None)`` at local nodes ``X`` (P, M, 3)
     from the history (``s_bar``, ``anchor``), ``s_plus`` (P, G) the chord's + points (or
@@ -239,19 +360,22 @@ def frozen_potential(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian: bool = 
     at the point) and normals ``n0`` (P, G, 3), ``kT`` (P, G) and ``mu`` (P,) or (P, G).
     ``eta > 0``: the corner of the cone rounded (``_smooth_cone``; convex and C^2, the force
     within ``(1 + eta^2/4) mu f0``), the predictor's continuation towards ``eta = 0``, the
-    law."""
+    law. ``turn = (Dw, Jd)`` (``Dw`` (P, G, M) the weights of the - chord ``d``, ``Jd`` (P, G,
+    3, 3)): the anchor's turn with the chord frozen as linear, ``u = anchor + sum_k cb_k X_k
+    + Jd d(X)``, i.e. the matrix weights ``W_k = cb_k I + Dw_k Jd``: ``R_k = W_k^T t``, ``K_kl =
+    W_k^T D W_l`` (symmetric, positive semi-definite)."""
     f0 = np.asarray(f0, float)
     cb = _weights_of(s_plus, weights)(s_bar)
     if eta > 0.0:
-        return _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, float(eta))
+        return _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, float(eta), turn)
     mu = _per_point(mu, f0.shape)
-    u = anchor + np.einsum("pgk,pki->pgi", cb, X)
+    u = _frozen_gap(X, cb, anchor, turn)
     e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
     limit = np.where((f0 > 0.0) & (mu > 0.0), mu * f0, 0.0)
     en, stick, slip, t = _return_map(e, limit, kT, 1.0, limit > 0.0)
     kTs = np.where(kT > 0, kT, 1.0)
     psi = np.where(stick, 0.5 * kT * en * en, np.where(slip, limit * en - 0.5 * limit * limit / kTs, 0.0))
-    R = np.einsum("pgk,pgi->pki", cb, t)
+    R = _frozen_force(cb, turn, t)
     if not jacobian:
         return psi, R, None
     I3 = np.eye(3)
@@ -260,13 +384,39 @@ def frozen_potential(X, s_plus, s_bar, anchor, f0, n0, kT, mu, jacobian: bool = 
     a_slip = np.where(slip, limit / np.where(en > 0, en, 1.0), 0.0)
     D = (np.where(stick, kT, 0.0)[..., None, None] * P0
          + a_slip[..., None, None] * (P0 - ehat[..., :, None] * ehat[..., None, :]))
-    K = np.einsum("pgk,pgl,pgij->pkilj", cb, cb, D, optimize=True)
-    return psi, R, K
+    return psi, R, _frozen_hessian(cb, turn, D)
 
 
-def _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, eta):
-    mu = _per_point(mu, f0.shape)
+def _frozen_gap(X, cb, anchor, turn):
     u = anchor + np.einsum("pgk,pki->pgi", cb, X)
+    if turn is not None:
+        Dw, Jd = turn
+        u = u + np.einsum("pgij,pgj->pgi", Jd, np.einsum("pgk,pki->pgi", Dw, X))
+    return u
+
+
+def _frozen_force(cb, turn, t):
+    R = np.einsum("pgk,pgi->pki", cb, t)
+    if turn is not None:
+        Dw, Jd = turn
+        R = R + np.einsum("pgk,pgi->pki", Dw, np.einsum("pgji,pgj->pgi", Jd, t))
+    return R
+
+
+def _frozen_hessian(cb, turn, D):
+    K = np.einsum("pgk,pgl,pgij->pkilj", cb, cb, D, optimize=True)
+    if turn is not None:
+        Dw, Jd = turn
+        DJ = D @ Jd
+        K += np.einsum("pgk,pgl,pgij->pkilj", cb, Dw, DJ, optimize=True)
+        K += np.einsum("pgk,pgl,pgji->pkilj", Dw, cb, DJ, optimize=True)
+        K += np.einsum("pgk,pgl,pgij->pkilj", Dw, Dw, np.swapaxes(Jd, -1, -2) @ DJ, optimize=True)
+    return K
+
+
+def _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, eta, turn=None):
+    mu = _per_point(mu, f0.shape)
+    u = _frozen_gap(X, cb, anchor, turn)
     e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
     on = (f0 > 0.0) & (mu > 0.0) & (kT > 0.0)
     L = np.where(on, mu * f0, 0.0)
@@ -277,7 +427,7 @@ def _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, eta):
     psi = np.where(on, L * delta * Phi, 0.0)
     ehat = e / np.where(en > 0, en, 1.0)[..., None]
     t = np.where(on, L * phi, 0.0)[..., None] * ehat
-    R = np.einsum("pgk,pgi->pki", cb, t)
+    R = _frozen_force(cb, turn, t)
     if not jacobian:
         return psi, R, None
     I3 = np.eye(3)
@@ -286,5 +436,4 @@ def _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, eta):
     b = np.where(on, kTs * over, 0.0)          # across: |t| / |e|
     ee = ehat[..., :, None] * ehat[..., None, :]
     D = a[..., None, None] * ee + b[..., None, None] * (P0 - ee)
-    K = np.einsum("pgk,pgl,pgij->pkilj", cb, cb, D, optimize=True)
-    return psi, R, K
+    return psi, R, _frozen_hessian(cb, turn, D)

@@ -139,6 +139,7 @@ class DynamicFriction:
     def arrays(self) -> dict:
         rec = self.term.record()
         return {PREFIX + "keys": rec["keys"], PREFIX + "s_bar": rec["s_bar"], PREFIX + "anchor": rec["anchor"],
+                PREFIX + "d_ref": rec["d_ref"],
                 PREFIX + "dissipated": np.array(rec["dissipated"]), PREFIX + "released": np.array(self.released),
                 PREFIX + "energy_keys": self._keys, PREFIX + "energy": self._energy}
 
@@ -147,7 +148,8 @@ class DynamicFriction:
         term = self.term
         x = self.part(x)
         rec = {"keys": np.asarray(arrays[PREFIX + "keys"], np.int64), "s_bar": arrays[PREFIX + "s_bar"],
-               "anchor": arrays[PREFIX + "anchor"], "dissipated": float(arrays[PREFIX + "dissipated"])}
+               "anchor": arrays[PREFIX + "anchor"], "d_ref": arrays[PREFIX + "d_ref"] if PREFIX + "d_ref" in arrays else None,
+               "dissipated": float(arrays[PREFIX + "dissipated"])}
         self.released = float(arrays[PREFIX + "released"])
         self._keys = np.asarray(arrays[PREFIX + "energy_keys"], np.int64).reshape(-1, 6)
         self._energy = np.asarray(arrays[PREFIX + "energy"], float)

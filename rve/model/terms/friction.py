@@ -62,8 +62,8 @@ import numpy as np
 from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
-from ...physics.friction_forms import (friction_forces, friction_state, frozen_potential, material_weights,
-                                      moved_history, start_history, tangential_gap)
+from ...physics.friction_forms import (chord_direction, friction_forces, friction_state, frozen_potential,
+                                      frozen_turn, material_weights, moved_history, start_history, tangential_gap)
 from .contact_pairs import HalfPasses
 
 __all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
@@ -144,10 +144,12 @@ class FrictionTerm:
         self.fibril_family = np.zeros(contact.mesh.n_fibrils, np.int64)
         self._mu_matrix = law.matrix(self.family_names)
         #: history of the map's points (rows: the pairs, or the curves' oriented rows):
-        #: keys (rows*G, 6), s_bar (rows, G), anchor (rows, G, 3)
+        #: keys (rows*G, 6), s_bar (rows, G), anchor (rows, G, 3), d_ref (rows, G, 3) the - chord's
+        #: direction the anchor was stored in (``friction_forms``: the anchor turns with it)
         self.keys = None
         self.s_bar = None
         self.anchor = None
+        self.d_ref = None
         #: energy dissipated by slip over the committed states (N mm)
         self.dissipated = 0.0
         self.mu_pair = np.zeros(0)
@@ -293,21 +295,26 @@ class FrictionTerm:
         keys = self._map_keys()
         geo = c.geometry(x) if P else None
         if P:
-            s_new, a_new = start_history(self._local(x, rows), None, geo.s_minus, weights=geo.material_weights)
+            X = self._local(x, rows)
+            s_new, a_new = start_history(X, None, geo.s_minus, weights=geo.material_weights)
+            d_new = chord_direction(X, geo.material_weights, s_new.shape)[0]
         else:
-            s_new, a_new = np.zeros((0, G)), np.zeros((0, G, 3))
+            s_new, a_new, d_new = np.zeros((0, G)), np.zeros((0, G, 3)), np.zeros((0, G, 3))
         hit = np.zeros(P * G, bool)
         if self.keys is not None and P:
             idx = match_rows(keys, self.keys)
             hit = idx >= 0
             s_new = s_new.reshape(-1)
             a_new = a_new.reshape(-1, 3)
+            d_new = d_new.reshape(-1, 3)
             s_new[hit] = self.s_bar.reshape(-1)[idx[hit]]
             a_new[hit] = self.anchor.reshape(-1, 3)[idx[hit]]
+            d_new[hit] = self.d_ref.reshape(-1, 3)[idx[hit]]
         old_keys = self.keys
         self.keys = keys
         self.s_bar = s_new.reshape(P, G)
         self.anchor = a_new.reshape(P, G, 3)
+        self.d_ref = d_new.reshape(P, G, 3)
         if P and not hit.all():
             self.share_along_fibrils(x, receivers=~hit.reshape(P, G), geo=geo)
         if self._frozen is not None:
@@ -329,7 +336,8 @@ class FrictionTerm:
         rows = self._rows(sel)
         geo = self._geometry(x, rows)
         f, _, kT = self._loads(geo, rows)
-        return friction_state(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kT, self._mu(rows))
+        return friction_state(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kT, self._mu(rows),
+                              d_ref=self.d_ref[rows])
 
     def commit(self, x) -> float:
         """Make ``x`` (a converged state) the history; returns the energy dissipated since the
@@ -339,12 +347,17 @@ class FrictionTerm:
         rows = self._rows()
         geo = self.contact.geometry(x)
         f, _, kT = self._loads(geo, rows)
-        st = friction_state(geo, self._local(x, rows), self.s_bar, self.anchor, f, kT, self._mu(rows))
+        st = friction_state(geo, self._local(x, rows), self.s_bar, self.anchor, f, kT, self._mu(rows),
+                            d_ref=self.d_ref)
         self._committed_loads = (np.array(self.keys, np.int64), np.array(f, float), np.array(geo.n, float),
                                  np.array(geo.s_plus, float))
         self.last = st
-        self.s_bar, self.anchor = st.s_bar, st.anchor
-        self._committed_history = (self.s_bar.copy(), self.anchor.copy())
+        self.s_bar, self.anchor, self.d_ref = st.s_bar, st.anchor, st.d_ref
+        # the committed state's frozen form (``freeze(None)``): its turn, and the anchor less
+        # the turn's linear part, so that the frozen gap is the law's at the state
+        Dw, Jd, d = frozen_turn(self._local(x, rows), geo.material_weights, geo.n, geo.rho, geo.active)
+        self._committed_history = (self.s_bar.copy(), self.anchor - np.einsum("pgij,pgj->pgi", Jd, d),
+                                   self.d_ref.copy(), Jd, Dw)
         self.share_along_fibrils(x, receivers=st.normal <= 0.0, geo=geo)
         d = float(st.dissipation.sum())
         self.dissipated += d
@@ -393,30 +406,39 @@ class FrictionTerm:
         em = keys[:, 2]
         S = S0[em[d]] + self.s_bar.reshape(-1)[d] * h[em[d]]
         sb = (S - S0[em[r]]) / h[em[r]]
-        e = tangential_gap(geo, X, self.s_bar, self.anchor).reshape(-1, 3)[d]
+        e = tangential_gap(geo, X, self.s_bar, self.anchor, self.d_ref).reshape(-1, 3)[d]
         pr = r // G
-        cb = self._weights(pr, geo.s_plus.reshape(-1)[r][:, None])(sb[:, None])[:, 0]     # (n, M)
+        wr = self._weights(pr, geo.s_plus.reshape(-1)[r][:, None])
+        cb = wr(sb[:, None])[:, 0]     # (n, M)
         jr = np.einsum("nk,nki->ni", cb, X[pr])
         s_flat, a_flat = self.s_bar.reshape(-1).copy(), self.anchor.reshape(-1, 3).copy()
-        s_flat[r], a_flat[r] = sb, e - jr
-        self.s_bar, self.anchor = s_flat.reshape(P, G), a_flat.reshape(P, G, 3)
+        d_flat = self.d_ref.reshape(-1, 3).copy()
+        s_flat[r], a_flat[r] = sb, e - jr       # the donor's gap at x: stored in the receiver's chord now
+        d_flat[r] = chord_direction(X[pr], wr, (r.size, 1))[0][:, 0]
+        self.s_bar, self.anchor, self.d_ref = s_flat.reshape(P, G), a_flat.reshape(P, G, 3), d_flat.reshape(P, G, 3)
 
     def record(self) -> dict:
         """The history by point key (copies): ``keys`` (n, 6), ``s_bar`` (n,), ``anchor``
-        (n, 3), ``dissipated``."""
+        (n, 3), ``d_ref`` (n, 3), ``dissipated``."""
         return {"keys": np.array(self.keys, np.int64), "s_bar": np.array(self.s_bar, float).reshape(-1),
-                "anchor": np.array(self.anchor, float).reshape(-1, 3), "dissipated": float(self.dissipated)}
+                "anchor": np.array(self.anchor, float).reshape(-1, 3), "d_ref": np.array(self.d_ref, float).reshape(-1, 3),
+                "dissipated": float(self.dissipated)}
 
     def seed(self, record) -> None:
         """The history of the current map from a ``record`` (by point key; a point not in the
-        record keeps the history it has)."""
+        record keeps the history it has; a record without ``d_ref`` keeps the directions of
+        the map, i.e. its anchors are taken as stored in the chords at the seeding state)."""
         idx = match_rows(self.keys, record["keys"])
         hit = idx >= 0
         s = self.s_bar.reshape(-1).copy()
         a = self.anchor.reshape(-1, 3).copy()
+        d = self.d_ref.reshape(-1, 3).copy()
         s[hit] = np.asarray(record["s_bar"], float)[idx[hit]]
         a[hit] = np.asarray(record["anchor"], float).reshape(-1, 3)[idx[hit]]
+        if record.get("d_ref") is not None:
+            d[hit] = np.asarray(record["d_ref"], float).reshape(-1, 3)[idx[hit]]
         self.s_bar, self.anchor = s.reshape(self.s_bar.shape), a.reshape(self.anchor.shape)
+        self.d_ref = d.reshape(self.anchor.shape)
         self.dissipated = float(record.get("dissipated", 0.0))
 
     def material_weights(self, s_bar=None) -> np.ndarray:
@@ -442,8 +464,10 @@ class FrictionTerm:
         P, G = self.s_bar.shape
         idx = match_rows(self.keys, keys_from) if keys_from is not None else np.full(P * G, -1)
         hit = idx >= 0
+        M = np.shape(loads["Dw"])[-1]
         out = {"f0": np.zeros(P * G), "n0": np.zeros((P * G, 3)), "s_plus": np.full(P * G, 0.5),
-               "s_bar": self.s_bar.reshape(-1).copy(), "anchor": self.anchor.reshape(-1, 3).copy()}
+               "s_bar": self.s_bar.reshape(-1).copy(), "anchor": self.anchor.reshape(-1, 3).copy(),
+               "d_ref": self.d_ref.reshape(-1, 3).copy(), "Jd": np.zeros((P * G, 3, 3)), "Dw": np.zeros((P * G, M))}
         for k, v in out.items():
             v[hit] = np.asarray(loads[k], float).reshape((-1,) + v.shape[1:])[idx[hit]]
         return {k: v.reshape((P, G) + v.shape[1:]) for k, v in out.items()}
@@ -456,8 +480,9 @@ class FrictionTerm:
             if self._committed_loads is None:
                 raise ValueError("freeze(None): no committed state yet")
             keys, f, n, s_plus = self._committed_loads
-            by_key = {"f0": f, "n0": n, "s_plus": s_plus, "s_bar": self._committed_history[0],
-                      "anchor": self._committed_history[1]}
+            s_bar, anchor, d_ref, Jd, Dw = self._committed_history
+            by_key = {"f0": f, "n0": n, "s_plus": s_plus, "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref,
+                      "Jd": Jd, "Dw": Dw}
             self._frozen = self._loads_by_key(keys, by_key)
             return
         self._frozen = self.loads_at(x)
@@ -472,17 +497,22 @@ class FrictionTerm:
         P, G = self.s_bar.shape
         sel = np.flatnonzero((np.asarray(c.gaps(x)) > 0.0).any(axis=1))
         f0, n0 = np.zeros((P, G)), np.zeros((P, G, 3))
-        s_bar, anchor = self.s_bar.copy(), self.anchor.copy()
+        s_bar, anchor, d_ref = self.s_bar.copy(), self.anchor.copy(), self.d_ref.copy()
+        M = self._local(x, np.arange(min(P, 1))).shape[1] if P else 0
+        Jd, Dw = np.zeros((P, G, 3, 3)), np.zeros((P, G, M))
         if sel.size:
             geo = self._geometry(x, sel)
             f, _, _ = self._loads(geo, sel)
             f0[sel] = f
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
             sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
-            s_bar[sel], anchor[sel] = moved_history(self._local(x, sel), None, self.s_bar[sel], self.anchor[sel], sm,
-                                                    weights=geo.material_weights)
+            X = self._local(x, sel)
+            s_bar[sel], a_sel, d_ref[sel] = moved_history(X, None, self.s_bar[sel], self.anchor[sel], sm,
+                                                          weights=geo.material_weights, d_ref=self.d_ref[sel])
+            Dw[sel], Jd[sel], d = frozen_turn(X, geo.material_weights, geo.n, geo.rho, geo.active)
+            anchor[sel] = a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
         return {"f0": f0, "n0": n0, "s_plus": np.array(self._s_plus(np.arange(P)), float),
-                "s_bar": s_bar, "anchor": anchor}
+                "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref, "Jd": Jd, "Dw": Dw}
 
     def unfreeze(self) -> None:
         """Back to the exact law (the frozen loads dropped, no smoothing)."""
@@ -508,7 +538,7 @@ class FrictionTerm:
         sp_ = fz["s_plus"][rows]
         psi, R, K = frozen_potential(self._local(x, rows), sp_, fz["s_bar"][rows], fz["anchor"][rows],
                                      fz["f0"][rows], fz["n0"][rows], kT, self._mu(rows), jacobian, self.smoothing,
-                                     weights=self._weights(rows, sp_))
+                                     weights=self._weights(rows, sp_), turn=(fz["Dw"][rows], fz["Jd"][rows]))
         return (psi,) + self._fold(R, K)
 
     def potential(self, x) -> float:
@@ -565,7 +595,7 @@ class FrictionTerm:
         geo = self.contact.geometry(x, sel)
         f, kN, kT = self._loads(geo, rows)
         R, K = friction_forces(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kN, kT,
-                               self._mu(rows), jacobian)
+                               self._mu(rows), jacobian, d_ref=self.d_ref[rows])
         return self._fold(R, K)
 
     def add_to(self, x, act, R, Kx, Kw, jacobian: bool):
