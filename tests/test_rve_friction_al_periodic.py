@@ -357,11 +357,11 @@ def test_rigid_rotation_without_friction_is_objective():
     assert np.abs(P_solved - R @ P0).max() <= 1e-10 * scale
 
 
-@pytest.mark.xfail(strict=True, reason="the friction law's trial gap is not objective: its anchor is a fixed "
-                                       "spatial vector and the centre-line jump p - q includes rho n, which a "
-                                       "rigid rotation turns, so every point slips by rho |n - (n.n')n'| and the "
-                                       "solved cell keeps friction forces (docs/contact.md: several % of |P0| at 0.05 rad); "
-                                       "rve/physics/friction_forms.py, docs/contact.md")
+@pytest.mark.xfail(strict=True, reason="the friction law's trial gap is objective under rotations across the - "
+                                       "chord only: a rotation about z has a twist part about the crimped, tilted "
+                                       "chords, which positions cannot tell from sliding around the - fibril, so "
+                                       "the points slip and the solved cell keeps friction forces (docs/contact.md "
+                                       "'Rigid rotation': 2 % of |P0| at 0.05 rad)")
 def test_rigid_rotation_with_friction_gives_the_frictionless_macro_stress():
     """Friction from the relaxed history: the turned cell should carry no friction force and
     P = R P0 (the friction forces of pairs across the faces enter P as the normal forces of

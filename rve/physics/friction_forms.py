@@ -42,9 +42,13 @@ weights of the jump between the + points and the - points at parameters ``s`` (e
 * **Residual** (internal-force sign, the - side gets the opposite force): the force on the
   + material point is ``-t``, on the - side ``+t`` at the *current* closest point ``s-``
   (where the fibrils touch), distributed with the current weights ``c``: ``R_k = c_k t``.
-  So a commit (the material point moved to ``s-``, the anchor so that ``u`` is unchanged)
-  changes no force: a converged state stays an equilibrium under its own history.
-* **Tangent** ``K_kl = c_k dt/dX_l + t dc_k/dX_l`` (``dc_k/dX_l = dc_ds_k ds_l^T``) with,
+  With ``d_ref`` the - chord's ends also carry the couple of the anchor's turn, ``R_k += D_k
+  C`` (``D`` the chord's weights, ``C = rho h x (n x t) / |d|``: its moment is the part
+  across the - fibril of ``rho n x t``), evaluated from the current geometry, so that the
+  work of the forces is that of the turned gap. So a commit (the material point moved to
+  ``s-``, the anchor so that ``u`` is unchanged, ``d_ref = h``) changes no force: a converged
+  state stays an equilibrium under its own history.
+* **Tangent** ``K_kl = c_k dt/dX_l + t dc_k/dX_l + D_k dC/dX_l`` (``dc_k/dX_l = dc_ds_k ds_l^T``) with,
   per point, ``Q_l = c_l I + jd ds_l^T`` (``dj/dX_l`` of the current jump, ``jd = sum_k
   dc_ds_k X_k = -dq/ds`` at ``s-``; chord: ``jd = -(b- - a-)``),
   ``de/dX_l = P du_l - (n.u / rho) P Q_l - (1/rho) n e^T Q_l`` (``P = I - n n^T``,
@@ -183,7 +187,8 @@ class FrictionPoints:
     sticking); ``e`` (P, G, 3) the trial tangential gap; the committed history at this
     state ``s_bar``, ``anchor``, ``d_ref`` (None when the history has none);
     ``dissipation`` (P, G) the energy of the return map's slip (N mm); ``normal`` (P, G)
-    the point normal forces."""
+    the point normal forces; with ``d_ref``, ``couple`` (P, G, 3) the couple's force ``C``
+    on the - chord ends with the weights ``chord_weights`` (P, G, M) (``R_k += D_k C``)."""
 
     t: np.ndarray
     slip: np.ndarray
@@ -194,6 +199,8 @@ class FrictionPoints:
     dissipation: np.ndarray
     normal: np.ndarray
     d_ref: np.ndarray = None
+    couple: np.ndarray = None
+    chord_weights: np.ndarray = None
 
 
 def _trial(geo, X, s_bar, anchor, d_ref=None):
@@ -233,9 +240,13 @@ def friction_state(geo, X, s_bar, anchor, f, kT, mu, d_ref=None) -> FrictionPoin
     _, stick, slip, t = _return_map(e, f, kT, mu, active)
     el = np.where(active[..., None], t / np.where(kT > 0, kT, 1.0)[..., None], 0.0)
     diss = np.where(slip, np.einsum("pgi,pgi->pg", t, e - el), 0.0)
-    h = None if d_ref is None else chord_direction(X, geo.material_weights, np.shape(s_bar))[0]
+    h = D = C = None
+    if d_ref is not None:
+        h, D, dn = chord_direction(X, geo.material_weights, np.shape(s_bar))
+        C = _couple(geo, t, h, dn, active)
     return FrictionPoints(t=t, slip=slip, stick=stick, e=e, s_bar=np.array(geo.s_minus, float, copy=True),
-                          anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float), d_ref=h)
+                          anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float), d_ref=h, couple=C,
+                          chord_weights=D)
 
 
 def _per_point(mu, shape):

@@ -118,7 +118,8 @@ class DynamicFriction:
 
     def power(self, w) -> float:
         """The power the friction forces of the last committed state take from the motion
-        ``w`` (W = mJ/ms): sum over the points of t . (v+ - v-) at the material points."""
+        ``w`` (W = mJ/ms): sum over the points of t . (v+ - v-) at the material points, and
+        of the couple's forces on the - chord ends."""
         st, c = self.term.last, self.term.contact
         if st is None or st.t.size == 0 or c.map is None or c.row_pair.size != st.t.shape[0]:
             return 0.0
@@ -126,7 +127,10 @@ class DynamicFriction:
             raise ValueError("friction power: periodic shifts are not supported")
         V = self.term.local_nodes(self.part(w), shifted=False)
         cb = self.term.material_weights(st.s_bar)
-        return float(np.einsum("pgk,pki,pgi->", cb, V, st.t))
+        p = float(np.einsum("pgk,pki,pgi->", cb, V, st.t))
+        if st.couple is not None:   # the couple on the - chord ends (rve.physics.friction_forms)
+            p += float(np.einsum("pgk,pki,pgi->", st.chord_weights, V, st.couple))
+        return p
 
     def terms(self, w=None) -> dict:
         out = {"friction_dissipated": float(self.term.dissipated) + self.released,
