@@ -159,9 +159,11 @@ def frozen_turn(X, weights_fn, n, rho, active):
     at ``X`` carries the law's couple ``rho h x (n x t) / |d|``."""
     h, Dw, dn = chord_direction(X, weights_fn, np.shape(rho))
     a = -np.where(active, rho, 0.0)[..., None] * n
-    J0 = -_skew(a) @ _skew(h)
+    # J0 = -S(a) S(h) = (a.h) I - h a^T; J0 (I - h h^T) = (a.h)(I - h h^T) - h (a - (a.h) h)^T
+    ah = np.einsum("pgi,pgi->pg", a, h)
     Pi = np.eye(3) - h[..., :, None] * h[..., None, :]
-    Jd = (J0 @ Pi) / np.where(dn > 0, dn, 1.0)[..., None, None]
+    J0Pi = ah[..., None, None] * Pi - h[..., :, None] * (a - ah[..., None] * h)[..., None, :]
+    Jd = J0Pi / np.where(dn > 0, dn, 1.0)[..., None, None]
     return Dw, Jd, h * dn[..., None]
 
 
@@ -415,13 +417,17 @@ def _frozen_force(cb, turn, t):
 
 
 def _frozen_hessian(cb, turn, D):
-    K = np.einsum("pgk,pgl,pgij->pkilj", cb, cb, D, optimize=True)
+    if turn is None:
+        return np.einsum("pgk,pgl,pgij->pkilj", cb, cb, D, optimize=True)
     if turn is not None:
+        # K_kl = sum_g W_k^T D W_l with W_k = cb_k I + Dw_k Jd, as (3M x 3) blocks per point
         Dw, Jd = turn
-        DJ = D @ Jd
-        K += np.einsum("pgk,pgl,pgij->pkilj", cb, Dw, DJ, optimize=True)
-        K += np.einsum("pgk,pgl,pgji->pkilj", Dw, cb, DJ, optimize=True)
-        K += np.einsum("pgk,pgl,pgij->pkilj", Dw, Dw, np.swapaxes(Jd, -1, -2) @ DJ, optimize=True)
+        P_, G_, M_ = cb.shape
+        W = Dw[..., None, None] * Jd[:, :, None]                                       # (P, G, M, 3, 3)
+        i3 = np.arange(3)
+        W[..., i3, i3] += cb[..., None]
+        B = np.ascontiguousarray(W.transpose(0, 1, 3, 2, 4)).reshape(P_, G_, 3, 3 * M_)  # B[a, (k, i)]
+        K = (np.swapaxes(B, -1, -2) @ D @ B).sum(axis=1).reshape(P_, M_, 3, M_, 3)
     return K
 
 
