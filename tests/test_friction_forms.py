@@ -315,3 +315,27 @@ def test_commit_with_the_turn_changes_no_force(mu, ratio):
     R, _, st, _ = _forces_turned(X, sp, s_bar, anchor, d_ref, mu, ratio, jac=False)
     R2_, _, _, _ = _forces_turned(X, sp, st.s_bar, st.anchor, st.d_ref, mu, ratio, jac=False)
     np.testing.assert_allclose(R2_, R, rtol=0, atol=1e-12 * np.abs(R).max())
+
+
+def test_couple_balances_the_moment_of_the_friction_forces():
+    """The friction forces of a point on the pair's nodes sum to zero, and with the couple their
+    moment has no part across the - chord (only the twist about it, which a position-only
+    chord cannot carry); without the couple the pair of forces, rho n apart, leaves a net
+    moment."""
+    from rve.physics.friction_forms import chord_direction
+
+    X, sp, _, _ = _pairs()
+    s_bar, anchor, d_ref = _turned_history(X, sp)
+    R = _forces_turned(X, sp, s_bar, anchor, d_ref, 0.3, 1.0, jac=False)[0]
+    R0 = _forces(X, sp, s_bar, anchor, 0.3, 1.0, jac=False)[0]
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    h = chord_direction(X, geo.material_weights, s_bar.shape)[0][:, 0]
+    for forces, balanced in ((R, True), (R0, False)):
+        assert np.abs(forces.sum(axis=1)).max() <= 1e-15
+        M = np.cross(X, -forces).sum(axis=1)
+        across = M - np.einsum("pi,pi->p", M, h)[:, None] * h
+        scale = np.abs(forces).max() * np.abs(X).max()
+        if balanced:
+            assert np.abs(across).max() <= 1e-12 * scale
+        else:
+            assert np.abs(across).max() > 1e-2 * scale
