@@ -279,10 +279,8 @@ class FrictionTerm:
             return
         ep = c.endpos
         Rl[pos[:, None], ep[None, :], 0:3] += Rf
-        if K5 is not None:
-            for k in range(4):
-                for l in range(4):
-                    K5[pos, ep[k], 0:3, ep[l], 0:3] += Kf[:, k, :, l, :]
+        if K5 is not None:   # one scatter: (pairs, k, l) advanced, the 3 x 3 blocks sliced
+            K5[pos[:, None, None], ep[None, :, None], 0:3, ep[None, None, :], 0:3] += Kf.transpose(0, 1, 3, 2, 4)
 
     # ------------------------------------------------------------------ history
     def on_rebuild(self, x) -> None:
