@@ -32,8 +32,11 @@ layout. The contact term calls
 
 Drivers call ``commit(x)`` at every converged state (the history becomes that state's, the
 points out of contact take that of a point in contact on the same + point and - fibril, and
-the dissipated energy is accumulated in ``dissipated``); ``record()`` / ``seed(record)``
-carry the history to another system or through a checkpoint (by point key);
+the dissipated energy is accumulated in ``dissipated``); the history of a point is its
+material point ``s_bar``, its ``anchor`` and ``d_ref``, the - chord's direction the anchor is
+stored in (the law turns it with the chord); ``record()`` / ``seed(record)`` carry the
+history to another system or through a checkpoint (by point key; a record without ``d_ref``
+takes the directions at the seeding state);
 ``set_families(labels)`` names the family of every fibril (default: one family);
 ``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``, per row);
 ``material_weights(s_bar)`` and ``local_nodes(v)`` the rows' material weights and local
@@ -45,7 +48,8 @@ Frozen loads (the predictor of ``rve.solvers.frictional``): ``freeze(x)`` (or
 ``freeze(None)``: the loads of the last committed state) fixes the normal force ``f0`` and
 normal ``n0`` of every point by point key, and the point of the - chord the friction force
 acts on (the closest point at ``x``: the history's material point moved there with the
-same trial gap, ``friction_forms.moved_history``); until ``unfreeze()`` the term's forces are those
+same trial gap, ``friction_forms.moved_history``, and the anchor's turn linearised there,
+``friction_forms.frozen_turn``); until ``unfreeze()`` the term's forces are those
 of the convex incremental potential ``sum psi(e0)`` (``rve.physics.friction_forms.
 frozen_potential``) on every pair with a frozen load (also pairs not in contact now, so the
 potential and its gradient are smooth in x), ``potential(x)`` its value (added to the
