@@ -8,13 +8,11 @@ bit."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from test_rve_friction import _job  # one job in its own process, as Snakemake runs it
 
 TOL = 1e-5   # al_tolerance: tight enough that the strain steps below need Uzawa updates
 ATOL = 1e-9
@@ -252,25 +250,6 @@ def test_periodic_history_of_a_pair_across_a_cell_face_is_carried_by_key():
     np.testing.assert_array_equal(fr.anchor.reshape(-1, 3)[at2], anchor.reshape(-1, 3)[at])
 
 
-_JOB = """
-import json, sys
-from rve.homogenisation.jobs import fabric_job, relax_job, strain_job
-kind, spec, a, b, step = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3], sys.argv[4], int(sys.argv[5])
-if kind == "fabric":
-    fabric_job(b, None, spec)
-elif kind == "relax":
-    relax_job(a, b, None, spec)
-else:
-    strain_job(a, b, None, spec, "base", "shear", step)
-"""
-
-
-def _job(kind, spec, a, b, step=0):
-    """One job in its own process, as Snakemake runs it."""
-    proc = subprocess.run([sys.executable, "-c", _JOB, kind, json.dumps(spec), str(a), str(b), str(step)],
-                          capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
-                                                               "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
-    assert proc.returncode == 0, proc.stderr[-3000:]
 
 
 @pytest.mark.long
