@@ -16,7 +16,7 @@ from rve.solvers.linear import is_symmetric, sparse_solve
 from rve.testing import fd_jacobian
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_friction_term import _slid  # noqa: E402
+from test_friction_term import _slid, check_history_survives_rebuilds_and_records  # noqa: E402
 
 CASES = [("curve", 1), ("curve", 2), ("curve", 3), ("smooth", 1), ("smooth", 2)]
 
@@ -97,25 +97,7 @@ def test_history_survives_rebuilds_and_records(geometry, order):
     assert fr.last.stick.sum() == 2 and np.abs(fr.last.t).max() > 0
     assert fr.keys.shape == (2 * system.term.map.n_pairs * cfg.contact.n_gp, 6)
     assert np.unique(fr.keys, axis=0).shape[0] == fr.keys.shape[0]     # one key per row and point
-    w = np.zeros(system.n)
-    x2 = x.copy()
-    x2[parts["x"]] += 0.0002
-    F_before = system.evaluate(x2, w, 0.0, jacobian=False)[0]
-    system.rebuild(x)
-    assert np.array_equal(system.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
-    rec = fr.record()
-    other = friction_crossing.setup(cfg)[0]
-    other.rebuild(x)
-    assert not np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
-    other.term.friction.seed(rec)
-    assert np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
-    far = x.copy()
-    lay = system.layout
-    far.reshape(-1, lay.block)[system.mesh.fibril_nodes(0), 2] += 1.0
-    system.rebuild(far)
-    assert system.term.map.n_pairs == 0 and system.term.friction.keys.shape[0] == 0
-    system.rebuild(x)
-    assert np.abs(system.term.friction.state(x).t).max() == 0.0
+    check_history_survives_rebuilds_and_records(cfg, system, parts, x, 0.0002)
 
 
 def test_history_carried_to_the_next_element_of_the_base():

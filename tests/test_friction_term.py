@@ -69,13 +69,15 @@ def test_zero_coefficient_adds_nothing():
     assert np.array_equal(F1, F2) and np.array_equal(Fx1.data, Fx2.data) and np.array_equal(Fx1.indices, Fx2.indices)
 
 
-def test_history_survives_rebuilds_and_records():
-    cfg, system, parts, x = _slid(cycle_steps=1, u=0.004)   # stick with an elastic gap
+def check_history_survives_rebuilds_and_records(cfg, system, parts, x, du: float) -> None:
+    """With a committed stick history at ``x`` and the slider moved by ``du``: a rebuild at
+    ``x`` keeps every force (history by key); a fresh system differs until seeded with the
+    record, then equals it; a map without the pair forgets it, and the pair's return starts
+    with no elastic gap."""
     fr = system.term.friction
-    assert fr.last.stick.sum() == 1 and np.abs(fr.last.t).max() > 0
     w = np.zeros(system.n)
     x2 = x.copy()
-    x2[parts["x"]] += 0.002
+    x2[parts["x"]] += du
     F_before = system.evaluate(x2, w, 0.0, jacobian=False)[0]
     system.rebuild(x)                               # same pairs, history by key
     assert np.array_equal(system.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
@@ -85,14 +87,19 @@ def test_history_survives_rebuilds_and_records():
     assert not np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
     other.term.friction.seed(rec)
     assert np.array_equal(other.evaluate(x2, w, 0.0, jacobian=False)[0], F_before)
-    # a map without the pair forgets it; the pair's return starts with no elastic gap
     far = x.copy()
-    lay = system.layout
-    far.reshape(-1, lay.block)[system.mesh.fibril_nodes(0), 2] += 1.0
+    far.reshape(-1, system.layout.block)[system.mesh.fibril_nodes(0), 2] += 1.0
     system.rebuild(far)
     assert system.term.map.n_pairs == 0 and system.term.friction.keys.shape[0] == 0
     system.rebuild(x)
     assert np.abs(system.term.friction.state(x).t).max() == 0.0
+
+
+def test_history_survives_rebuilds_and_records():
+    cfg, system, parts, x = _slid(cycle_steps=1, u=0.004)   # stick with an elastic gap
+    fr = system.term.friction
+    assert fr.last.stick.sum() == 1 and np.abs(fr.last.t).max() > 0
+    check_history_survives_rebuilds_and_records(cfg, system, parts, x, 0.002)
 
 
 def test_family_coefficients():
