@@ -81,6 +81,7 @@ from ..model import ContactSystem
 from ..solvers.frictional import friction_of
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .cell_statics import cycle_levels, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .branch import BRANCH_COUNTS
 from .continuation import periodic_arc, pinned_arc
 from .friction_history import friction_law, friction_record, friction_summary, seed_friction
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
@@ -309,8 +310,6 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         # trapezoid work misses ~(F_b - F_a) d / 2, 10-40 % of the step's work at any step size
         # (docs/table_accuracy.md "One equilibrium path"); the step is solved once and its
         # record says it was not tested
-        from .branch import BRANCH_COUNTS
-
         x, system, info = part(x_prev, eps_prev, eps, whole=True)
         info["branch"] = {**{k: 0 for k in BRANCH_COUNTS}, "kept": "naive", "untested": "friction"}
         return x, system, info

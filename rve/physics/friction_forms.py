@@ -167,7 +167,7 @@ def frozen_turn(X, weights_fn, n, rho, active):
     return Dw, Jd, h * dn[..., None]
 
 
-def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None, d_ref=None):
+def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None, d_ref=None, h=None):
     """``(s_star, anchor')`` (and ``d_ref'`` when ``d_ref`` is given): the history
     (``s_bar`` (P, G), ``anchor`` (P, G, 3), ``d_ref`` (P, G, 3)) with its material point
     moved to ``s_star`` (P, G), its anchor turned with the - chord to its direction at
@@ -178,7 +178,8 @@ def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None, d_ref=None):
     js = np.einsum("pgk,pki->pgi", wf(s_star), X)
     if d_ref is None:
         return np.array(s_star, float, copy=True), np.asarray(anchor, float) + jb - js
-    h = chord_direction(X, wf, np.shape(s_bar))[0]
+    if h is None:   # (given: the chord's direction at X, e.g. frozen_turn's d / |d|)
+        h = chord_direction(X, wf, np.shape(s_bar))[0]
     return np.array(s_star, float, copy=True), turned_anchor(anchor, d_ref, h) + jb - js, h
 
 
@@ -206,14 +207,19 @@ class FrictionPoints:
 
 
 def _trial(geo, X, s_bar, anchor, d_ref=None):
+    """``(cb, u, un, e, chord)``: the trial gap and, with ``d_ref``, the - chord's
+    ``(h, D, |d|)`` (``chord_direction``; None without ``d_ref``)."""
     cb = geo.material_weights(s_bar)
     jb = np.einsum("pgk,pki->pgi", cb, X)
-    u = turned_anchor(anchor, d_ref, chord_direction(X, geo.material_weights, np.shape(s_bar))[0]) \
-        if d_ref is not None else anchor
+    chord = None
+    u = anchor
+    if d_ref is not None:
+        chord = chord_direction(X, geo.material_weights, np.shape(s_bar))
+        u = turned_anchor(anchor, d_ref, chord[0])
     u = u + jb
     un = np.einsum("pgi,pgi->pg", geo.n, u)
     e = u - un[..., None] * geo.n
-    return cb, u, un, e
+    return cb, u, un, e, chord
 
 
 def tangential_gap(geo, X, s_bar, anchor, d_ref=None) -> np.ndarray:
@@ -238,13 +244,13 @@ def friction_state(geo, X, s_bar, anchor, f, kT, mu, d_ref=None) -> FrictionPoin
     (P, G)."""
     mu = _per_point(mu, f.shape)
     active = geo.active & (f > 0.0) & (mu > 0.0)
-    _, _, _, e = _trial(geo, X, s_bar, anchor, d_ref)
+    _, _, _, e, chord = _trial(geo, X, s_bar, anchor, d_ref)
     _, stick, slip, t = _return_map(e, f, kT, mu, active)
     el = np.where(active[..., None], t / np.where(kT > 0, kT, 1.0)[..., None], 0.0)
     diss = np.where(slip, np.einsum("pgi,pgi->pg", t, e - el), 0.0)
     h = D = C = None
-    if d_ref is not None:
-        h, D, dn = chord_direction(X, geo.material_weights, np.shape(s_bar))
+    if chord is not None:
+        h, D, dn = chord
         C = _couple(geo, t, h, dn, active)
     return FrictionPoints(t=t, slip=slip, stick=stick, e=e, s_bar=np.array(geo.s_minus, float, copy=True),
                           anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float), d_ref=h, couple=C,
@@ -265,11 +271,11 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True,
     tangential stiffness; ``mu`` (P,) or (P, G)."""
     mu = _per_point(mu, f.shape)
     active = geo.active & (f > 0.0) & (mu > 0.0)
-    cb, u, un, e = _trial(geo, X, s_bar, anchor, d_ref)
+    cb, u, un, e, chord = _trial(geo, X, s_bar, anchor, d_ref)
     en, stick, slip, t = _return_map(e, f, kT, mu, active)
     R = np.einsum("pgk,pgi->pki", geo.c, t)
-    if d_ref is not None:   # the couple of the turned anchor (module docstring)
-        h, D, dn = chord_direction(X, geo.material_weights, f.shape)
+    if chord is not None:   # the couple of the turned anchor (module docstring)
+        h, D, dn = chord
         C = _couple(geo, t, h, dn, active)
         R = R + np.einsum("pgk,pgi->pki", D, C)
     if not jacobian:
@@ -288,8 +294,7 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True,
     dE = (cb[..., None, None] * Pn[:, :, None]
           - (un / rho)[..., None, None, None] * PQ
           - n[:, :, None, :, None] * eQ[:, :, :, None, :] / rho[..., None, None, None])
-    if d_ref is not None:   # the turned anchor: du_l += J (I - h h^T) D_l / |d|
-        h, D, dn = chord_direction(X, geo.material_weights, (P_, G_))
+    if chord is not None:   # the turned anchor: du_l += J (I - h h^T) D_l / |d|
         _, J = turned_anchor(anchor, d_ref, h, jacobian=True)
         Jd = J @ (I3 - h[..., :, None] * h[..., None, :]) / np.where(dn > 0, dn, 1.0)[..., None, None]
         dE = dE + D[..., None, None] * (Pn @ Jd)[:, :, None]
@@ -306,7 +311,7 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True,
     # K_kilj = sum_g c_gk dT_g,l,i,j + t_gi dc_gk/dX_lj, dc_k/dX_l = dc_ds_k ds_l
     K = np.einsum("pgk,pglij->pkilj", geo.c, dT, optimize=True)
     K += np.einsum("pgk,pgilj->pkilj", dc_ds, t[..., :, None, None] * geo.ds[:, :, None, :, :])
-    if d_ref is not None:
+    if chord is not None:
         K += np.einsum("pgk,pglij->pkilj", D, _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active))
     return R, K
 

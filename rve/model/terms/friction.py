@@ -509,9 +509,11 @@ class FrictionTerm:
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
             sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
             X = self._local(x, sel)
-            s_bar[sel], a_sel, d_ref[sel] = moved_history(X, None, self.s_bar[sel], self.anchor[sel], sm,
-                                                          weights=geo.material_weights, d_ref=self.d_ref[sel])
             Dw[sel], Jd[sel], d = frozen_turn(X, geo.material_weights, geo.n, geo.rho, geo.active)
+            dn = np.linalg.norm(d, axis=-1)
+            s_bar[sel], a_sel, d_ref[sel] = moved_history(X, None, self.s_bar[sel], self.anchor[sel], sm,
+                                                          weights=geo.material_weights, d_ref=self.d_ref[sel],
+                                                          h=d / np.where(dn > 0, dn, 1.0)[..., None])
             anchor[sel] = a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
         return {"f0": f0, "n0": n0, "s_plus": np.array(self._s_plus(np.arange(P)), float),
                 "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref, "Jd": Jd, "Dw": Dw}
