@@ -1,0 +1,71 @@
+"""The friction law's figures on the tests' small cases, printed (docs/contact.md "The law",
+"Friction in the RVE pipeline"): the cases are the tests' own (tests/test_rve_friction.py,
+tests/test_rve_friction_al_periodic.py), run at more step sizes or angles than the tests do.
+
+    python benchmarks/friction_path_checks.py cycle      # tiny cell, mu = 0.3: work - dPi against D, 4/8/16 steps per leg
+    python benchmarks/friction_path_checks.py branch     # tiny cell: the energy test's miss at 3 step sizes, mu = 0.1, 0.3
+    python benchmarks/friction_path_checks.py rotation   # periodic 2 x 2 stacked cell turned by 0.05 and 0.2 rad, mu = 0.3
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+
+def cycle():
+    import tempfile
+
+    import test_rve_friction as T
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in (4, 8, 16):
+            work, dpi, d = T._loop_balance(T._cycle(0.3, n, Path(tmp) / f"n{n}"))
+            print(f"{n:3d} steps per leg: W - dPi = {work - dpi:.4e} N mm, D = {d:.4e} N mm, "
+                  f"relative difference {abs(work - dpi - d) / d:.2%}")
+
+
+def branch():
+    from rve.config import validate_config
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.strain import (friction_start, mech_system, pinned_energy, relax_fabric, seed_friction,
+                                           strain_step)
+    from rve.solvers.system import friction_of
+    from test_rve_friction import TINY
+
+    for mu in (0.1, 0.3):
+        cfg = validate_config({**TINY, "friction": {"coefficient": mu}})
+        fab, mesh = fabric_and_mesh(cfg)
+        x0, _, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+        record = friction_start(cfg, fab, mesh, x0)
+        out = []
+        for eps in (0.05, 0.025, 0.0125):
+            c = validate_config({**TINY, "friction": {"coefficient": mu},
+                                 "strain": {**TINY["strain"], "total": 2 * eps, "path": "quasi_static"}})
+            xb, sb, _ = strain_step(c, fab, mesh, x0, x0, "shear", 1, friction=record)
+            s0 = mech_system(fab, mesh, c, c.strain.relax_damping, x0.reshape(-1))
+            seed_friction(s0, record, x0.reshape(-1))
+            Pa, ra = pinned_energy(fab, mesh, s0, x0, x0, "shear", 0.0)
+            Pb, rb = pinned_energy(fab, mesh, sb, xb, x0, "shear", eps)
+            work = 0.5 * (ra + rb) * eps
+            out.append(abs(work - (Pb - Pa + friction_of(sb).dissipated)) / abs(work))
+        print(f"mu = {mu}: |work - (dPi + D)| / work at strain steps 0.05, 0.025, 0.0125: "
+              + ", ".join(f"{v:.3f}" for v in out) + f" (the test's tolerance {cfg.strain.branch_energy_rtol})")
+
+
+def rotation():
+    import test_rve_friction_al_periodic as T
+
+    for theta in (0.05, 0.2):
+        P0, R, P_pred, P_solved, t_pred = T._rotation(0.3, theta)
+        sc = np.abs(P0).max()
+        print(f"theta = {theta} rad: |P - R P0| / |P0| = {np.abs(P_pred - R @ P0).max() / sc:.2%} at the turned "
+              f"state, {np.abs(P_solved - R @ P0).max() / sc:.2%} after the static solve; largest friction force "
+              f"at the turned state {t_pred:.3e} N")
+
+
+if __name__ == "__main__":
+    {"cycle": cycle, "branch": branch, "rotation": rotation}[sys.argv[1]]()
