@@ -68,6 +68,7 @@ from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
 from ...physics.friction_forms import (chord_direction, friction_forces, friction_state, frozen_potential,
                                       frozen_turn, material_weights, moved_history, start_history, tangential_gap)
+from ...kernels import use_numba
 from .contact_pairs import HalfPasses
 
 __all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
@@ -165,6 +166,8 @@ class FrictionTerm:
         self._frozen = None
         #: the rounding of the cone's corner in the frozen-load potential (0: the law's)
         self.smoothing = 0.0
+        #: ``(frozen loads, pairs, inputs)`` of the last ``_frozen_inputs`` call
+        self._frozen_cache = None
 
     # ------------------------------------------------------------------ set-up
     def set_families(self, labels) -> None:
@@ -276,6 +279,12 @@ class FrictionTerm:
         local arrays ``Rl`` (., m, nC), ``K5`` (., m, nC, m, nC) at pair positions ``pos``:
         on the chord ends' slots (``endpos``), or on every local node for the curves."""
         c = self.contact
+        whole = c.nC == 3 and (c.curve or np.array_equal(c.endpos, np.arange(Rl.shape[1])))
+        if whole:   # mechanics only, the pair's local nodes those of the forms: one add per pair
+            Rl[pos] += Rf
+            if K5 is not None:
+                K5[pos] += Kf
+            return
         if c.curve:
             Rl[pos, :, 0:3] += Rf
             if K5 is not None:
@@ -521,6 +530,7 @@ class FrictionTerm:
     def unfreeze(self) -> None:
         """Back to the exact law (the frozen loads dropped, no smoothing)."""
         self._frozen = None
+        self._frozen_cache = None
         self.smoothing = 0.0
 
     def frozen_loads(self) -> dict:
@@ -531,18 +541,40 @@ class FrictionTerm:
         fp = self.contact._pairs_of_rows(self._frozen["f0"] > 0.0)
         return fp[self.mu_pair[fp] > 0.0]
 
+    def _frozen_inputs(self, sel) -> tuple:
+        """``(rows, inputs)``: the frozen potential's per-point arrays of the map pairs ``sel``
+        (weights, loads, anchors, turn, kT, mu), fixed while these loads stay frozen, so
+        computed once per freeze and selection."""
+        fz = self._frozen
+        hit = self._frozen_cache
+        if hit is not None and hit[0] is fz and np.array_equal(hit[1], sel):
+            return hit[2]
+        rows = self._rows(sel)
+        f0 = fz["f0"][rows]
+        w = np.asarray(self.contact.weight[rows], float)
+        w = np.broadcast_to(w[:, None] if w.ndim == 1 else w, f0.shape)
+        kT = w * float(self.law.stiffness) * self.penalty
+        cb = self._weights(rows, fz["s_plus"][rows])(fz["s_bar"][rows])
+        mu = np.broadcast_to(np.asarray(self._mu(rows), float)[:, None], f0.shape)
+        c = np.ascontiguousarray
+        out = (rows, tuple(c(a, dtype=float) for a in (cb, fz["anchor"][rows], f0, fz["n0"][rows], kT, mu,
+                                                      fz["Dw"][rows], fz["Jd"][rows])))
+        self._frozen_cache = (fz, np.array(sel, copy=True), out)
+        return out
+
     def _frozen_forms(self, x, sel, jacobian: bool):
         """``(psi (rows, G), R, K)`` of the frozen potential on the map pairs ``sel``, R and K
-        in the pairs' local layout."""
-        fz = self._frozen
-        rows = self._rows(sel)
-        w = np.asarray(self.contact.weight[rows], float)
-        w = np.broadcast_to(w[:, None] if w.ndim == 1 else w, fz["f0"][rows].shape)
-        kT = w * float(self.law.stiffness) * self.penalty
-        sp_ = fz["s_plus"][rows]
-        psi, R, K = frozen_potential(self._local(x, rows), sp_, fz["s_bar"][rows], fz["anchor"][rows],
-                                     fz["f0"][rows], fz["n0"][rows], kT, self._mu(rows), jacobian, self.smoothing,
-                                     weights=self._weights(rows, sp_), turn=(fz["Dw"][rows], fz["Jd"][rows]))
+        in the pairs' local layout (the compiled kernel ``rve.kernels.friction`` when
+        ``use_numba()``, else ``friction_forms.frozen_potential``: the same arrays)."""
+        rows, (cb, anchor, f0, n0, kT, mu, Dw, Jd) = self._frozen_inputs(sel)
+        X = self._local(x, rows)
+        if use_numba():
+            from ...kernels.friction import frozen_potential as compiled
+
+            psi, R, K = compiled(X, cb, anchor, f0, n0, kT, mu, jacobian, self.smoothing, Dw, Jd)
+        else:
+            psi, R, K = frozen_potential(X, None, None, anchor, f0, n0, kT, mu, jacobian, self.smoothing,
+                                         weights=lambda s: cb, turn=(Dw, Jd))
         return (psi,) + self._fold(R, K)
 
     def potential(self, x) -> float:

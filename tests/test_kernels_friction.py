@@ -1,0 +1,86 @@
+"""The compiled frozen-load friction potential (``rve.kernels.friction``) against the numpy
+reference (``rve.physics.friction_forms.frozen_potential`` with the turn), on random points
+in stick, slip, out of contact and at the smoothed cone, for the chord (M = 4) and the
+curves' local node counts (M = 6, 8), and the term's two paths on the same system."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+
+from rve.kernels.friction import frozen_potential as compiled  # noqa: E402
+from rve.physics.friction_forms import frozen_potential as reference  # noqa: E402
+
+
+def _points(M, seed=0, P=300, G=4):
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(P, M, 3))
+    cb = rng.normal(size=(P, G, M))
+    anchor = 0.1 * rng.normal(size=(P, G, 3))
+    n0 = rng.normal(size=(P, G, 3))
+    n0 /= np.linalg.norm(n0, axis=-1)[..., None]
+    f0 = np.abs(rng.normal(size=(P, G)))
+    f0[rng.random((P, G)) < 0.3] = 0.0                      # points without a frozen load
+    # tangential stiffness over three decades: stick (small |e| kT) and slip both occur
+    kT = np.abs(rng.normal(size=(P, G))) * rng.choice([0.1, 10.0, 1000.0], size=(P, G))
+    mu = np.where(rng.random((P, G)) < 0.1, 0.0, 0.2)
+    Dw = rng.normal(size=(P, G, M))
+    Jd = 0.1 * rng.normal(size=(P, G, 3, 3))
+    return X, cb, anchor, f0, n0, kT, mu, Dw, Jd
+
+
+@pytest.mark.parametrize("M", [4, 6, 8])
+@pytest.mark.parametrize("eta", [0.0, 0.3, 1.0])
+@pytest.mark.parametrize("jacobian", [True, False])
+def test_frozen_potential_kernel_matches_numpy(M, eta, jacobian):
+    X, cb, anchor, f0, n0, kT, mu, Dw, Jd = _points(M)
+    ref = reference(X, None, None, anchor, f0, n0, kT, mu, jacobian, eta, weights=lambda s: cb, turn=(Dw, Jd))
+    out = compiled(X, cb, anchor, f0, n0, kT, mu, jacobian, eta, Dw, Jd)
+    # the smoothed cone's potential is a difference of terms ~x^2 for x = |e|/delta up to 1e4
+    # here: the two arcsinh implementations' last bits, amplified by that cancellation, give
+    # ~x^2 eps relative to the largest entry; the law (eta = 0) agrees to a few ulps
+    tol = 1e-13 if eta == 0.0 else 1e-11
+    for a, b in zip(ref, out):
+        if a is None:
+            assert b is None
+            continue
+        assert a.shape == b.shape
+        assert np.abs(a - b).max() <= tol * np.abs(a).max()
+
+
+def test_frozen_potential_kernel_sees_stick_and_slip():
+    """The random points of the comparison have both stick and slip points (else the test
+    above would not compare both branches)."""
+    X, cb, anchor, f0, n0, kT, mu, Dw, Jd = _points(4)
+    u = anchor + np.einsum("pgk,pki->pgi", cb, X) + np.einsum("pgij,pgj->pgi", Jd, np.einsum("pgk,pki->pgi", Dw, X))
+    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
+    on = (f0 > 0) & (mu > 0)
+    stick = on & (kT * np.linalg.norm(e, axis=-1) <= mu * f0)
+    assert stick.sum() > 10 and (on & ~stick).sum() > 10
+
+
+@pytest.mark.parametrize("eta", [0.0, 1.0])
+@pytest.mark.parametrize("shift", [-0.002, 0.002])
+def test_frozen_term_forms_equal_on_both_paths(monkeypatch, eta, shift):
+    """``FrictionTerm`` at frozen loads on the sliding crossing of tests/test_friction_term.py
+    (stick for one sign of the shift, slip for the other): residual, tangent and potential of
+    the compiled path equal the numpy path's."""
+    from test_friction_term import _slid
+
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        cfg, system, parts, x = _slid(cycle_steps=2, u=0.04)
+        fr = system.term.friction
+        fr.freeze(None)
+        fr.smoothing = eta
+        y = x.copy()
+        y[parts["contact_x"]] += shift
+        F, J, _ = system.evaluate(y, np.zeros(system.n), 0.0)
+        out[path] = (np.asarray(F, float), J.toarray(), fr.potential(y))
+    a, b = out["numpy"], out["numba"]
+    assert a[2] > 0
+    assert np.abs(a[0] - b[0]).max() <= 1e-12 * np.abs(a[0]).max()
+    assert np.abs(a[1] - b[1]).max() <= 1e-12 * np.abs(a[1]).max()
+    assert abs(a[2] - b[2]) <= 1e-12 * abs(a[2])
