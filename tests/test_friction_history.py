@@ -71,3 +71,15 @@ def test_checkpoint_carries_the_friction_history(tmp_path):
     with xr.open_dataset(plain) as ds:
         assert not any(v.startswith("contact_friction") for v in ds.variables)
         assert "friction_dissipated" not in ds.attrs
+
+
+def test_row_groups_are_the_indices_of_unique_rows():
+    """``row_groups`` (the grouping of the history's sharing along fibrils) gives the same
+    group indices as ``np.unique(axis=0, return_inverse=True)``."""
+    from rve.model.terms.friction import row_groups
+
+    rng = np.random.default_rng(3)
+    keys = rng.integers(-2, 4, size=(3000, 6))
+    _, inv = np.unique(keys, axis=0, return_inverse=True)
+    np.testing.assert_array_equal(row_groups(keys), inv.ravel())
+    assert row_groups(np.zeros((0, 6), np.int64)).size == 0

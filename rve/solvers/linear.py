@@ -162,6 +162,8 @@ def is_symmetric(J, rtol: float = 1e-10) -> bool:
         return False
     if big.max() <= 1e-14 * amax:
         return True
+    if big.max() > (2.0 * rtol + 1e-14) * amax:   # above the bound at any entry (|J_ij| + |J_ji| <= 2 max|J|)
+        return False
     S = (abs(A) + abs(A).T).tocsr()
     s = np.asarray(S[D.row, D.col]).ravel()
     return bool(np.all(big <= rtol * s + 1e-14 * amax))

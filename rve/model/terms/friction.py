@@ -71,7 +71,7 @@ from ...physics.friction_forms import (chord_direction, friction_forces, frictio
 from ...kernels import use_numba
 from .contact_pairs import HalfPasses
 
-__all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows"]
+__all__ = ["FrictionLaw", "FrictionTerm", "MAX_FRICTION_COEFFICIENT", "match_rows", "row_groups"]
 
 #: largest accepted friction coefficient (dry polymer and rubber contacts stay below it)
 MAX_FRICTION_COEFFICIENT = 2.0
@@ -133,6 +133,21 @@ def match_rows(keys_to, keys_from) -> np.ndarray:
     owner = np.full(inv.max() + 1, -1, np.int64)
     owner[inv[:keys_from.shape[0]]] = np.arange(keys_from.shape[0])
     return owner[inv[keys_from.shape[0]:]]
+
+
+def row_groups(keys) -> np.ndarray:
+    """The group index (n,) of every row of ``keys`` (n, k): equal rows, equal index (the
+    indices of ``np.unique(keys, axis=0, return_inverse=True)``, by a lexicographic sort of
+    the columns as in ``match_rows``)."""
+    keys = np.asarray(keys, np.int64)
+    if keys.shape[0] == 0:
+        return np.zeros(0, np.int64)
+    order = np.lexsort(keys.T[::-1])
+    srt = keys[order]
+    first = np.r_[True, (srt[1:] != srt[:-1]).any(axis=1)]
+    inv = np.empty(keys.shape[0], np.int64)
+    inv[order] = np.cumsum(first) - 1
+    return inv
 
 
 class FrictionTerm:
@@ -392,8 +407,7 @@ class FrictionTerm:
         keys = self.keys
         group = keys.copy()
         group[:, 2] = mesh.elem_fibril[keys[:, 2]]
-        _, inv = np.unique(group, axis=0, return_inverse=True)
-        inv = inv.ravel()
+        inv = row_groups(group)
         rec = np.asarray(receivers, bool).reshape(-1)
         donor_ok = geo.active.reshape(-1) & ~rec & (np.repeat(self._mu(rows), G) > 0)
         if not donor_ok.any() or not rec.any():
