@@ -84,3 +84,79 @@ def test_frozen_term_forms_equal_on_both_paths(monkeypatch, eta, shift):
     assert np.abs(a[0] - b[0]).max() <= 1e-12 * np.abs(a[0]).max()
     assert np.abs(a[1] - b[1]).max() <= 1e-12 * np.abs(a[1]).max()
     assert abs(a[2] - b[2]) <= 1e-12 * abs(a[2])
+
+
+def _law_inputs(M, turn, seed=1, P=250, G=4):
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(P, M, 3))
+    n = rng.normal(size=(P, G, 3))
+    n /= np.linalg.norm(n, axis=-1)[..., None]
+    cb = rng.normal(size=(P, G, M))
+    D = rng.normal(size=(P, G, M)) if turn else None
+    d_ref = None
+    if turn:
+        d_ref = rng.normal(size=(P, G, 3))
+        d_ref /= np.linalg.norm(d_ref, axis=-1)[..., None]
+    geo = SimpleNamespace(c=rng.normal(size=(P, G, M)), ds=rng.normal(size=(P, G, M, 3)), n=n,
+                          rho=0.1 + rng.random((P, G)), active=rng.random((P, G)) < 0.85,
+                          dc_ds=rng.normal(size=(P, G, M)), material_weights=lambda s: cb)
+    f = np.abs(rng.normal(size=(P, G)))
+    f[~geo.active] = 0.0
+    kN = np.abs(rng.normal(size=(P, G)))
+    kT = np.abs(rng.normal(size=(P, G))) * rng.choice([0.1, 10.0, 1000.0], size=(P, G))
+    mu = np.where(rng.random((P, G)) < 0.1, 0.0, 0.3)
+    anchor = 0.3 * rng.normal(size=(P, G, 3))
+    return geo, X, anchor, f, kN, kT, mu, cb, D, d_ref
+
+
+@pytest.mark.parametrize("M", [4, 6, 8])
+@pytest.mark.parametrize("turn", [False, True])
+@pytest.mark.parametrize("jacobian", [True, False])
+def test_law_kernel_matches_numpy(M, turn, jacobian):
+    """``rve.kernels.friction.friction_forces`` against ``friction_forms.friction_forces``
+    (stick, slip and inactive points; with and without the anchor's turn and its couple)."""
+    from rve.kernels.friction import friction_forces as compiled_law
+    from rve.physics.friction_forms import chord_direction, friction_forces
+
+    geo, X, anchor, f, kN, kT, mu, cb, D, d_ref = _law_inputs(M, turn)
+    if turn:
+        def weights(s):   # the reference takes the - chord's weights D as weights(0) - weights(1)
+            s = np.asarray(s, float)
+            if s.ndim and np.all(s == 0.0):
+                return D
+            if s.ndim and np.all(s == 1.0):
+                return np.zeros_like(D)
+            return cb
+
+        geo.material_weights = weights
+        np.testing.assert_array_equal(chord_direction(X, weights, f.shape)[1], D)
+    ref = friction_forces(geo, X, np.full(f.shape, 0.5), anchor, f, kN, kT, mu, jacobian, d_ref=d_ref)
+    out = compiled_law(geo.c, geo.ds, geo.n, geo.rho, geo.active, geo.dc_ds, cb, X, anchor, f, kN, kT, mu,
+                       jacobian, D=D, d_ref=d_ref)
+    for a, b in zip(ref, out):
+        if a is None:
+            assert b is None
+            continue
+        assert np.abs(a - b).max() <= 1e-12 * np.abs(a).max()
+
+
+@pytest.mark.parametrize("shift", [-0.002, 0.002])
+def test_law_term_forms_equal_on_both_paths(monkeypatch, shift):
+    """``FrictionTerm`` with the exact law (no frozen loads) on the sliding crossing:
+    residual and tangent of the compiled path equal the numpy path's."""
+    from test_friction_term import _slid
+
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        cfg, system, parts, x = _slid(cycle_steps=2, u=0.04)
+        y = x.copy()
+        y[parts["contact_x"]] += shift
+        F, J, _ = system.evaluate(y, np.zeros(system.n), 0.0)
+        assert system.term.friction.state(y).t.any()
+        out[path] = (np.asarray(F, float), J.toarray())
+    a, b = out["numpy"], out["numba"]
+    assert np.abs(a[0] - b[0]).max() <= 1e-12 * np.abs(a[0]).max()
+    assert np.abs(a[1] - b[1]).max() <= 1e-12 * np.abs(a[1]).max()

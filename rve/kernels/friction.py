@@ -23,7 +23,7 @@ from ..threads import run_chunked
 #: pairs per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
 MIN_CHUNK = 512
 
-__all__ = ["frozen_potential"]
+__all__ = ["frozen_potential", "friction_forces"]
 
 
 @njit(cache=True, nogil=True)
@@ -106,33 +106,39 @@ def _forms(X, cb, anchor, f0, n0, kT, mu, eta, Dw, Jd, jacobian, psi, R, K):
     P, M = X.shape[0], X.shape[1]
     G = cb.shape[1]
     u, e, t = np.zeros(3), np.zeros(3), np.zeros(3)
-    D = np.zeros((3, 3))
-    W = np.zeros((M, 3, 3))
-    DW = np.zeros((M, 3, 3))
+    D, DJ, JtD, JtDJ = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
     for p in range(P):
         for g in range(G):
+            if not (f0[p, g] > 0.0 and mu[p, g] > 0.0):
+                continue          # no frozen load: no potential, force or stiffness
             psi[p, g] = _point(X, cb, anchor, f0, n0, kT, mu, eta, Dw, Jd, p, g, u, e, t, D)
-            if t[0] == 0.0 and t[1] == 0.0 and t[2] == 0.0 and not jacobian:
-                continue
-            for k in range(M):   # W_k = cb_k I + Dw_k Jd
-                for i in range(3):
-                    for j in range(3):
-                        W[k, i, j] = Dw[p, g, k] * Jd[p, g, i, j] + (cb[p, g, k] if i == j else 0.0)
-            for k in range(M):   # R_k += W_k^T t
-                for j in range(3):
-                    R[p, k, j] += W[k, 0, j] * t[0] + W[k, 1, j] * t[1] + W[k, 2, j] * t[2]
+            # R_k += W_k^T t, W_k = cb_k I + Dw_k Jd
+            Jt0 = Jd[p, g, 0, 0] * t[0] + Jd[p, g, 1, 0] * t[1] + Jd[p, g, 2, 0] * t[2]
+            Jt1 = Jd[p, g, 0, 1] * t[0] + Jd[p, g, 1, 1] * t[1] + Jd[p, g, 2, 1] * t[2]
+            Jt2 = Jd[p, g, 0, 2] * t[0] + Jd[p, g, 1, 2] * t[1] + Jd[p, g, 2, 2] * t[2]
+            for k in range(M):
+                a, b = cb[p, g, k], Dw[p, g, k]
+                R[p, k, 0] += a * t[0] + b * Jt0
+                R[p, k, 1] += a * t[1] + b * Jt1
+                R[p, k, 2] += a * t[2] + b * Jt2
             if not jacobian:
                 continue
-            for l in range(M):
-                for i in range(3):
-                    for j in range(3):
-                        DW[l, i, j] = D[i, 0] * W[l, 0, j] + D[i, 1] * W[l, 1, j] + D[i, 2] * W[l, 2, j]
+            # K_kl = W_k^T D W_l = cb_k cb_l D + cb_k Dw_l D Jd + Dw_k cb_l Jd^T D + Dw_k Dw_l Jd^T D Jd
+            for i in range(3):
+                for j in range(3):
+                    DJ[i, j] = D[i, 0] * Jd[p, g, 0, j] + D[i, 1] * Jd[p, g, 1, j] + D[i, 2] * Jd[p, g, 2, j]
+                    JtD[i, j] = Jd[p, g, 0, i] * D[0, j] + Jd[p, g, 1, i] * D[1, j] + Jd[p, g, 2, i] * D[2, j]
+            for i in range(3):
+                for j in range(3):
+                    JtDJ[i, j] = Jd[p, g, 0, i] * DJ[0, j] + Jd[p, g, 1, i] * DJ[1, j] + Jd[p, g, 2, i] * DJ[2, j]
             for k in range(M):
+                ak, bk = cb[p, g, k], Dw[p, g, k]
                 for l in range(M):
+                    al, bl = cb[p, g, l], Dw[p, g, l]
+                    c1, c2, c3, c4 = ak * al, ak * bl, bk * al, bk * bl
                     for i in range(3):
                         for j in range(3):
-                            K[p, k, i, l, j] += W[k, 0, i] * DW[l, 0, j] + W[k, 1, i] * DW[l, 1, j] \
-                                + W[k, 2, i] * DW[l, 2, j]
+                            K[p, k, i, l, j] += c1 * D[i, j] + c2 * DJ[i, j] + c3 * JtD[i, j] + c4 * JtDJ[i, j]
 
 
 def frozen_potential(X, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, Dw, Jd):
@@ -149,3 +155,223 @@ def frozen_potential(X, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, 
     run_chunked(P, lambda a, b: _forms(X[a:b], cb[a:b], anchor[a:b], f0[a:b], n0[a:b], kT[a:b], mu[a:b], e,
                                        Dw[a:b], Jd[a:b], jac, psi[a:b], R[a:b], K[a:b] if jac else K), MIN_CHUNK)
     return psi, R, (K if jac else None)
+
+
+@njit(cache=True, nogil=True)
+def _cross(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True, nogil=True)
+def _skew(a, S):
+    S[0, 0], S[0, 1], S[0, 2] = 0.0, -a[2], a[1]
+    S[1, 0], S[1, 1], S[1, 2] = a[2], 0.0, -a[0]
+    S[2, 0], S[2, 1], S[2, 2] = -a[1], a[0], 0.0
+
+
+@njit(cache=True, nogil=True)
+def _mm(A, B, out):
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+
+
+@njit(cache=True, nogil=True)
+def _turn(a, r, h, out, J):
+    """``out = R a`` (the smallest rotation from ``r`` to ``h``) and ``J = d(R a)/dh``
+    (``rve.physics.friction_forms.turned_anchor``)."""
+    v, w, z = np.zeros(3), np.zeros(3), np.zeros(3)
+    _cross(r, h, v)
+    c1 = 1.0 + r[0] * h[0] + r[1] * h[1] + r[2] * h[2]
+    _cross(v, a, w)
+    _cross(v, w, z)
+    for i in range(3):
+        out[i] = a[i] + w[i] + z[i] / c1
+    Sr, Sa, Sw, Sv = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    _skew(r, Sr)
+    _skew(a, Sa)
+    _skew(w, Sw)
+    _skew(v, Sv)
+    dw, t1, t2 = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    _mm(Sa, Sr, dw)
+    for i in range(3):
+        for j in range(3):
+            dw[i, j] = -dw[i, j]
+    _mm(Sw, Sr, t1)
+    _mm(Sv, dw, t2)
+    for i in range(3):
+        for j in range(3):
+            J[i, j] = dw[i, j] + (t2[i, j] - t1[i, j]) / c1 - z[i] * r[j] / (c1 * c1)
+
+
+@njit(cache=True, nogil=True)
+def _law_forms(c, ds, n, rho, gact, dc_ds, cb, D, X, anchor, d_ref, f, kN, kT, mu, jacobian, turn, R, K):
+    P, M = X.shape[0], X.shape[1]
+    G = c.shape[1]
+    u, e, t, h, d, jb, jd = (np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
+                             np.zeros(3))
+    ua, C, Mv, hM, ehat = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
+    I3 = np.eye(3)
+    J, Jd, Pn, Ph, proj = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    PJd = np.zeros((3, 3))
+    Q, dE, dT = np.zeros((M, 3, 3)), np.zeros((M, 3, 3)), np.zeros((M, 3, 3))
+    Sh, Sn, St, SM, ShSt, ShSn = (np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)),
+                                  np.zeros((3, 3)), np.zeros((3, 3)))
+    dn_l, dh_l, dhM, tmp = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    drho = np.zeros(3)
+    for p in range(P):
+        for g in range(G):
+            act = gact[p, g] and f[p, g] > 0.0 and mu[p, g] > 0.0
+            for i in range(3):
+                jb[i] = 0.0
+                d[i] = 0.0
+            for k in range(M):
+                for i in range(3):
+                    jb[i] += cb[p, g, k] * X[p, k, i]
+                    if turn:
+                        d[i] += D[p, g, k] * X[p, k, i]
+            dnorm = 1.0
+            if turn:
+                dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                dnorm = dn if dn > 0 else 1.0
+                for i in range(3):
+                    h[i] = d[i] / dnorm
+                _turn(anchor[p, g], d_ref[p, g], h, ua, J)
+            else:
+                for i in range(3):
+                    ua[i] = anchor[p, g, i]
+            for i in range(3):
+                u[i] = ua[i] + jb[i]
+            un = n[p, g, 0] * u[0] + n[p, g, 1] * u[1] + n[p, g, 2] * u[2]
+            en2 = 0.0
+            for i in range(3):
+                e[i] = u[i] - un * n[p, g, i]
+                en2 += e[i] * e[i]
+            en = np.sqrt(en2)
+            limit = mu[p, g] * f[p, g]
+            stick = act and kT[p, g] * en <= limit
+            slip = act and not stick
+            enn = en if en > 0 else 1.0
+            scale = kT[p, g] if stick else (limit / enn if slip else 0.0)
+            for i in range(3):
+                t[i] = scale * e[i]
+            for k in range(M):
+                for i in range(3):
+                    R[p, k, i] += c[p, g, k] * t[i]
+            r_a = rho[p, g] if act else 0.0
+            if turn:
+                _cross(n[p, g], t, Mv)
+                _cross(h, Mv, hM)
+                for i in range(3):
+                    C[i] = r_a / dnorm * hM[i]
+                for k in range(M):
+                    for i in range(3):
+                        R[p, k, i] += D[p, g, k] * C[i]
+            if not jacobian or not act:
+                continue
+            rho_s = rho[p, g]
+            for i in range(3):
+                jd[i] = 0.0
+            for k in range(M):
+                for i in range(3):
+                    jd[i] += dc_ds[p, g, k] * X[p, k, i]
+            for i in range(3):
+                for j in range(3):
+                    Pn[i, j] = I3[i, j] - n[p, g, i] * n[p, g, j]
+                    Ph[i, j] = I3[i, j] - h[i] * h[j]
+            if turn:
+                _mm(J, Ph, Jd)
+                for i in range(3):
+                    for j in range(3):
+                        Jd[i, j] /= dnorm
+                _mm(Pn, Jd, PJd)
+            for l in range(M):
+                for i in range(3):
+                    for j in range(3):
+                        Q[l, i, j] = c[p, g, l] * I3[i, j] + jd[i] * ds[p, g, l, j]
+                for j in range(3):
+                    eq = e[0] * Q[l, 0, j] + e[1] * Q[l, 1, j] + e[2] * Q[l, 2, j]
+                    for i in range(3):
+                        pq = Pn[i, 0] * Q[l, 0, j] + Pn[i, 1] * Q[l, 1, j] + Pn[i, 2] * Q[l, 2, j]
+                        dE[l, i, j] = cb[p, g, l] * Pn[i, j] - (un / rho_s) * pq - n[p, g, i] * eq / rho_s
+                        if turn:
+                            dE[l, i, j] += D[p, g, l] * PJd[i, j]
+            for i in range(3):
+                ehat[i] = e[i] / enn
+            for i in range(3):
+                for j in range(3):
+                    proj[i, j] = I3[i, j] - ehat[i] * ehat[j]
+            a_slip = mu[p, g] * f[p, g] / enn
+            for l in range(M):
+                for i in range(3):
+                    for j in range(3):
+                        if stick:
+                            dT[l, i, j] = kT[p, g] * dE[l, i, j]
+                        else:
+                            dT[l, i, j] = a_slip * (proj[i, 0] * dE[l, 0, j] + proj[i, 1] * dE[l, 1, j]
+                                                    + proj[i, 2] * dE[l, 2, j]) \
+                                - ehat[i] * kN[p, g] * mu[p, g] * c[p, g, l] * n[p, g, j]
+            for k in range(M):
+                ck, dk = c[p, g, k], dc_ds[p, g, k]
+                for l in range(M):
+                    for i in range(3):
+                        for j in range(3):
+                            K[p, k, i, l, j] += ck * dT[l, i, j] + dk * t[i] * ds[p, g, l, j]
+            if not turn:
+                continue
+            inv_d = 1.0 / dnorm
+            _skew(h, Sh)
+            _skew(n[p, g], Sn)
+            _skew(t, St)
+            _skew(Mv, SM)
+            _mm(Sh, St, ShSt)
+            _mm(Sh, Sn, ShSn)
+            for l in range(M):
+                for j in range(3):
+                    drho[j] = n[p, g, 0] * Q[l, 0, j] + n[p, g, 1] * Q[l, 1, j] + n[p, g, 2] * Q[l, 2, j]
+                    for i in range(3):
+                        dn_l[i, j] = (Pn[i, 0] * Q[l, 0, j] + Pn[i, 1] * Q[l, 1, j] + Pn[i, 2] * Q[l, 2, j]) / rho_s
+                        dh_l[i, j] = D[p, g, l] * Ph[i, j] * inv_d
+                # d(h x (n x t)) = -S(M) dh - S(h) S(t) dn + S(h) S(n) dt
+                _mm(SM, dh_l, dhM)
+                _mm(ShSt, dn_l, tmp)
+                for i in range(3):
+                    for j in range(3):
+                        dhM[i, j] = -dhM[i, j] - tmp[i, j] + (ShSn[i, 0] * dT[l, 0, j] + ShSn[i, 1] * dT[l, 1, j]
+                                                              + ShSn[i, 2] * dT[l, 2, j])
+                dlh = D[p, g, l]
+                for k in range(M):
+                    Dk = D[p, g, k]
+                    if Dk == 0.0:
+                        continue
+                    for i in range(3):
+                        for j in range(3):
+                            dC = inv_d * (hM[i] * drho[j] + r_a * dhM[i, j]) - r_a * inv_d * inv_d * hM[i] * dlh * h[j]
+                            K[p, k, i, l, j] += Dk * dC
+
+
+def friction_forces(c, ds, n, rho, active, dc_ds, cb, X, anchor, f, kN, kT, mu, jacobian: bool, D=None, d_ref=None):
+    """``(R (P, M, 3), K (P, M, 3, M, 3) or None)`` of the law: the same arrays, to rounding,
+    as ``rve.physics.friction_forms.friction_forces`` (the reference) from the geometry's
+    fields ``c``, ``ds``, ``n``, ``rho``, ``active``, ``dc_ds``, the material weights ``cb``
+    (P, G, M) at the history's ``s_bar``, the local nodes ``X``, the history's ``anchor`` and,
+    with the anchor's turn, ``d_ref`` (P, G, 3) and the - chord's weights ``D`` (P, G, M);
+    ``f``, ``kN``, ``kT``, ``mu`` (P, G)."""
+    g = lambda a: np.ascontiguousarray(a, dtype=np.float64)   # noqa: E731
+    c, ds, n, rho, dc_ds, cb, X, anchor, f, kN, kT = map(g, (c, ds, n, rho, dc_ds, cb, X, anchor, f, kN, kT))
+    mu = g(np.broadcast_to(mu, f.shape))
+    act = np.ascontiguousarray(active, dtype=np.bool_)
+    turn = d_ref is not None
+    D = g(D) if turn else np.zeros((0, 1, 1))
+    d_ref = g(d_ref) if turn else np.zeros((0, 1, 3))
+    P, M = X.shape[0], X.shape[1]
+    R = np.zeros((P, M, 3))
+    jac = bool(jacobian)
+    K = np.zeros((P, M, 3, M, 3)) if jac else np.zeros((0, M, 3, M, 3))
+    run_chunked(P, lambda a, b: _law_forms(c[a:b], ds[a:b], n[a:b], rho[a:b], act[a:b], dc_ds[a:b], cb[a:b],
+                                           D[a:b] if turn else D, X[a:b], anchor[a:b],
+                                           d_ref[a:b] if turn else d_ref, f[a:b], kN[a:b], kT[a:b], mu[a:b], jac,
+                                           turn, R[a:b], K[a:b] if jac else K), MIN_CHUNK)
+    return R, (K if jac else None)

@@ -644,8 +644,18 @@ class FrictionTerm:
         rows = self._rows(sel)
         geo = self.contact.geometry(x, sel)
         f, kN, kT = self._loads(geo, rows)
-        R, K = friction_forces(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kN, kT,
-                               self._mu(rows), jacobian, d_ref=self.d_ref[rows])
+        X = self._local(x, rows)
+        if use_numba():   # the compiled law (rve.kernels.friction): the same arrays
+            from ...kernels.friction import friction_forces as compiled
+
+            D = chord_direction(X, geo.material_weights, f.shape)[1]
+            mu = np.broadcast_to(np.asarray(self._mu(rows), float)[:, None], f.shape)
+            R, K = compiled(geo.c, geo.ds, geo.n, geo.rho, geo.active, geo.dc_ds,
+                            geo.material_weights(self.s_bar[rows]), X, self.anchor[rows], f, kN, kT, mu, jacobian,
+                            D=D, d_ref=self.d_ref[rows])
+            return self._fold(R, K)
+        R, K = friction_forces(geo, X, self.s_bar[rows], self.anchor[rows], f, kN, kT, self._mu(rows), jacobian,
+                               d_ref=self.d_ref[rows])
         return self._fold(R, K)
 
     def add_to(self, x, act, R, Kx, Kw, jacobian: bool):
