@@ -37,17 +37,18 @@ def _point(X, cb, anchor, f0, n0, kT, mu, eta, Dw, Jd, p, g, u, e, t, D):
     """The gap, force ``t`` and (in ``D``) the 3 x 3 stiffness of point (p, g); returns psi
     (0 and t = 0, D = 0 for a point without friction)."""
     M = X.shape[1]
-    d = np.zeros(3)
+    d0, d1, d2 = 0.0, 0.0, 0.0
     for i in range(3):
         u[i] = anchor[p, g, i]
     for k in range(M):
         c, w = cb[p, g, k], Dw[p, g, k]
         for i in range(3):
             u[i] += c * X[p, k, i]
-            d[i] += w * X[p, k, i]
+        d0 += w * X[p, k, 0]
+        d1 += w * X[p, k, 1]
+        d2 += w * X[p, k, 2]
     for i in range(3):
-        for j in range(3):
-            u[i] += Jd[p, g, i, j] * d[j]
+        u[i] += Jd[p, g, i, 0] * d0 + Jd[p, g, i, 1] * d1 + Jd[p, g, i, 2] * d2
     un = n0[p, g, 0] * u[0] + n0[p, g, 1] * u[1] + n0[p, g, 2] * u[2]
     en2 = 0.0
     for i in range(3):
@@ -179,22 +180,21 @@ def _mm(A, B, out):
 
 
 @njit(cache=True, nogil=True)
-def _turn(a, r, h, out, J):
+def _turn(a, r, h, out, J, V, W):
     """``out = R a`` (the smallest rotation from ``r`` to ``h``) and ``J = d(R a)/dh``
-    (``rve.physics.friction_forms.turned_anchor``)."""
-    v, w, z = np.zeros(3), np.zeros(3), np.zeros(3)
+    (``rve.physics.friction_forms.turned_anchor``; ``V`` (3, 3), ``W`` (7, 3, 3): work)."""
+    v, w, z = V[0], V[1], V[2]
     _cross(r, h, v)
     c1 = 1.0 + r[0] * h[0] + r[1] * h[1] + r[2] * h[2]
     _cross(v, a, w)
     _cross(v, w, z)
     for i in range(3):
         out[i] = a[i] + w[i] + z[i] / c1
-    Sr, Sa, Sw, Sv = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    Sr, Sa, Sw, Sv, dw, t1, t2 = W[0], W[1], W[2], W[3], W[4], W[5], W[6]
     _skew(r, Sr)
     _skew(a, Sa)
     _skew(w, Sw)
     _skew(v, Sv)
-    dw, t1, t2 = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
     _mm(Sa, Sr, dw)
     for i in range(3):
         for j in range(3):
@@ -207,149 +207,176 @@ def _turn(a, r, h, out, J):
 
 
 @njit(cache=True, nogil=True)
+def _law_point(c, n, rho, gact, cb, D, X, anchor, d_ref, f, kT, mu, turn, p, g, e, t, h, J, Mv, hM, R, V, W):
+    """The trial gap ``e``, force ``t`` and the residual ``R[p] += c t + D C`` of point
+    (p, g); with the turn also ``h`` (the - chord's direction), ``J = d(R anchor)/dh``, ``Mv
+    = n x t`` and ``hM = h x Mv``; ``V`` (6, 3) and ``W`` (7+, 3, 3) work space. Returns ``(active, stick, |e|,
+    n.u, |d|)``."""
+    M = X.shape[1]
+    act = gact[p, g] and f[p, g] > 0.0 and mu[p, g] > 0.0
+    jb, d, ua = V[0], V[1], V[2]
+    for i in range(3):
+        jb[i] = 0.0
+        d[i] = 0.0
+    TV, TW = V[3:6], W[:7]
+    for k in range(M):
+        for i in range(3):
+            jb[i] += cb[p, g, k] * X[p, k, i]
+            if turn:
+                d[i] += D[p, g, k] * X[p, k, i]
+    dnorm = 1.0
+    if turn:
+        dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        dnorm = dn if dn > 0 else 1.0
+        for i in range(3):
+            h[i] = d[i] / dnorm
+        _turn(anchor[p, g], d_ref[p, g], h, ua, J, TV, TW)
+    else:
+        for i in range(3):
+            ua[i] = anchor[p, g, i]
+    un = n[p, g, 0] * (ua[0] + jb[0]) + n[p, g, 1] * (ua[1] + jb[1]) + n[p, g, 2] * (ua[2] + jb[2])
+    en2 = 0.0
+    for i in range(3):
+        e[i] = ua[i] + jb[i] - un * n[p, g, i]
+        en2 += e[i] * e[i]
+    en = np.sqrt(en2)
+    limit = mu[p, g] * f[p, g]
+    stick = act and kT[p, g] * en <= limit
+    slip = act and not stick
+    scale = kT[p, g] if stick else (limit / (en if en > 0 else 1.0) if slip else 0.0)
+    for i in range(3):
+        t[i] = scale * e[i]
+    for k in range(M):
+        for i in range(3):
+            R[p, k, i] += c[p, g, k] * t[i]
+    if turn:
+        r_a = rho[p, g] if act else 0.0
+        _cross(n[p, g], t, Mv)
+        _cross(h, Mv, hM)
+        for k in range(M):
+            for i in range(3):
+                R[p, k, i] += D[p, g, k] * r_a / dnorm * hM[i]
+    return act, stick, en, un, dnorm
+
+
+@njit(cache=True, nogil=True)
+def _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stick, en, un, dnorm, e, t, h, J,
+                 Q, dT, K, dE, V, W):
+    """``K[p] += c_k dt/dX_l + t dc_k/dX_l`` of an active point (p, g); fills ``Q`` (M, 3, 3)
+    = dj/dX_l and ``dT`` (M, 3, 3) = dt/dX_l for the couple's tangent (``dE`` (M, 3, 3), ``V``
+    (3, 3) and ``W`` (5, 3, 3): work space)."""
+    M = X.shape[1]
+    jd, ehat = V[0], V[1]
+    Pn, Ph, Jd, PJd, proj = W[0], W[1], W[2], W[3], W[4]
+    rho_s = rho[p, g]
+    for i in range(3):
+        jd[i] = 0.0
+    for k in range(M):
+        for i in range(3):
+            jd[i] += dc_ds[p, g, k] * X[p, k, i]
+    for i in range(3):
+        for j in range(3):
+            Pn[i, j] = (1.0 if i == j else 0.0) - n[p, g, i] * n[p, g, j]
+            Ph[i, j] = (1.0 if i == j else 0.0) - h[i] * h[j]
+    if turn:
+        _mm(J, Ph, Jd)
+        for i in range(3):
+            for j in range(3):
+                Jd[i, j] /= dnorm
+        _mm(Pn, Jd, PJd)
+    for l in range(M):
+        for i in range(3):
+            for j in range(3):
+                Q[l, i, j] = (c[p, g, l] if i == j else 0.0) + jd[i] * ds[p, g, l, j]
+        for j in range(3):
+            eq = e[0] * Q[l, 0, j] + e[1] * Q[l, 1, j] + e[2] * Q[l, 2, j]
+            for i in range(3):
+                pq = Pn[i, 0] * Q[l, 0, j] + Pn[i, 1] * Q[l, 1, j] + Pn[i, 2] * Q[l, 2, j]
+                dE[l, i, j] = cb[p, g, l] * Pn[i, j] - (un / rho_s) * pq - n[p, g, i] * eq / rho_s
+                if turn:
+                    dE[l, i, j] += D[p, g, l] * PJd[i, j]
+    enn = en if en > 0 else 1.0
+    for i in range(3):
+        ehat[i] = e[i] / enn
+    for i in range(3):
+        for j in range(3):
+            proj[i, j] = (1.0 if i == j else 0.0) - ehat[i] * ehat[j]
+    a_slip = mu[p, g] * f[p, g] / enn
+    for l in range(M):
+        for i in range(3):
+            for j in range(3):
+                if stick:
+                    dT[l, i, j] = kT[p, g] * dE[l, i, j]
+                else:   # slip: mu e_hat df + (mu f/|e|)(I - e_hat e_hat^T) dE, df_l = -kN c_l n^T
+                    dT[l, i, j] = a_slip * (proj[i, 0] * dE[l, 0, j] + proj[i, 1] * dE[l, 1, j]
+                                            + proj[i, 2] * dE[l, 2, j]) \
+                        - ehat[i] * kN[p, g] * mu[p, g] * c[p, g, l] * n[p, g, j]
+    for k in range(M):
+        ck, dk = c[p, g, k], dc_ds[p, g, k]
+        for l in range(M):
+            for i in range(3):
+                for j in range(3):
+                    K[p, k, i, l, j] += ck * dT[l, i, j] + dk * t[i] * ds[p, g, l, j]
+
+
+@njit(cache=True, nogil=True)
+def _couple_tangent(n, rho, D, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W):
+    """``K[p] += D_k dC/dX_l`` of an active point (p, g), ``C = rho h x (n x t) / |d|``
+    (``rve.physics.friction_forms._couple_tangent``; ``V`` (3, 3), ``W`` (10, 3, 3): work
+    space)."""
+    M = Q.shape[0]
+    inv_d = 1.0 / dnorm
+    r_a = rho[p, g]
+    Sh, Sn, St, SM, ShSt, ShSn, dn_l, dh_l, dhM, tmp = W[0], W[1], W[2], W[3], W[4], W[5], W[6], W[7], W[8], W[9]
+    drho = V[0]
+    _skew(h, Sh)
+    _skew(n[p, g], Sn)
+    _skew(t, St)
+    _skew(Mv, SM)
+    _mm(Sh, St, ShSt)
+    _mm(Sh, Sn, ShSn)
+    for l in range(M):
+        for j in range(3):
+            drho[j] = n[p, g, 0] * Q[l, 0, j] + n[p, g, 1] * Q[l, 1, j] + n[p, g, 2] * Q[l, 2, j]
+            for i in range(3):
+                dn_l[i, j] = (Q[l, i, j] - n[p, g, i] * drho[j]) / r_a
+                dh_l[i, j] = D[p, g, l] * ((1.0 if i == j else 0.0) - h[i] * h[j]) * inv_d
+        # d(h x (n x t)) = -S(M) dh - S(h) S(t) dn + S(h) S(n) dt
+        _mm(SM, dh_l, dhM)
+        _mm(ShSt, dn_l, tmp)
+        for i in range(3):
+            for j in range(3):
+                dhM[i, j] = -dhM[i, j] - tmp[i, j] + (ShSn[i, 0] * dT[l, 0, j] + ShSn[i, 1] * dT[l, 1, j]
+                                                      + ShSn[i, 2] * dT[l, 2, j])
+        dlh = D[p, g, l]
+        for k in range(M):
+            Dk = D[p, g, k]
+            if Dk == 0.0:
+                continue
+            for i in range(3):
+                for j in range(3):
+                    dC = inv_d * (hM[i] * drho[j] + r_a * dhM[i, j]) - r_a * inv_d * inv_d * hM[i] * dlh * h[j]
+                    K[p, k, i, l, j] += Dk * dC
+
+
+@njit(cache=True, nogil=True)
 def _law_forms(c, ds, n, rho, gact, dc_ds, cb, D, X, anchor, d_ref, f, kN, kT, mu, jacobian, turn, R, K):
     P, M = X.shape[0], X.shape[1]
     G = c.shape[1]
-    u, e, t, h, d, jb, jd = (np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
-                             np.zeros(3))
-    ua, C, Mv, hM, ehat = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
-    I3 = np.eye(3)
-    J, Jd, Pn, Ph, proj = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
-    PJd = np.zeros((3, 3))
-    Q, dE, dT = np.zeros((M, 3, 3)), np.zeros((M, 3, 3)), np.zeros((M, 3, 3))
-    Sh, Sn, St, SM, ShSt, ShSn = (np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)),
-                                  np.zeros((3, 3)), np.zeros((3, 3)))
-    dn_l, dh_l, dhM, tmp = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
-    drho = np.zeros(3)
+    e, t, h, Mv, hM = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
+    J = np.zeros((3, 3))
+    Q, dT, dE = np.zeros((M, 3, 3)), np.zeros((M, 3, 3)), np.zeros((M, 3, 3))
+    V, W = np.zeros((6, 3)), np.zeros((10, 3, 3))
     for p in range(P):
         for g in range(G):
-            act = gact[p, g] and f[p, g] > 0.0 and mu[p, g] > 0.0
-            for i in range(3):
-                jb[i] = 0.0
-                d[i] = 0.0
-            for k in range(M):
-                for i in range(3):
-                    jb[i] += cb[p, g, k] * X[p, k, i]
-                    if turn:
-                        d[i] += D[p, g, k] * X[p, k, i]
-            dnorm = 1.0
-            if turn:
-                dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-                dnorm = dn if dn > 0 else 1.0
-                for i in range(3):
-                    h[i] = d[i] / dnorm
-                _turn(anchor[p, g], d_ref[p, g], h, ua, J)
-            else:
-                for i in range(3):
-                    ua[i] = anchor[p, g, i]
-            for i in range(3):
-                u[i] = ua[i] + jb[i]
-            un = n[p, g, 0] * u[0] + n[p, g, 1] * u[1] + n[p, g, 2] * u[2]
-            en2 = 0.0
-            for i in range(3):
-                e[i] = u[i] - un * n[p, g, i]
-                en2 += e[i] * e[i]
-            en = np.sqrt(en2)
-            limit = mu[p, g] * f[p, g]
-            stick = act and kT[p, g] * en <= limit
-            slip = act and not stick
-            enn = en if en > 0 else 1.0
-            scale = kT[p, g] if stick else (limit / enn if slip else 0.0)
-            for i in range(3):
-                t[i] = scale * e[i]
-            for k in range(M):
-                for i in range(3):
-                    R[p, k, i] += c[p, g, k] * t[i]
-            r_a = rho[p, g] if act else 0.0
-            if turn:
-                _cross(n[p, g], t, Mv)
-                _cross(h, Mv, hM)
-                for i in range(3):
-                    C[i] = r_a / dnorm * hM[i]
-                for k in range(M):
-                    for i in range(3):
-                        R[p, k, i] += D[p, g, k] * C[i]
+            act, stick, en, un, dnorm = _law_point(c, n, rho, gact, cb, D, X, anchor, d_ref, f, kT, mu, turn, p, g,
+                                                   e, t, h, J, Mv, hM, R, V, W)
             if not jacobian or not act:
                 continue
-            rho_s = rho[p, g]
-            for i in range(3):
-                jd[i] = 0.0
-            for k in range(M):
-                for i in range(3):
-                    jd[i] += dc_ds[p, g, k] * X[p, k, i]
-            for i in range(3):
-                for j in range(3):
-                    Pn[i, j] = I3[i, j] - n[p, g, i] * n[p, g, j]
-                    Ph[i, j] = I3[i, j] - h[i] * h[j]
+            _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stick, en, un, dnorm, e, t, h, J,
+                         Q, dT, K, dE, V, W)
             if turn:
-                _mm(J, Ph, Jd)
-                for i in range(3):
-                    for j in range(3):
-                        Jd[i, j] /= dnorm
-                _mm(Pn, Jd, PJd)
-            for l in range(M):
-                for i in range(3):
-                    for j in range(3):
-                        Q[l, i, j] = c[p, g, l] * I3[i, j] + jd[i] * ds[p, g, l, j]
-                for j in range(3):
-                    eq = e[0] * Q[l, 0, j] + e[1] * Q[l, 1, j] + e[2] * Q[l, 2, j]
-                    for i in range(3):
-                        pq = Pn[i, 0] * Q[l, 0, j] + Pn[i, 1] * Q[l, 1, j] + Pn[i, 2] * Q[l, 2, j]
-                        dE[l, i, j] = cb[p, g, l] * Pn[i, j] - (un / rho_s) * pq - n[p, g, i] * eq / rho_s
-                        if turn:
-                            dE[l, i, j] += D[p, g, l] * PJd[i, j]
-            for i in range(3):
-                ehat[i] = e[i] / enn
-            for i in range(3):
-                for j in range(3):
-                    proj[i, j] = I3[i, j] - ehat[i] * ehat[j]
-            a_slip = mu[p, g] * f[p, g] / enn
-            for l in range(M):
-                for i in range(3):
-                    for j in range(3):
-                        if stick:
-                            dT[l, i, j] = kT[p, g] * dE[l, i, j]
-                        else:
-                            dT[l, i, j] = a_slip * (proj[i, 0] * dE[l, 0, j] + proj[i, 1] * dE[l, 1, j]
-                                                    + proj[i, 2] * dE[l, 2, j]) \
-                                - ehat[i] * kN[p, g] * mu[p, g] * c[p, g, l] * n[p, g, j]
-            for k in range(M):
-                ck, dk = c[p, g, k], dc_ds[p, g, k]
-                for l in range(M):
-                    for i in range(3):
-                        for j in range(3):
-                            K[p, k, i, l, j] += ck * dT[l, i, j] + dk * t[i] * ds[p, g, l, j]
-            if not turn:
-                continue
-            inv_d = 1.0 / dnorm
-            _skew(h, Sh)
-            _skew(n[p, g], Sn)
-            _skew(t, St)
-            _skew(Mv, SM)
-            _mm(Sh, St, ShSt)
-            _mm(Sh, Sn, ShSn)
-            for l in range(M):
-                for j in range(3):
-                    drho[j] = n[p, g, 0] * Q[l, 0, j] + n[p, g, 1] * Q[l, 1, j] + n[p, g, 2] * Q[l, 2, j]
-                    for i in range(3):
-                        dn_l[i, j] = (Pn[i, 0] * Q[l, 0, j] + Pn[i, 1] * Q[l, 1, j] + Pn[i, 2] * Q[l, 2, j]) / rho_s
-                        dh_l[i, j] = D[p, g, l] * Ph[i, j] * inv_d
-                # d(h x (n x t)) = -S(M) dh - S(h) S(t) dn + S(h) S(n) dt
-                _mm(SM, dh_l, dhM)
-                _mm(ShSt, dn_l, tmp)
-                for i in range(3):
-                    for j in range(3):
-                        dhM[i, j] = -dhM[i, j] - tmp[i, j] + (ShSn[i, 0] * dT[l, 0, j] + ShSn[i, 1] * dT[l, 1, j]
-                                                              + ShSn[i, 2] * dT[l, 2, j])
-                dlh = D[p, g, l]
-                for k in range(M):
-                    Dk = D[p, g, k]
-                    if Dk == 0.0:
-                        continue
-                    for i in range(3):
-                        for j in range(3):
-                            dC = inv_d * (hM[i] * drho[j] + r_a * dhM[i, j]) - r_a * inv_d * inv_d * hM[i] * dlh * h[j]
-                            K[p, k, i, l, j] += Dk * dC
+                _couple_tangent(n, rho, D, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W)
 
 
 def friction_forces(c, ds, n, rho, active, dc_ds, cb, X, anchor, f, kN, kT, mu, jacobian: bool, D=None, d_ref=None):
