@@ -1,0 +1,116 @@
+"""One relaxation-free strain step of the periodic cell between two strains, from a stored
+state or from the result of an earlier call (docs/snap_through.md), with optional config
+overrides, and the figures that tell the branches apart.
+
+    python benchmarks/snap_step.py RUN FROM EPS_FROM EPS_TO OUT.npz [--set KEY=VALUE ...] [--reset]
+
+RUN: a run of configs/pipeline.yaml; FROM: a stored state (.nc) or an OUT.npz of an earlier
+call (its x and multipliers); ``--reset`` drops the stored multipliers (a changed n_gp
+cannot reuse them: the Uzawa loop rebuilds them from the penalty overlap). Prints CPU s,
+|F|, the potential (true overlaps; ``periodic_energy``), the face forces and the stack
+shapes of the end state; OUT.npz keeps x and the multipliers.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _harness import ROOT  # noqa: E402
+from snap_through import stack_shape  # noqa: E402
+
+
+def config(run, sets):
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.sweeps import load_run_config
+
+    spec = copy.deepcopy(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
+    spec.pop("sweep", None)
+    spec.pop("accuracy", None)
+    spec["overrides"] = list(spec.get("overrides", [])) + list(sets)
+    cfg = load_run_config(spec, "base")
+    return cfg, *fabric_and_mesh(cfg)
+
+
+def start(path):
+    from rve.homogenisation.checkpoint import load_state
+
+    if str(path).endswith(".npz"):
+        d = np.load(path)
+        return d["x"], (d["keys"], d["values"])
+    st = load_state(path)
+    return st.x, st.multipliers
+
+
+def report(cfg, fab, mesh, x, mult, eps, label=""):
+    from rve.homogenisation.checkpoint import State
+    from rve.homogenisation.periodic import cell_gradient, cell_reactions, periodic_energy, periodic_system
+    from rve.homogenisation.multipliers import seed_multipliers
+
+    e = periodic_energy(cfg, fab, mesh, x, "uniaxial", eps, mult)[0]
+    psys = periodic_system(cfg, fab, mesh, x, cell_gradient(fab, mesh, x))
+    seed_multipliers(psys, mult)
+    rf = cell_reactions(fab, psys, psys.restrict(np.asarray(x).reshape(-1)))
+    st = State(x=np.asarray(x).reshape(mesh.n_nodes, -1), w=None, origin=None, kind="strained", mode="uniaxial",
+               step=0, strain=eps)
+    sh = stack_shape(fab, mesh, st)
+    print(f"{label:40s} strain {eps:.5f}: energy {e:.6e} N mm, x+ x {rf['x+'][0]:.5f} N, y+ y {rf['y+'][1]:.5f} N, "
+          f"weft h/w {sh['weft'][0]:.3f}/{sh['weft'][1]:.3f}, warp h/w {sh['warp'][0]:.3f}/{sh['warp'][1]:.3f} mm")
+    return e
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("run")
+    ap.add_argument("start")
+    ap.add_argument("eps_from", type=float)
+    ap.add_argument("eps_to", type=float)
+    ap.add_argument("out")
+    ap.add_argument("--set", action="append", default=[])
+    ap.add_argument("--reset", action="store_true")
+    a = ap.parse_args()
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.periodic import periodic_strain_step
+
+    cfg, fab, mesh = config(a.run, a.set)
+    x0, m0 = start(a.start)
+    if a.reset:
+        m0 = None
+    c0, t0 = time.process_time(), time.perf_counter()
+    x, system, info = periodic_strain_step(cfg, fab, mesh, x0, None, "uniaxial", 1, eps_range=(a.eps_from, a.eps_to),
+                                           multipliers=m0)
+    cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+    rec = multiplier_record(system)
+    np.savez(a.out, x=x, keys=rec[0], values=rec[1], cpu=cpu, wall=wall, residual=info["residual_N"])
+    print(f"step {a.eps_from} -> {a.eps_to} from {a.start} ({' '.join(a.set) or 'run config'}"
+          f"{', multipliers reset' if a.reset else ''}): converged {info['converged']}, |F| {info['residual_N']:.2e} N, "
+          f"{cpu:.1f} CPU s, {wall:.1f} s wall")
+    x0r = np.asarray(x0).reshape(mesh.n_nodes, -1)
+    d = np.linalg.norm(np.asarray(x).reshape(mesh.n_nodes, -1)[:, :3] - x0r[:, :3], axis=1)
+    print(f"  largest node move from the start state {d.max():.4f} mm (the affine part {abs(a.eps_to - a.eps_from) * 4.2:.4f} mm at most)")
+    report(cfg, fab, mesh, x0, m0 if m0 is not None else start(a.start)[1], a.eps_from, "start")
+    report(cfg, fab, mesh, x, rec, a.eps_to, "end")
+
+
+if __name__ == "__main__":
+    main()
+
+
+def per_crossing(run, npz):
+    """Weft stack height / width at each of the four weft crossings of a snap_step result."""
+    from rve.homogenisation.checkpoint import State
+    from snap_through import sections
+
+    cfg, fab, mesh = config(run, [])
+    x = np.load(npz)["x"]
+    st = State(x=x.reshape(mesh.n_nodes, -1), w=None, origin=None, kind="strained", mode="uniaxial", step=0,
+               strain=0.0)
+    secs = sections(fab, mesh, st)
+    return {(y.name, i): (float(np.ptp(S[:, 1])), float(np.ptp(S[:, 0]))) for y in fab.yarns
+            if y.direction == "weft" for i, S in enumerate(secs[y.name])}
