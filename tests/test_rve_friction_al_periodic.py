@@ -147,6 +147,36 @@ def test_every_sub_increment_is_committed_once(monkeypatch):
     assert info["friction"]["dissipated"] > info["static"]["dissipated"] > 0
 
 
+@pytest.mark.parametrize("boundary", ["pinned", "periodic"])
+def test_uzawa_re_solves_take_the_predictor_in_rounds(boundary, monkeypatch):
+    """The first solve of a step refreezes the loads at every accepted iterate; the Uzawa
+    re-solves at updated multipliers (and raised P*) take the predictor in rounds of converged
+    minimisations at fixed loads (``fr.resolving``; the refreezing predictor diverges there on
+    the periodic weave, docs/contact.md "Friction with the augmented Lagrangian and the
+    periodic cell"), and the flag is cleared after the loop."""
+    import rve.solvers.frictional as frictional
+    from rve.homogenisation.strain import strain_step
+    from rve.solvers.system import friction_of
+
+    cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    modes = []
+    original = frictional._predictor
+
+    def spied(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, *args, **kw):
+        modes.append((bool(fr.resolving), bool(refreeze), int(max_rounds)))
+        return original(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, *args, **kw)
+
+    monkeypatch.setattr(frictional, "_predictor", spied)
+    x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    al = info["static"]["augmented_lagrangian"]
+    assert info["converged"] and al["met"] and al["updates"] >= 1
+    assert modes and modes[0] == (False, True, 4)
+    resolves = [m for m in modes if m[0]]
+    assert resolves and all(m == (True, False, frictional.RESOLVE_ROUNDS) for m in resolves)
+    assert friction_of(system).resolving is False
+
+
 def test_eps_t_is_the_configured_penalty_while_the_loop_raises_it():
     """The Uzawa loop's penalty increase changes the normal law's P*, not the friction law's
     tangential stiffness: the friction forces at a state are the same before and after a

@@ -32,6 +32,11 @@ record untouched, so the penalty path is bit-identical.
   sub-increment): a multiplier update moves the normal loads, not the load path, and a commit
   inside the loop would turn each update into a backward-Euler step of its own. With the
   penalty the single solve is committed the same way. An unconverged solve is not committed.
+  The re-solves (after the first update) run with ``fr.resolving`` set: ``frictional_solve``
+  then takes its predictor in rounds of converged minimisations at fixed loads
+  (``rve.solvers.frictional.RESOLVE_ROUNDS``) instead of refreezing the loads at every
+  accepted iterate, which diverges at the raised P* (docs/contact.md "Friction with the
+  augmented Lagrangian and the periodic cell").
 """
 from __future__ import annotations
 
@@ -73,16 +78,23 @@ def equilibrium(system, solve, x):
         return x, _commit(system, x, info)
     loop = AugmentedLagrangian(system)
     solves, iterations, walls = 0, [], []
-    while True:
-        t0 = time.perf_counter()
-        x, info = solve(x)
-        solves += 1
-        iterations.append(info.get("iterations"))
-        walls.append(time.perf_counter() - t0)
-        if not info.get("converged", False):
-            break
-        if loop.update(x) or loop.exhausted:
-            break
+    fr = friction_of(system)
+    try:
+        while True:
+            t0 = time.perf_counter()
+            x, info = solve(x)
+            solves += 1
+            iterations.append(info.get("iterations"))
+            walls.append(time.perf_counter() - t0)
+            if not info.get("converged", False):
+                break
+            if loop.update(x) or loop.exhausted:
+                break
+            if fr is not None:   # the re-solves: the frictional predictor in rounds (module docstring)
+                fr.resolving = True
+    finally:
+        if fr is not None:
+            fr.resolving = False
     loop.finish(x)
     pen = float(system.max_penetration(x))
     info = dict(info)

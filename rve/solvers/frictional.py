@@ -35,7 +35,16 @@ matrix to a symmetric factorisation).
      these ``eta`` first (each to ten times the next stage's tolerance), then the law
      (``eta = 0``) to ``predictor_rtol`` (default 1e-4) of the step's initial |F|.
      ``refreeze=False``: rounds of converged minimisations at fixed loads, refrozen between
-     rounds until the loads change by at most ``load_rtol`` (at most ``max_rounds``);
+     rounds until the loads change by at most ``load_rtol`` (at most ``max_rounds``, default
+     4). ``refreeze=None`` (default): False, with ``max_rounds`` default ``RESOLVE_ROUNDS`` (8), when
+     the friction is ``resolving`` (the re-solves of ``multipliers.equilibrium``'s Uzawa loop
+     at updated multipliers and raised P*), else True. Measured on the periodic 2 x 2 weave's
+     shear step (docs/contact.md "Friction with the augmented Lagrangian and the periodic
+     cell"): at a re-solve's start the normal loads jump with the raised P*, and refreezing
+     them at every accepted iterate makes the minimiser's merit jump at each refreeze and the
+     iterates oscillate (P* = 600: 922 iterations; 2400: |F| 0.09 -> 1.1 and no convergence),
+     where rounds take 114 + 3 and 116 + 5 iterations; the first solve of a step keeps the
+     refreezing (56 iterations there, rounds stall);
   2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
      the predictor's state (``static_solve``, line search on |F|; the linear solves on the
      LU companion of the run's PARDISO instance, checked by their residual, else
@@ -159,15 +168,24 @@ def _refreezer(fr):
     return on_accept
 
 
+#: predictor rounds per stage of an augmented-Lagrangian re-solve (``fr.resolving``; module docstring)
+RESOLVE_ROUNDS = 8
+
+
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
-                     refreeze: bool = True, predictor_rtol: float = 1e-4, retry_rtol: float = 1e-6,
-                     max_rounds: int = 4, load_rtol: float = 0.05, corrector_iter: int = 12,
+                     refreeze: Optional[bool] = None, predictor_rtol: float = 1e-4, retry_rtol: float = 1e-6,
+                     max_rounds: Optional[int] = None, load_rtol: float = 0.05, corrector_iter: int = 12,
                      freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None,
                      smoothing=(1.0,), predictor_iter: int = 150, direct_atol: Optional[float] = None):
     """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
     fr = friction_of(system)
     if fr is None:
         raise ValueError("frictional_solve: the system has no friction")
+    resolve = refreeze is None and bool(getattr(fr, "resolving", False))
+    if refreeze is None:   # an augmented-Lagrangian re-solve: rounds (module docstring)
+        refreeze = not resolve
+    if max_rounds is None:
+        max_rounds = RESOLVE_ROUNDS if resolve else 4
     x = np.array(x, float, copy=True)
     system.rebuild(x)
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])

@@ -152,6 +152,7 @@ def row_groups(keys) -> np.ndarray:
 
 class FrictionTerm:
     name = "friction"
+    resolving = False
 
     def __init__(self, contact, law: FrictionLaw):
         self.contact, self.law = contact, law
@@ -183,6 +184,9 @@ class FrictionTerm:
         self.smoothing = 0.0
         #: ``(frozen loads, pairs, inputs)`` of the last ``_frozen_inputs`` call
         self._frozen_cache = None
+        #: True while ``multipliers.equilibrium`` re-solves the step at updated multipliers:
+        #: ``frictional_solve`` then takes its predictor in rounds (``RESOLVE_ROUNDS``)
+        self.resolving = False
 
     # ------------------------------------------------------------------ set-up
     def set_families(self, labels) -> None:
