@@ -277,8 +277,10 @@ def _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stic
     for i in range(3):
         for j in range(3):
             Pn[i, j] = (1.0 if i == j else 0.0) - n[p, g, i] * n[p, g, j]
-            Ph[i, j] = (1.0 if i == j else 0.0) - h[i] * h[j]
     if turn:
+        for i in range(3):
+            for j in range(3):
+                Ph[i, j] = (1.0 if i == j else 0.0) - h[i] * h[j]
         _mm(J, Ph, Jd)
         for i in range(3):
             for j in range(3):

@@ -122,14 +122,7 @@ def match_rows(keys_to, keys_from) -> np.ndarray:
     out = np.full(keys_to.shape[0], -1, np.int64)
     if keys_to.shape[0] == 0 or keys_from.shape[0] == 0:
         return out
-    both = np.concatenate([keys_from, keys_to])
-    # equal rows by a lexicographic sort of the columns (np.unique(axis=0) compares rows as
-    # opaque bytes, ~20x slower on the weave's maps)
-    order = np.lexsort(both.T[::-1])
-    srt = both[order]
-    first = np.r_[True, (srt[1:] != srt[:-1]).any(axis=1)]
-    inv = np.empty(both.shape[0], np.int64)
-    inv[order] = np.cumsum(first) - 1
+    inv = row_groups(np.concatenate([keys_from, keys_to]))
     owner = np.full(inv.max() + 1, -1, np.int64)
     owner[inv[:keys_from.shape[0]]] = np.arange(keys_from.shape[0])
     return owner[inv[keys_from.shape[0]:]]
@@ -138,7 +131,8 @@ def match_rows(keys_to, keys_from) -> np.ndarray:
 def row_groups(keys) -> np.ndarray:
     """The group index (n,) of every row of ``keys`` (n, k): equal rows, equal index (the
     indices of ``np.unique(keys, axis=0, return_inverse=True)``, by a lexicographic sort of
-    the columns as in ``match_rows``)."""
+    the columns: ``np.unique(axis=0)`` compares rows as opaque bytes, ~20x slower on the
+    weave's maps)."""
     keys = np.asarray(keys, np.int64)
     if keys.shape[0] == 0:
         return np.zeros(0, np.int64)
@@ -152,7 +146,6 @@ def row_groups(keys) -> np.ndarray:
 
 class FrictionTerm:
     name = "friction"
-    resolving = False
 
     def __init__(self, contact, law: FrictionLaw):
         self.contact, self.law = contact, law
