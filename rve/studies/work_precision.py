@@ -12,10 +12,13 @@ of their jobs; a lever whose override key the config does not know is skipped by
 
 For every run (a combination of a lever run, the default run) and every table quantity
 (``rve.studies.table_convergence.QUANTITIES``) the error against the reference on the
-**range measure** (``range_error``: |q - q_ref| over the reference's range over the strain
-path at that label and mode, floored at ``RANGE_FLOOR`` x the quantity's scale) and, for
-comparison, on the magnitude measure (``relative_error``), max over labels, modes and
-strains (and per mode); the **work** = summed CPU seconds of the combination's jobs (wall
+**stated measure** ``STATED_MEASURE``, the **magnitude measure** (``relative_error``:
+|q - q_ref| over the largest |q_ref| of that label and mode along the strain path, so a
+label that crosses zero is divided by its largest value, not by its value there), and, for
+comparison, on the range measure (``range_error``: over the reference's range over the
+strain path, floored at ``RANGE_FLOOR`` x the quantity's scale; it divides a nearly
+constant label, a sheet resistance or a transverse force, by its few per cent of
+variation), max over labels, modes and strains (and per mode); the **work** = summed CPU seconds of the combination's jobs (wall
 seconds and the largest job's peak RSS beside it). The **Pareto front** is over (CPU time,
 worst target ratio = max over quantities of error / ``TARGETS``): the runs no other run
 beats in both.
@@ -23,7 +26,8 @@ beats in both.
 Contract
 --------
 * ``run_errors(run_ds, reference_ds)`` -> {"range": {q: e}, "magnitude": {q: e},
-  "range_by_mode": {q: {mode: e}}} (tables aligned on their common modes and strains);
+  "range_by_mode": {q: {mode: e}}, "magnitude_by_mode": {q: {mode: e}}} (tables aligned on
+  their common modes and strains); ``stated(errors)`` its ``STATED_MEASURE`` part;
 * ``pareto_front(points)`` -> indices of the non-dominated (cpu, error) points;
 * ``work_precision_job(reference, default, levers, costs, skipped, outputs, log_path,
   names)`` writes ``md`` (the table), ``csv`` (every run and quantity), ``png`` (error vs
@@ -46,15 +50,18 @@ from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
 from ..io.provenance import logging_to
 from .table_convergence import NEGLIGIBLE, QUANTITIES, RANGE_FLOOR, relative_errors, summarize_by_mode
 
-__all__ = ["TARGETS", "not_comparable", "run_errors", "worst_ratio", "missing_targets", "target_misses", "pareto_front",
-           "front_of", "study_points", "work_precision_report", "work_precision_job"]
+__all__ = ["STATED_MEASURE", "TARGETS", "not_comparable", "run_errors", "stated", "worst_ratio", "missing_targets",
+           "target_misses", "pareto_front", "front_of", "study_points", "work_precision_report", "work_precision_job"]
 
 log = logging.getLogger("rve.studies.work_precision")
 
 PathLike = Union[str, os.PathLike]
 
+#: the measure of the stated errors and the targets (module docstring)
+STATED_MEASURE = "magnitude"
+
 #: the accuracy asked of the default table against the reference (max over strains, labels and
-#: modes, range measure): forces and Joule rise 2 %, probe resistances 1 %, R_c 2 %, R_y 0.5 %
+#: modes, the stated measure): forces and Joule rise 2 %, probe resistances 1 %, R_c 2 %, R_y 0.5 %
 TARGETS = {"reaction_force": 0.02, "membrane_force": 0.02, "probe_resistance": 0.01, "temperature_rise_max": 0.02,
            "contact_resistance": 0.02, "yarn_resistance": 0.005}
 
@@ -98,15 +105,21 @@ def run_errors(run_ds, reference_ds) -> dict:
                     join="inner")
     ds = xr.concat([a, b], dim=xr.DataArray([_RUN, _REF], dims=_DIM, name=_DIM))
     rows = relative_errors(ds, _REF, _DIM)
-    out: dict = {"range": {}, "magnitude": {}, "range_by_mode": {}, "not_compared": skip}
+    out: dict = {"range": {}, "magnitude": {}, "range_by_mode": {}, "magnitude_by_mode": {}, "not_compared": skip}
     for r in rows:
         for key, col in (("range", "range_error"), ("magnitude", "relative_error")):
             e = r[col]
             if np.isfinite(e):
                 out[key][r["quantity"]] = max(out[key].get(r["quantity"], 0.0), e)
-    for q, modes in summarize_by_mode(rows, _DIM, "range_error").items():
-        out["range_by_mode"][q] = {m: v[_RUN]["max"] for m, v in modes.items() if _RUN in v}
+    for key, col in (("range_by_mode", "range_error"), ("magnitude_by_mode", "relative_error")):
+        for q, modes in summarize_by_mode(rows, _DIM, col).items():
+            out[key][q] = {m: v[_RUN]["max"] for m, v in modes.items() if _RUN in v}
     return out
+
+
+def stated(errors: Mapping, by_mode: bool = False) -> dict:
+    """The ``STATED_MEASURE`` part of ``run_errors``' result (per mode with ``by_mode``)."""
+    return errors.get(f"{STATED_MEASURE}_by_mode" if by_mode else STATED_MEASURE) or {}
 
 
 def worst_ratio(errors: Mapping[str, float]) -> float:
@@ -120,12 +133,12 @@ def missing_targets(errors: Mapping) -> list:
     comparable, or NaN in the run): a run with any is not a candidate for the default, its
     worst ratio omits them."""
     skip = errors.get("not_compared") or {}
-    return [q for q in TARGETS if q not in errors["range"] and skip.get(q) != "not in the reference table"]
+    return [q for q in TARGETS if q not in stated(errors) and skip.get(q) != "not in the reference table"]
 
 
 def target_misses(errors: Mapping) -> dict:
     """{quantity: (error, target)} of the compared quantities above their target."""
-    return {q: (e, TARGETS[q]) for q, e in errors["range"].items() if q in TARGETS and e > TARGETS[q]}
+    return {q: (e, TARGETS[q]) for q, e in stated(errors).items() if q in TARGETS and e > TARGETS[q]}
 
 
 def pareto_front(points: Sequence[tuple]) -> list:
@@ -164,7 +177,7 @@ def study_points(reference, default, levers: Mapping, costs: Mapping) -> list[di
             combo = "__".join(f"{k}-{format(v, '.12g') if isinstance(v, float) else v}" for k, v in params.items()) \
                 or "base"
             missing = missing_targets(errs)
-            ratio = worst_ratio(errs["range"])
+            ratio = worst_ratio(stated(errs))
             out.append({"lever": lever, "run": run, "combo": combo, "label": _combo_value(params), "errors": errs,
                         "cost": (costs.get(run) or {}).get(combo, {}), "worst_ratio": ratio, "missing": missing,
                         "meets": bool(not missing and np.isfinite(ratio) and ratio <= 1.0)})
@@ -180,16 +193,16 @@ def front_of(points: Sequence[Mapping]) -> list:
 
 
 def work_precision_report(points: Sequence[Mapping], skipped: Mapping[str, str], names: Mapping) -> str:
-    """Markdown: every run's error on the range measure (magnitude measure in brackets), its
+    """Markdown: every run's error on the stated measure (the range measure in brackets), its
     CPU time, the front, the runs that meet every target, what the default misses, the
     quantities not compared and the skipped levers."""
-    qs = [q for q in QUANTITIES if any(q in p["errors"]["range"] for p in points)]
+    qs = [q for q in QUANTITIES if any(q in stated(p["errors"]) for p in points)]
     front = set(front_of(points))
     out = [f"# Work-precision study {names.get('study', '')} (rve.studies.work_precision)", "",
            f"Reference: run {names.get('reference')}. Error = max over labels, modes and strains of |q - q_ref| / "
-           f"max(range of q_ref over the strain path, {RANGE_FLOOR:g} x the quantity's scale) (range measure; the "
-           f"magnitude measure, / max |q_ref| of the label, in brackets); labels below {NEGLIGIBLE:g} of the "
-           "quantity's scale left out. Work = summed CPU time of the run's jobs. Front: among the runs compared on "
+           "max |q_ref| of the label and mode over the strain path (the magnitude measure, stated; the range "
+           f"measure, / max(range of q_ref over the path, {RANGE_FLOOR:g} x the quantity's scale), in brackets); "
+           f"labels below {NEGLIGIBLE:g} of the quantity's scale left out. Work = summed CPU time of the run's jobs. Front: among the runs compared on "
            "every targeted quantity the reference has, no other run is both cheaper and more accurate (worst error "
            "/ target over the quantities). meets: every such quantity within its target.", "",
            "| lever | run | CPU s | wall s | peak RSS MB | " + " | ".join(QUANTITIES[q] for q in qs)
@@ -197,15 +210,15 @@ def work_precision_report(points: Sequence[Mapping], skipped: Mapping[str, str],
            "|" + "---|" * (len(qs) + 8)]
     for i, p in enumerate(points):
         c = p["cost"]
-        cells = [f"{100 * p['errors']['range'][q]:.3g} % ({100 * p['errors']['magnitude'].get(q, np.nan):.3g} %)"
-                 if q in p["errors"]["range"] else "n/a" for q in qs]
+        cells = [f"{100 * p['errors']['magnitude'][q]:.3g} % ({100 * p['errors']['range'].get(q, np.nan):.3g} %)"
+                 if q in p["errors"]["magnitude"] else "n/a" for q in qs]
         meets = "yes" if p["meets"] else ("incomplete" if p["missing"] else "no")
         out.append(f"| {p['lever']} | {p['label']} | {c.get('cpu_s', np.nan):.1f} | {c.get('wall_s', np.nan):.1f} | "
                    f"{c.get('max_rss_mb', np.nan):.0f} | " + " | ".join(cells)
                    + f" | {p['worst_ratio']:.3g} | {'yes' if i in front else ''} | {meets} |")
-    out += ["", "Per mode (range measure, max over labels and strains):", ""]
+    out += ["", "Per mode (magnitude measure, max over labels and strains):", ""]
     for p in points:
-        by = p["errors"].get("range_by_mode") or {}
+        by = stated(p["errors"], by_mode=True)
         cells = "; ".join(f"{QUANTITIES[q]} " + ", ".join(f"{m} {100 * e:.3g} %" for m, e in sorted(by[q].items()))
                           for q in qs if q in by)
         out.append(f"* {p['lever']} {p['label']}: {cells}")
@@ -260,7 +273,7 @@ def _plot(path, points):
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("work: summed job CPU time of the run [s]")
-    ax.set_ylabel("worst error / target over the quantities (range measure)")
+    ax.set_ylabel("worst error / target over the quantities (magnitude measure)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
     ax.set_title("work-precision against the common reference", fontsize=10)
@@ -283,23 +296,23 @@ def _csv(points) -> str:
 
 def accuracy_record(points, names: Mapping, default_config: Mapping, skipped: Mapping) -> dict:
     """The accuracy file of the default run (``rve.tables.accuracy``, ``method:
-    work_precision``): its error against the reference on the range measure, per quantity
-    and per mode, and every run's figures."""
+    work_precision``): its error against the reference on the stated measure, per quantity
+    and per mode (the range measure beside it), and every run's figures."""
     dp = next((p for p in points if p["lever"] == "default"), None)
-    stated = dict(dp["errors"]["range"]) if dp else {}
-    by_mode = {q: {m: {"max": e} for m, e in modes.items()} for q, modes in (dp["errors"]["range_by_mode"]
+    errs = stated(dp["errors"]) if dp else {}
+    by_mode = {q: {m: {"max": e} for m, e in modes.items()} for q, modes in (stated(dp["errors"], by_mode=True)
                                                                               if dp else {}).items()}
     ref = names.get("reference")
-    return {"method": "work_precision", "measure": "range", "range_floor": RANGE_FLOOR,
+    return {"method": "work_precision", "measure": STATED_MEASURE, "range_floor": RANGE_FLOOR,
             "negligible_fraction": NEGLIGIBLE, "targets": TARGETS, "default": dict(default_config),
             "reference": ref, "study": names.get("study"),
-            "stated_relative_error": stated, "stated_relative_error_by_mode": by_mode,
-            "magnitude_relative_error": dict(dp["errors"]["magnitude"]) if dp else {},
-            "meets_targets": {q: bool(e <= TARGETS.get(q, np.inf)) for q, e in stated.items()},
+            "stated_relative_error": errs, "stated_relative_error_by_mode": by_mode,
+            "range_relative_error": dict(dp["errors"]["range"]) if dp else {},
+            "meets_targets": {q: bool(e <= TARGETS.get(q, np.inf)) for q, e in errs.items()},
             "not_measured": dict(dp["errors"].get("not_compared") or {}) if dp else {},
             "front": [f"{points[i]['lever']}: {points[i]['combo']}" for i in front_of(points)],
             # the layout of a convergence study's file (read_accuracy): the whole error in "mesh"
-            "mesh": {"reference": ref, "estimated_relative_error": stated, "stated_relative_error": stated,
+            "mesh": {"reference": ref, "estimated_relative_error": errs, "stated_relative_error": errs,
                      "by_mode": by_mode},
             "penalty": {"reference": ref, "estimated_relative_error": {}},
             "skipped_levers": dict(skipped),

@@ -153,7 +153,7 @@ def _same_default(accuracy: dict, ds: xr.Dataset, mesh_elements: int, contact_pe
 def _annotate_work_precision(ds: xr.Dataset, accuracy: dict, mesh_elements: int, contact_penalty: float,
                              source: str) -> list:
     """A work-precision study's file (``method: work_precision``): ``stated_relative_error``
-    (the default run against the study's one reference, range measure) as
+    (the default run against the study's one reference, on the file's ``measure``) as
     ``estimated_relative_error`` and ``stated_relative_error_by_mode`` as
     ``estimated_relative_error_<mode>``; no mesh / penalty split (the reference differs in
     every lever at once)."""
