@@ -177,6 +177,74 @@ def test_uzawa_re_solves_take_the_predictor_in_rounds(boundary, monkeypatch):
     assert friction_of(system).resolving is False
 
 
+@pytest.mark.parametrize("boundary", ["pinned", "periodic"])
+def test_re_solves_from_the_held_loads_with_blended_rounds_find_the_unmodified_root(boundary, monkeypatch):
+    """The re-solves' first round frozen at the last converged solve's loads and the later
+    rounds' normal forces blended with the round before (``RESOLVE_HELD``, ``RESOLVE_BLEND``)
+    reach the equilibrium the unmodified rounds reach (round 1 at the committed loads, the
+    loads at the round's start alone): both exact roots at the same multipliers, the same
+    state, the same dissipation."""
+    import rve.solvers.frictional as frictional
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import strain_step
+    from rve.model.terms.friction import FrictionTerm
+
+    cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    held = []
+    original = FrictionTerm.freeze_held
+
+    def spied(term):
+        held.append(original(term))
+        return held[-1]
+
+    monkeypatch.setattr(FrictionTerm, "freeze_held", spied)
+    runs = {}
+    for name, h, b in (("new", True, 0.5), ("unmodified", False, 1.0)):
+        monkeypatch.setattr(frictional, "RESOLVE_HELD", h)
+        monkeypatch.setattr(frictional, "RESOLVE_BLEND", b)
+        x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+        assert info["converged"] and info["static"]["augmented_lagrangian"]["met"]
+        lam = multiplier_record(system)
+        assert _fresh_residual(cfg, fab, mesh, x, lam, fr0) <= ATOL
+        runs[name] = (np.asarray(x, float).reshape(-1), info["static"]["dissipated"])
+    assert held and all(held)          # the new path froze the kept loads at every re-solve
+    (xn, dn), (xu, du) = runs["new"], runs["unmodified"]
+    assert np.abs(xn - xu).max() <= 1e-6 * np.abs(xu).max()
+    assert dn == pytest.approx(du, rel=1e-5)
+
+
+def test_held_loads_freeze_by_key_and_blend_as_the_mean():
+    """``hold_loads(x)`` then ``freeze_held()`` freezes the loads ``loads_at(x)`` (after a
+    rebuild at the same state, by point key); ``blend_frozen`` with weight 1/2 gives the mean
+    of the frozen normal forces and the given ones, point by point."""
+    from rve.homogenisation.multipliers import seed_multipliers
+    from rve.homogenisation.strain import mech_system, seed_friction
+    from rve.solvers.system import friction_of
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    xf = np.asarray(x0, float).reshape(-1)
+    system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf)
+    seed_multipliers(system, lam0)
+    seed_friction(system, fr0, xf)
+    fr = friction_of(system)
+    assert fr.freeze_held() is False and not fr.frozen
+    fr.hold_loads(xf)
+    want = fr.loads_at(xf)
+    system.rebuild(xf + 1e-9)
+    assert fr.freeze_held() and fr.frozen
+    got = fr.frozen_loads()
+    assert np.any(want["f0"] > 0)
+    for k in ("f0", "n0", "s_bar", "anchor"):
+        np.testing.assert_allclose(got[k], want[k], rtol=0, atol=1e-12)
+    other = np.linspace(0.0, 1.0, got["f0"].size)
+    fr.blend_frozen(np.array(fr.keys), other, 0.5)
+    np.testing.assert_allclose(fr.frozen_loads()["f0"].reshape(-1), 0.5 * (got["f0"].reshape(-1) + other),
+                               rtol=1e-14, atol=0)
+    fr.unfreeze()
+
+
 def test_eps_t_is_the_configured_penalty_while_the_loop_raises_it():
     """The Uzawa loop's penalty increase changes the normal law's P*, not the friction law's
     tangential stiffness: the friction forces at a state are the same before and after a

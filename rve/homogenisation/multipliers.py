@@ -35,8 +35,10 @@ record untouched, so the penalty path is bit-identical.
   The re-solves (after the first update) run with ``fr.resolving`` set: ``frictional_solve``
   then takes its predictor in rounds of converged minimisations at fixed loads
   (``rve.solvers.frictional.RESOLVE_ROUNDS``) instead of refreezing the loads at every
-  accepted iterate, which diverges at the raised P* (docs/contact.md "Friction with the
-  augmented Lagrangian and the periodic cell").
+  accepted iterate, which diverges at the raised P*, the first round at the loads of the
+  previous converged solve (kept by ``frictional_solve`` before the update, ``FrictionTerm.
+  hold_loads``; docs/contact.md "Friction with the augmented Lagrangian and the periodic
+  cell").
 """
 from __future__ import annotations
 

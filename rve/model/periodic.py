@@ -186,6 +186,9 @@ class ReducedFriction:
     def loads_at(self, x) -> dict:
         return self._term.loads_at(self._full(x))
 
+    def hold_loads(self, x) -> None:
+        self._term.hold_loads(self._full(x))
+
     def state(self, x, sel=None):
         return self._term.state(self._full(x), sel)
 

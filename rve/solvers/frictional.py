@@ -44,7 +44,14 @@ matrix to a symmetric factorisation).
      them at every accepted iterate makes the minimiser's merit jump at each refreeze and the
      iterates oscillate (P* = 600: 922 iterations; 2400: |F| 0.09 -> 1.1 and no convergence),
      where rounds take 114 + 3 and 116 + 5 iterations; the first solve of a step keeps the
-     refreezing (56 iterations there, rounds stall);
+     refreezing (56 iterations there, rounds stall). A re-solve's first round freezes the
+     loads of the last converged solve, before the multiplier update (``RESOLVE_HELD``:
+     ``FrictionTerm.hold_loads`` at the end of every converged solve of an augmented system,
+     ``freeze_held``; those at the re-solve's start have jumped with the updated multipliers),
+     and every later round freezes normal forces halfway between those at its start and the
+     round before's (``RESOLVE_BLEND`` = 0.5, by point key): the loads of plain rounds settle
+     into a two-set cycle (load change 13 % or 58 % round after round, |F| ~1e-3 N) that the
+     mean breaks;
   2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
      the predictor's state (``static_solve``, line search on |F|; the linear solves on the
      LU companion of the run's PARDISO instance, checked by their residual, else
@@ -171,6 +178,12 @@ def _refreezer(fr):
 #: predictor rounds per stage of an augmented-Lagrangian re-solve (``fr.resolving``; module docstring)
 RESOLVE_ROUNDS = 8
 
+#: a re-solve's first round freezes the loads of the last converged solve (``hold_loads``)
+RESOLVE_HELD = True
+#: weight of the loads at the round's start in a re-solve round's frozen normal forces, the
+#: rest the last round's (1: the loads at the start alone)
+RESOLVE_BLEND = 0.5
+
 
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
                      refreeze: Optional[bool] = None, predictor_rtol: float = 1e-4, retry_rtol: float = 1e-6,
@@ -186,6 +199,18 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         refreeze = not resolve
     if max_rounds is None:
         max_rounds = RESOLVE_ROUNDS if resolve else 4
+    xs, out = _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds,
+                     load_rtol, corrector_iter, freeze, fallback, step_cap, backend, smoothing, predictor_iter,
+                     direct_atol, resolve)
+    if getattr(system, "augmented", False) and hasattr(fr, "hold_loads"):
+        # the loads the next re-solve of the Uzawa loop freezes first (module docstring)
+        fr.hold_loads(xs if out.converged else None)
+    return xs, out
+
+
+def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds, load_rtol,
+           corrector_iter, freeze, fallback, step_cap, backend, smoothing, predictor_iter, direct_atol, resolve):
+    """``frictional_solve`` once the re-solve is told apart (module docstring)."""
     x = np.array(x, float, copy=True)
     system.rebuild(x)
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
@@ -198,7 +223,8 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
             return xs, out
         if np.isfinite(nres.residuals[-1]) and nres.residuals[-1] < nres.residuals[0]:
             x = xs
-    first = fr._committed_loads is not None and freeze == "committed"
+    first = "held" if resolve and RESOLVE_HELD else \
+        ("committed" if fr._committed_loads is not None and freeze == "committed" else None)
     for ptol in (predictor_rtol, retry_rtol):
         # the retry goes on from the corrector's start with the law itself
         etas = (tuple(float(v) for v in smoothing if v > 0) if ptol == predictor_rtol else ()) + (0.0,)
@@ -208,9 +234,9 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
             # corner makes the trust region crawl, while Newton converges from far less close
             its = min(max_iter, predictor_iter) if ptol == predictor_rtol else max_iter
             x = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, its, refreeze,
-                           max_rounds, load_rtol, first, step_cap, backend, eta)
-            first = False
-        first = False
+                           max_rounds, load_rtol, first, step_cap, backend, eta, RESOLVE_BLEND if resolve else 1.0)
+            first = None
+        first = None
         xs, nres = _corrector(system, x, t, out, atol, rtol, corrector_iter, backend)
         if nres.converged:
             out.u, out.converged, out.method = nres.u, True, "potential predictor + newton"
@@ -224,20 +250,29 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend)
 
 
-def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, committed, step_cap,
-               backend, eta=0.0):
-    """The predictor rounds from ``x`` (module docstring); returns the last round's state."""
+def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, start, step_cap,
+               backend, eta=0.0, blend=1.0):
+    """The predictor rounds from ``x`` (module docstring); returns the last round's state.
+    ``start``: round 1's loads, "committed", "held" (``freeze_held``, where kept) or None (at
+    ``x``); ``blend`` < 1: a later round's normal forces ``blend`` f(x) + (1 - blend) those of
+    the round before, by point key."""
     from .minimize import minimize_energy
 
     for k in range(1 if refreeze else max_rounds):
         t0 = time.perf_counter()
-        fr.freeze(None if (k == 0 and committed) else x)
+        if not (k == 0 and start == "held" and fr.freeze_held()):
+            fr.freeze(None if (k == 0 and start == "committed") else x)
+        if k and blend < 1.0:
+            # the rounds' loads cycle between two sets where a point flips (contact, slip):
+            # the mean of the two breaks the cycle
+            fr.blend_frozen(prev[0], prev[1], blend)
         fr.smoothing = eta
         try:
             xs, _, mres = minimize_energy(system, x, t, atol=ptol, rtol=rtol, max_iter=max_iter, sigma0=0.0,
                                           backtrack=3, step_cap=step_cap, label=f"friction predictor {out.rounds + 1}",
                                           backend=backend, on_accept=_refreezer(fr) if refreeze else None)
             change = _load_change(fr, xs)
+            prev = (np.array(fr.keys, copy=True), fr.frozen_loads()["f0"].reshape(-1))
         finally:
             fr.unfreeze()
         out.rounds += 1

@@ -54,7 +54,9 @@ of the convex incremental potential ``sum psi(e0)`` (``rve.physics.friction_form
 frozen_potential``) on every pair with a frozen load (also pairs not in contact now, so the
 potential and its gradient are smooth in x), ``potential(x)`` its value (added to the
 contact term's ``energy``), and a map rebuild carries the frozen loads by point key (a new
-point: no load). ``frozen`` says whether loads are frozen; ``smoothing`` (eta >= 0, set by
+point: no load). ``hold_loads(x)`` keeps the loads at ``x`` by point key and ``freeze_held()`` freezes them
+later, on the map of then (the augmented Lagrangian's re-solves: the loads of the last
+converged solve, before the multiplier update); ``frozen`` says whether loads are frozen; ``smoothing`` (eta >= 0, set by
 the solver, reset by ``unfreeze``) rounds the corner of the cone in that potential.
 """
 from __future__ import annotations
@@ -180,6 +182,9 @@ class FrictionTerm:
         #: True while ``multipliers.equilibrium`` re-solves the step at updated multipliers:
         #: ``frictional_solve`` then takes its predictor in rounds (``RESOLVE_ROUNDS``)
         self.resolving = False
+        #: ``(keys, loads)``: the loads (``loads_at``) of the last converged solve of the Uzawa
+        #: loop by point key (``hold_loads``), or None
+        self._held_loads = None
 
     # ------------------------------------------------------------------ set-up
     def set_families(self, labels) -> None:
@@ -537,6 +542,29 @@ class FrictionTerm:
             anchor[sel] = a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
         return {"f0": f0, "n0": n0, "s_plus": np.array(self._s_plus(np.arange(P)), float),
                 "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref, "Jd": Jd, "Dw": Dw}
+
+    def hold_loads(self, x) -> None:
+        """Keep the loads at ``x`` (``loads_at``: at the current multipliers and P*) by point
+        key for ``freeze_held``; None drops them."""
+        self._held_loads = None if x is None else (self.keys.copy(), self.loads_at(x))
+
+    def freeze_held(self) -> bool:
+        """Freeze the loads kept by ``hold_loads`` (carried to the current map by point key;
+        a point not among them: no load); False, nothing frozen, when none are kept."""
+        if self._held_loads is None:
+            return False
+        keys, loads = self._held_loads
+        self._frozen = self._loads_by_key(keys, loads)
+        return True
+
+    def blend_frozen(self, keys, f0, weight: float) -> None:
+        """The frozen normal forces ``weight f0_frozen + (1 - weight) f0`` where ``keys`` (n, 6)
+        has the point (``f0`` (n,) by point; the other points keep theirs)."""
+        idx = match_rows(self.keys, keys)
+        hit = idx >= 0
+        f = self._frozen["f0"].reshape(-1).copy()
+        f[hit] = weight * f[hit] + (1.0 - weight) * np.asarray(f0, float)[idx[hit]]
+        self._frozen = dict(self._frozen, f0=f.reshape(self._frozen["f0"].shape))
 
     def unfreeze(self) -> None:
         """Back to the exact law (the frozen loads dropped, no smoothing)."""
