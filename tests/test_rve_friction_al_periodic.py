@@ -180,8 +180,8 @@ def test_uzawa_re_solves_take_the_predictor_in_rounds(boundary, monkeypatch):
 @pytest.mark.parametrize("boundary", ["pinned", "periodic"])
 def test_re_solves_from_the_held_loads_with_blended_rounds_find_the_unmodified_root(boundary, monkeypatch):
     """The re-solves' first round frozen at the last converged solve's loads and the later
-    rounds' normal forces blended with the round before (``RESOLVE_HELD``, ``RESOLVE_BLEND``)
-    reach the equilibrium the unmodified rounds reach (round 1 at the committed loads, the
+    rounds' normal forces blended with the previous round's (``RESOLVE_HELD``, ``RESOLVE_BLEND``)
+    reach the equilibrium the unmodified rounds reach (the first round at the committed loads, the
     loads at the round's start alone): both exact roots at the same multipliers, the same
     state, the same dissipation."""
     import rve.solvers.frictional as frictional

@@ -253,9 +253,9 @@ def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, ret
 def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, start, step_cap,
                backend, eta=0.0, blend=1.0):
     """The predictor rounds from ``x`` (module docstring); returns the last round's state.
-    ``start``: round 1's loads, "committed", "held" (``freeze_held``, where kept) or None (at
+    ``start``: the first round's loads, "committed", "held" (``freeze_held``, where kept) or None (at
     ``x``); ``blend`` < 1: a later round's normal forces ``blend`` f(x) + (1 - blend) those of
-    the round before, by point key."""
+    the previous round, by point key."""
     from .minimize import minimize_energy
 
     for k in range(1 if refreeze else max_rounds):
