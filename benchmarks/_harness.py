@@ -19,6 +19,11 @@ Contract
   ``median_time(fn, repeats) -> (median seconds, last result)`` inside one process;
   ``rss_mib()`` the peak RSS of this process.
 * ``write_json(path, obj)``: the records, numbers as floats.
+* ``pipeline_spec(run, overrides=()) -> dict``: a copy of the run spec ``run`` of
+  configs/pipeline.yaml without its ``sweep`` and ``accuracy``, ``overrides`` appended (one
+  combination, the spec the job functions of ``rve.homogenisation.jobs`` take).
+* ``relaxed_state(spec, combo, directory) -> Path``: ``directory/relaxed.nc`` of the spec's
+  combination (``fabric_job`` and ``relax_job`` of the pipeline), built once.
 
 The machine (2 cores) is usually shared: compare ratios within one invocation, not across.
 """
@@ -38,7 +43,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 __all__ = ["ROOT", "Run", "worker_env", "run_process", "run_json", "interleave", "median", "peak", "median_time",
-           "rss_mib", "write_json"]
+           "rss_mib", "write_json", "pipeline_spec", "relaxed_state"]
 
 ROOT = Path(__file__).resolve().parents[1]
 _ONE_THREAD = ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
@@ -129,3 +134,31 @@ def rss_mib() -> float:
 
 def write_json(path, obj) -> None:
     Path(path).write_text(json.dumps(obj, indent=1, default=float))
+
+
+def pipeline_spec(run: str, overrides=()) -> dict:
+    """One combination's spec of a configs/pipeline.yaml run (module docstring)."""
+    import copy
+
+    import yaml
+
+    spec = copy.deepcopy(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
+    spec.pop("sweep", None)
+    spec.pop("accuracy", None)
+    spec["overrides"] = list(spec.get("overrides") or []) + list(overrides)
+    return spec
+
+
+def relaxed_state(spec: Mapping, combo: str, directory) -> Path:
+    """The relaxed state of ``spec``'s ``combo`` under ``directory`` (module docstring)."""
+    from rve.homogenisation.jobs import fabric_job, relax_job
+
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    out = d / "relaxed.nc"
+    if not out.exists():
+        c0 = time.process_time()
+        fabric_job(d / "initial.nc", d / "fabric.log", spec, combo)
+        relax_job(d / "initial.nc", out, d / "relax.log", spec, combo)
+        print(f"relaxed {d.name}: {time.process_time() - c0:.1f} s CPU -> {out}", file=sys.stderr, flush=True)
+    return out

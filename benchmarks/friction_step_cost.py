@@ -35,32 +35,16 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import ROOT, interleave, median, peak, run_json, worker_env  # noqa: E402
+from _harness import (interleave, median, peak, pipeline_spec, relaxed_state, run_json,  # noqa: E402
+                      worker_env)
 
 
 def _spec(run: str, mu: float, extra=()) -> dict:
-    spec = dict(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
+    spec = pipeline_spec(run, extra)
     spec["sweep"] = {"friction_coefficient": [0.0, float(mu)]}
-    if extra:
-        spec["overrides"] = [*(spec.get("overrides") or []), *extra]
     return spec
-
-
-def _relaxed(spec: dict, combo: str, work: Path) -> Path:
-    from rve.homogenisation.jobs import fabric_job, relax_job
-
-    d = work / combo
-    d.mkdir(parents=True, exist_ok=True)
-    out = d / "relaxed.nc"
-    if not out.exists():
-        fabric_job(d / "initial.nc", d / "fabric.log", spec, combo)
-        t0 = time.process_time()
-        relax_job(d / "initial.nc", out, d / "relax.log", spec, combo)
-        print(f"relaxed {combo}: {time.process_time() - t0:.1f} s CPU -> {out}", file=sys.stderr, flush=True)
-    return out
 
 
 def pad_director_blocks() -> None:
@@ -164,7 +148,7 @@ def main():
     from rve.homogenisation.sweeps import combo_ids
 
     c0, c1 = combo_ids(spec)
-    states = [Path(p) for p in a.relaxed] if a.relaxed else [_relaxed(spec, c, work) for c in (c0, c1)]
+    states = [Path(p) for p in a.relaxed] if a.relaxed else [relaxed_state(spec, c, work / c) for c in (c0, c1)]
     spec_file = work / "spec.json"
     spec_file.write_text(json.dumps(spec))
 

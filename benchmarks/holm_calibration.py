@@ -25,38 +25,15 @@ calibrated ``contact.spot_radius`` with the CPU seconds of every solve.
 from __future__ import annotations
 
 import argparse
-import copy
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import ROOT  # noqa: E402
-
-
-def run_spec(run: str, extra=()) -> dict:
-    spec = copy.deepcopy(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
-    spec.pop("sweep", None)
-    spec.pop("accuracy", None)
-    spec["overrides"] = list(spec.get("overrides", [])) + list(extra)
-    return spec
-
-
-def relaxed(spec: dict, work: Path, name: str) -> Path:
-    """The spec's relaxed state under ``work/name`` (built once)."""
-    from rve.homogenisation.jobs import fabric_job, relax_job
-
-    d = work / name
-    d.mkdir(parents=True, exist_ok=True)
-    out = d / "relaxed.nc"
-    if not out.exists():
-        c0 = time.process_time()
-        fabric_job(d / "initial.nc", d / "fabric.log", spec, "base")
-        relax_job(d / "initial.nc", out, d / "relax.log", spec, "base")
-        print(f"relaxed {name}: {time.process_time() - c0:.1f} s CPU -> {out}", flush=True)
-    return out
+from _harness import ROOT, pipeline_spec, relaxed_state  # noqa: E402
 
 
 def exchange(state: Path, spec: dict) -> tuple[float, float]:
@@ -82,26 +59,27 @@ def main():
     ap.add_argument("--max-iter", type=int, default=6)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args()
-    import tempfile
+    from rve.homogenisation.sweeps import load_run_config
 
     work = Path(a.work or tempfile.mkdtemp(prefix="holm_"))
-    base = run_spec(a.run, a.set)
-    thesis = run_spec(a.run, [*a.set, "contact.enforcement=penalty", "contact.onset=0", "contact.conductance_law=width",
+    base = pipeline_spec(a.run, a.set)
+    thesis = pipeline_spec(a.run, [*a.set, "contact.enforcement=penalty", "contact.onset=0", "contact.conductance_law=width",
                               f"contact.penalty={_scene_penalty(base)}"])
-    target, target_R = exchange(relaxed(thesis, work, "thesis_penalty"), thesis)
+    target, target_R = exchange(relaxed_state(thesis, "base", work / "thesis_penalty"), thesis)
     print(f"thesis law (width, penalty {_scene_penalty(base)}): r_c {target:.6g} ohm mm2, R_c {target_R:.6g} ohm")
-    state = Path(a.relaxed) if a.relaxed else relaxed(base, work, "run")
+    state = Path(a.relaxed) if a.relaxed else relaxed_state(base, "base", work / "run")
     a_s = float(a.spot_radius)
     for k in range(a.max_iter):
-        holm = run_spec(a.run, [*a.set, "contact.conductance_law=holm", f"contact.hardness={a.hardness}",
+        holm = pipeline_spec(a.run, [*a.set, "contact.conductance_law=holm", f"contact.hardness={a.hardness}",
                                 f"contact.spot_radius={a_s:.9g} mm"])
         r_c, R_c = exchange(state, holm)
         ratio = r_c / target
         print(f"holm iterate {k + 1}: spot_radius {a_s:.6g} mm, r_c {r_c:.6g} ohm mm2 (R_c {R_c:.6g} ohm), "
               f"ratio to the thesis law {ratio:.6f}", flush=True)
         if abs(ratio - 1.0) <= a.rtol:
+            H = load_run_config(holm, "base").contact.hardness   # N/mm^2, converted by the config
             print(f"calibrated: contact.hardness = {a.hardness}, contact.spot_radius = {a_s:.4g} mm "
-                  f"(H a_s = {_mpa(a.hardness) * a_s:.4g} N/mm; c_H = 2 sigma0/(pi H a_s))")
+                  f"(H a_s = {H * a_s:.4g} N/mm; c_H = 2 sigma0/(pi H a_s))")
             return 0
         a_s /= ratio
     print("not calibrated within --max-iter iterations")
@@ -112,10 +90,6 @@ def _scene_penalty(spec: dict) -> str:
     """The scene config's P* (Table 7.1's law of the thesis tables), not the run's override."""
     cfg = yaml.safe_load((ROOT / spec["scene_config"]).read_text())
     return str(cfg["contact"]["penalty"]).replace(" ", "")
-
-
-def _mpa(text: str) -> float:
-    return float(str(text).split()[0])
 
 
 if __name__ == "__main__":

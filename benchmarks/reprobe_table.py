@@ -13,16 +13,14 @@ appended); STATES_DIR holds its ``relaxed.nc`` and ``<mode>_NN.nc`` states (e.g.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import sys
 import time
 from pathlib import Path
 
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import ROOT  # noqa: E402
+from _harness import pipeline_spec  # noqa: E402
 
 
 def main():
@@ -35,10 +33,7 @@ def main():
     ap.add_argument("out")
     ap.add_argument("--set", action="append", default=[], help="an override KEY=VALUE (repeatable)")
     a = ap.parse_args()
-    spec = copy.deepcopy(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][a.run])
-    spec.pop("sweep", None)
-    spec.pop("accuracy", None)
-    spec["overrides"] = list(spec.get("overrides", [])) + list(a.set)
+    spec = pipeline_spec(a.run, a.set)
     out = Path(a.out)
     (out / "records").mkdir(parents=True, exist_ok=True)
     states = sorted(p for p in Path(a.states).glob("*.nc") if p.stem != "initial" and "unconverged" not in p.stem)

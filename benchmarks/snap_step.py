@@ -13,29 +13,14 @@ shapes of the end state; OUT.npz keeps x and the multipliers.
 from __future__ import annotations
 
 import argparse
-import copy
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import ROOT  # noqa: E402
-from snap_through import stack_shape  # noqa: E402
-
-
-def config(run, sets):
-    from rve.fabrics.setup import fabric_and_mesh
-    from rve.homogenisation.sweeps import load_run_config
-
-    spec = copy.deepcopy(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
-    spec.pop("sweep", None)
-    spec.pop("accuracy", None)
-    spec["overrides"] = list(spec.get("overrides", [])) + list(sets)
-    cfg = load_run_config(spec, "base")
-    return cfg, *fabric_and_mesh(cfg)
+from snap_through import setup as config, stack_shape  # noqa: E402
 
 
 def start(path):

@@ -2,7 +2,13 @@
 the stored states before and after the step whose branch test found the limit point, for
 both meshes of the work-precision study, compared fibril by fibril and contact by contact.
 
-    python benchmarks/snap_through.py [--run12 STATES] [--run18 STATES]
+    python benchmarks/snap_through.py [--run12 STATES] [--run18 STATES] [--names RUN12 RUN18]
+        [--jumps STEP12 STEP18] [--matched STEP ...]
+
+``--names``: the configs/pipeline.yaml runs of the two state directories (default the
+work-precision study's ``work_precision_default`` and ``work_precision_reference_18``),
+``--jumps``: their uniaxial steps that hold the jump (default 4 and 3); ``--matched``: the
+uniaxial steps of the unlabelled section matching (default 2 4 6 10).
 
 For each mesh it prints
 
@@ -26,16 +32,14 @@ For each mesh it prints
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import ROOT  # noqa: E402
+from _harness import pipeline_spec  # noqa: E402
 
 RUN12 = Path("/work/kept-results/work_precision_default/base/states")
 RUN18 = Path("/work/runs/ref/results/rve/work_precision_reference_18/base/states")
@@ -43,13 +47,12 @@ RUN18 = Path("/work/runs/ref/results/rve/work_precision_reference_18/base/states
 JUMP = {"12": ("work_precision_default", 4), "18": ("work_precision_reference_18", 3)}
 
 
-def setup(run):
+def setup(run, overrides=()):
+    """(config, fabric, mesh) of a configs/pipeline.yaml run, ``overrides`` appended."""
     from rve.fabrics.setup import fabric_and_mesh
     from rve.homogenisation.sweeps import load_run_config
 
-    spec = copy.deepcopy(yaml.safe_load((ROOT / "configs" / "pipeline.yaml").read_text())["rve"]["runs"][run])
-    spec.pop("sweep", None)
-    spec.pop("accuracy", None)
+    spec = pipeline_spec(run, overrides)
     cfg = load_run_config(spec, "base")
     fab, mesh = fabric_and_mesh(cfg)
     return cfg, fab, mesh
@@ -258,7 +261,11 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run12", type=Path, default=RUN12)
     ap.add_argument("--run18", type=Path, default=RUN18)
+    ap.add_argument("--names", nargs=2, default=[JUMP["12"][0], JUMP["18"][0]])
+    ap.add_argument("--jumps", nargs=2, type=int, default=[JUMP["12"][1], JUMP["18"][1]])
+    ap.add_argument("--matched", nargs="+", type=int, default=[2, 4, 6, 10])
     a = ap.parse_args(argv)
+    JUMP.update({"12": (a.names[0], a.jumps[0]), "18": (a.names[1], a.jumps[1])})
     out = {}
     analyse("12", a.run12, out)
     analyse("18", a.run18, out)
@@ -287,7 +294,7 @@ def main(argv=None):
           f"({len(ks)} pairs)")
     path_table(a.run12, a.run18)
     mirror_asymmetry(a.run12, a.run18)
-    matched_sections(a.run12, a.run18)
+    matched_sections(a.run12, a.run18, tuple(a.matched))
     return 0
 
 

@@ -28,6 +28,7 @@ Contract
 * ``run_errors(run_ds, reference_ds)`` -> {"range": {q: e}, "magnitude": {q: e},
   "range_by_mode": {q: {mode: e}}, "magnitude_by_mode": {q: {mode: e}}} (tables aligned on
   their common modes and strains); ``stated(errors)`` its ``STATED_MEASURE`` part;
+  ``error_rows(run_ds, reference_ds)`` the rows (label, mode, strain) they are the maxima of;
 * ``pareto_front(points)`` -> indices of the non-dominated (cpu, error) points;
 * ``work_precision_job(reference, default, levers, costs, skipped, outputs, log_path,
   names)`` writes ``md`` (the table), ``csv`` (every run and quantity), ``png`` (error vs
@@ -50,7 +51,7 @@ from ..io.atomic import atomic_path, atomic_write_json, atomic_write_text
 from ..io.provenance import logging_to
 from .table_convergence import NEGLIGIBLE, QUANTITIES, RANGE_FLOOR, relative_errors, summarize_by_mode
 
-__all__ = ["STATED_MEASURE", "TARGETS", "not_comparable", "run_errors", "stated", "worst_ratio", "missing_targets",
+__all__ = ["STATED_MEASURE", "TARGETS", "not_comparable", "error_rows", "run_errors", "stated", "worst_ratio", "missing_targets",
            "target_misses", "pareto_front", "front_of", "study_points", "work_precision_report", "work_precision_job"]
 
 log = logging.getLogger("rve.studies.work_precision")
@@ -94,17 +95,25 @@ def not_comparable(run_ds, reference_ds) -> dict:
     return out
 
 
-def run_errors(run_ds, reference_ds) -> dict:
-    """Errors of one run's table against the reference's (module docstring), on the modes
-    and strains both have; ``not_compared`` {quantity: why} (``not_comparable``)."""
+def error_rows(run_ds, reference_ds, skip=None) -> list[dict]:
+    """The per-label, mode and strain rows (``table_convergence.relative_errors``) of one
+    run's table against the reference's, on the modes and strains both have, for the
+    quantities not in ``skip`` (default ``not_comparable``)."""
     import xarray as xr
 
-    skip = not_comparable(run_ds, reference_ds)
+    skip = not_comparable(run_ds, reference_ds) if skip is None else skip
     names = [q for q in QUANTITIES if q in run_ds and q in reference_ds and q not in skip]
     a, b = xr.align(run_ds[names].reset_coords(drop=True), reference_ds[names].reset_coords(drop=True),
                     join="inner")
     ds = xr.concat([a, b], dim=xr.DataArray([_RUN, _REF], dims=_DIM, name=_DIM))
-    rows = relative_errors(ds, _REF, _DIM)
+    return relative_errors(ds, _REF, _DIM)
+
+
+def run_errors(run_ds, reference_ds) -> dict:
+    """Errors of one run's table against the reference's (module docstring), on the modes
+    and strains both have; ``not_compared`` {quantity: why} (``not_comparable``)."""
+    skip = not_comparable(run_ds, reference_ds)
+    rows = error_rows(run_ds, reference_ds, skip)
     out: dict = {"range": {}, "magnitude": {}, "range_by_mode": {}, "magnitude_by_mode": {}, "not_compared": skip}
     for r in rows:
         for key, col in (("range", "range_error"), ("magnitude", "relative_error")):
