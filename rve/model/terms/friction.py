@@ -65,6 +65,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...contact.search import element_neighbours
 from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
@@ -422,17 +423,27 @@ class FrictionTerm:
         lead = order[starts]
         first[inv[lead]] = np.where(donor_ok[lead], lead, -1)
         donor = first[inv]
-        # neighbours along the - fibril only (the element continued over one element)
-        take = rec & (donor >= 0) & (np.abs(keys[:, 2] - keys[np.maximum(donor, 0), 2]) == 1)
+        # neighbours along the - fibril only (the element continued over one element); a
+        # fibril that wraps into its own image continues from its last element into its
+        # first (the keys' translations are taken modulo the wrap, so both are one group)
+        em = keys[:, 2]
+        nb = element_neighbours(mesh, c.wrap)
+        ed = em[np.maximum(donor, 0)]
+        ahead, behind = nb.next[ed] == em, nb.prev[ed] == em
+        take = rec & (donor >= 0) & (ahead | behind)
         if not take.any():
             return
         r, d = np.flatnonzero(take), donor[take]
         conn, node_s = mesh.conn, mesh.node_s
         S0 = node_s[conn[:, 0]]
         h = node_s[conn[:, -1]] - S0
-        em = keys[:, 2]
         S = S0[em[d]] + self.s_bar.reshape(-1)[d] * h[em[d]]
-        sb = (S - S0[em[r]]) / h[em[r]]
+        # across the seam the fibril parameter runs on by one fibril length
+        off = np.asarray(mesh.elem_offsets)
+        fib = mesh.elem_fibril[em[r]]
+        length = S0[off[1:] - 1] + h[off[1:] - 1] - S0[off[:-1]]
+        seam = np.where(ahead[r] & (em[r] < em[d]), 1.0, 0.0) - np.where(behind[r] & (em[r] > em[d]), 1.0, 0.0)
+        sb = (S - seam * length[fib] - S0[em[r]]) / h[em[r]]
         e = tangential_gap(geo, X, self.s_bar, self.anchor, self.d_ref).reshape(-1, 3)[d]
         pr = r // G
         wr = self._weights(pr, geo.s_plus.reshape(-1)[r][:, None])
