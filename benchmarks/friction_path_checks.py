@@ -5,6 +5,7 @@ tests/test_rve_friction_al_periodic.py), run at more step sizes or angles than t
     python benchmarks/friction_path_checks.py cycle      # tiny cell, mu = 0.3: work - dPi against D, 4/8/16 steps per leg
     python benchmarks/friction_path_checks.py branch     # tiny cell: the energy test's miss at 3 step sizes, mu = 0.1, 0.3
     python benchmarks/friction_path_checks.py rotation   # periodic 2 x 2 stacked cell turned by 0.05 and 0.2 rad, mu = 0.3
+    python benchmarks/friction_path_checks.py weave [--run R] [--mu 0.3] [--steps 3]   # the frictional one-path test on a run
 """
 from __future__ import annotations
 
@@ -67,5 +68,54 @@ def rotation():
               f"at the turned state {t_pred:.3e} N")
 
 
+def weave():
+    """The one-path test of the frictional steps on a pipeline run (default
+    ``plain_weave_friction``, its quasi-static shear path): each step with the test and
+    without it, from the same state; per step the checks' mismatches against their
+    tolerances, detections, solves, which state is kept and the CPU seconds of both."""
+    import argparse
+    import tempfile
+    import time
+
+    from _harness import pipeline_spec, relaxed_state
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.checkpoint import load_state
+    from rve.homogenisation.strain import friction_record, friction_start, strain_step
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.sweeps import load_run_config
+
+    ap = argparse.ArgumentParser(prog="friction_path_checks.py weave")
+    ap.add_argument("--run", default="plain_weave_friction")
+    ap.add_argument("--mu", type=float, default=0.3)
+    ap.add_argument("--steps", type=int, default=3)
+    ap.add_argument("--mode", default="shear")
+    ap.add_argument("--work", default=None)
+    a = ap.parse_args(sys.argv[2:])
+    spec = pipeline_spec(a.run, [f"friction.coefficient={a.mu}"])
+    work = Path(a.work or tempfile.mkdtemp(prefix="fpath-"))
+    st = load_state(relaxed_state(spec, "base", work / "relaxed"))
+    cfg = load_run_config(spec)
+    off = load_run_config({**spec, "overrides": spec["overrides"] + ["strain.follow_branch=false"]})
+    fab, mesh = fabric_and_mesh(cfg)
+    x, rec, lam = st.x, friction_start(cfg, fab, mesh, st.x), st.multipliers
+    print(f"{a.run}, mu = {a.mu}, {a.mode}, {cfg.strain.steps} steps of {cfg.strain.total / cfg.strain.steps:g}, "
+          f"path {cfg.strain.path}, energy_rtol {cfg.strain.branch_energy_rtol}")
+    for k in range(1, a.steps + 1):
+        c0 = time.process_time()
+        _, _, plain = strain_step(off, fab, mesh, x, st.x, a.mode, k, multipliers=lam, friction=rec)
+        c1 = time.process_time()
+        x2, s2, info = strain_step(cfg, fab, mesh, x, st.x, a.mode, k, multipliers=lam, friction=rec)
+        c2 = time.process_time()
+        b = info["branch"]
+        checks = "; ".join(f"[{c['eps'][0]:.4g}, {c['eps'][1]:.4g}] {abs(c['mismatch']) / c['tolerance']:.2f}"
+                           for c in b["checks"])
+        up = b.get("start_up")
+        print(f"step {k}: start-up {'to ' + format(up['strain'], '.4g') if up else 'none'}; |mismatch| / "
+              f"tolerance {checks}; detections {b['detections']}, solves {b['solves']}, kept {b['kept']}; "
+              f"CPU {c2 - c1:.1f} s tested, {c1 - c0:.1f} s untested (ratio {(c2 - c1) / (c1 - c0):.2f}); "
+              f"converged {info['converged']}", flush=True)
+        x, rec, lam = x2, friction_record(s2), multiplier_record(s2)
+
+
 if __name__ == "__main__":
-    {"cycle": cycle, "branch": branch, "rotation": rotation}[sys.argv[1]]()
+    {"cycle": cycle, "branch": branch, "rotation": rotation, "weave": weave}[sys.argv[1]]()

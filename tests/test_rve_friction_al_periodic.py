@@ -473,3 +473,38 @@ def test_mu_zero_is_the_frictionless_path_bit_for_bit(boundary, enforcement):
     if la is not None:
         np.testing.assert_array_equal(la[1], lb[1])
     assert ra == rb
+
+
+def test_frictional_steps_of_the_periodic_cell_pass_the_one_path_test():
+    """``strain.follow_branch`` with friction on the periodic cell of stacked yarns: the two
+    shear steps are tested by their energy balance with the dissipation
+    (``rve.homogenisation.friction_path``; the Hill-Mandel work rate with the friction
+    forces of the committed history), step 1 after its start-up, step 2 from step 1's
+    history; both pass without a detection. The stacked yarns have contact pairs across the
+    cell faces, whose friction forces are part of the face forces: the work rate with the
+    history not seeded differs."""
+    from types import SimpleNamespace
+
+    from rve.homogenisation.friction_path import frictional_energy
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import friction_record, strain_step
+
+    fab, mesh, x0, lam0, rec0 = _relaxed(_cfg("periodic", "penalty", 0.3, rows=STACKED))
+    cfg = _cfg("periodic", "penalty", 0.3, rows=STACKED, follow_branch=True)
+    x1, s1, i1 = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
+    x2, s2, i2 = strain_step(cfg, fab, mesh, x1, x0, "shear", 2, multipliers=multiplier_record(s1),
+                             friction=friction_record(s1))
+    for info in (i1, i2):
+        b = info["branch"]
+        assert info["converged"] and not b.get("untested") and b["checks"] and b["detections"] == 0, b
+        assert abs(b["checks"][0]["mismatch"]) < b["checks"][0]["tolerance"]
+    assert i1["branch"]["start_up"] is not None and i2["branch"]["start_up"] is None
+    cell = SimpleNamespace(periodic=True, fab=fab, mesh=mesh, origin=x0, mode="shear")
+    rec2 = friction_record(s2)
+    with_fr = frictional_energy(cfg, cell, None, x2, 0.1, multiplier_record(s2), rec2)
+    without = frictional_energy(cfg, cell, None, x2, 0.1, multiplier_record(s2), {**rec2, "keys": rec2["keys"][:0],
+                                                                                   "s_bar": rec2["s_bar"][:0],
+                                                                                   "anchor": rec2["anchor"][:0],
+                                                                                   "d_ref": rec2["d_ref"][:0]})
+    assert with_fr[0] == without[0]
+    assert abs(with_fr[1] - without[1]) > 0.05 * abs(with_fr[1])

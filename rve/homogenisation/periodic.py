@@ -323,7 +323,7 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     return x_full, psys.full, info
 
 
-def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float, multipliers=None) -> tuple:
+def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float, multipliers=None, friction=None) -> tuple:
     """``(Pi, dPi/deps)`` of an equilibrium of the cell at strain ``eps`` (the one-path test
     of ``rve.homogenisation.branch``): the potential of the reduced system at the mode's
     macro gradient (N mm) and its load derivative, the Hill-Mandel work rate A P : dF/deps
@@ -332,12 +332,17 @@ def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float, multipliers=N
     while the potential stays that of the true overlaps: the impenetrable limit's contact
     forces do no work, so its potential is the elastic energy (plus the penalty energy of
     the overlap left below al_tolerance), and the multiplier shift's constant terms, which
-    differ from state to state, are no part of it."""
+    differ from state to state, are no part of it. With the ``friction`` history committed at
+    the state the stress includes the friction forces (the potential does not: friction has
+    none; ``rve.homogenisation.friction_path`` adds the dissipation)."""
+    from .friction_history import seed_friction
+
     F = macro_gradient(mode, eps)
-    psys = periodic_system(cfg, fab, mesh, x_full, F)
+    psys = periodic_system(cfg, fab, mesh, x_full, F, friction=friction is not None)
     xr = psys.restrict(np.asarray(x_full, float).reshape(-1))
     energy = float(psys.energy(xr))
     seed_multipliers(psys, multipliers)
+    seed_friction(psys, friction, xr)
     h = 1e-6   # dF/deps: exact for the linear modes, the trellis gradient's central difference
     dF = (macro_gradient(mode, eps + h) - macro_gradient(mode, eps - h)) / (2.0 * h)
     return energy, float(psys.ties.area * np.sum(psys.macro_stress(xr) * dF))

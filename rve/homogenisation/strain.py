@@ -80,8 +80,8 @@ from ..fabrics.setup import clamped_ends, contact_params, mechanics_system
 from ..model import ContactSystem
 from ..solvers.frictional import friction_of
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
-from .cell_statics import cycle_levels, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .branch import BRANCH_COUNTS
+from .cell_statics import cycle_levels, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .continuation import periodic_arc, pinned_arc
 from .friction_history import friction_law, friction_record, friction_summary, seed_friction
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
@@ -265,15 +265,17 @@ def end_targets(origin_ends: np.ndarray, mode: str, eps: float) -> np.ndarray:
 
 
 def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multipliers=None, friction=None,
-                levels=None):
+                levels=None, loading_start=None):
     """One step of Algorithm 7.1 (or of the periodic cell, ``boundary: periodic``) from
     ``x_prev`` (n_nodes, 9) at strain eps_{step-1} to eps_step (module docstring).
     ``multipliers``: the contact multipliers of ``x_prev`` (``multipliers.multiplier_record``,
     the checkpoint's; None: zero), for ``contact.enforcement: augmented_lagrangian``.
     ``friction``: the friction history of ``x_prev`` (``friction_record``, the checkpoint's),
     with the config's friction on. ``levels``: ``(eps_from, eps_to)`` of the step instead of
-    ``strain_levels`` (a loading-unloading cycle, ``cycle_levels``). Returns ``(x (n_nodes, 9), system, info)``; the system
-    holds the multipliers and the committed friction history of ``x``."""
+    ``strain_levels`` (a loading-unloading cycle, ``cycle_levels``). ``loading_start``: the
+    step starts a loading or reverses it (the friction's stick transient is at its start;
+    default: step 1). Returns ``(x (n_nodes, 9), system, info)``; the system holds the
+    multipliers and the committed friction history of ``x``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
     sp_ = cfg.strain
@@ -281,17 +283,17 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
     if periodic:
         from .periodic import periodic_energy, periodic_strain_step
 
-        def part(x, e_from, e_to, whole=False, lam=multipliers):
+        def part(x, e_from, e_to, whole=False, lam=multipliers, fr=friction):
             return periodic_strain_step(cfg, fab, mesh, x, origin, mode, step, None if whole else (e_from, e_to),
-                                        multipliers=lam, friction=friction)
+                                        multipliers=lam, friction=fr)
 
         def energy(system, x, e):
             return periodic_energy(cfg, fab, mesh, x, mode, e, multipliers if system is None else multiplier_record(system))
     else:
         stepper = _quasi_static_step if sp_.path == "quasi_static" else _algorithm_step
 
-        def part(x, e_from, e_to, whole=False, lam=multipliers):
-            return stepper(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam, friction=friction)
+        def part(x, e_from, e_to, whole=False, lam=multipliers, fr=friction):
+            return stepper(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam, friction=fr)
 
         def energy(system, x, e):
             if system is None:
@@ -305,9 +307,14 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         levels = strain_levels(cfg)
         eps_prev, eps = float(levels[step - 1]), float(levels[step])
     if sp_.follow_branch and friction_law(cfg) is not None:
-        # a frictional path has no energy test: the clamp force steps up by the friction at
-        # every loading start or reversal (the stick length mu g is ~1e-4 of a step), so the
-        # trapezoid work misses ~(F_b - F_a) d / 2, 10-40 % of the step's work at any step size
+        if periodic or sp_.path == "quasi_static":
+            from .friction_path import frictional_branch_step
+
+            cell = SimpleNamespace(periodic=periodic, part=part, fab=fab, mesh=mesh, origin=origin, mode=mode)
+            start = step == 1 if loading_start is None else bool(loading_start)
+            return frictional_branch_step(cfg, cell, x_prev, eps_prev, eps, multipliers, friction, start)
+        # Algorithm 7.1's driven phase slips the contacts on a dynamic path of its own, so its
+        # dissipation is not the quasi-static path's and the energy balance cannot close
         # (docs/table_accuracy.md "One equilibrium path"); the step is solved once and its
         # record says it was not tested
         x, system, info = part(x_prev, eps_prev, eps, whole=True)
@@ -325,14 +332,17 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
     return part(x_prev, eps_prev, eps, whole=True)
 
 
-def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=None, arc=None):
+def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=None, arc=None, friction=None,
+                 start=None):
     """The step ``part(x, eps_from, eps_to)`` through ``branch.follow_branch``: the potential
     of a state and its load derivative ``energy_of(system, x, eps)`` (pinned: the clamp
     forces times the end velocity per unit strain, ``pinned_energy``; periodic: the
     Hill-Mandel work rate, ``periodic.periodic_energy``); the inertia from the energy
-    minimiser's definiteness verdict. A part starts from the multipliers of the state it
-    starts from (``multipliers`` for the step's start). ``arc``: the continuation of a
-    detected step (``rve.homogenisation.continuation``; ``strain.branch_method``)."""
+    minimiser's definiteness verdict. A part starts from the multipliers and the friction
+    history of the state it starts from (``multipliers``, ``friction`` for the step's start
+    ``x_prev``, or ``start``, a ``StepSolution`` at ``eps_prev`` with its system). ``arc``:
+    the continuation of a detected step (``rve.homogenisation.continuation``;
+    ``strain.branch_method``)."""
     from .branch import BranchSettings, StepSolution, follow_branch
 
     t0 = time.perf_counter()
@@ -340,7 +350,8 @@ def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=
 
     def solve(start, e_from, e_to):
         lam = multipliers if start.extra is None else multiplier_record(start.extra)
-        x2, sys2, inf = part(start.x, e_from, e_to, lam=lam)
+        fr = friction if start.extra is None else friction_record(start.extra)
+        x2, sys2, inf = part(start.x, e_from, e_to, lam=lam, fr=fr)
         return StepSolution(x2, inf, sys2)
 
     def energy(sol, e):
@@ -356,7 +367,8 @@ def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=
     settings = BranchSettings(energy_rtol=float(sp_.branch_energy_rtol), max_halvings=int(sp_.branch_max_halvings),
                               state_tol=float(sp_.branch_state_tol), method=str(sp_.branch_method),
                               persist_ratio=float(sp_.branch_persist_ratio))
-    start = StepSolution(np.array(x_prev, float).reshape(nn, 9))
+    if start is None:
+        start = StepSolution(np.array(x_prev, float).reshape(nn, 9))
     sol, binfo = follow_branch(solve, start, eps_prev, eps, energy, inertia=inertia, distance=distance,
                                settings=settings, arc=arc)
     info = dict(sol.info)
