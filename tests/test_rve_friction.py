@@ -477,7 +477,8 @@ def test_frictional_step_follows_one_path_by_its_energy_balance_with_the_dissipa
 
     from rve.fabrics.setup import fabric_and_mesh
     from rve.homogenisation.friction_path import START_UP, frictional_energy
-    from rve.homogenisation.strain import friction_record, friction_start, relax_fabric, strain_step
+    from rve.homogenisation.strain import (friction_record, friction_start, mech_system, pinned_energy, relax_fabric,
+                                           strain_step)
 
     def cfg_of(mu, **strain):
         return validate_config({**TINY, "friction": {"coefficient": mu},
@@ -497,7 +498,9 @@ def test_frictional_step_follows_one_path_by_its_energy_balance_with_the_dissipa
     assert info2["converged"] and b2["start_up"] is None and b2["checks"][0]["eps"] == [0.05, 0.1]
     assert b2["detections"] == 0
     # the balance from the relaxed state and from the start-up's end, two step sizes
-    cell = SimpleNamespace(periodic=False, fab=fab, mesh=mesh, origin=x0, mode="shear")
+    cell = SimpleNamespace(periodic=False, fab=fab, mesh=mesh, origin=x0, mode="shear",
+                           system=lambda xf: mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf),
+                           energy=lambda system, xf, e: pinned_energy(fab, mesh, system, xf, x0, "shear", e))
     e0 = frictional_energy(cfg, cell, None, x0, 0.0, None, rec0)
     tol = cfg.strain.branch_energy_rtol
     for d in (0.05, 0.04):

@@ -10,23 +10,26 @@ return map dissipates,
 
 with D the friction's dissipation counter (``FrictionTerm.dissipated``, carried in the
 history record) and P the work rate of the macro load at the state with its committed
-history (the clamps' forces, or the Hill-Mandel stress, friction forces included). So the
-test of ``rve.homogenisation.branch`` applies with Pi + D as the energy. One thing breaks
-the trapezoid: at a loading start or reversal the load's work rate steps up by the friction
-share within the stick length (~1e-4 of a step), so P(a) is not the rate the step loads
-with. A step that starts a loading therefore first takes an untested **start-up** of
-``START_UP`` of the step, which holds that transient, and the branch test runs from its end,
-where the rate is the sliding one; a step that continues a loading starts from the incoming
-state's committed history, whose friction forces already slide with the load.
+history (the clamps' forces, or the Hill-Mandel stress, whose pairs across a face carry
+their friction forces). So the test of ``rve.homogenisation.branch`` applies with Pi + D as
+the energy. One thing breaks the trapezoid: at a loading start or reversal the contacts
+stick first, and the work rate rises steeply until they slip (a kink of P(eps) inside the
+step, ~1.5e-3 strain on the tests' tiny cell). A step that starts a loading therefore first
+takes an untested **start-up** of ``START_UP`` of the step, which holds that transient, and
+the branch test runs from its end; a step that continues a loading starts from the
+incoming state's committed history, which already slides with the load.
 
 Contract
 --------
 ``frictional_branch_step(cfg, cell, x_prev, eps_prev, eps, multipliers, friction,
 loading_start) -> (x, system, info)``: ``cell`` has ``periodic``, ``part(x, e_from, e_to,
 lam=, fr=) -> (x, system, info)`` (the path's own step from a state with its multipliers
-and friction record), ``fab``, ``mesh``, ``origin``, ``mode``. ``info["branch"]`` is the
-follower's record with ``start_up`` (its strain and wall time; None without one). No
-continuation through limit points: a detected frictional step is followed by halving.
+and friction record), ``fab``, ``mesh``, ``origin``, ``mode``, ``branch_step`` (the strain
+path's ``follow_branch`` wrapper, ``strain._branch_step``) and, for the pinned cell,
+``system(x)`` (a fresh mechanics system at x) and ``energy(system, x, eps)`` (``(Pi, P)``,
+``strain.pinned_energy``). ``info["branch"]`` is the follower's record with ``start_up``
+(its strain and wall time; None without one). No continuation through limit points: a
+detected frictional step is followed by halving.
 """
 from __future__ import annotations
 
@@ -40,8 +43,9 @@ from .multipliers import multiplier_record, seed_multipliers
 
 __all__ = ["START_UP", "frictional_branch_step", "frictional_energy"]
 
-#: the start-up's share of a step that starts a loading: many stick lengths, and short
-#: enough that a jump inside it is unlikely (it is not tested)
+#: the start-up's share of a step that starts a loading: it must hold the stick transient
+#: (1/16 of the friction table's first shear step did not, a quarter did:
+#: ``benchmarks/friction_path_checks.py weave``), and it is not tested
 START_UP = 0.25
 
 
@@ -50,8 +54,6 @@ def frictional_energy(cfg, cell, system, x, eps, multipliers, friction) -> tuple
     dissipation so far and the work rate of the macro load with the friction forces of its
     committed history. ``system``: the step's own system at ``x`` (its multipliers and
     history), or None for the step's incoming state (``multipliers``, ``friction``)."""
-    from .strain import mech_system, pinned_energy
-
     lam = multipliers if system is None else multiplier_record(system)
     rec = friction if system is None else friction_record(system)
     if cell.periodic:
@@ -61,10 +63,10 @@ def frictional_energy(cfg, cell, system, x, eps, multipliers, friction) -> tuple
     else:
         if system is None:
             xf = np.asarray(x, float).reshape(-1)
-            system = mech_system(cell.fab, cell.mesh, cfg, cfg.strain.relax_damping, xf)
+            system = cell.system(xf)
             seed_multipliers(system, lam)
             seed_friction(system, rec, xf)
-        pi, rate = pinned_energy(cell.fab, cell.mesh, system, x, cell.origin, cell.mode, eps)
+        pi, rate = cell.energy(system, x, eps)
     return pi + float((rec or {}).get("dissipated", 0.0)), rate
 
 
@@ -72,8 +74,6 @@ def frictional_branch_step(cfg, cell, x_prev, eps_prev: float, eps: float, multi
                            loading_start: bool):
     """The frictional step from ``x_prev`` at ``eps_prev`` to ``eps`` on one equilibrium path
     (module docstring)."""
-    from .strain import _branch_step
-
     t0 = time.perf_counter()
     nn = cell.mesh.n_nodes
     start, up, e_a = None, None, float(eps_prev)
@@ -86,7 +86,7 @@ def frictional_branch_step(cfg, cell, x_prev, eps_prev: float, eps: float, multi
     def energy_of(system, x, e):
         return frictional_energy(cfg, cell, system, x, e, multipliers, friction)
 
-    x, system, info = _branch_step(cell.mesh, x_prev, e_a, eps, cfg.strain, cell.part, energy_of, multipliers,
+    x, system, info = cell.branch_step(cell.mesh, x_prev, e_a, eps, cfg.strain, cell.part, energy_of, multipliers,
                                    friction=friction, start=start)
     info["branch"]["start_up"] = up
     info.update({"strain_increment": float(eps - eps_prev), "wall_s": time.perf_counter() - t0})

@@ -310,7 +310,10 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         if periodic or sp_.path == "quasi_static":
             from .friction_path import frictional_branch_step
 
-            cell = SimpleNamespace(periodic=periodic, part=part, fab=fab, mesh=mesh, origin=origin, mode=mode)
+            cell = SimpleNamespace(periodic=periodic, part=part, fab=fab, mesh=mesh, origin=origin, mode=mode,
+                                   branch_step=_branch_step,
+                                   system=lambda xf: mech_system(fab, mesh, cfg, sp_.relax_damping, xf),
+                                   energy=lambda system, xf, e: pinned_energy(fab, mesh, system, xf, origin, mode, e))
             start = step == 1 if loading_start is None else bool(loading_start)
             return frictional_branch_step(cfg, cell, x_prev, eps_prev, eps, multipliers, friction, start)
         # Algorithm 7.1's driven phase slips the contacts on a dynamic path of its own, so its
