@@ -5,7 +5,7 @@ tests/test_rve_friction_al_periodic.py), run at more step sizes or angles than t
     python benchmarks/friction_path_checks.py cycle      # tiny cell, mu = 0.3: work - dPi against D, 4/8/16 steps per leg
     python benchmarks/friction_path_checks.py branch     # tiny cell: the energy test's miss at 3 step sizes, mu = 0.1, 0.3
     python benchmarks/friction_path_checks.py rotation   # periodic 2 x 2 stacked cell turned by 0.05 and 0.2 rad, mu = 0.3
-    python benchmarks/friction_path_checks.py weave [--run R] [--mu 0.3] [--steps 3]   # the frictional one-path test on a run
+    python benchmarks/friction_path_checks.py weave [--run R] [--mu 0.3] [--steps 3] [--start-up F]   # the frictional one-path test on a run
 """
 from __future__ import annotations
 
@@ -72,7 +72,9 @@ def weave():
     """The one-path test of the frictional steps on a pipeline run (default
     ``plain_weave_friction``, its quasi-static shear path): each step with the test and
     without it, from the same state; per step the checks' mismatches against their
-    tolerances, detections, solves, which state is kept and the CPU seconds of both."""
+    tolerances, detections, solves, which state is kept (and how far the followed state is
+    from the one-step one) and the CPU seconds of both. ``--start-up F``: the start-up's
+    share of step 1 (0: none)."""
     import argparse
     import tempfile
     import time
@@ -90,7 +92,13 @@ def weave():
     ap.add_argument("--steps", type=int, default=3)
     ap.add_argument("--mode", default="shear")
     ap.add_argument("--work", default=None)
+    ap.add_argument("--start-up", type=float, default=None,
+                    help="the start-up's share of a loading start's step (0: none; default friction_path.START_UP)")
     a = ap.parse_args(sys.argv[2:])
+    import rve.homogenisation.friction_path as fpath
+
+    if a.start_up is not None:
+        fpath.START_UP = a.start_up
     spec = pipeline_spec(a.run, [f"friction.coefficient={a.mu}"])
     work = Path(a.work or tempfile.mkdtemp(prefix="fpath-"))
     st = load_state(relaxed_state(spec, "base", work / "relaxed"))
@@ -104,14 +112,17 @@ def weave():
         c0 = time.process_time()
         _, _, plain = strain_step(off, fab, mesh, x, st.x, a.mode, k, multipliers=lam, friction=rec)
         c1 = time.process_time()
-        x2, s2, info = strain_step(cfg, fab, mesh, x, st.x, a.mode, k, multipliers=lam, friction=rec)
+        x2, s2, info = strain_step(cfg, fab, mesh, x, st.x, a.mode, k, multipliers=lam, friction=rec,
+                                   loading_start=k == 1 and fpath.START_UP > 0)
         c2 = time.process_time()
         b = info["branch"]
         checks = "; ".join(f"[{c['eps'][0]:.4g}, {c['eps'][1]:.4g}] {abs(c['mismatch']) / c['tolerance']:.2f}"
                            for c in b["checks"])
         up = b.get("start_up")
+        gap = b.get("naive_to_followed_distance")
+        kept = b["kept"] + (f" ({gap:.3g} mm from the one-step state)" if gap is not None else "")
         print(f"step {k}: start-up {'to ' + format(up['strain'], '.4g') if up else 'none'}; |mismatch| / "
-              f"tolerance {checks}; detections {b['detections']}, solves {b['solves']}, kept {b['kept']}; "
+              f"tolerance {checks}; detections {b['detections']}, solves {b['solves']}, kept {kept}; "
               f"CPU {c2 - c1:.1f} s tested, {c1 - c0:.1f} s untested (ratio {(c2 - c1) / (c1 - c0):.2f}); "
               f"converged {info['converged']}", flush=True)
         x, rec, lam = x2, friction_record(s2), multiplier_record(s2)
