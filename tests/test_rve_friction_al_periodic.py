@@ -153,7 +153,8 @@ def test_uzawa_re_solves_take_the_predictor_in_rounds(boundary, monkeypatch):
     re-solves at updated multipliers (and raised P*) take the predictor in rounds of converged
     minimisations at fixed loads (``fr.resolving``; the refreezing predictor diverges there on
     the periodic weave, docs/contact.md "Friction with the augmented Lagrangian and the
-    periodic cell"), and the flag is cleared after the loop."""
+    periodic cell") and with the law's stage alone (``RESOLVE_SMOOTHING``), and the flag is
+    cleared after the loop."""
     import rve.solvers.frictional as frictional
     from rve.homogenisation.strain import strain_step
     from rve.solvers.system import friction_of
@@ -164,26 +165,29 @@ def test_uzawa_re_solves_take_the_predictor_in_rounds(boundary, monkeypatch):
     original = frictional._predictor
 
     def spied(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, *args, **kw):
-        modes.append((bool(fr.resolving), bool(refreeze), int(max_rounds)))
+        eta = args[4] if len(args) > 4 else kw.get("eta", 0.0)
+        modes.append((bool(fr.resolving), bool(refreeze), int(max_rounds), float(eta)))
         return original(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, *args, **kw)
 
     monkeypatch.setattr(frictional, "_predictor", spied)
     x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
     al = info["static"]["augmented_lagrangian"]
     assert info["converged"] and al["met"] and al["updates"] >= 1
-    assert modes and modes[0] == (False, True, 4)
+    assert modes and modes[0] == (False, True, 4, 1.0) and modes[1] == (False, True, 4, 0.0)
     resolves = [m for m in modes if m[0]]
-    assert resolves and all(m == (True, False, frictional.RESOLVE_ROUNDS) for m in resolves)
+    # the re-solves start next to an equilibrium: the law's stage alone, no smoothed stage
+    assert resolves and all(m == (True, False, frictional.RESOLVE_ROUNDS, 0.0) for m in resolves)
     assert friction_of(system).resolving is False
 
 
 @pytest.mark.parametrize("boundary", ["pinned", "periodic"])
 def test_re_solves_from_the_held_loads_with_blended_rounds_find_the_unmodified_root(boundary, monkeypatch):
-    """The re-solves' first round frozen at the last converged solve's loads and the later
-    rounds' normal forces blended with the previous round's (``RESOLVE_HELD``, ``RESOLVE_BLEND``)
-    reach the equilibrium the unmodified rounds reach (the first round at the committed loads, the
-    loads at the round's start alone): both exact roots at the same multipliers, the same
-    state, the same dissipation."""
+    """The re-solves' first round frozen at the last converged solve's loads, the later
+    rounds' normal forces blended with the previous round's and the law's stage alone
+    (``RESOLVE_HELD``, ``RESOLVE_BLEND``, ``RESOLVE_SMOOTHING``) reach the equilibrium the
+    unmodified rounds reach (the first round at the committed loads, the loads at the round's
+    start alone, the smoothed stage first): both exact roots at the same multipliers, the
+    same state, the same dissipation."""
     import rve.solvers.frictional as frictional
     from rve.homogenisation.multipliers import multiplier_record
     from rve.homogenisation.strain import strain_step
@@ -200,9 +204,10 @@ def test_re_solves_from_the_held_loads_with_blended_rounds_find_the_unmodified_r
 
     monkeypatch.setattr(FrictionTerm, "freeze_held", spied)
     runs = {}
-    for name, h, b in (("new", True, 0.5), ("unmodified", False, 1.0)):
+    for name, h, b, sm in (("new", True, 0.5, ()), ("unmodified", False, 1.0, None)):
         monkeypatch.setattr(frictional, "RESOLVE_HELD", h)
         monkeypatch.setattr(frictional, "RESOLVE_BLEND", b)
+        monkeypatch.setattr(frictional, "RESOLVE_SMOOTHING", sm)
         x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
         assert info["converged"] and info["static"]["augmented_lagrangian"]["met"]
         lam = multiplier_record(system)

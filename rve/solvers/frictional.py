@@ -51,7 +51,8 @@ matrix to a symmetric factorisation).
      and every later round freezes normal forces halfway between those at its start and the
      round before's (``RESOLVE_BLEND`` = 0.5, by point key): the loads of plain rounds settle
      into a two-set cycle (load change 13 % or 58 % round after round, |F| ~1e-3 N) that the
-     mean breaks;
+     mean breaks. A re-solve takes the law's stage alone (``RESOLVE_SMOOTHING``: no smoothed
+     stage; it starts next to the last solve's equilibrium);
   2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
      the predictor's state (``static_solve``, line search on |F|; the linear solves on the
      LU companion of the run's PARDISO instance, checked by their residual, else
@@ -183,6 +184,10 @@ RESOLVE_HELD = True
 #: weight of the loads at the round's start in a re-solve round's frozen normal forces, the
 #: rest the last round's (1: the loads at the start alone)
 RESOLVE_BLEND = 0.5
+#: the predictor stages of an augmented-Lagrangian re-solve (None: the caller's
+#: ``smoothing``): the law's stage alone, since a re-solve starts next to the last solve's
+#: equilibrium and the smoothed stage would first move it off to its own solution
+RESOLVE_SMOOTHING = ()
 
 
 def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: float = 1e-14, max_iter: int = 200,
@@ -199,6 +204,8 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         refreeze = not resolve
     if max_rounds is None:
         max_rounds = RESOLVE_ROUNDS if resolve else 4
+    if resolve and RESOLVE_SMOOTHING is not None:
+        smoothing = RESOLVE_SMOOTHING
     xs, out = _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds,
                      load_rtol, corrector_iter, freeze, fallback, step_cap, backend, smoothing, predictor_iter,
                      direct_atol, resolve)
