@@ -259,6 +259,32 @@ def test_frictional_cycle_dissipates_what_the_return_map_dissipates(tmp_path):
     assert errors[1] < 0.1
 
 
+def test_frictional_cycle_steps_start_up_at_the_start_and_at_the_turning_point(tmp_path):
+    """With the one-path test on, the cycle's frictional steps are tested; the first step
+    takes a start-up of ``START_UP`` of the step (a loading start), the step after the turning
+    point one of ``START_UP_REVERSAL`` (the friction forces turn over), the others none."""
+    from rve.homogenisation.friction_path import START_UP, START_UP_REVERSAL
+    from rve.homogenisation.jobs import cycle_job, fabric_job, relax_job
+
+    n = 2
+    spec = _spec(0.3, path="quasi_static", cycle_modes=["shear"], cycle_steps=n, follow_branch=True)
+    fabric_job(tmp_path / "initial.nc", None, spec)
+    relax_job(tmp_path / "initial.nc", tmp_path / "relaxed.nc", None, spec)
+    prev, d = tmp_path / "relaxed.nc", 0.1 / n
+    for i in range(1, 2 * n + 1):
+        st = cycle_job(prev, tmp_path / f"shear_cycle_{i:02d}.nc", None, spec, "base", "shear", i)
+        prev = tmp_path / f"shear_cycle_{i:02d}.nc"
+        b = st.solver["branch"]
+        assert not b.get("untested") and b["checks"], (i, b)
+        up = b["start_up"]
+        if i == 1:
+            assert up["strain"] == pytest.approx(START_UP * d)
+        elif i == n + 1:
+            assert up["strain"] == pytest.approx(n * d - START_UP_REVERSAL * d)
+        else:
+            assert up is None
+
+
 # --------------------------------------------------------------------------- through Snakemake
 @pytest.mark.slow
 def test_friction_sweep_and_cycle_tables_through_snakemake(tmp_path):

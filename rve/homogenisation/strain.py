@@ -273,8 +273,8 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
     ``friction``: the friction history of ``x_prev`` (``friction_record``, the checkpoint's),
     with the config's friction on. ``levels``: ``(eps_from, eps_to)`` of the step instead of
     ``strain_levels`` (a loading-unloading cycle, ``cycle_levels``). ``loading_start``: the
-    step starts a loading or reverses it (the friction's stick transient is at its start;
-    default: step 1). Returns ``(x (n_nodes, 9), system, info)``; the system holds the
+    step starts a loading (True) or reverses it ("reversal"): the friction's stick transient
+    is at its start (default: True at step 1). Returns ``(x (n_nodes, 9), system, info)``; the system holds the
     multipliers and the committed friction history of ``x``."""
     if mode not in MODE_DIRECTION:
         raise ValueError(f"mode must be one of {tuple(MODE_DIRECTION)}, got {mode!r}")
@@ -314,7 +314,7 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
                                    branch_step=_branch_step,
                                    system=lambda xf: mech_system(fab, mesh, cfg, sp_.relax_damping, xf),
                                    energy=lambda system, xf, e: pinned_energy(fab, mesh, system, xf, origin, mode, e))
-            start = step == 1 if loading_start is None else bool(loading_start)
+            start = step == 1 if loading_start is None else loading_start
             return frictional_branch_step(cfg, cell, x_prev, eps_prev, eps, multipliers, friction, start)
         # Algorithm 7.1's driven phase slips the contacts on a dynamic path of its own, so its
         # dissipation is not the quasi-static path's and the energy balance cannot close
