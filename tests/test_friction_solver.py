@@ -155,3 +155,38 @@ def test_commit_keeps_the_equilibrium_and_a_near_start_is_newton_alone(weave):
     x2, res = frictional_solve(s, xp, 0.0, atol=atol, rtol=1e-12)
     assert res.converged and res.method == "newton" and res.predictor_iterations == 0 and res.rounds == 0
     assert _free_residual(s, x2) <= atol
+
+
+def test_a_re_solve_takes_the_law_stage_alone_and_the_smoothed_stage_where_it_fails(monkeypatch):
+    """An augmented-Lagrangian re-solve (``fr.resolving``) first takes the law's predictor
+    stage alone without the fallback; where that fails, the caller's smoothed stages from the
+    same start, with the fallback; the iterations of both passes are counted and the loads of
+    the converged solve are held for the next re-solve."""
+    from types import SimpleNamespace
+
+    import rve.solvers.frictional as frictional
+
+    held, calls = [], []
+    fr = SimpleNamespace(resolving=True, hold_loads=lambda x: held.append(x))
+    system = SimpleNamespace(term=SimpleNamespace(friction=fr), augmented=True)
+    x0 = np.zeros(3)
+
+    def fake(system, fr, x, t, *args):
+        fallback, smoothing = args[10], args[13]
+        calls.append((tuple(smoothing), bool(fallback), np.array(x)))
+        ok = tuple(smoothing) != ()
+        out = frictional.FrictionalResult(None, ok, 7, [1.0], "" if ok else "stalled")
+        out.predictor_iterations, out.corrector_iterations, out.rounds = 5, 2, 1
+        return x + (1.0 if ok else 2.0), out
+
+    monkeypatch.setattr(frictional, "_solve", fake)
+    xs, out = frictional.frictional_solve(system, x0)
+    assert [(c[0], c[1]) for c in calls] == [((), False), ((1.0,), True)]
+    assert np.array_equal(calls[1][2], x0)                 # the second pass from the same start
+    assert out.converged and np.array_equal(xs, x0 + 1.0)
+    assert out.iterations == 14 and out.predictor_iterations == 10 and out.rounds == 2
+    assert len(held) == 1 and np.array_equal(held[0], xs)
+    calls.clear()
+    fr.resolving = False                                    # a first solve: the caller's stages only
+    frictional.frictional_solve(system, x0)
+    assert [(c[0], c[1]) for c in calls] == [((1.0,), True)]

@@ -51,8 +51,9 @@ matrix to a symmetric factorisation).
      and every later round freezes normal forces halfway between those at its start and the
      round before's (``RESOLVE_BLEND`` = 0.5, by point key): the loads of plain rounds settle
      into a two-set cycle (load change 13 % or 58 % round after round, |F| ~1e-3 N) that the
-     mean breaks. A re-solve takes the law's stage alone (``RESOLVE_SMOOTHING``: no smoothed
-     stage; it starts next to the last solve's equilibrium);
+     mean breaks. A re-solve takes the law's stage alone first (``RESOLVE_SMOOTHING``: no
+     smoothed stage; it starts next to the last solve's equilibrium), without the fallback;
+     where that fails, the caller's stages from the same start, with it;
   2. **corrector**: Newton on the exact residual with its exact unsymmetric tangent from
      the predictor's state (``static_solve``, line search on |F|; the linear solves on the
      LU companion of the run's PARDISO instance, checked by their residual, else
@@ -204,11 +205,31 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         refreeze = not resolve
     if max_rounds is None:
         max_rounds = RESOLVE_ROUNDS if resolve else 4
-    if resolve and RESOLVE_SMOOTHING is not None:
-        smoothing = RESOLVE_SMOOTHING
-    xs, out = _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds,
-                     load_rtol, corrector_iter, freeze, fallback, step_cap, backend, smoothing, predictor_iter,
-                     direct_atol, resolve)
+    args = (atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds, load_rtol, corrector_iter, freeze)
+    if resolve and RESOLVE_SMOOTHING is not None and tuple(RESOLVE_SMOOTHING) != tuple(smoothing):
+        # the law's stage alone first; where it fails, the caller's stages from the same start
+        xs, out = _solve(system, fr, x, t, *args, False, step_cap, backend, RESOLVE_SMOOTHING, predictor_iter,
+                         direct_atol, resolve)
+        if out.converged:
+            return _held(system, fr, xs, out)
+        log.info("friction re-solve: the law's stage alone did not converge (%s); again with the smoothed stage",
+                 out.reason)
+        first = out
+        xs, out = _solve(system, fr, x, t, *args, fallback, step_cap, backend, smoothing, predictor_iter,
+                         direct_atol, resolve)
+        out.iterations += first.iterations
+        out.predictor_iterations += first.predictor_iterations
+        out.corrector_iterations += first.corrector_iterations
+        out.rounds += first.rounds
+        return _held(system, fr, xs, out)
+    xs, out = _solve(system, fr, x, t, *args, fallback, step_cap, backend, smoothing, predictor_iter, direct_atol,
+                     resolve)
+    return _held(system, fr, xs, out)
+
+
+def _held(system, fr, xs, out):
+    """``(xs, out)``, the loads of a converged solve of an augmented system held for the next
+    re-solve of the Uzawa loop."""
     if getattr(system, "augmented", False) and hasattr(fr, "hold_loads"):
         # the loads the next re-solve of the Uzawa loop freezes first (module docstring)
         fr.hold_loads(xs if out.converged else None)
