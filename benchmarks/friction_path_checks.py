@@ -116,6 +116,11 @@ def weave():
                                    loading_start=k == 1 and fpath.START_UP > 0)
         c2 = time.process_time()
         b = info["branch"]
+        if b.get("untested"):
+            print(f"step {k}: untested ({b['untested']}: off the quasi-static path); CPU {c2 - c1:.1f} s, "
+                  f"{c1 - c0:.1f} s with the test off", flush=True)
+            x, rec, lam = x2, friction_record(s2), multiplier_record(s2)
+            continue
         checks = "; ".join(f"[{c['eps'][0]:.4g}, {c['eps'][1]:.4g}] {abs(c['mismatch']) / c['tolerance']:.2f}"
                            for c in b["checks"])
         up = b.get("start_up")

@@ -481,8 +481,8 @@ def test_mu_zero_is_the_frictionless_path_bit_for_bit(boundary, enforcement):
 
 
 def test_frictional_steps_of_the_periodic_cell_pass_the_one_path_test():
-    """``strain.follow_branch`` with friction on the periodic cell of stacked yarns: the two
-    shear steps are tested by their energy balance with the dissipation
+    """``strain.follow_branch`` with friction on the periodic cell of stacked yarns on the
+    quasi-static path (two sub-increments a step): the two shear steps are tested by their energy balance with the dissipation
     (``rve.homogenisation.friction_path``; the Hill-Mandel work rate with the friction
     forces of the committed history), step 1 after its start-up, step 2 from step 1's
     history; both pass without a detection. The stacked yarns have contact pairs across the
@@ -513,3 +513,7 @@ def test_frictional_steps_of_the_periodic_cell_pass_the_one_path_test():
                                                                                    "d_ref": rec2["d_ref"][:0]})
     assert with_fr[0] == without[0]
     assert abs(with_fr[1] - without[1]) > 0.05 * abs(with_fr[1])
+    # one increment a step (off the quasi-static path): solved once, marked untested
+    single = _cfg("periodic", "penalty", 0.3, rows=STACKED, follow_branch=True, path="algorithm_7_1")
+    _, _, i1 = strain_step(single, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
+    assert i1["converged"] and i1["branch"]["untested"] == "friction" and not i1["branch"].get("checks")

@@ -1,6 +1,6 @@
-"""One equilibrium path with friction: the branch test of a frictional strain step
-(docs/table_accuracy.md "One equilibrium path", docs/contact.md "Friction in the RVE
-pipeline").
+"""One equilibrium path with friction: the branch test of a frictional strain step on the
+quasi-static path, pinned or periodic (docs/table_accuracy.md "One equilibrium path",
+docs/contact.md "Friction in the RVE pipeline").
 
 Friction has no potential, but a quasi-static frictional path still balances energy: the
 work of the macro load equals the change of the elastic potential plus the energy the
