@@ -185,3 +185,20 @@ def test_a_jump_that_keeps_its_parents_mismatch_is_not_halved_further():
     assert len(held) == 1 and held[0]["eps"][0] <= LIMIT <= held[0]["eps"][1]
     assert abs(held[0]["mismatch"]) >= 0.5 * abs(info["checks"][0]["mismatch"])
     assert s.x == pytest.approx(floor.x) == pytest.approx(roots(0.5)[0])
+
+
+def test_a_followed_path_that_does_not_converge_keeps_the_converged_naive_state():
+    """The toy's jump step with sub-step solves that report no convergence: the follower
+    keeps the naive step's (converged) state, counts a limit point and records why."""
+    solve, energy, inertia, roots = _toy(K, -1.0)
+
+    def failing(start, ea, eb):
+        sol = solve(start, ea, eb)
+        sol.info["converged"] = (ea, eb) == (-0.4, 0.2)       # only the whole step converges
+        return sol
+
+    start = solve(StepSolution(-1.0), -1.0, -0.4)
+    s, info = follow_branch(failing, start, -0.4, 0.2, energy, inertia=inertia)
+    naive = failing(start, -0.4, 0.2)
+    assert info["detections"] >= 1 and info.get("followed_unconverged")
+    assert s.x == naive.x and info["limit_points"] >= 1 and info["branch_jumps"] == 0

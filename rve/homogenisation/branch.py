@@ -34,7 +34,9 @@ accepted as a limit point without halving further (each level would cost two mor
 solves and only narrow where the jump happens; ``persist_ratio = 0``: down to the floor). The followed end state is compared with the naive one: when both are
 the same equilibrium (``distance`` below ``state_tol`` and the energies equal within the
 criterion's tolerance) the naive state is kept, so a false alarm changes no bit of the
-result; otherwise the followed state replaces it (a branch jump was avoided). A sub-step at
+result; otherwise the followed state replaces it (a branch jump was avoided), unless the
+followed path's last solve did not converge (its ``info["converged"]`` False): then the
+converged naive state is kept as a limit point (``followed_unconverged``). A sub-step at
 the floor that still fails the test is a **limit point** (the branch ends; the jump is
 physical) and is accepted and recorded. Every detection and retry is in the returned info.
 
@@ -265,6 +267,14 @@ def follow_branch(solve: Callable, start: StepSolution, eps_a: float, eps_b: flo
         f.info["limit_points"] += 1
         return naive, f.info
     followed, e_fol = f.follow(start, e_a, eps_a, eps_b, 1, v["mismatch"])
+    if followed.info.get("converged") is False and naive.info.get("converged") is not False:
+        # a followed path whose sub-steps did not reach equilibrium is no state of the table:
+        # the converged naive state is kept, and the record says so
+        f.info["followed_unconverged"] = True
+        f.info["limit_points"] += 1
+        log.warning("branch [%g, %g]: the followed path did not converge; the naive step's state is kept",
+                    eps_a, eps_b)
+        return naive, f.info
     gap = float(f.distance(naive.x, followed.x))
     energy_gap = abs(e_fol[0] - e_naive[0])
     same = gap <= settings.state_tol and energy_gap <= max(v["tolerance"], settings.energy_atol)
