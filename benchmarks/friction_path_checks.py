@@ -4,6 +4,7 @@ tests/test_rve_friction_al_periodic.py), run at more step sizes or angles than t
 
     python benchmarks/friction_path_checks.py cycle      # tiny cell, mu = 0.3: work - dPi against D, 4/8/16 steps per leg
     python benchmarks/friction_path_checks.py branch     # tiny cell: the energy test's miss at 3 step sizes, mu = 0.1, 0.3
+    python benchmarks/friction_path_checks.py transient  # tiny cell, mu = 0.3: the stick transient at the loading start
     python benchmarks/friction_path_checks.py rotation   # periodic 2 x 2 stacked cell turned by 0.05 and 0.2 rad, mu = 0.3
     python benchmarks/friction_path_checks.py weave [--run R] [--mu 0.3] [--steps 3] [--start-up F]   # the frictional one-path test on a run
 """
@@ -55,6 +56,33 @@ def branch():
             out.append(abs(work - (Pb - Pa + friction_of(sb).dissipated)) / abs(work))
         print(f"mu = {mu}: |work - (dPi + D)| / work at strain steps 0.05, 0.025, 0.0125: "
               + ", ".join(f"{v:.3f}" for v in out) + f" (the test's tolerance {cfg.strain.branch_energy_rtol})")
+
+
+def transient():
+    """The stick transient at the loading start of the tiny cell (mu = 0.3, quasi-static
+    shear): for start-up strains from 1e-4 to 8e-3, the clamps' work rate, its secant over
+    the strain and the stick / slip counts of the return map there."""
+    from types import SimpleNamespace
+
+    from rve.config import validate_config
+    from rve.fabrics.setup import fabric_and_mesh
+    from rve.homogenisation.friction_path import frictional_energy
+    from rve.homogenisation.strain import (friction_start, mech_system, pinned_energy, relax_fabric, strain_step)
+    from rve.solvers.system import friction_of
+    from test_rve_friction import TINY
+
+    cfg = validate_config({**TINY, "friction": {"coefficient": 0.3}, "strain": {**TINY["strain"], "path": "quasi_static"}})
+    fab, mesh = fabric_and_mesh(cfg)
+    x0, _, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    rec = friction_start(cfg, fab, mesh, x0)
+    cell = SimpleNamespace(periodic=False, system=lambda xf: mech_system(fab, mesh, cfg, cfg.strain.relax_damping, xf),
+                           energy=lambda system, xf, e: pinned_energy(fab, mesh, system, xf, x0, "shear", e))
+    for up in (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 4e-3, 8e-3):
+        xu, su, _ = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, friction=rec, levels=(0.0, up))
+        rate = frictional_energy(cfg, cell, su, xu, up, None, None)[1]
+        st = friction_of(su).points()
+        print(f"strain {up:.0e}: work rate {rate:.4e} N mm, secant {rate / up:.5f} N mm, stick {st['stick']}, "
+              f"slip {st['slip']}", flush=True)
 
 
 def rotation():
@@ -134,4 +162,4 @@ def weave():
 
 
 if __name__ == "__main__":
-    {"cycle": cycle, "branch": branch, "rotation": rotation, "weave": weave}[sys.argv[1]]()
+    {"cycle": cycle, "branch": branch, "rotation": rotation, "weave": weave, "transient": transient}[sys.argv[1]]()

@@ -2,8 +2,8 @@
 
 Gathers Snakemake's benchmark files ``results/benchmarks/rve/<run>/**.tsv`` (one per job:
 wall seconds ``s``, peak RSS ``max_rss`` in MB, ``cpu_time``) into one table per stage
-(fabric, relax, strain, probes, gather, report): jobs, median and total wall seconds, max
-RSS. The whole-job time is the wall time between the first and the last job of the
+(fabric, relax, strain, probes, gather, report): jobs, median and total wall seconds, total
+CPU seconds, max RSS. The whole-job time is the wall time between the first and the last job of the
 latest Snakemake log (``.snakemake/log/*.snakemake.log``), or the time measured here with
 ``--run`` (which runs ``snakemake -j2`` first). Prints the dominant stage (largest total
 job time) and the critical path (relax + the longest chain of strain steps).
@@ -70,8 +70,10 @@ def stage_table(rows: list[dict]) -> list[dict]:
         sel = [r for r in rows if r["stage"] == st]
         s = np.array([r["s"] for r in sel])
         rss = np.array([r["max_rss_mb"] for r in sel])
+        cpu = np.array([r["cpu_s"] for r in sel])
         out.append({"stage": st, "jobs": len(sel), "median_s": float(np.median(s)), "total_s": float(s.sum()),
-                    "max_s": float(s.max()), "max_rss_mb": float(np.nanmax(rss)) if np.isfinite(rss).any() else np.nan})
+                    "max_s": float(s.max()), "total_cpu_s": float(np.nansum(cpu)),
+                    "max_rss_mb": float(np.nanmax(rss)) if np.isfinite(rss).any() else np.nan})
     return out
 
 
@@ -138,10 +140,11 @@ def main(argv=None):
     runs = sorted({r["run"] for r in rows})
     combos = sorted({r["combo"] for r in rows if r["combo"]})
     print(f"RVE pipeline timing: runs {', '.join(runs)}; {len(combos)} combination(s); {len(rows)} jobs")
-    print(f"{'stage':8s} {'jobs':>5s} {'median s':>10s} {'max s':>9s} {'total s':>9s} {'max RSS MB':>11s}")
+    print(f"{'stage':8s} {'jobs':>5s} {'median s':>10s} {'max s':>9s} {'total s':>9s} {'total CPU s':>12s} "
+          f"{'max RSS MB':>11s}")
     for t in table:
         print(f"{t['stage']:8s} {t['jobs']:5d} {t['median_s']:10.1f} {t['max_s']:9.1f} {t['total_s']:9.1f} "
-              f"{t['max_rss_mb']:11.0f}")
+              f"{t['total_cpu_s']:12.1f} {t['max_rss_mb']:11.0f}")
     total_job_s = sum(t["total_s"] for t in table)
     dom = max(table, key=lambda t: t["total_s"])
     print(f"sum of job times: {total_job_s:.1f} s ({total_job_s / 60:.1f} min); with 2 cores >= "
