@@ -242,10 +242,11 @@ def cycle_job(in_state: PathLike, out_state: PathLike, log_path: Optional[PathLi
                              f"{prev.kind} mode={prev.mode!r} step={prev.step}")
         _check_friction(cfg, prev, in_state)
         eps_prev, eps = float(levels[step - 1]), float(levels[step])
-        # a loading starts at step 1 and turns at the turning point (the friction's stick transient)
-        turns = step == 1 or ("reversal" if (eps - eps_prev) * (eps_prev - float(levels[step - 2])) < 0 else False)
+        # the friction's stick transient: a loading starts at step 1 and turns at the turning point
+        turns = step > 1 and (eps - eps_prev) * (eps_prev - float(levels[step - 2])) < 0
         x, system, info = strain_step(cfg, fab, mesh, prev.x, prev.origin, mode, step, multipliers=prev.multipliers,
-                                      friction=prev.friction, levels=(eps_prev, eps), loading_start=turns)
+                                      friction=prev.friction, levels=(eps_prev, eps),
+                                      loading_start="reversal" if turns else step == 1)
         energy, rate = pinned_energy(fab, mesh, system, x, prev.origin, mode, eps)
         info["cycle"] = {"strain": eps, "energy": energy, "work_rate": rate,
                          "leg": "load" if eps > eps_prev else "unload", "steps": len(levels) - 1}

@@ -205,31 +205,25 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         refreeze = not resolve
     if max_rounds is None:
         max_rounds = RESOLVE_ROUNDS if resolve else 4
-    args = (atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds, load_rtol, corrector_iter, freeze)
+    # (stages, fallback) of each pass: a re-solve takes the law's stage alone first and, where
+    # that fails, the caller's stages from the same start (module docstring)
+    passes = [(smoothing, fallback)]
     if resolve and RESOLVE_SMOOTHING is not None and tuple(RESOLVE_SMOOTHING) != tuple(smoothing):
-        # the law's stage alone first; where it fails, the caller's stages from the same start
-        xs, out = _solve(system, fr, x, t, *args, False, step_cap, backend, RESOLVE_SMOOTHING, predictor_iter,
+        passes.insert(0, (RESOLVE_SMOOTHING, False))
+    done = None
+    for stages, fb in passes:
+        xs, out = _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds,
+                         load_rtol, corrector_iter, freeze, fb, step_cap, backend, stages, predictor_iter,
                          direct_atol, resolve)
+        if done is not None:
+            for k in ("iterations", "predictor_iterations", "corrector_iterations", "rounds"):
+                setattr(out, k, getattr(out, k) + getattr(done, k))
         if out.converged:
-            return _held(system, fr, xs, out)
-        log.info("friction re-solve: the law's stage alone did not converge (%s); again with the smoothed stage",
-                 out.reason)
-        first = out
-        xs, out = _solve(system, fr, x, t, *args, fallback, step_cap, backend, smoothing, predictor_iter,
-                         direct_atol, resolve)
-        out.iterations += first.iterations
-        out.predictor_iterations += first.predictor_iterations
-        out.corrector_iterations += first.corrector_iterations
-        out.rounds += first.rounds
-        return _held(system, fr, xs, out)
-    xs, out = _solve(system, fr, x, t, *args, fallback, step_cap, backend, smoothing, predictor_iter, direct_atol,
-                     resolve)
-    return _held(system, fr, xs, out)
-
-
-def _held(system, fr, xs, out):
-    """``(xs, out)``, the loads of a converged solve of an augmented system held for the next
-    re-solve of the Uzawa loop."""
+            break
+        if (stages, fb) != passes[-1]:
+            log.info("friction re-solve: the law's stage alone did not converge (%s); again with the smoothed "
+                     "stage", out.reason)
+        done = out
     if getattr(system, "augmented", False) and hasattr(fr, "hold_loads"):
         # the loads the next re-solve of the Uzawa loop freezes first (module docstring)
         fr.hold_loads(xs if out.converged else None)

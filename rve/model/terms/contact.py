@@ -231,7 +231,9 @@ class ContactTerm:
         nn = conn.shape[1]
         ep, em = cmap.e_plus, cmap.e_minus
         stencil = None
-        nb = element_neighbours(mesh, self.wrap) if self.curve else None
+        #: the elements before and after every element, across the wraps (the curves' stencils
+        #: and the friction history's neighbours)
+        self.neighbours = nb = element_neighbours(mesh, self.wrap)
         if self.smooth:
             stencil = smooth_stencil(mesh.order, conn, nb.prev, nb.next, mesh.elem_length)
             local = np.concatenate([stencil.nodes[ep], stencil.nodes[em]], axis=1)  # (P, 2 Ms)

@@ -65,7 +65,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...contact.search import element_neighbours
 from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
@@ -427,7 +426,7 @@ class FrictionTerm:
         # fibril that wraps into its own image continues from its last element into its
         # first (the keys' translations are taken modulo the wrap, so both are one group)
         em = keys[:, 2]
-        nb = element_neighbours(mesh, c.wrap)
+        nb = c.neighbours
         ed = em[np.maximum(donor, 0)]
         ahead, behind = nb.next[ed] == em, nb.prev[ed] == em
         take = rec & (donor >= 0) & (ahead | behind)
