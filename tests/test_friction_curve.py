@@ -196,3 +196,86 @@ def test_frozen_potential_at_its_own_loads_is_the_law(kind, order):
         np.testing.assert_allclose(R, R_law, rtol=0, atol=1e-14 * np.abs(R_law).max())
         _, R_old, _ = _frozen(X, s_bar, anchor, mu, ratio, f0, n0, geo.material_weights, jac=False)
         assert np.abs(R_old - R_law).max() > 1e-6 * np.abs(R_law).max()
+
+
+# --------------------------------------------------------------------------- the turned anchor
+def _turned_history(X, geo_fn, seed=5, scale=0.01):
+    """A history taken at a nearby state with the - side's direction at its closest points
+    there (``d_ref``): the anchor turns between that state and ``X``."""
+    from rve.physics.friction_forms import minus_direction
+
+    X0 = X + np.random.default_rng(seed).normal(size=X.shape) * scale
+    g0 = geo_fn(X0)
+    s_bar, anchor = start_history(X0, None, g0.s_minus, weights=g0.material_weights)
+    return s_bar, anchor, minus_direction(X0, g0.direction_weights(g0.s_minus))[0]
+
+
+def _turned_forces(geo_fn, X, s_bar, anchor, d_ref, mu, ratio, jac=True):
+    geo = geo_fn(X)
+    w = np.full(geo.g.shape, W)
+    _, p1, p2 = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
+    f = np.where(geo.active, w * p1, 0.0)
+    kN = np.where(geo.active, w * p2, 0.0)
+    kT = w * ratio * PEN
+    mus = np.full(X.shape[0], mu)
+    R, K = friction_forces(geo, X, s_bar, anchor, f, kN, kT, mus, jac, d_ref=d_ref)
+    return R, K, friction_state(geo, X, s_bar, anchor, f, kT, mus, d_ref=d_ref), f
+
+
+@pytest.mark.parametrize("kind, order", CASES)
+def test_direction_weights_are_the_tangent_at_a_point_and_its_derivative(kind, order):
+    """``direction_weights(s) X = dq/ds`` (the - side's tangent, against differences of the
+    material weights) and ``direction_weights_ds`` its derivative in s (differences)."""
+    X, geo_fn = _case(kind, order)
+    geo = geo_fn(X)
+    h = 1e-6
+    s = geo.s_minus + 0.1
+    half = X.shape[1] // 2
+    q = lambda v: -np.einsum("pgk,pki->pgi", geo.material_weights(v)[..., half:], X[:, half:])  # noqa: E731
+    d = np.einsum("pgk,pki->pgi", geo.direction_weights(s), X)
+    np.testing.assert_allclose(d, (q(s + h) - q(s - h)) / (2 * h), rtol=1e-7, atol=1e-8)
+    assert np.abs(geo.direction_weights(s)[..., :half]).max() == 0.0
+    fd = (geo.direction_weights(s + h) - geo.direction_weights(s - h)) / (2 * h)
+    np.testing.assert_allclose(geo.direction_weights_ds(s), fd, rtol=1e-6, atol=1e-6)
+    straight = kind == "curve" and order == 1       # a straight element: one direction
+    assert (np.abs(geo.direction_weights_ds(s)).max() == 0.0) if straight else \
+        (np.abs(geo.direction_weights_ds(s)).max() > 0.1)
+
+
+@pytest.mark.parametrize("kind, order", CASES)
+@pytest.mark.parametrize("regime, mu, ratio", [("stick", 1.5, 0.05), ("slip", 0.2, 50.0)])
+def test_turned_friction_tangent_matches_finite_differences(kind, order, regime, mu, ratio):
+    """With the anchor turned to the - side's direction at the current closest point (a
+    direction that moves with that point along the curve) the tangent, the turn's derivative,
+    the couple's and the moving weights of the couple included, matches central differences."""
+    X, geo_fn = _case(kind, order)
+    s_bar, anchor, d_ref = _turned_history(X, geo_fn)
+    R, K, st, f = _turned_forces(geo_fn, X, s_bar, anchor, d_ref, mu, ratio)
+    n_active = int((f > 0).sum())
+    assert n_active >= 6
+    if regime == "stick":
+        assert st.stick.sum() == n_active
+    else:
+        assert st.slip.sum() == n_active
+    # the direction moves with the closest point: its derivative terms are exercised
+    geo = geo_fn(X)
+    q2 = np.einsum("pgk,pki->pgi", geo.direction_weights_ds(geo.s_minus), X)
+    assert np.abs(geo.ds).max() > 0.1
+    if not (kind == "curve" and order == 1):
+        assert np.abs(q2[f > 0]).max() > 0.05
+    Kfd = fd_nodes(lambda Y: _turned_forces(geo_fn, Y, s_bar, anchor, d_ref, mu, ratio, False)[0], X)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
+
+
+@pytest.mark.parametrize("kind, order", CASES)
+@pytest.mark.parametrize("mu, ratio", [(1.5, 0.05), (0.2, 50.0)])
+def test_turned_commit_changes_no_force(kind, order, mu, ratio):
+    """The history committed at a state (material point, anchor and direction at the
+    closest point) gives that state the same forces, the couple included: the direction of
+    the turn is taken at the closest point, which a commit does not move."""
+    X, geo_fn = _case(kind, order)
+    s_bar, anchor, d_ref = _turned_history(X, geo_fn)
+    R, _, st, _ = _turned_forces(geo_fn, X, s_bar, anchor, d_ref, mu, ratio, jac=False)
+    assert np.abs(st.s_bar - s_bar)[st.stick | st.slip].max() > 1e-3      # the material points do move
+    R2_, _, _, _ = _turned_forces(geo_fn, X, st.s_bar, st.anchor, st.d_ref, mu, ratio, jac=False)
+    np.testing.assert_allclose(R2_, R, rtol=0, atol=1e-12 * np.abs(R).max())

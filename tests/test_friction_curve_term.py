@@ -221,3 +221,56 @@ def test_history_carried_across_the_periodic_seam(geometry, slide):
     away = _seam_slide(-1.0, geometry, slide)
     assert np.abs(away[:, 0]).min() > 0.1 * np.abs(away[:, 0]).max()   # friction carries load all along
     np.testing.assert_allclose(across, away, rtol=0, atol=1e-12 * np.abs(away).max())
+
+
+def _node_slide(geometry, bend, positions):
+    """Fibril b pressed across fibril a (6 elements along x) next to a's node at x = 2/3,
+    the history committed there (b's point inside a's element, the row of that point on
+    a's next element sharing it), then a bent by ``bend`` about that node (its elements turn
+    against each other) and b slid along x through ``positions`` across the node, on a, the
+    history held: the total contact force on b at each position."""
+    from rve.fem.mesh import fibril_mesh, straight_fibril
+    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
+    from rve.model.terms.friction import FrictionLaw
+
+    R = 0.15
+    x0 = positions[0]
+    fibs = [straight_fibril([0.0, 0.013, 0.0], [2.0, 0.013, 0.0], R, "a"),
+            straight_fibril([x0, -1, -(2 * R - 0.01)], [x0, 1, -(2 * R - 0.01)], R, "b")]
+    mesh = fibril_mesh(fibs, 6, 2)
+    base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
+    x = np.zeros(base.n)
+    base.nodal(x)[:, :9] = mesh.X0
+    params = ContactParams(penalty=50.0, geometry=geometry, friction=FrictionLaw(0.3, 0.2))
+    system = ContactSystem(base, params, x)
+    fr = system.term.friction
+    fr.commit(x)
+    on_a, on_b = mesh.node_fibril == 0, mesh.node_fibril == 1
+    b_dofs = base.layout.dofs("r", np.flatnonzero(on_b)).reshape(-1, 3)
+    ra = base.nodal(x)[on_a, :3]
+    y0 = x.copy()
+    base.nodal(y0)[on_a, 2] += bend * (ra[:, 0] - 2.0 / 3.0) ** 2     # a's elements turn about its node
+    forces = []
+    for p in positions:
+        y = y0.copy()
+        base.nodal(y)[on_b, 0] += p - x0
+        base.nodal(y)[on_b, 2] += bend * (p - 2.0 / 3.0) ** 2
+        system.rebuild(y)
+        forces.append(system.evaluate(y, np.zeros(system.n), 0.0, False)[0][b_dofs].sum(axis=0))
+    return np.array(forces)
+
+
+@pytest.mark.parametrize("geometry", ["curve", "smooth"])
+def test_friction_force_continuous_across_an_element_end(geometry):
+    """The anchor turns with the - fibril's tangent at the contact point, and a row that takes
+    a neighbour's history takes its direction, so a contact sliding across an element end of
+    a - fibril bent since the history keeps a continuous friction force: no change between
+    neighbouring positions stands out from its neighbours' (a jump is one change many times
+    both neighbours; with the turn by each element's own chord it was 162 times at the node,
+    the two elements having turned against each other by the bend)."""
+    positions = np.linspace(2.0 / 3.0 - 0.02, 2.0 / 3.0 + 0.02, 41)
+    F = _node_slide(geometry, 0.6, positions)
+    steps = np.linalg.norm(np.diff(F, axis=0), axis=1)
+    assert steps.min() > 0
+    spike = steps[1:-1] / np.maximum(steps[:-2], steps[2:])
+    assert spike.max() <= 2.0, (spike.max(), int(np.argmax(spike)) + 1)

@@ -63,13 +63,13 @@ def test_friction_tangent_matches_finite_differences(regime, mu, ratio, frozen):
 
 def _turned_history(X, sp):
     """A history committed at a nearby state X0 with its - chord direction there, and X0."""
-    from rve.physics.friction_forms import chord_direction
+    from rve.physics.friction_forms import minus_direction
 
     rng = np.random.default_rng(7)
     X0 = X + rng.normal(size=X.shape) * 0.02
     g0 = chord_geometry(*(X0[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
     s_bar, anchor = start_history(X0, sp, g0.s_minus)
-    d_ref = chord_direction(X0, g0.material_weights, s_bar.shape)[0]
+    d_ref = minus_direction(X0, g0.direction_weights(g0.s_minus))[0]
     return s_bar, anchor, d_ref
 
 
@@ -103,13 +103,13 @@ def test_turned_anchor_makes_a_rigid_rotation_slip_free():
     friction force is zero (no slip happened); left unturned it is not (the stored -j_n, the
     length of the radii, reads as a tangential gap). A rotation about the - chord's own axis,
     which positions cannot tell from the + side sliding around it, still reads as a slip."""
-    from rve.physics.friction_forms import chord_direction
+    from rve.physics.friction_forms import minus_direction
     from scipy.spatial.transform import Rotation
 
     X, sp, _, _ = _pairs()
     geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
     s_bar, anchor = start_history(X, sp, geo.s_minus)
-    d_ref = chord_direction(X, geo.material_weights, s_bar.shape)[0]
+    d_ref = minus_direction(X, geo.direction_weights(geo.s_minus))[0]
     h = d_ref[:, 0]                                    # (P, 3): one - chord per pair
     a1 = np.cross(h, [0.0, 0.0, 1.0])
     a1 /= np.linalg.norm(a1, axis=1)[:, None]
@@ -286,7 +286,7 @@ def test_frozen_turn_is_a_potential_and_at_its_own_state_the_law(mu, ratio, eta)
     geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
     f0, n0 = _loads_at(X, sp)
     s_star, a_star, _ = moved_history(X, sp, s_bar, anchor, geo.s_minus, d_ref=d_ref)
-    Dw, Jd, d = frozen_turn(X, geo.material_weights, geo.n, geo.rho, geo.active)
+    Dw, Jd, d = frozen_turn(X, geo.direction_weights(geo.s_minus), geo.n, geo.rho, geo.active)
     a_f = a_star - np.einsum("pgij,pgj->pgi", Jd, d)
     turn = (Dw, Jd)
     if eta == 0.0:
@@ -322,14 +322,14 @@ def test_couple_balances_the_moment_of_the_friction_forces():
     moment has no part across the - chord (only the twist about it, which a position-only
     chord cannot carry); without the couple the pair of forces, rho n apart, leaves a net
     moment."""
-    from rve.physics.friction_forms import chord_direction
+    from rve.physics.friction_forms import minus_direction
 
     X, sp, _, _ = _pairs()
     s_bar, anchor, d_ref = _turned_history(X, sp)
     R = _forces_turned(X, sp, s_bar, anchor, d_ref, 0.3, 1.0, jac=False)[0]
     R0 = _forces(X, sp, s_bar, anchor, 0.3, 1.0, jac=False)[0]
     geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
-    h = chord_direction(X, geo.material_weights, s_bar.shape)[0][:, 0]
+    h = minus_direction(X, geo.direction_weights(geo.s_minus))[0][:, 0]
     for forces, balanced in ((R, True), (R0, False)):
         assert np.abs(forces.sum(axis=1)).max() <= 1e-15
         M = np.cross(X, -forces).sum(axis=1)

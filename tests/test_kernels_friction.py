@@ -118,23 +118,18 @@ def test_law_kernel_matches_numpy(M, turn, jacobian):
     """``rve.kernels.friction.friction_forces`` against ``friction_forms.friction_forces``
     (stick, slip and inactive points; with and without the anchor's turn and its couple)."""
     from rve.kernels.friction import friction_forces as compiled_law
-    from rve.physics.friction_forms import chord_direction, friction_forces
+    from rve.physics.friction_forms import friction_forces
 
     geo, X, anchor, f, kN, kT, mu, cb, D, d_ref = _law_inputs(M, turn)
-    if turn:
-        def weights(s):   # the reference takes the - chord's weights D as weights(0) - weights(1)
-            s = np.asarray(s, float)
-            if s.ndim and np.all(s == 0.0):
-                return D
-            if s.ndim and np.all(s == 1.0):
-                return np.zeros_like(D)
-            return cb
-
-        geo.material_weights = weights
-        np.testing.assert_array_equal(chord_direction(X, weights, f.shape)[1], D)
+    Dp = None
+    if turn:   # the direction weights at the closest point and their derivative in it
+        Dp = np.random.default_rng(3).normal(size=D.shape)
+        geo.s_minus = np.full(f.shape, 0.25)
+        geo.direction_weights = lambda s: D
+        geo.direction_weights_ds = lambda s: Dp
     ref = friction_forces(geo, X, np.full(f.shape, 0.5), anchor, f, kN, kT, mu, jacobian, d_ref=d_ref)
     out = compiled_law(geo.c, geo.ds, geo.n, geo.rho, geo.active, geo.dc_ds, cb, X, anchor, f, kN, kT, mu,
-                       jacobian, D=D, d_ref=d_ref)
+                       jacobian, D=D, d_ref=d_ref, Dp=Dp)
     for a, b in zip(ref, out):
         if a is None:
             assert b is None

@@ -260,13 +260,14 @@ def _law_point(c, n, rho, gact, cb, D, X, anchor, d_ref, f, kT, mu, turn, p, g, 
 
 
 @njit(cache=True, nogil=True)
-def _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stick, en, un, dnorm, e, t, h, J,
-                 Q, dT, K, dE, V, W):
+def _law_tangent(c, ds, n, rho, dc_ds, cb, D, Dp, X, f, kN, kT, mu, turn, p, g, stick, en, un, dnorm, e, t, h,
+                 J, Q, dT, K, dE, V, W):
     """``K[p] += c_k dt/dX_l + t dc_k/dX_l`` of an active point (p, g); fills ``Q`` (M, 3, 3)
-    = dj/dX_l and ``dT`` (M, 3, 3) = dt/dX_l for the couple's tangent (``dE`` (M, 3, 3), ``V``
-    (3, 3) and ``W`` (5, 3, 3): work space)."""
+    = dj/dX_l and ``dT`` (M, 3, 3) = dt/dX_l for the couple's tangent, and with the turn
+    ``V[4]`` = ``q2 = sum_k Dp_k X_k`` (the direction's derivative in s-; ``dE`` (M, 3, 3),
+    ``V`` (5, 3) and ``W`` (5, 3, 3): work space)."""
     M = X.shape[1]
-    jd, ehat = V[0], V[1]
+    jd, ehat, w2, q2 = V[0], V[1], V[2], V[4]
     Pn, Ph, Jd, PJd, proj = W[0], W[1], W[2], W[3], W[4]
     rho_s = rho[p, g]
     for i in range(3):
@@ -286,6 +287,13 @@ def _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stic
             for j in range(3):
                 Jd[i, j] /= dnorm
         _mm(Pn, Jd, PJd)
+        for i in range(3):
+            q2[i] = 0.0
+        for k in range(M):
+            for i in range(3):
+                q2[i] += Dp[p, g, k] * X[p, k, i]
+        for i in range(3):
+            w2[i] = PJd[i, 0] * q2[0] + PJd[i, 1] * q2[1] + PJd[i, 2] * q2[2]
     for l in range(M):
         for i in range(3):
             for j in range(3):
@@ -295,8 +303,8 @@ def _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stic
             for i in range(3):
                 pq = Pn[i, 0] * Q[l, 0, j] + Pn[i, 1] * Q[l, 1, j] + Pn[i, 2] * Q[l, 2, j]
                 dE[l, i, j] = cb[p, g, l] * Pn[i, j] - (un / rho_s) * pq - n[p, g, i] * eq / rho_s
-                if turn:
-                    dE[l, i, j] += D[p, g, l] * PJd[i, j]
+                if turn:   # dd/dX_l = D_l I + q2 ds_l^T (the direction at the closest point)
+                    dE[l, i, j] += D[p, g, l] * PJd[i, j] + w2[i] * ds[p, g, l, j]
     enn = en if en > 0 else 1.0
     for i in range(3):
         ehat[i] = e[i] / enn
@@ -322,15 +330,19 @@ def _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stic
 
 
 @njit(cache=True, nogil=True)
-def _couple_tangent(n, rho, D, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W):
-    """``K[p] += D_k dC/dX_l`` of an active point (p, g), ``C = rho h x (n x t) / |d|``
-    (``rve.physics.friction_forms._couple_tangent``; ``V`` (3, 3), ``W`` (10, 3, 3): work
+def _couple_tangent(n, rho, ds, D, Dp, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W):
+    """``K[p] += D_k dC/dX_l + Dp_k C ds_l^T`` of an active point (p, g), ``C = rho h x (n x
+    t) / |d|`` with ``dd/dX_l = D_l I + q2 ds_l^T`` (``q2`` in ``V[4]``, ``_law_tangent``;
+    ``rve.physics.friction_forms._couple_tangent``; ``V`` (5, 3), ``W`` (10, 3, 3): work
     space)."""
     M = Q.shape[0]
     inv_d = 1.0 / dnorm
     r_a = rho[p, g]
     Sh, Sn, St, SM, ShSt, ShSn, dn_l, dh_l, dhM, tmp = W[0], W[1], W[2], W[3], W[4], W[5], W[6], W[7], W[8], W[9]
-    drho = V[0]
+    drho, pq2, q2 = V[0], V[1], V[4]
+    hq2 = h[0] * q2[0] + h[1] * q2[1] + h[2] * q2[2]
+    for i in range(3):
+        pq2[i] = q2[i] - h[i] * hq2
     _skew(h, Sh)
     _skew(n[p, g], Sn)
     _skew(t, St)
@@ -342,7 +354,7 @@ def _couple_tangent(n, rho, D, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W):
             drho[j] = n[p, g, 0] * Q[l, 0, j] + n[p, g, 1] * Q[l, 1, j] + n[p, g, 2] * Q[l, 2, j]
             for i in range(3):
                 dn_l[i, j] = (Q[l, i, j] - n[p, g, i] * drho[j]) / r_a
-                dh_l[i, j] = D[p, g, l] * ((1.0 if i == j else 0.0) - h[i] * h[j]) * inv_d
+                dh_l[i, j] = (D[p, g, l] * ((1.0 if i == j else 0.0) - h[i] * h[j]) + pq2[i] * ds[p, g, l, j]) * inv_d
         # d(h x (n x t)) = -S(M) dh - S(h) S(t) dn + S(h) S(n) dt
         _mm(SM, dh_l, dhM)
         _mm(ShSt, dn_l, tmp)
@@ -352,17 +364,18 @@ def _couple_tangent(n, rho, D, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W):
                                                       + ShSn[i, 2] * dT[l, 2, j])
         dlh = D[p, g, l]
         for k in range(M):
-            Dk = D[p, g, k]
-            if Dk == 0.0:
+            Dk, Dpk = D[p, g, k], Dp[p, g, k]
+            if Dk == 0.0 and Dpk == 0.0:
                 continue
             for i in range(3):
                 for j in range(3):
-                    dC = inv_d * (hM[i] * drho[j] + r_a * dhM[i, j]) - r_a * inv_d * inv_d * hM[i] * dlh * h[j]
-                    K[p, k, i, l, j] += Dk * dC
+                    ddn = dlh * h[j] + hq2 * ds[p, g, l, j]
+                    dC = inv_d * (hM[i] * drho[j] + r_a * dhM[i, j]) - r_a * inv_d * inv_d * hM[i] * ddn
+                    K[p, k, i, l, j] += Dk * dC + Dpk * r_a * inv_d * hM[i] * ds[p, g, l, j]
 
 
 @njit(cache=True, nogil=True)
-def _law_forms(c, ds, n, rho, gact, dc_ds, cb, D, X, anchor, d_ref, f, kN, kT, mu, jacobian, turn, R, K):
+def _law_forms(c, ds, n, rho, gact, dc_ds, cb, D, Dp, X, anchor, d_ref, f, kN, kT, mu, jacobian, turn, R, K):
     P, M = X.shape[0], X.shape[1]
     G = c.shape[1]
     e, t, h, Mv, hM = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
@@ -375,18 +388,20 @@ def _law_forms(c, ds, n, rho, gact, dc_ds, cb, D, X, anchor, d_ref, f, kN, kT, m
                                                    e, t, h, J, Mv, hM, R, V, W)
             if not jacobian or not act:
                 continue
-            _law_tangent(c, ds, n, rho, dc_ds, cb, D, X, f, kN, kT, mu, turn, p, g, stick, en, un, dnorm, e, t, h, J,
-                         Q, dT, K, dE, V, W)
+            _law_tangent(c, ds, n, rho, dc_ds, cb, D, Dp, X, f, kN, kT, mu, turn, p, g, stick, en, un, dnorm, e, t,
+                         h, J, Q, dT, K, dE, V, W)
             if turn:
-                _couple_tangent(n, rho, D, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W)
+                _couple_tangent(n, rho, ds, D, Dp, p, g, dnorm, t, h, Mv, hM, Q, dT, K, V, W)
 
 
-def friction_forces(c, ds, n, rho, active, dc_ds, cb, X, anchor, f, kN, kT, mu, jacobian: bool, D=None, d_ref=None):
+def friction_forces(c, ds, n, rho, active, dc_ds, cb, X, anchor, f, kN, kT, mu, jacobian: bool, D=None, d_ref=None,
+                    Dp=None):
     """``(R (P, M, 3), K (P, M, 3, M, 3) or None)`` of the law: the same arrays, to rounding,
     as ``rve.physics.friction_forms.friction_forces`` (the reference) from the geometry's
     fields ``c``, ``ds``, ``n``, ``rho``, ``active``, ``dc_ds``, the material weights ``cb``
     (P, G, M) at the history's ``s_bar``, the local nodes ``X``, the history's ``anchor`` and,
-    with the anchor's turn, ``d_ref`` (P, G, 3) and the - chord's weights ``D`` (P, G, M);
+    with the anchor's turn, ``d_ref`` (P, G, 3), the - side's direction weights ``D`` (P, G,
+    M) at the closest point and their derivative ``Dp`` in it (None: zero, the chord's);
     ``f``, ``kN``, ``kT``, ``mu`` (P, G)."""
     g = lambda a: np.ascontiguousarray(a, dtype=np.float64)   # noqa: E731
     c, ds, n, rho, dc_ds, cb, X, anchor, f, kN, kT = map(g, (c, ds, n, rho, dc_ds, cb, X, anchor, f, kN, kT))
@@ -394,13 +409,14 @@ def friction_forces(c, ds, n, rho, active, dc_ds, cb, X, anchor, f, kN, kT, mu, 
     act = np.ascontiguousarray(active, dtype=np.bool_)
     turn = d_ref is not None
     D = g(D) if turn else np.zeros((0, 1, 1))
+    Dp = (np.zeros_like(D) if Dp is None else g(Dp)) if turn else D
     d_ref = g(d_ref) if turn else np.zeros((0, 1, 3))
     P, M = X.shape[0], X.shape[1]
     R = np.zeros((P, M, 3))
     jac = bool(jacobian)
     K = np.zeros((P, M, 3, M, 3)) if jac else np.zeros((0, M, 3, M, 3))
     run_chunked(P, lambda a, b: _law_forms(c[a:b], ds[a:b], n[a:b], rho[a:b], act[a:b], dc_ds[a:b], cb[a:b],
-                                           D[a:b] if turn else D, X[a:b], anchor[a:b],
+                                           D[a:b] if turn else D, Dp[a:b] if turn else Dp, X[a:b], anchor[a:b],
                                            d_ref[a:b] if turn else d_ref, f[a:b], kN[a:b], kT[a:b], mu[a:b], jac,
                                            turn, R[a:b], K[a:b] if jac else K), MIN_CHUNK)
     return R, (K if jac else None)

@@ -210,6 +210,28 @@ class CurveGeometry(PointKinematics):
         plus = np.broadcast_to(self.c[..., :half], np.shape(s_bar) + (half,))
         return np.concatenate([plus, -self.minus_basis(s_bar)], axis=-1)
 
+    def direction_weights(self, s) -> np.ndarray:
+        """``(P, G, M)`` weights ``D`` of the - side's direction ``d = sum_k D_k X_k`` at
+        points ``s`` (P, G) of b (the friction takes it at the closest point): b's tangent
+        ``dq/ds`` there (zero on the a side). Continuous along b's fibril on the smooth curve
+        (C^1), so the friction's anchor turns the same way on either side of an element end
+        (``rve.physics.friction_forms``)."""
+        return self._minus_derivative(s, 1)
+
+    def direction_weights_ds(self, s) -> np.ndarray:
+        """``(P, G, M)`` derivative of ``direction_weights`` in ``s`` (b's ``d2q/ds2``)."""
+        return self._minus_derivative(s, 2)
+
+    def _minus_derivative(self, s, k: int) -> np.ndarray:
+        s = np.asarray(s, float)
+        half = self.c.shape[-1] // 2
+        if self.Sb is None:
+            dN = curve_basis(self.Nb.shape[-1] - 1, s)[k]
+        else:
+            dN = np.matmul(hermite_basis(s)[k], self.Sb)
+        dN = np.broadcast_to(dN, s.shape + (half,))
+        return np.concatenate([np.zeros(s.shape + (half,)), dN], axis=-1)
+
 
 def curve_geometry(order: int, Xa, Xb, s_a, gap_radius, has_next, t_next, has_prev) -> CurveGeometry:
     """Contact kinematics of points ``s_a`` (G,) on the curves ``Xa`` (P, nn, 3) against the

@@ -84,6 +84,7 @@ __all__ = [
 
 _CM = np.array([0.0, 0.0, 1.0, -1.0])  # d(d)/dX coefficients, with d = b- - a- (sign: -C^T)
 #: d c / d s- of the chord weights c = (1 - s+, s+, -(1 - s-), -s-)
+_DIRECTION = np.array([0.0, 0.0, -1.0, 1.0])
 _DC_DS = np.array([0.0, 0.0, 1.0, -1.0])
 
 
@@ -149,6 +150,17 @@ class ChordGeometry(PointKinematics):
         material points, ``rve.physics.friction_forms``)."""
         sb = np.asarray(s_bar, float)
         return np.stack([1.0 - self.s_plus, self.s_plus, -(1.0 - sb), -sb], axis=-1)
+
+    def direction_weights(self, s_bar) -> np.ndarray:
+        """``(P, G, 4)`` weights ``D`` of the - side's direction ``d = sum_k D_k X_k`` at
+        points ``s_bar`` (P, G): the chord ``b- - a-``, (0, 0, -1, 1) at every point (the
+        friction's turn of its anchor, ``rve.physics.friction_forms``)."""
+        return np.broadcast_to(_DIRECTION, np.shape(s_bar) + (4,))
+
+    def direction_weights_ds(self, s_bar) -> np.ndarray:
+        """``(P, G, 4)`` derivative of ``direction_weights`` in ``s``: zero (a chord's
+        direction is the same at every point)."""
+        return np.zeros(np.shape(s_bar) + (4,))
 
     @property
     def dc_ds(self) -> np.ndarray:

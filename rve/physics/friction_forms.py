@@ -21,7 +21,9 @@ weights of the jump between the + points and the - points at parameters ``s`` (e
   of the - side that was in contact then (a parameter of the - element, continued beyond
   [0, 1] by its polynomial), and ``anchor`` (3,) = ``e_n - j_n``, its elastic tangential
   gap minus the jump ``j_n = p - q(s_bar)`` of the two material points then, and
-  ``d_ref`` (3,), the unit direction of the - element's chord then (``chord_direction``).
+  ``d_ref`` (3,), the unit direction of the - side at the material point then
+  (``minus_direction`` with the geometry's ``direction_weights``: the - element's chord; on
+  the curves b's tangent at ``s_bar``, continuous along the smooth curve).
   ``start_history(X, s_plus, s_minus)`` is the history of points with no elastic gap.
 * **Trial gap**: ``u = R anchor + j(X; s_bar)`` with ``j(X; s_bar) = sum_k cb_k X_k``,
   ``cb = material_weights(s_bar)`` (chord: ``(1 - s+, s+, -(1 - s_bar), -s_bar)``), and
@@ -84,7 +86,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
-           "tangential_gap", "frozen_potential", "moved_history", "chord_direction", "turned_anchor", "frozen_turn"]
+           "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "chord_directions",
+           "turned_anchor", "frozen_turn"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -110,15 +113,21 @@ def start_history(X, s_plus, s_minus, weights=None):
     return np.array(s_minus, float, copy=True), -np.einsum("pgk,pki->pgi", cb, X)
 
 
-def chord_direction(X, weights_fn, shape):
-    """``(h, D, |d|)``: the unit direction ``h`` (P, G, 3) of the - element's chord (its end
-    points ``q(1) - q(0)``) at local nodes ``X`` (P, M, 3), the weights ``D`` (P, G, M) of
-    ``d = sum_k D_k X_k`` and ``|d|`` (P, G); ``weights_fn`` the material weights ``s ->
-    (P, G, M)``, ``shape`` (P, G)."""
-    D = weights_fn(np.zeros(shape)) - weights_fn(np.ones(shape))   # the - side enters the jump with -N
+def minus_direction(X, D):
+    """``(h, D, |d|)``: the unit direction ``h`` (P, G, 3) of the - side at local nodes ``X``
+    (P, M, 3), ``d = sum_k D_k X_k`` with the weights ``D`` (P, G, M) of a geometry's
+    ``direction_weights`` (the chord's ``b- - a-``; on the curves b's tangent at the material
+    point), and ``|d|`` (P, G)."""
+    D = np.asarray(D, float)
     d = np.einsum("pgk,pki->pgi", D, X)
     dn = np.sqrt(np.einsum("pgi,pgi->pg", d, d))
     return d / np.where(dn > 0, dn, 1.0)[..., None], D, dn
+
+
+def chord_directions(s):
+    """The chord's ``direction_weights`` at material points ``s`` (P, G): (0, 0, -1, 1)
+    (``ChordGeometry.direction_weights``, for the functions that take ``s_plus``)."""
+    return np.broadcast_to(np.array([0.0, 0.0, -1.0, 1.0]), np.shape(s) + (4,))
 
 
 def _skew(a):
@@ -150,14 +159,15 @@ def turned_anchor(anchor, d_ref, h, jacobian: bool = False):
     return out, J
 
 
-def frozen_turn(X, weights_fn, n, rho, active):
+def frozen_turn(X, D, n, rho, active):
     """``(Dw, Jd, d)``: the turn of the anchor frozen at local nodes ``X`` (P, M, 3) for
-    ``frozen_potential(turn=(Dw, Jd))``: ``Dw`` (P, G, M) the weights of the - chord ``d``
-    (P, G, 3), ``Jd = J0 (I - h h^T) / |d|`` with ``J0 = -S(a) S(h)`` the derivative of the
+    ``frozen_potential(turn=(Dw, Jd))``: ``Dw`` (P, G, M) = ``D``, the direction weights of
+    the - side at the points' material points (``minus_direction``), ``d`` (P, G, 3) that
+    direction, ``Jd = J0 (I - h h^T) / |d|`` with ``J0 = -S(a) S(h)`` the derivative of the
     smallest rotation from ``h`` at ``h`` applied to ``a = -rho n`` (the points' normals ``n``
     and distances ``rho``; zero where not ``active``), so that the frozen potential's gradient
     at ``X`` carries the law's couple ``rho h x (n x t) / |d|``."""
-    h, Dw, dn = chord_direction(X, weights_fn, np.shape(rho))
+    h, Dw, dn = minus_direction(X, D)
     a = -np.where(active, rho, 0.0)[..., None] * n
     # J0 = -S(a) S(h) = (a.h) I - h a^T; J0 (I - h h^T) = (a.h)(I - h h^T) - h (a - (a.h) h)^T
     ah = np.einsum("pgi,pgi->pg", a, h)
@@ -167,19 +177,20 @@ def frozen_turn(X, weights_fn, n, rho, active):
     return Dw, Jd, h * dn[..., None]
 
 
-def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None, d_ref=None, h=None):
+def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None, d_ref=None, directions=None):
     """``(s_star, anchor')`` (and ``d_ref'`` when ``d_ref`` is given): the history
     (``s_bar`` (P, G), ``anchor`` (P, G, 3), ``d_ref`` (P, G, 3)) with its material point
-    moved to ``s_star`` (P, G), its anchor turned with the - chord to its direction at
-    ``X`` (``d_ref'``) and the trial gap ``u`` at local nodes ``X`` (P, M, 3) unchanged,
-    ``anchor' = R anchor + j(X; s_bar) - j(X; s_star)``."""
+    moved to ``s_star`` (P, G) (the closest point at ``X``), its anchor turned to the - side's
+    direction there (``d_ref'``, the direction of the turn at ``X``), the trial gap ``u`` at
+    local nodes ``X`` (P, M, 3) unchanged, ``anchor' = R anchor + j(X; s_bar) - j(X;
+    s_star)``; ``directions`` the direction weights ``s -> (P, G, M)`` (a geometry's
+    ``direction_weights``; None: the chord's)."""
     wf = _weights_of(s_plus, weights)
     jb = np.einsum("pgk,pki->pgi", wf(s_bar), X)
     js = np.einsum("pgk,pki->pgi", wf(s_star), X)
     if d_ref is None:
         return np.array(s_star, float, copy=True), np.asarray(anchor, float) + jb - js
-    if h is None:   # (given: the chord's direction at X, e.g. frozen_turn's d / |d|)
-        h = chord_direction(X, wf, np.shape(s_bar))[0]
+    h = minus_direction(X, (chord_directions if directions is None else directions)(s_star))[0]
     return np.array(s_star, float, copy=True), turned_anchor(anchor, d_ref, h) + jb - js, h
 
 
@@ -208,13 +219,13 @@ class FrictionPoints:
 
 def _trial(geo, X, s_bar, anchor, d_ref=None):
     """``(cb, u, un, e, chord)``: the trial gap and, with ``d_ref``, the - chord's
-    ``(h, D, |d|)`` (``chord_direction``; None without ``d_ref``)."""
+    ``(h, D, |d|)`` at the closest point ``s-`` (``minus_direction``; None without ``d_ref``)."""
     cb = geo.material_weights(s_bar)
     jb = np.einsum("pgk,pki->pgi", cb, X)
     chord = None
     u = anchor
     if d_ref is not None:
-        chord = chord_direction(X, geo.material_weights, np.shape(s_bar))
+        chord = minus_direction(X, geo.direction_weights(geo.s_minus))
         u = turned_anchor(anchor, d_ref, chord[0])
     u = u + jb
     un = np.einsum("pgi,pgi->pg", geo.n, u)
@@ -294,10 +305,14 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True,
     dE = (cb[..., None, None] * Pn[:, :, None]
           - (un / rho)[..., None, None, None] * PQ
           - n[:, :, None, :, None] * eQ[:, :, :, None, :] / rho[..., None, None, None])
-    if chord is not None:   # the turned anchor: du_l += J (I - h h^T) D_l / |d|
+    if chord is not None:   # the turned anchor: du_l += J (I - h h^T) dd_l / |d|
         _, J = turned_anchor(anchor, d_ref, h, jacobian=True)
         Jd = J @ (I3 - h[..., :, None] * h[..., None, :]) / np.where(dn > 0, dn, 1.0)[..., None, None]
-        dE = dE + D[..., None, None] * (Pn @ Jd)[:, :, None]
+        PJd = Pn @ Jd
+        dE = dE + D[..., None, None] * PJd[:, :, None]
+        # dd/dX_l = D_l I + q'' ds_l^T: the direction is taken at the closest point s-(X)
+        q2 = np.einsum("pgk,pki->pgi", geo.direction_weights_ds(geo.s_minus), X)
+        dE = dE + np.einsum("pgij,pgj->pgi", PJd, q2)[:, :, None, :, None] * geo.ds[:, :, :, None, :]
     # stick: kT dE; slip: mu e_hat df^T + (mu f/|e|)(I - e_hat e_hat^T) dE
     ehat = e / np.where(en > 0, en, 1.0)[..., None]
     proj = I3 - ehat[..., :, None] * ehat[..., None, :]
@@ -312,7 +327,11 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True,
     K = np.einsum("pgk,pglij->pkilj", geo.c, dT, optimize=True)
     K += np.einsum("pgk,pgilj->pkilj", dc_ds, t[..., :, None, None] * geo.ds[:, :, None, :, :])
     if chord is not None:
-        K += np.einsum("pgk,pglij->pkilj", D, _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active))
+        K += np.einsum("pgk,pglij->pkilj", D, _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active, q2))
+        # the weights D_k(s-) of the couple move with the closest point
+        Dp = geo.direction_weights_ds(geo.s_minus)
+        C = _couple(geo, t, h, dn, active)
+        K += np.einsum("pgk,pgi,pglj->pkilj", Dp, C, geo.ds)
     return R, K
 
 
@@ -325,8 +344,9 @@ def _couple(geo, t, h, dn, active):
     return (rho / np.where(dn > 0, dn, 1.0))[..., None] * np.cross(h, M)
 
 
-def _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active):
-    """``dC/dX_l`` (P, G, M, 3, 3) of ``_couple`` (``Q_l = dj/dX_l``, ``dT`` = dt/dX_l)."""
+def _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active, q2):
+    """``dC/dX_l`` (P, G, M, 3, 3) of ``_couple`` (``Q_l = dj/dX_l``, ``dT`` = dt/dX_l,
+    ``dd/dX_l = D_l I + q2 ds_l^T``, ``q2`` (P, G, 3) the direction's derivative in s-)."""
     I3 = np.eye(3)
     n = geo.n
     inv_d = 1.0 / np.where(dn > 0, dn, 1.0)
@@ -339,13 +359,14 @@ def _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active):
     drho = np.einsum("pgi,pglij->pglj", n, Q)                      # (P, G, M, 3)
     dn_ = np.einsum("pgij,pgljk->pglik", Pn, Q) / np.where(active, rho, 1.0)[..., None, None, None]
     dh = D[..., None, None] * (Pi * inv_d[..., None, None])[:, :, None]          # (P, G, M, 3, 3)
+    dh = dh + (np.einsum("pgij,pgj->pgi", Pi, q2) * inv_d[..., None])[:, :, None, :, None] * geo.ds[:, :, :, None, :]
+    ddn = D[..., None] * h[:, :, None, :] + np.einsum("pgi,pgi->pg", h, q2)[..., None, None] * geo.ds  # d|d|/dX_l
     # d(h x (n x t)) = -S(M) dh - S(h) S(t) dn + S(h) S(n) dt
     dhM = (-np.einsum("pgij,pgljk->pglik", SM, dh) - np.einsum("pgij,pgljk->pglik", Sh @ St, dn_)
            + np.einsum("pgij,pgljk->pglik", Sh @ Sn, dT))
     out = (inv_d[..., None, None, None] * (hM[:, :, None, :, None] * drho[:, :, :, None, :]
                                            + r[..., None, None, None] * dhM)
-           - (r * inv_d * inv_d)[..., None, None, None] * hM[:, :, None, :, None]
-           * (D[..., None] * h[:, :, None, :])[:, :, :, None, :])
+           - (r * inv_d * inv_d)[..., None, None, None] * hM[:, :, None, :, None] * ddn[:, :, :, None, :])
     return np.where(active[..., None, None, None], out, 0.0)
 
 

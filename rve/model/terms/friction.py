@@ -68,8 +68,9 @@ import numpy as np
 from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
-from ...physics.friction_forms import (chord_direction, friction_forces, friction_state, frozen_potential,
-                                      frozen_turn, material_weights, moved_history, start_history, tangential_gap)
+from ...physics.friction_forms import (friction_forces, friction_state, frozen_potential, frozen_turn,
+                                      material_weights, minus_direction, moved_history, start_history,
+                                      tangential_gap)
 from ...kernels import use_numba
 from .contact_pairs import HalfPasses
 
@@ -325,7 +326,7 @@ class FrictionTerm:
         if P:
             X = self._local(x, rows)
             s_new, a_new = start_history(X, None, geo.s_minus, weights=geo.material_weights)
-            d_new = chord_direction(X, geo.material_weights, s_new.shape)[0]
+            d_new = minus_direction(X, geo.direction_weights(geo.s_minus))[0]
         else:
             s_new, a_new, d_new = np.zeros((0, G)), np.zeros((0, G, 3)), np.zeros((0, G, 3))
         hit = np.zeros(P * G, bool)
@@ -383,24 +384,36 @@ class FrictionTerm:
         self.s_bar, self.anchor, self.d_ref = st.s_bar, st.anchor, st.d_ref
         # the committed state's frozen form (``freeze(None)``): its turn, and the anchor less
         # the turn's linear part, so that the frozen gap is the law's at the state
-        Dw, Jd, d = frozen_turn(self._local(x, rows), geo.material_weights, geo.n, geo.rho, geo.active)
+        Dw, Jd, d = frozen_turn(self._local(x, rows), geo.direction_weights(geo.s_minus), geo.n, geo.rho,
+                                geo.active)
         self._committed_history = (self.s_bar.copy(), self.anchor - np.einsum("pgij,pgj->pgi", Jd, d),
                                    self.d_ref.copy(), Jd, Dw)
-        self.share_along_fibrils(x, receivers=st.normal <= 0.0, geo=geo)
+        self.share_along_fibrils(x, receivers=(st.normal <= 0.0) & ~self._owners(geo), geo=geo)
         d = float(st.dissipation.sum())
         self.dissipated += d
         return d
 
+    def _owners(self, geo) -> np.ndarray:
+        """(rows, G) bool: on the curves the points whose closest point their row owns (an
+        interior one, ``CurveGeometry.owned``), in contact or not; none on the chords."""
+        owned = getattr(geo, "owned", None)
+        return np.zeros(geo.active.shape, bool) if owned is None else np.asarray(owned, bool)
+
     def share_along_fibrils(self, x, receivers, geo=None) -> None:
         """The history of the ``receivers`` (rows, G) bool points from a *donor*: the point in
         contact at ``x`` (largest overlap) with the same + point (+ element, point
-        index), - fibril and shift, on a neighbouring - element. The donor's material point is
+        index), - fibril and shift, on a neighbouring - element; on the curves, where none is
+        in contact, the point whose row owns the closest point (so the rows of a + point on
+        both sides of an element end of the - fibril hold one material point before the
+        contact reaches them). The donor's material point is
         named by its fibril parameter S = S0(e-) + s_bar h(e-) and re-expressed on the
         receiver's element, ``s_bar = (S - S0(e-')) / h(e-')`` (outside [0, 1] until the
         contact reaches that element: the element's chord, curve or Hermite cubic continued),
         and the receiver keeps the donor's elastic gap at ``x``: ``anchor = e - j'(x;
-        s_bar)``. So a contact that moves on to the next element of the - fibril carries its
-        stick state instead of sticking anew."""
+        s_bar)``, stored in the direction of the turn at the receiver's closest point on the
+        chords and at the donor's on the curves (where the contact is; when it reaches the
+        element end the two rows turn their anchors alike). So a contact that moves on to
+        the next element of the - fibril carries its stick state instead of sticking anew."""
         c, mesh = self.contact, self.contact.mesh
         P, G = self.s_bar.shape
         rows = self._rows()
@@ -411,7 +424,7 @@ class FrictionTerm:
         group[:, 2] = mesh.elem_fibril[keys[:, 2]]
         inv = row_groups(group)
         rec = np.asarray(receivers, bool).reshape(-1)
-        donor_ok = geo.active.reshape(-1) & ~rec & (np.repeat(self._mu(rows), G) > 0)
+        donor_ok = (geo.active | self._owners(geo)).reshape(-1) & ~rec & (np.repeat(self._mu(rows), G) > 0)
         if not donor_ok.any() or not rec.any():
             return
         fN = np.where(geo.active, geo.g, -np.inf).reshape(-1)
@@ -451,7 +464,10 @@ class FrictionTerm:
         s_flat, a_flat = self.s_bar.reshape(-1).copy(), self.anchor.reshape(-1, 3).copy()
         d_flat = self.d_ref.reshape(-1, 3).copy()
         s_flat[r], a_flat[r] = sb, e - jr       # the donor's gap at x: stored in the receiver's chord now
-        d_flat[r] = chord_direction(X[pr], wr, (r.size, 1))[0][:, 0]
+        # the direction of the turn: the receiver's at x on the chords, the donor's on the curves
+        via = d if c.curve else r
+        Dv = geo.direction_weights(geo.s_minus).reshape(P * G, -1)[via]
+        d_flat[r] = minus_direction(X[via // G], Dv[:, None, :])[0][:, 0]
         self.s_bar, self.anchor, self.d_ref = s_flat.reshape(P, G), a_flat.reshape(P, G, 3), d_flat.reshape(P, G, 3)
 
     def record(self) -> dict:
@@ -544,11 +560,10 @@ class FrictionTerm:
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
             sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
             X = self._local(x, sel)
-            Dw[sel], Jd[sel], d = frozen_turn(X, geo.material_weights, geo.n, geo.rho, geo.active)
-            dn = np.linalg.norm(d, axis=-1)
+            Dw[sel], Jd[sel], d = frozen_turn(X, geo.direction_weights(sm), geo.n, geo.rho, geo.active)
             s_bar[sel], a_sel, d_ref[sel] = moved_history(X, None, self.s_bar[sel], self.anchor[sel], sm,
                                                           weights=geo.material_weights, d_ref=self.d_ref[sel],
-                                                          h=d / np.where(dn > 0, dn, 1.0)[..., None])
+                                                          directions=geo.direction_weights)
             anchor[sel] = a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
         return {"f0": f0, "n0": n0, "s_plus": np.array(self._s_plus(np.arange(P)), float),
                 "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref, "Jd": Jd, "Dw": Dw}
@@ -683,11 +698,11 @@ class FrictionTerm:
         if use_numba():   # the compiled law (rve.kernels.friction): the same arrays
             from ...kernels.friction import friction_forces as compiled
 
-            D = chord_direction(X, geo.material_weights, f.shape)[1]
             mu = np.broadcast_to(np.asarray(self._mu(rows), float)[:, None], f.shape)
             R, K = compiled(geo.c, geo.ds, geo.n, geo.rho, geo.active, geo.dc_ds,
                             geo.material_weights(self.s_bar[rows]), X, self.anchor[rows], f, kN, kT, mu, jacobian,
-                            D=D, d_ref=self.d_ref[rows])
+                            D=geo.direction_weights(geo.s_minus), d_ref=self.d_ref[rows],
+                            Dp=geo.direction_weights_ds(geo.s_minus))
             return self._fold(R, K)
         R, K = friction_forces(geo, X, self.s_bar[rows], self.anchor[rows], f, kN, kT, self._mu(rows), jacobian,
                                d_ref=self.d_ref[rows])
