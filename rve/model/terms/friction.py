@@ -31,10 +31,12 @@ layout. The contact term calls
   of every local node on the curves).
 
 Drivers call ``commit(x)`` at every converged state (the history becomes that state's, the
-points out of contact take that of a point in contact on the same + point and - fibril, and
+points out of contact take that of a point in contact on the same + point and - fibril, on
+the curves of the point whose row owns the closest point where none is in contact, and
 the dissipated energy is accumulated in ``dissipated``); the history of a point is its
-material point ``s_bar``, its ``anchor`` and ``d_ref``, the - chord's direction the anchor is
-stored in (the law turns it with the chord); ``record()`` / ``seed(record)`` carry the
+material point ``s_bar``, its ``anchor`` and ``d_ref``, the direction of the - side the
+anchor is stored in (the chord; on the curves the tangent at the closest point; the law
+turns the anchor with it); ``record()`` / ``seed(record)`` carry the
 history to another system or through a checkpoint (by point key; a record without ``d_ref``
 takes the directions at the seeding state);
 ``set_families(labels)`` names the family of every fibril (default: one family);
@@ -161,7 +163,7 @@ class FrictionTerm:
         self.fibril_family = np.zeros(contact.mesh.n_fibrils, np.int64)
         self._mu_matrix = law.matrix(self.family_names)
         #: history of the map's points (rows: the pairs, or the curves' oriented rows):
-        #: keys (rows*G, 6), s_bar (rows, G), anchor (rows, G, 3), d_ref (rows, G, 3) the - chord's
+        #: keys (rows*G, 6), s_bar (rows, G), anchor (rows, G, 3), d_ref (rows, G, 3) the - side's
         #: direction the anchor was stored in (``friction_forms``: the anchor turns with it)
         self.keys = None
         self.s_bar = None
