@@ -517,3 +517,43 @@ def test_frictional_steps_of_the_periodic_cell_pass_the_one_path_test():
     single = _cfg("periodic", "penalty", 0.3, rows=STACKED, follow_branch=True, path="algorithm_7_1")
     _, _, i1 = strain_step(single, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
     assert i1["converged"] and i1["branch"]["untested"] == "friction" and not i1["branch"].get("checks")
+
+
+def test_a_failed_periodic_step_is_cut_and_solved_again_from_its_start(monkeypatch):
+    """A frictional step of the periodic cell whose one-increment solve fails is solved again
+    from its start in two sub-increments (``strain.max_cuts``): the multipliers and friction
+    history of the start are seeded afresh, so the state, multipliers and history equal those
+    of the step run in two sub-increments directly, bit for bit, and the record names the cut.
+    With ``max_cuts: 0`` the failure stands."""
+    import rve.homogenisation.periodic as periodic
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import friction_record, strain_step
+
+    real = periodic.equilibrium
+    calls = []
+
+    def failing_once(psys, static, xr):
+        xs, info = real(psys, static, xr)
+        calls.append(info["converged"])
+        if len(calls) == 1:   # the one-increment solve: reported failed
+            info = dict(info, converged=False)
+        return xs, info
+
+    out = {}
+    for name, substeps, cuts in (("cut", 1, 2), ("direct", 2, 2), ("none", 1, 0)):
+        cfg = _cfg("periodic", "penalty", 0.3, substeps=substeps, rows=STACKED, max_cuts=cuts)
+        fab, mesh, x0, lam0, rec0 = _relaxed(_cfg("periodic", "penalty", 0.3, rows=STACKED))
+        calls.clear()
+        if name != "direct":
+            monkeypatch.setattr(periodic, "equilibrium", failing_once)
+        x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
+        monkeypatch.setattr(periodic, "equilibrium", real)
+        out[name] = (x, info, multiplier_record(system), friction_record(system))
+    x, info, lam, rec = out["cut"]
+    xd, infod, lamd, recd = out["direct"]
+    assert info["converged"] and info["cuts"][0]["substeps"] == 1 and len(info["substeps"]) == 2
+    np.testing.assert_array_equal(x, xd)
+    for key in ("s_bar", "anchor", "d_ref"):
+        np.testing.assert_array_equal(rec[key], recd[key])
+    assert info["friction"]["dissipated"] == infod["friction"]["dissipated"]
+    assert not out["none"][1]["converged"] and "cuts" not in out["none"][1]

@@ -257,9 +257,11 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     residual from it, committed once at the Uzawa loop's converged state. With ``strain.path:
     quasi_static`` the step is ``strain.substeps`` sub-increments of F, each the affine
     predictor and that static solve (with friction one committed backward-Euler step of the
-    slip each), on one system (``set_macro``); otherwise one. Returns ``(x (n_nodes, 9), full
-    system, info)``."""
-    from .friction_history import friction_summary, seed_friction
+    slip each), on one system (``set_macro``); otherwise one. A step whose solve fails is cut:
+    solved again from ``x_prev`` (its multipliers and friction history) in twice as many
+    sub-increments, at most ``strain.max_cuts`` times (``info["cuts"]``). Returns ``(x
+    (n_nodes, 9), full system, info)``."""
+    from .friction_history import friction_summary
 
     del origin
     sp_ = cfg.strain
@@ -269,8 +271,45 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     levels = strain_levels(cfg)
     eps_from, eps_to = (float(levels[step - 1]), float(levels[step])) if eps_range is None else map(float, eps_range)
     n = int(sp_.substeps) if sp_.path == "quasi_static" else 1
-    subs = [eps_from + (eps_to - eps_from) * k / n for k in range(n)] + [eps_to]
     x_prev = np.asarray(x_prev, float).reshape(mesh.n_nodes, 9)
+    cuts = []
+    while True:
+        x_full, psys, fr, d_start, sinfo, sub_info, F_next, xs = _increments(
+            cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction)
+        if sinfo["converged"] or len(cuts) >= int(sp_.max_cuts):
+            break
+        cuts.append({"substeps": n, "residual_N": free_residual(psys, xs)})
+        log.warning("%s step %d (periodic): not converged in %d increment(s) (|F| = %.3e N); cut to %d", mode, step,
+                    n, cuts[-1]["residual_N"], 2 * n)
+        n *= 2
+    sinfo["wall_s"] = time.perf_counter() - t0
+    info = {"mode": mode, "step": int(step), "strain": eps_to,
+            "strain_increment": eps_to - eps_from, "boundary": "periodic",
+            "macro_gradient": F_next.tolist(), "static": sinfo, "converged": bool(sinfo["converged"]),
+            "residual_N": free_residual(psys, xs), "energy_mJ": float(psys.energy(xs)),
+            "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
+            "reaction_force": cell_reactions(fab, psys, xs), "wall_s": time.perf_counter() - t0}
+    if n > 1:
+        info.update({"path": "quasi_static", "substeps": sub_info})
+    if cuts:
+        info["cuts"] = cuts
+    if fr is not None:
+        info["friction"] = friction_summary(psys, d_start)
+    if not info["converged"]:
+        log.warning("%s step %d (periodic): static solve did not reach %.1e N (|F| = %.3e N)", mode, step,
+                    sp_.static_atol, info["residual_N"])
+    return x_full, psys.full, info
+
+
+def _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction):
+    """``periodic_strain_step``'s solve in ``n`` increments from ``x_prev`` on a new system
+    (the multipliers and friction history of ``x_prev`` seeded): ``(x_full, psys, friction
+    view, dissipation at the start, static info of the last increment, per-increment records,
+    the last macro gradient, the reduced state)``; it stops at the first increment that fails."""
+    from .friction_history import seed_friction
+
+    sp_ = cfg.strain
+    subs = [eps_from + (eps_to - eps_from) * k / n for k in range(n)] + [eps_to]
     held = int(mesh.node_offsets[0])
     centre = x_prev[held, :3]
 
@@ -306,21 +345,7 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
                 log.warning("%s step %d (periodic): sub-increment %d of %d (strain %g) did not converge", mode,
                             step, k, n, subs[k])
             break
-    sinfo["wall_s"] = time.perf_counter() - t0
-    info = {"mode": mode, "step": int(step), "strain": eps_to,
-            "strain_increment": eps_to - eps_from, "boundary": "periodic",
-            "macro_gradient": F_next.tolist(), "static": sinfo, "converged": bool(sinfo["converged"]),
-            "residual_N": free_residual(psys, xs), "energy_mJ": float(psys.energy(xs)),
-            "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
-            "reaction_force": cell_reactions(fab, psys, xs), "wall_s": time.perf_counter() - t0}
-    if n > 1:
-        info.update({"path": "quasi_static", "substeps": sub_info})
-    if fr is not None:
-        info["friction"] = friction_summary(psys, d_start)
-    if not info["converged"]:
-        log.warning("%s step %d (periodic): static solve did not reach %.1e N (|F| = %.3e N)", mode, step,
-                    sp_.static_atol, info["residual_N"])
-    return x_full, psys.full, info
+    return x_full, psys, fr, d_start, sinfo, sub_info, F_next, xs
 
 
 def periodic_energy(cfg, fab, mesh, x_full, mode: str, eps: float, multipliers=None, friction=None) -> tuple:
