@@ -51,14 +51,22 @@ def _case(kind, order, seed=3):
     return np.concatenate([Xa, Xb], axis=1), geo
 
 
-def _history(X, geo, seed=5, scale=0.01):
-    """A history taken at a nearby state: the material points in contact there, no gap."""
+def _history(X, geo, seed=5, scale=0.01, turned=False):
+    """A history taken at a nearby state: the material points in contact there, no gap
+    (``turned``: with the - side's direction at the closest points there, ``d_ref``, so that
+    the anchor turns between that state and ``X``)."""
+    from rve.physics.friction_forms import minus_direction
+
     X0 = X + np.random.default_rng(seed).normal(size=X.shape) * scale
     g0 = geo(X0)
-    return start_history(X0, None, g0.s_minus, weights=g0.material_weights)
+    s_bar, anchor = start_history(X0, None, g0.s_minus, weights=g0.material_weights)
+    if not turned:
+        return s_bar, anchor
+    return s_bar, anchor, minus_direction(X0, g0.direction_weights(g0.s_minus))[0]
 
 
-def _forces(geo_fn, X, s_bar, anchor, mu, ratio, jac=True):
+def _forces(geo_fn, X, s_bar, anchor, mu, ratio, jac=True, d_ref=None):
+    """Friction forms of the points at ``X``; ``d_ref``: the anchor turns (its direction then)."""
     geo = geo_fn(X)
     w = np.full(geo.g.shape, W)
     _, p1, p2 = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
@@ -66,8 +74,8 @@ def _forces(geo_fn, X, s_bar, anchor, mu, ratio, jac=True):
     kN = np.where(geo.active, w * p2, 0.0)
     kT = w * ratio * PEN
     mus = np.full(X.shape[0], mu)
-    R, K = friction_forces(geo, X, s_bar, anchor, f, kN, kT, mus, jac)
-    return R, K, friction_state(geo, X, s_bar, anchor, f, kT, mus), f
+    R, K = friction_forces(geo, X, s_bar, anchor, f, kN, kT, mus, jac, d_ref=d_ref)
+    return R, K, friction_state(geo, X, s_bar, anchor, f, kT, mus, d_ref=d_ref), f
 
 
 @pytest.mark.parametrize("kind, order", CASES)
@@ -199,29 +207,6 @@ def test_frozen_potential_at_its_own_loads_is_the_law(kind, order):
 
 
 # --------------------------------------------------------------------------- the turned anchor
-def _turned_history(X, geo_fn, seed=5, scale=0.01):
-    """A history taken at a nearby state with the - side's direction at its closest points
-    there (``d_ref``): the anchor turns between that state and ``X``."""
-    from rve.physics.friction_forms import minus_direction
-
-    X0 = X + np.random.default_rng(seed).normal(size=X.shape) * scale
-    g0 = geo_fn(X0)
-    s_bar, anchor = start_history(X0, None, g0.s_minus, weights=g0.material_weights)
-    return s_bar, anchor, minus_direction(X0, g0.direction_weights(g0.s_minus))[0]
-
-
-def _turned_forces(geo_fn, X, s_bar, anchor, d_ref, mu, ratio, jac=True):
-    geo = geo_fn(X)
-    w = np.full(geo.g.shape, W)
-    _, p1, p2 = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
-    f = np.where(geo.active, w * p1, 0.0)
-    kN = np.where(geo.active, w * p2, 0.0)
-    kT = w * ratio * PEN
-    mus = np.full(X.shape[0], mu)
-    R, K = friction_forces(geo, X, s_bar, anchor, f, kN, kT, mus, jac, d_ref=d_ref)
-    return R, K, friction_state(geo, X, s_bar, anchor, f, kT, mus, d_ref=d_ref), f
-
-
 @pytest.mark.parametrize("kind, order", CASES)
 def test_direction_weights_are_the_tangent_at_a_point_and_its_derivative(kind, order):
     """``direction_weights(s) X = dq/ds`` (the - side's tangent, against differences of the
@@ -249,8 +234,8 @@ def test_turned_friction_tangent_matches_finite_differences(kind, order, regime,
     direction that moves with that point along the curve) the tangent, the turn's derivative,
     the couple's and the moving weights of the couple included, matches central differences."""
     X, geo_fn = _case(kind, order)
-    s_bar, anchor, d_ref = _turned_history(X, geo_fn)
-    R, K, st, f = _turned_forces(geo_fn, X, s_bar, anchor, d_ref, mu, ratio)
+    s_bar, anchor, d_ref = _history(X, geo_fn, turned=True)
+    R, K, st, f = _forces(geo_fn, X, s_bar, anchor, mu, ratio, d_ref=d_ref)
     n_active = int((f > 0).sum())
     assert n_active >= 6
     if regime == "stick":
@@ -263,7 +248,7 @@ def test_turned_friction_tangent_matches_finite_differences(kind, order, regime,
     assert np.abs(geo.ds).max() > 0.1
     if not (kind == "curve" and order == 1):
         assert np.abs(q2[f > 0]).max() > 0.05
-    Kfd = fd_nodes(lambda Y: _turned_forces(geo_fn, Y, s_bar, anchor, d_ref, mu, ratio, False)[0], X)
+    Kfd = fd_nodes(lambda Y: _forces(geo_fn, Y, s_bar, anchor, mu, ratio, False, d_ref=d_ref)[0], X)
     np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-6 * np.abs(K).max())
 
 
@@ -274,8 +259,8 @@ def test_turned_commit_changes_no_force(kind, order, mu, ratio):
     closest point) gives that state the same forces, the couple included: the direction of
     the turn is taken at the closest point, which a commit does not move."""
     X, geo_fn = _case(kind, order)
-    s_bar, anchor, d_ref = _turned_history(X, geo_fn)
-    R, _, st, _ = _turned_forces(geo_fn, X, s_bar, anchor, d_ref, mu, ratio, jac=False)
+    s_bar, anchor, d_ref = _history(X, geo_fn, turned=True)
+    R, _, st, _ = _forces(geo_fn, X, s_bar, anchor, mu, ratio, jac=False, d_ref=d_ref)
     assert np.abs(st.s_bar - s_bar)[st.stick | st.slip].max() > 1e-3      # the material points do move
-    R2_, _, _, _ = _turned_forces(geo_fn, X, st.s_bar, st.anchor, st.d_ref, mu, ratio, jac=False)
+    R2_, _, _, _ = _forces(geo_fn, X, st.s_bar, st.anchor, mu, ratio, jac=False, d_ref=st.d_ref)
     np.testing.assert_allclose(R2_, R, rtol=0, atol=1e-12 * np.abs(R).max())

@@ -175,23 +175,31 @@ def test_frozen_at_its_own_loads_is_the_law(geometry, order):
         fr.unfreeze()
 
 
-def _seam_slide(a_start, geometry, slide, steps=10, L=2.0):
-    """Fibril b pressed across fibril a (along x over [a_start, a_start + L], wrapping into its
-    image one period L on) and slid along x by ``slide`` in ``steps`` prescribed positions,
-    the friction history committed at each: the total contact force on b at each position."""
-    from rve.fem.mesh import fibril_mesh, straight_fibril
+def _two_fibrils(fibs, geometry):
+    """``(mesh, base, system, x)``: fibrils ``fibs`` (6 elements, p = 2) in one contact system
+    with friction (mu 0.3, eps_T / P* 0.2) at their natural state."""
+    from rve.fem.mesh import fibril_mesh
     from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
     from rve.model.terms.friction import FrictionLaw
 
-    R = 0.15
-    fibs = [straight_fibril([a_start, 0.013, 0], [a_start + L, 0.013, 0], R, "a"),
-            straight_fibril([-slide / 2, -1, -(2 * R - 0.01)], [-slide / 2, 1, -(2 * R - 0.01)], R, "b")]
     mesh = fibril_mesh(fibs, 6, 2)
     base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
     x = np.zeros(base.n)
     base.nodal(x)[:, :9] = mesh.X0
     params = ContactParams(penalty=50.0, geometry=geometry, friction=FrictionLaw(0.3, 0.2))
-    system = ContactSystem(base, params, x)
+    return mesh, base, ContactSystem(base, params, x), x
+
+
+def _seam_slide(a_start, geometry, slide, steps=10, L=2.0):
+    """Fibril b pressed across fibril a (along x over [a_start, a_start + L], wrapping into its
+    image one period L on) and slid along x by ``slide`` in ``steps`` prescribed positions,
+    the friction history committed at each: the total contact force on b at each position."""
+    from rve.fem.mesh import straight_fibril
+
+    R = 0.15
+    fibs = [straight_fibril([a_start, 0.013, 0], [a_start + L, 0.013, 0], R, "a"),
+            straight_fibril([-slide / 2, -1, -(2 * R - 0.01)], [-slide / 2, 1, -(2 * R - 0.01)], R, "b")]
+    mesh, base, system, x = _two_fibrils(fibs, geometry)
     T = np.array([L, 0.0, 0.0])
     system.set_periodic(images=[T, -T], wrap={0: T}, x=x, lattice=[T, [0.0, 4.0, 0.0]])
     fr = system.term.friction
@@ -229,20 +237,13 @@ def _node_slide(geometry, bend, positions):
     a's next element sharing it), then a bent by ``bend`` about that node (its elements turn
     against each other) and b slid along x through ``positions`` across the node, on a, the
     history held: the total contact force on b at each position."""
-    from rve.fem.mesh import fibril_mesh, straight_fibril
-    from rve.model import BeamMaterial, BeamModel, ContactParams, ContactSystem
-    from rve.model.terms.friction import FrictionLaw
+    from rve.fem.mesh import straight_fibril
 
     R = 0.15
     x0 = positions[0]
     fibs = [straight_fibril([0.0, 0.013, 0.0], [2.0, 0.013, 0.0], R, "a"),
             straight_fibril([x0, -1, -(2 * R - 0.01)], [x0, 1, -(2 * R - 0.01)], R, "b")]
-    mesh = fibril_mesh(fibs, 6, 2)
-    base = BeamModel(mesh, BeamMaterial(1.26, density=1e-3))
-    x = np.zeros(base.n)
-    base.nodal(x)[:, :9] = mesh.X0
-    params = ContactParams(penalty=50.0, geometry=geometry, friction=FrictionLaw(0.3, 0.2))
-    system = ContactSystem(base, params, x)
+    mesh, base, system, x = _two_fibrils(fibs, geometry)
     fr = system.term.friction
     fr.commit(x)
     on_a, on_b = mesh.node_fibril == 0, mesh.node_fibril == 1

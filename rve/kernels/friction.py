@@ -180,6 +180,16 @@ def _mm(A, B, out):
 
 
 @njit(cache=True, nogil=True)
+def _weighted(Wt, X, p, g, out):
+    """``out = sum_k Wt[p, g, k] X[p, k]`` (3,): a point's vector from its local nodes."""
+    for i in range(3):
+        out[i] = 0.0
+    for k in range(X.shape[1]):
+        for i in range(3):
+            out[i] += Wt[p, g, k] * X[p, k, i]
+
+
+@njit(cache=True, nogil=True)
 def _turn(a, r, h, out, J, V, W):
     """``out = R a`` (the smallest rotation from ``r`` to ``h``) and ``J = d(R a)/dh``
     (``rve.physics.friction_forms.turned_anchor``; ``V`` (3, 3), ``W`` (7, 3, 3): work)."""
@@ -209,23 +219,17 @@ def _turn(a, r, h, out, J, V, W):
 @njit(cache=True, nogil=True)
 def _law_point(c, n, rho, gact, cb, D, X, anchor, d_ref, f, kT, mu, turn, p, g, e, t, h, J, Mv, hM, R, V, W):
     """The trial gap ``e``, force ``t`` and the residual ``R[p] += c t + D C`` of point
-    (p, g); with the turn also ``h`` (the - chord's direction), ``J = d(R anchor)/dh``, ``Mv
+    (p, g); with the turn also ``h`` (the - side's direction), ``J = d(R anchor)/dh``, ``Mv
     = n x t`` and ``hM = h x Mv``; ``V`` (6, 3) and ``W`` (7+, 3, 3) work space. Returns ``(active, stick, |e|,
     n.u, |d|)``."""
     M = X.shape[1]
     act = gact[p, g] and f[p, g] > 0.0 and mu[p, g] > 0.0
     jb, d, ua = V[0], V[1], V[2]
-    for i in range(3):
-        jb[i] = 0.0
-        d[i] = 0.0
     TV, TW = V[3:6], W[:7]
-    for k in range(M):
-        for i in range(3):
-            jb[i] += cb[p, g, k] * X[p, k, i]
-            if turn:
-                d[i] += D[p, g, k] * X[p, k, i]
+    _weighted(cb, X, p, g, jb)
     dnorm = 1.0
     if turn:
+        _weighted(D, X, p, g, d)
         dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         dnorm = dn if dn > 0 else 1.0
         for i in range(3):
@@ -270,11 +274,7 @@ def _law_tangent(c, ds, n, rho, dc_ds, cb, D, Dp, X, f, kN, kT, mu, turn, p, g, 
     jd, ehat, w2, q2 = V[0], V[1], V[2], V[4]
     Pn, Ph, Jd, PJd, proj = W[0], W[1], W[2], W[3], W[4]
     rho_s = rho[p, g]
-    for i in range(3):
-        jd[i] = 0.0
-    for k in range(M):
-        for i in range(3):
-            jd[i] += dc_ds[p, g, k] * X[p, k, i]
+    _weighted(dc_ds, X, p, g, jd)
     for i in range(3):
         for j in range(3):
             Pn[i, j] = (1.0 if i == j else 0.0) - n[p, g, i] * n[p, g, j]
@@ -287,11 +287,7 @@ def _law_tangent(c, ds, n, rho, dc_ds, cb, D, Dp, X, f, kN, kT, mu, turn, p, g, 
             for j in range(3):
                 Jd[i, j] /= dnorm
         _mm(Pn, Jd, PJd)
-        for i in range(3):
-            q2[i] = 0.0
-        for k in range(M):
-            for i in range(3):
-                q2[i] += Dp[p, g, k] * X[p, k, i]
+        _weighted(Dp, X, p, g, q2)
         for i in range(3):
             w2[i] = PJd[i, 0] * q2[0] + PJd[i, 1] * q2[1] + PJd[i, 2] * q2[2]
     for l in range(M):

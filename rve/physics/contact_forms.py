@@ -70,6 +70,7 @@ from ..fem.lagrange import lagrange_basis
 
 __all__ = [
     "ChordGeometry",
+    "chord_direction_weights",
     "chord_geometry",
     "hertz_kappa",
     "hertz_width",
@@ -85,6 +86,12 @@ __all__ = [
 _CM = np.array([0.0, 0.0, 1.0, -1.0])  # d(d)/dX coefficients, with d = b- - a- (sign: -C^T)
 #: d c / d s- of the chord weights c = (1 - s+, s+, -(1 - s-), -s-)
 _DIRECTION = np.array([0.0, 0.0, -1.0, 1.0])
+
+
+def chord_direction_weights(s) -> np.ndarray:
+    """``(P, G, 4)`` weights of the chord ``b- - a-`` in the chord ends at any points ``s``
+    (P, G): (0, 0, -1, 1) (``ChordGeometry.direction_weights``)."""
+    return np.broadcast_to(_DIRECTION, np.shape(s) + (4,))
 _DC_DS = np.array([0.0, 0.0, 1.0, -1.0])
 
 
@@ -155,7 +162,7 @@ class ChordGeometry(PointKinematics):
         """``(P, G, 4)`` weights ``D`` of the - side's direction ``d = sum_k D_k X_k`` at
         points ``s_bar`` (P, G): the chord ``b- - a-``, (0, 0, -1, 1) at every point (the
         friction's turn of its anchor, ``rve.physics.friction_forms``)."""
-        return np.broadcast_to(_DIRECTION, np.shape(s_bar) + (4,))
+        return chord_direction_weights(s_bar)
 
     def direction_weights_ds(self, s_bar) -> np.ndarray:
         """``(P, G, 4)`` derivative of ``direction_weights`` in ``s``: zero (a chord's

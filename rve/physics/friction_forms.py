@@ -85,9 +85,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .contact_forms import chord_direction_weights
+
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
-           "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "chord_directions",
-           "turned_anchor", "frozen_turn"]
+           "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "turned_anchor",
+           "frozen_turn"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -122,12 +124,6 @@ def minus_direction(X, D):
     d = np.einsum("pgk,pki->pgi", D, X)
     dn = np.sqrt(np.einsum("pgi,pgi->pg", d, d))
     return d / np.where(dn > 0, dn, 1.0)[..., None], D, dn
-
-
-def chord_directions(s):
-    """The chord's ``direction_weights`` at material points ``s`` (P, G): (0, 0, -1, 1)
-    (``ChordGeometry.direction_weights``, for the functions that take ``s_plus``)."""
-    return np.broadcast_to(np.array([0.0, 0.0, -1.0, 1.0]), np.shape(s) + (4,))
 
 
 def _skew(a):
@@ -190,7 +186,7 @@ def moved_history(X, s_plus, s_bar, anchor, s_star, weights=None, d_ref=None, di
     js = np.einsum("pgk,pki->pgi", wf(s_star), X)
     if d_ref is None:
         return np.array(s_star, float, copy=True), np.asarray(anchor, float) + jb - js
-    h = minus_direction(X, (chord_directions if directions is None else directions)(s_star))[0]
+    h = minus_direction(X, (chord_direction_weights if directions is None else directions)(s_star))[0]
     return np.array(s_star, float, copy=True), turned_anchor(anchor, d_ref, h) + jb - js, h
 
 
@@ -311,7 +307,8 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True,
         PJd = Pn @ Jd
         dE = dE + D[..., None, None] * PJd[:, :, None]
         # dd/dX_l = D_l I + q'' ds_l^T: the direction is taken at the closest point s-(X)
-        q2 = np.einsum("pgk,pki->pgi", geo.direction_weights_ds(geo.s_minus), X)
+        Dp = geo.direction_weights_ds(geo.s_minus)
+        q2 = np.einsum("pgk,pki->pgi", Dp, X)
         dE = dE + np.einsum("pgij,pgj->pgi", PJd, q2)[:, :, None, :, None] * geo.ds[:, :, :, None, :]
     # stick: kT dE; slip: mu e_hat df^T + (mu f/|e|)(I - e_hat e_hat^T) dE
     ehat = e / np.where(en > 0, en, 1.0)[..., None]
@@ -328,9 +325,7 @@ def friction_forces(geo, X, s_bar, anchor, f, kN, kT, mu, jacobian: bool = True,
     K += np.einsum("pgk,pgilj->pkilj", dc_ds, t[..., :, None, None] * geo.ds[:, :, None, :, :])
     if chord is not None:
         K += np.einsum("pgk,pglij->pkilj", D, _couple_tangent(geo, t, h, D, dn, Q, dT, rho, active, q2))
-        # the weights D_k(s-) of the couple move with the closest point
-        Dp = geo.direction_weights_ds(geo.s_minus)
-        C = _couple(geo, t, h, dn, active)
+        # the weights D_k(s-) of the couple (C above) move with the closest point
         K += np.einsum("pgk,pgi,pglj->pkilj", Dp, C, geo.ds)
     return R, K
 
