@@ -259,7 +259,9 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     predictor and that static solve (with friction one committed backward-Euler step of the
     slip each), on one system (``set_macro``); otherwise one. A step whose solve fails is cut:
     solved again from ``x_prev`` (its multipliers and friction history) in twice as many
-    sub-increments, at most ``strain.max_cuts`` times (``info["cuts"]``). Returns ``(x
+    sub-increments, at most ``strain.max_cuts`` times (``info["cuts"]``); a try that can still
+    be cut solves without the frictional solve's capped-Newton and pseudo-transient fallback
+    (``static_minimize(fallback=False)``), the last try with it. Returns ``(x
     (n_nodes, 9), full system, info)``."""
     from .friction_history import friction_summary
 
@@ -274,9 +276,10 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     x_prev = np.asarray(x_prev, float).reshape(mesh.n_nodes, 9)
     cuts = []
     while True:
+        last = len(cuts) >= int(sp_.max_cuts)
         x_full, psys, fr, d_start, sinfo, sub_info, F_next, xs = _increments(
-            cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction)
-        if sinfo["converged"] or len(cuts) >= int(sp_.max_cuts):
+            cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction, fallback=last)
+        if sinfo["converged"] or last:
             break
         cuts.append({"substeps": n, "residual_N": free_residual(psys, xs)})
         log.warning("%s step %d (periodic): not converged in %d increment(s) (|F| = %.3e N); cut to %d", mode, step,
@@ -301,11 +304,12 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     return x_full, psys.full, info
 
 
-def _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction):
+def _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction, fallback=True):
     """``periodic_strain_step``'s solve in ``n`` increments from ``x_prev`` on a new system
     (the multipliers and friction history of ``x_prev`` seeded): ``(x_full, psys, friction
     view, dissipation at the start, static info of the last increment, per-increment records,
-    the last macro gradient, the reduced state)``; it stops at the first increment that fails."""
+    the last macro gradient, the reduced state)``; it stops at the first increment that fails.
+    ``fallback``: that of the frictional solves (``static_minimize``)."""
     from .friction_history import seed_friction
 
     sp_ = cfg.strain
@@ -314,7 +318,7 @@ def _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipl
     centre = x_prev[held, :3]
 
     def static(xv):   # the energy minimiser, then the Newton polish close to the tolerance
-        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter, commit=False)
+        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter, commit=False, fallback=fallback)
         xm, si["converged"], si["polish"] = newton_polish(psys, xm, si["converged"], sp_.static_atol)
         return xm, si
 
