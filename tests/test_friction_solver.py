@@ -190,3 +190,49 @@ def test_a_re_solve_takes_the_law_stage_alone_and_the_smoothed_stage_where_it_fa
     fr.resolving = False                                    # a first solve: the caller's stages only
     frictional.frictional_solve(system, x0)
     assert [(c[0], c[1]) for c in calls] == [((1.0,), True)]
+
+
+def test_a_fallback_with_a_stall_window_skips_the_continuation(monkeypatch):
+    """``fallback_stall`` (a try its caller can still cut): the capped Newton gets the stall
+    window and a failure ends there; without it, a failure of the capped Newton goes on to the
+    pseudo-transient continuation."""
+    from types import SimpleNamespace
+
+    import rve.solvers.frictional as frictional
+    import rve.solvers.minimize as minimize
+    import rve.solvers.static as static
+    from rve.solvers.newton import NewtonResult
+
+    capped, continued = [], []
+
+    def fake_capped(system, x, t, *, max_iter, stall_window, **k):
+        capped.append((max_iter, stall_window))
+        return x, None, NewtonResult(None, False, 17, [1.0, 0.5], "stalled")
+
+    def fake_continuation(system, x, w, t, **k):
+        continued.append(k["max_iter"])
+        return x, None, NewtonResult(None, False, 3, [0.5, 0.4], "stalled")
+
+    monkeypatch.setattr(minimize, "capped_newton", fake_capped)
+    monkeypatch.setattr(static, "pseudo_transient_solve", fake_continuation)
+    system = SimpleNamespace(rebuild=lambda x: None, params=SimpleNamespace(margin=0.1), n=3)
+    for stall, cont in ((20, []), (None, [200])):
+        capped.clear()
+        continued.clear()
+        out = frictional.FrictionalResult(None, False, 0, [1.0])
+        frictional._fallback(system, np.zeros(3), 0.0, out, 1e-9, 1e-14, 1000, None, None, stall)
+        assert capped == [(1000, stall)] and continued == cont and not out.converged
+        assert out.fallback_iterations == 17 + (3 if cont else 0)
+
+
+def test_capped_newton_stall_test():
+    """``capped_newton``'s stall test: |F| that fell by less than 1 % over the window's
+    accepted iterations is a stall; a steady 5 % an iteration (the fallback that converges in
+    ~100 iterations) is not, nor is a history shorter than the window, nor no window."""
+    from rve.solvers.minimize import _stalled
+
+    flat = [5.2e-5, 1.1e-5] + [6.82e-6 * (1 - 1e-5 * k) for k in range(25)]
+    creep = [2.7e-5 * 0.95 ** k for k in range(40)]
+    assert _stalled(flat, 20) and not _stalled(flat[:21], 20)
+    assert not _stalled(creep, 20)
+    assert not _stalled(flat, None) and not _stalled(flat, 0)

@@ -558,24 +558,24 @@ def test_a_failed_periodic_step_is_cut_and_solved_again_from_its_start(monkeypat
     assert not out["none"][1]["converged"] and "cuts" not in out["none"][1]
 
 
-def test_a_try_that_can_still_be_cut_solves_without_the_fallback(monkeypatch):
-    """The frictional solves of a try that ``strain.max_cuts`` can still cut leave out the
-    capped-Newton and pseudo-transient fallback (``fallback=False`` down to
-    ``frictional_solve``); the last try keeps it, and so does a step with ``max_cuts: 0``."""
+def test_a_try_that_can_still_be_cut_bounds_the_fallback(monkeypatch):
+    """The frictional solves of a try that ``strain.max_cuts`` can still cut bound their
+    capped-Newton fallback (``CUT_STALL_WINDOW``, down to ``frictional_solve``); the last try
+    has all of it, and so does a step with ``max_cuts: 0``."""
     import rve.homogenisation.cell_statics as statics
     import rve.homogenisation.periodic as periodic
     from rve.homogenisation.strain import strain_step
 
     real_eq, real_solve = periodic.equilibrium, statics.frictional_solve
-    tries, fallbacks = [], []
+    tries, bounds = [], []
 
     def failing_first(psys, static, xr):
         xs, info = real_eq(psys, static, xr)
-        tries.append(len(fallbacks))
+        tries.append(len(bounds))
         return xs, (dict(info, converged=False) if len(tries) == 1 else info)
 
     def recording(*a, **k):
-        fallbacks.append(k["fallback"])
+        bounds.append(k["fallback_stall"])
         return real_solve(*a, **k)
 
     monkeypatch.setattr(statics, "frictional_solve", recording)
@@ -584,14 +584,14 @@ def test_a_try_that_can_still_be_cut_solves_without_the_fallback(monkeypatch):
         cfg = _cfg("periodic", "penalty", 0.3, rows=STACKED, max_cuts=cuts)
         fab, mesh, x0, lam0, rec0 = _relaxed(_cfg("periodic", "penalty", 0.3, rows=STACKED))
         tries.clear()
-        fallbacks.clear()
+        bounds.clear()
         monkeypatch.setattr(periodic, "equilibrium", failing_first)
         _, _, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
         monkeypatch.setattr(periodic, "equilibrium", real_eq)
-        seen[cuts] = (info, list(tries), list(fallbacks))
-    info, tries1, fb = seen[1]
+        seen[cuts] = (info, list(tries), list(bounds))
+    info, tries1, b = seen[1]
     assert info["converged"] and len(info["cuts"]) == 1
-    first = fb[:tries1[0]]
-    assert first and not any(first) and all(fb[tries1[0]:]) and len(fb) > tries1[0]
-    info0, _, fb0 = seen[0]
-    assert not info0["converged"] and fb0 and all(fb0)
+    assert tries1[0] and b[:tries1[0]] == [periodic.CUT_STALL_WINDOW] * tries1[0]
+    assert len(b) > tries1[0] and all(v is None for v in b[tries1[0]:])
+    info0, _, b0 = seen[0]
+    assert not info0["converged"] and b0 and all(v is None for v in b0)

@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import logging
+from typing import Optional
 
 import numpy as np
 
@@ -44,20 +45,21 @@ def cycle_levels(cfg) -> np.ndarray:
     return np.array(up + up[-2::-1])
 
 
-def static_minimize(system, x, atol: float, max_iter: int, commit: bool = True, fallback: bool = True) -> tuple:
+def static_minimize(system, x, atol: float, max_iter: int, commit: bool = True,
+                    fallback_stall: Optional[int] = None) -> tuple:
     """Static equilibrium as a local minimum of the potential (``rve.solvers.minimize.minimize_energy``:
     trust-region Newton with an inertia check, the energy as merit, centroid steps capped,
     map rebuilt as fibrils move; docs/relaxation.md), from a state near it (plain Newton
     first), then a map rebuild that must find no newly active pair. Returns ``(x, info)``.
     With friction: the residual from the held history (``_static_frictional``), the solution
     committed when it converged and ``commit`` (False: the caller commits, e.g.
-    ``multipliers.equilibrium`` once after its Uzawa loop); ``fallback=False`` leaves out the
-    frictional solve's capped-Newton and pseudo-transient fallback (a caller that cuts the
-    step where the solve fails: the cut is cheaper than the fallback's 1000 iterations)."""
+    ``multipliers.equilibrium`` once after its Uzawa loop); ``fallback_stall``: the stall
+    window of the frictional solve's capped-Newton fallback, without the pseudo-transient continuation
+    (``frictional_solve``), for a caller that cuts the step where the solve fails."""
     x = np.asarray(x, float).reshape(-1)
     fr = friction_of(system)
     if fr is not None:
-        xs, info = _static_frictional(system, x, atol, max_iter, fallback)
+        xs, info = _static_frictional(system, x, atol, max_iter, fallback_stall)
         if commit and info["converged"]:
             info["dissipated"] = float(fr.commit(xs))
         return xs, info
@@ -82,11 +84,12 @@ def static_minimize(system, x, atol: float, max_iter: int, commit: bool = True, 
 FRICTIONAL_ROUNDS = 6
 
 
-def _static_frictional(system, x, atol: float, max_iter: int, fallback: bool = True) -> tuple:
+def _static_frictional(system, x, atol: float, max_iter: int, fallback_stall: Optional[int] = None) -> tuple:
     """The static residual of a frictional system from its held history, not committed
     (``static_minimize``): ``rve.solvers.frictional.frictional_solve`` (the
     incremental-potential predictor, then Newton with the unsymmetric tangent on the LU path;
-    its own capped-Newton and pseudo-transient fallback where ``fallback``); where it fails, once more with the
+    its own capped-Newton and pseudo-transient fallback, with the stall window
+    ``fallback_stall``); where it fails, once more with the
     smoothed predictor stage from the same start. Each round ends with a map rebuild at the
     solution (history carried by key); a residual above ``atol`` at the rebuilt map starts
     another round from the same held history. A pair newly active at the rebuild alone does
@@ -106,13 +109,13 @@ def _static_frictional(system, x, atol: float, max_iter: int, fallback: bool = T
         # predictor stage alone (the smoothed stage would first move the state off to its
         # own solution, |F| ~ 2e-2 N on the thesis weave, for the law's stage to bring back)
         xs, res = frictional_solve(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter),
-                                   smoothing=() if k else (1.0,), fallback=fallback)
+                                   smoothing=() if k else (1.0,), fallback_stall=fallback_stall)
         how, its, converged, residuals, reason = "potential", int(res.iterations), bool(res.converged), \
             res.residuals, res.reason
         if not converged and k:
             log.info("frictional static solve: %s; again with the smoothed stage from the same history", res.reason)
             xs, res = frictional_solve(system, x, 0.0, atol=atol, rtol=1e-14, max_iter=int(max_iter),
-                                       fallback=fallback)
+                                       fallback_stall=fallback_stall)
             how, its, converged = "potential (smoothed)", its + int(res.iterations), bool(res.converged)
             residuals, reason = res.residuals, res.reason
         x = np.asarray(xs, float)

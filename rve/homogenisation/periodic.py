@@ -245,6 +245,14 @@ def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
     return x
 
 
+#: the stall window of the frictional capped-Newton fallback in a try that can still be cut
+#: (no pseudo-transient continuation): a fallback that creeps on converges (the AL cell's
+#: uniaxial step 2: |F| -5 % an iteration, 104 iterations), one that stalls with no progress
+#: is cut (the imperfect cell's step 1: 1000 iterations at |F| = 6.82e-6 N, then converged in
+#: two sub-increments; docs/fault_tolerance.md)
+CUT_STALL_WINDOW = 20
+
+
 def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_range=None, multipliers=None,
                          friction=None):
     """One strain step of the periodic cell from ``x_prev`` (full, n_nodes x 9) at strain
@@ -260,8 +268,8 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     slip each), on one system (``set_macro``); otherwise one. A step whose solve fails is cut:
     solved again from ``x_prev`` (its multipliers and friction history) in twice as many
     sub-increments, at most ``strain.max_cuts`` times (``info["cuts"]``); a try that can still
-    be cut solves without the frictional solve's capped-Newton and pseudo-transient fallback
-    (``static_minimize(fallback=False)``), the last try with it. Returns ``(x
+    be cut ends the frictional solve's fallback where it stalls (``CUT_STALL_WINDOW``), the
+    last try has all of it. Returns ``(x
     (n_nodes, 9), full system, info)``."""
     from .friction_history import friction_summary
 
@@ -278,7 +286,8 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     while True:
         last = len(cuts) >= int(sp_.max_cuts)
         x_full, psys, fr, d_start, sinfo, sub_info, F_next, xs = _increments(
-            cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction, fallback=last)
+            cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction,
+            fallback_stall=None if last else CUT_STALL_WINDOW)
         if sinfo["converged"] or last:
             break
         cuts.append({"substeps": n, "residual_N": free_residual(psys, xs)})
@@ -304,12 +313,13 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     return x_full, psys.full, info
 
 
-def _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction, fallback=True):
+def _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction,
+                fallback_stall=None):
     """``periodic_strain_step``'s solve in ``n`` increments from ``x_prev`` on a new system
     (the multipliers and friction history of ``x_prev`` seeded): ``(x_full, psys, friction
     view, dissipation at the start, static info of the last increment, per-increment records,
     the last macro gradient, the reduced state)``; it stops at the first increment that fails.
-    ``fallback``: that of the frictional solves (``static_minimize``)."""
+    ``fallback_stall``: the stall window of the frictional solves' fallback (``static_minimize``)."""
     from .friction_history import seed_friction
 
     sp_ = cfg.strain
@@ -318,7 +328,8 @@ def _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipl
     centre = x_prev[held, :3]
 
     def static(xv):   # the energy minimiser, then the Newton polish close to the tolerance
-        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter, commit=False, fallback=fallback)
+        xm, si = static_minimize(psys, xv, sp_.static_atol, sp_.static_max_iter, commit=False,
+                                 fallback_stall=fallback_stall)
         xm, si["converged"], si["polish"] = newton_polish(psys, xm, si["converged"], sp_.static_atol)
         return xm, si
 

@@ -65,7 +65,10 @@ matrix to a symmetric factorisation).
   3. if the corrector fails: the predictor again (the law, no smoothing stage) to
      ``retry_rtol`` (1e-6) and the corrector;
      then (``fallback=True``) the residual path of before from the better state: the capped
-     Newton (``rve.solvers.minimize.capped_newton``), then pseudo-transient continuation.
+     Newton (``rve.solvers.minimize.capped_newton``), then pseudo-transient continuation;
+     ``fallback_stall``: the capped Newton stops where |F| fell by less than 1 % over that
+     many iterations (``capped_newton(stall_window=...)``), and no continuation follows (a
+     caller that cuts the step where the solve fails).
 
   A start already within ``direct_atol`` (N; default 1e4 atol) of equilibrium (the re-solve after a commit)
   goes to the corrector first, and to the predictor only if it stalls. The first pass's
@@ -195,7 +198,8 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
                      refreeze: Optional[bool] = None, predictor_rtol: float = 1e-4, retry_rtol: float = 1e-6,
                      max_rounds: Optional[int] = None, load_rtol: float = 0.05, corrector_iter: int = 12,
                      freeze: str = "committed", fallback: bool = True, step_cap=None, backend=None,
-                     smoothing=(1.0,), predictor_iter: int = 150, direct_atol: Optional[float] = None):
+                     smoothing=(1.0,), predictor_iter: int = 150, direct_atol: Optional[float] = None,
+                     fallback_stall: Optional[int] = None):
     """The frictional equilibrium from the held history (module docstring); ``(x, result)``."""
     fr = friction_of(system)
     if fr is None:
@@ -214,7 +218,7 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     for stages, fb in passes:
         xs, out = _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds,
                          load_rtol, corrector_iter, freeze, fb, step_cap, backend, stages, predictor_iter,
-                         direct_atol, resolve)
+                         direct_atol, resolve, fallback_stall)
         if done is not None:
             for k in ("iterations", "predictor_iterations", "corrector_iterations", "rounds"):
                 setattr(out, k, getattr(out, k) + getattr(done, k))
@@ -231,7 +235,8 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
 
 
 def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, retry_rtol, max_rounds, load_rtol,
-           corrector_iter, freeze, fallback, step_cap, backend, smoothing, predictor_iter, direct_atol, resolve):
+           corrector_iter, freeze, fallback, step_cap, backend, smoothing, predictor_iter, direct_atol, resolve,
+           fallback_stall=None):
     """``frictional_solve`` once the re-solve is told apart (module docstring)."""
     x = np.array(x, float, copy=True)
     system.rebuild(x)
@@ -269,7 +274,7 @@ def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, ret
     if not fallback:
         out.u, out.reason = None, f"corrector: {nres.reason}"
         return x, out
-    return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend)
+    return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend, fallback_stall)
 
 
 def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, start, step_cap,
@@ -343,18 +348,19 @@ def _corrector(system, x, t, out, atol, rtol, corrector_iter, backend, chunk: in
     return xs, nres
 
 
-def _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend):
+def _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend, stall=None):
     """The residual path of before from ``x``: the capped Newton, then pseudo-transient
-    continuation."""
+    continuation; ``stall``: the capped Newton's stall window, and no continuation."""
     from .minimize import capped_newton
     from .static import pseudo_transient_solve
 
     t0 = time.perf_counter()
     system.rebuild(x)
     cap = 0.5 * float(system.params.margin) if step_cap is None else float(step_cap)
-    xc, _, cres = capped_newton(system, x, t, atol=atol, rtol=rtol, max_iter=max_iter, step_cap=cap, backend=backend)
+    xc, _, cres = capped_newton(system, x, t, atol=atol, rtol=rtol, max_iter=max_iter, step_cap=cap, backend=backend,
+                                stall_window=stall)
     its = int(cres.iterations)
-    if not cres.converged:
+    if not cres.converged and stall is None:
         log.warning("frictional capped Newton failed (%s); pseudo-transient continuation", cres.reason)
         system.rebuild(xc)
         xc, _, pres = pseudo_transient_solve(system, xc, np.zeros(system.n), t, atol=atol, rtol=rtol, max_iter=200,

@@ -88,19 +88,33 @@ def _free_centroids(prob, layout) -> np.ndarray:
 
 
 def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.05, max_halvings=20,
-                  max_rejections=12, backend=None, options: MinimizeOptions = DEFAULT_OPTIONS):
+                  max_rejections=12, backend=None, options: MinimizeOptions = DEFAULT_OPTIONS,
+                  stall_window: Optional[int] = None):
     """Static Newton on ``F(x, 0, t) = 0`` with the centroid motion per iteration capped
     at ``step_cap``, the contact map rebuilt after ``step_cap`` of motion, and a
     Levenberg-Marquardt safeguard: a step that increases |F| is rejected and retried
     with ``(K + sigma M) du = -F`` (sigma raised 8x per rejection, lowered 4x after an
     accepted step, down to pure Newton). ``backend``: the linear solver (one instance for
-    the run, ``options.run_backend``). Returns ``(x, w, NewtonResult)``."""
+    the run, ``options.run_backend``). ``stall_window``: stop, not converged, where |F| fell
+    by less than ``STALL_DROP`` over that many accepted iterations. Returns ``(x, w,
+    NewtonResult)``."""
     with options.run_backend(backend) as solver:
         return _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver,
-                              options.keep_stored_pattern)
+                              options.keep_stored_pattern, stall_window)
 
 
-def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver, keep_stored):
+#: the least relative fall of |F| over ``capped_newton``'s ``stall_window`` iterations
+STALL_DROP = 0.01
+
+
+def _stalled(residuals, window) -> bool:
+    """|F| (``residuals``: the start, then every accepted iterate) fell by less than
+    ``STALL_DROP`` over the last ``window`` iterations."""
+    return bool(window) and len(residuals) > window and residuals[-1] > (1.0 - STALL_DROP) * residuals[-1 - window]
+
+
+def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver, keep_stored,
+                   stall_window=None):
     w0 = np.zeros(system.n)
     lay = system.layout
 
@@ -157,6 +171,9 @@ def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, m
             rates = convergence_rates(res)
             log.info("capped newton it=%d |r|=%.3e step=%.3g sigma=%.3g rate=%s pairs=%d", it, rn, step, sigma,
                      f"{rates[-1]:.2f}" if rates else "-", system.map.n_pairs)
+            if _stalled(res, stall_window):
+                return (*prob.state(u), NewtonResult(u, False, it, res, f"stalled: |r| {res[-1 - stall_window]:.3e} -> "
+                                                     f"{rn:.3e} in the last {stall_window} iterations"))
             continue
         # reject: back to the current iterate, more regularisation
         rejections += 1
