@@ -236,3 +236,82 @@ def test_capped_newton_stall_test():
     assert _stalled(flat, 20) and not _stalled(flat[:21], 20)
     assert not _stalled(creep, 20)
     assert not _stalled(flat, None) and not _stalled(flat, 0)
+
+
+class _ScriptedProblem:
+    """A ``StaticProblem`` stand-in whose residuals at successive evaluations are scripted
+    (the Jacobian the identity), for the corrector's full-step watchdog."""
+
+    def __init__(self, residuals):
+        self.residuals = list(residuals)
+        self.calls = 0
+
+    def u0(self):
+        return np.zeros(1)
+
+    def __call__(self, u):
+        import scipy.sparse as sp
+        r = self.residuals[min(self.calls, len(self.residuals) - 1)]
+        self.calls += 1
+        return np.array([r]), sp.identity(1, format="csr")
+
+    def admissible(self, u):
+        return True
+
+    def state(self, u):
+        return np.array(u, copy=True), None
+
+
+@pytest.mark.parametrize("residuals, steps, converged, best", [
+    # a step across a stick/slip change raises |F| once, then quadratic convergence
+    ([1.1e-4, 8.5e-4, 6.2e-7, 1.4e-9, 7.3e-13], 4, True, 4),
+    ([1.1e-4, 2.0e-2, 1e-12], 1, False, 0),          # growth beyond FULL_STEP_GROWTH: stop
+    ([1.1e-4, 5.0e-4, 2.0e-4, 1e-12], 2, False, 0),  # not below the start from the second step
+    ([1.1e-4, 5.0e-5, 6.0e-5, 7.0e-5, 8.0e-5, 9.0e-5, 1.0e-4, 1e-12], 6, False, 1),  # FULL_STEPS
+])
+def test_full_steps_let_the_residual_rise_and_keep_the_lowest(monkeypatch, residuals, steps, converged, best):
+    """The corrector's watchdog (``_full_steps``): full Newton steps, |F| allowed to rise up to
+    ``FULL_STEP_GROWTH`` times the start's and, from the second step on, not above the start;
+    at most ``FULL_STEPS``; it returns the iterate of the lowest |F| and converges only at
+    ``atol``."""
+    import rve.solvers.frictional as frictional
+
+    prob = _ScriptedProblem(residuals)
+    monkeypatch.setattr(frictional, "StaticProblem", lambda *a: prob)
+    system = type("S", (), {"n": 1})()
+    xs, res, nres = frictional._full_steps(system, None, 0.0, 1e-9, lambda J, r: J @ r)
+    assert len(res) - 1 == steps and res == residuals[:steps + 1]
+    assert nres.converged is converged and nres.iterations == steps
+    # the iterates are u_k = -(r_0 + ... + r_{k-1}) (J = I): the one kept is that of the lowest |F|
+    assert xs[0] == pytest.approx(-sum(residuals[:best]))
+
+
+def test_the_corrector_keeps_converged_full_steps_else_searches_from_the_best(monkeypatch):
+    """``_corrector``: full steps that converge are the result (no line-search Newton); full
+    steps that do not hand their lowest-|F| iterate to the line-search Newton, and the
+    record counts both."""
+    from types import SimpleNamespace
+
+    import rve.solvers.frictional as frictional
+    from rve.solvers.newton import NewtonResult
+
+    searched = []
+
+    def fake_static(system, x, w, t, opts):
+        searched.append(np.array(x))
+        return x + 1.0, None, NewtonResult(None, True, 2, [5e-5, 1e-7, 1e-12])
+
+    monkeypatch.setattr(frictional, "static_solve", fake_static)
+    system = SimpleNamespace(rebuild=lambda x: None, n=1)
+    for res, ok in (([1e-4, 8e-4, 1e-7, 1e-12], True), ([1e-4, 5e-5, 2e-4], False)):
+        searched.clear()
+        monkeypatch.setattr(frictional, "_full_steps",
+                            lambda *a, res=res, ok=ok: (np.array([7.0]), res, NewtonResult(None, ok, len(res) - 1, res)))
+        out = frictional.FrictionalResult(None, False, 0, [1e-4])
+        xs, nres = frictional._corrector(system, np.zeros(1), 0.0, out, 1e-9, 1e-14, 12, None)
+        assert nres.converged
+        if ok:
+            assert not searched and xs[0] == 7.0 and nres.iterations == 3 and out.residuals[1:] == res[1:]
+        else:   # the search starts from the full steps' best state, its residual 5e-5 after the start's
+            assert len(searched) == 1 and searched[0][0] == 7.0 and xs[0] == 8.0
+            assert nres.iterations == 2 + 2 and nres.residuals == [1e-4, 5e-5, 1e-7, 1e-12]

@@ -58,10 +58,14 @@ matrix to a symmetric factorisation).
      the predictor's state (``static_solve``, line search on |F|; the linear solves on the
      LU companion of the run's PARDISO instance, checked by their residual, else
      ``sparse_solve``; quadratic once the stick/slip set is settled; logged on
-     ``rve.newton``), at most ``corrector_iter`` iterations;
-     It runs in chunks of 3 iterations; a chunk that does not reduce |F| tenfold is a stall
-     (Newton heading for another root of the non-unique frictional equilibrium, its line
-     search creeping) and ends it;
+     ``rve.newton``), at most ``corrector_iter`` iterations. It first takes up to
+     ``FULL_STEPS`` full steps with |F| allowed to rise (a watchdog, ``_full_steps``: a step
+     across a stick/slip or contact change raises |F| once, and the next converge
+     quadratically, where the line search on |F| cut every step and crept), kept where they
+     converge; else the line-search Newton goes on from their lowest |F|, in chunks of 3
+     iterations; a chunk that does not reduce |F| tenfold is a stall (Newton heading for
+     another root of the non-unique frictional equilibrium, its line search creeping) and
+     ends it;
   3. if the corrector fails: the predictor again (the law, no smoothing stage) to
      ``retry_rtol`` (1e-6) and the corrector;
      then (``fallback=True``) the residual path of before from the better state: the capped
@@ -94,7 +98,7 @@ import numpy as np
 
 from .backends.registry import run_backend
 from .linear import sparse_solve
-from .newton import NewtonResult, StageFactorisation
+from .newton import NewtonResult, StageFactorisation, convergence_rates
 from .system import friction_of
 from .static import StaticProblem, static_solve
 
@@ -382,7 +386,9 @@ def _full_steps(system, x, t, atol, lin):
         u = u + du
         r, J = prob(u)
         res.append(float(np.linalg.norm(r)))
-        log.info("friction corrector (full steps) it=%d |r|=%.3e", k, res[-1])
+        rates = convergence_rates(res)
+        log.info("friction corrector (full steps) it=%d |r|=%.3e rate=%s", k, res[-1],
+                 f"{rates[-1]:.2f}" if rates else "-")
         if not np.isfinite(res[-1]):
             res.pop()
             break
