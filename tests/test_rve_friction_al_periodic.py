@@ -595,3 +595,45 @@ def test_a_try_that_can_still_be_cut_bounds_the_fallback(monkeypatch):
     assert len(b) > tries1[0] and all(v is None for v in b[tries1[0]:])
     info0, _, b0 = seen[0]
     assert not info0["converged"] and b0 and all(v is None for v in b0)
+
+
+def test_a_failed_pinned_step_is_cut_into_parts_chained_from_its_start(monkeypatch):
+    """A frictional step of the pinned cell whose solve fails is solved again from its start
+    in two parts (``strain.max_cuts``), the second from the first's state, multipliers and
+    committed friction history: the state and history equal those of the two parts run one
+    after the other directly, bit for bit; the record names the cut and the parts, and its
+    step dissipation is the two parts' sum. With ``max_cuts: 0`` the failure stands."""
+    import rve.homogenisation.strain as strain
+    from rve.homogenisation.strain import friction_record, multiplier_record, strain_step
+
+    real = strain._quasi_static_step
+    calls = []
+
+    def failing_once(*a, **k):
+        x, system, info = real(*a, **k)
+        calls.append(info["converged"])
+        return x, system, (dict(info, converged=False) if len(calls) == 1 else info)
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, max_cuts=2)
+    fab, mesh, x0, lam0, rec0 = _relaxed(cfg)
+    monkeypatch.setattr(strain, "_quasi_static_step", failing_once)
+    x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
+    monkeypatch.setattr(strain, "_quasi_static_step", real)
+    eps = strain.strain_levels(cfg)[1]
+    x1, s1, i1 = real(cfg, fab, mesh, x0, x0, "shear", 1, 0.0, eps / 2, multipliers=lam0, friction=rec0)
+    x2, s2, i2 = real(cfg, fab, mesh, x1, x0, "shear", 1, eps / 2, eps, multipliers=multiplier_record(s1),
+                      friction=friction_record(s1))
+    assert info["converged"] and info["cuts"][0]["substeps"] == 1 and len(info["parts"]) == 2
+    assert info["strain"] == eps and info["strain_increment"] == eps
+    np.testing.assert_array_equal(x, x2)
+    rec, rec2 = friction_record(system), friction_record(s2)
+    for key in ("s_bar", "anchor", "d_ref"):
+        np.testing.assert_array_equal(rec[key], rec2[key])
+    assert info["friction"]["step_dissipated"] == pytest.approx(
+        i1["friction"]["step_dissipated"] + i2["friction"]["step_dissipated"], rel=1e-12)
+    assert info["friction"]["dissipated"] == i2["friction"]["dissipated"]
+    calls.clear()
+    none = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, max_cuts=0)
+    monkeypatch.setattr(strain, "_quasi_static_step", failing_once)
+    _, _, info0 = strain_step(none, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
+    assert not info0["converged"] and "cuts" not in info0 and len(calls) == 1

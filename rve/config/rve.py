@@ -118,8 +118,9 @@ class StrainPath(Section):
                                      "cell, which has no dynamic phases, algorithm_7_1 is one such increment)")
     substeps: Integer = Field(2, ge=1, le=50, description="sub-increments of a quasi_static step")
     max_cuts: Integer = Field(
-        2, ge=0, le=5, description="periodic cell: times a step whose static solve fails is solved again from its "
-                                   "start in twice as many sub-increments (0: none; the record's cuts)")
+        2, ge=0, le=5, description="times a step whose static solve fails is solved again from its start in twice "
+                                   "as many sub-increments (the periodic cell) or parts (the pinned cell: Algorithm "
+                                   "7.1 or the quasi-static path on each part; 0: none; the record's cuts)")
     cycle_modes: list[Literal["uniaxial", "shear", "uniaxial_y", "trellis"]] = Field(
         [], description="modes that also get a loading-unloading cycle from the relaxed state: cycle_steps steps "
                         "up to cycle_total, as many back to 0 (the hysteresis loop; docs/rve_pipeline.md "

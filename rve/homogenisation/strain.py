@@ -88,7 +88,7 @@ from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "cycle_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
-           "end_targets", "pinned_energy", "friction_law", "friction_record", "seed_friction", "friction_start",
+           "end_targets", "pinned_energy", "cut_step", "friction_law", "friction_record", "seed_friction", "friction_start",
            "friction_summary"]
 
 log = logging.getLogger("rve.homogenisation.strain")
@@ -293,7 +293,9 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         stepper = _quasi_static_step if sp_.path == "quasi_static" else _algorithm_step
 
         def part(x, e_from, e_to, whole=False, lam=multipliers, fr=friction):
-            return stepper(cfg, fab, mesh, x, origin, mode, step, e_from, e_to, multipliers=lam, friction=fr)
+            return cut_step(lambda xs, a, b, lam_, fr_: stepper(cfg, fab, mesh, xs, origin, mode, step, a, b,
+                                                               multipliers=lam_, friction=fr_),
+                            x, e_from, e_to, lam, fr, int(sp_.max_cuts), f"{mode} step {step}")
 
         def energy(system, x, e):
             if system is None:
@@ -333,6 +335,44 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
             arc = pinned_arc(cfg, fab, mesh, origin, mode, cell)
         return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy, multipliers, arc)
     return part(x_prev, eps_prev, eps, whole=True)
+
+
+def cut_step(solve, x_prev, e_from: float, e_to: float, multipliers, friction, max_cuts: int, label: str = "step"):
+    """``solve(x, e_a, e_b, multipliers, friction) -> (x, system, info)`` from ``x_prev`` over
+    [e_from, e_to]; where ``info["converged"]`` is False, again from ``x_prev`` (its
+    multipliers and friction history) in 2, then 4, ... equal parts, each from the state,
+    multipliers and committed friction history of the part before, at most ``max_cuts``
+    times. The pinned cell's step cut (the periodic cell cuts inside its own step,
+    ``periodic.periodic_strain_step``). The record is the last part's, over the whole range,
+    with ``cuts`` (each failed try's parts and |F|) and ``parts`` (strain, converged, wall
+    time of each part) where cut; the step's friction dissipation sums the parts'."""
+    t0, n, cuts = time.perf_counter(), 1, []
+    while True:
+        x, lam, fr, parts, dissipated = x_prev, multipliers, friction, [], 0.0
+        for k in range(n):
+            a = e_from + (e_to - e_from) * k / n
+            b = e_to if k == n - 1 else e_from + (e_to - e_from) * (k + 1) / n
+            x, system, info = solve(x, a, b, lam, fr)
+            parts.append({"strain": float(b), "converged": bool(info["converged"]),
+                          "wall_s": float(info.get("wall_s", 0.0))})
+            dissipated += float((info.get("friction") or {}).get("step_dissipated", 0.0))
+            if not info["converged"]:
+                break
+            lam, fr = multiplier_record(system), friction_record(system)
+        if info["converged"] or len(cuts) >= max_cuts:
+            break
+        cuts.append({"substeps": n, "residual_N": float(info.get("residual_N", np.nan))})
+        log.warning("%s: not converged in %d part(s) (|F| = %.3e N); cut to %d", label, n, cuts[-1]["residual_N"],
+                    2 * n)
+        n *= 2
+    if n > 1:
+        info = dict(info, strain=float(e_to), strain_increment=float(e_to - e_from), parts=parts,
+                    wall_s=time.perf_counter() - t0)
+        if info.get("friction"):
+            info["friction"] = dict(info["friction"], step_dissipated=dissipated)
+    if cuts:
+        info = dict(info, cuts=cuts)
+    return x, system, info
 
 
 def _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy_of, multipliers=None, arc=None, friction=None,
