@@ -305,8 +305,8 @@ def test_the_corrector_keeps_converged_full_steps_else_searches_from_the_best(mo
     system = SimpleNamespace(rebuild=lambda x: None, n=1)
     for res, ok in (([1e-4, 8e-4, 1e-7, 1e-12], True), ([1e-4, 5e-5, 2e-4], False)):
         searched.clear()
-        monkeypatch.setattr(frictional, "_full_steps",
-                            lambda *a, res=res, ok=ok: (np.array([7.0]), res, NewtonResult(None, ok, len(res) - 1, res)))
+        done = (np.array([7.0]), res, NewtonResult(None, ok, len(res) - 1, res))
+        monkeypatch.setattr(frictional, "_full_steps", lambda *a, done=done: done)
         out = frictional.FrictionalResult(None, False, 0, [1e-4])
         xs, nres = frictional._corrector(system, np.zeros(1), 0.0, out, 1e-9, 1e-14, 12, None)
         assert nres.converged

@@ -591,7 +591,7 @@ def test_a_try_that_can_still_be_cut_bounds_the_fallback(monkeypatch):
         seen[cuts] = (info, list(tries), list(bounds))
     info, tries1, b = seen[1]
     assert info["converged"] and len(info["cuts"]) == 1
-    assert tries1[0] and b[:tries1[0]] == [periodic.CUT_STALL_WINDOW] * tries1[0]
+    assert tries1[0] and b[:tries1[0]] == [statics.CUT_STALL_WINDOW] * tries1[0]
     assert len(b) > tries1[0] and all(v is None for v in b[tries1[0]:])
     info0, _, b0 = seen[0]
     assert not info0["converged"] and b0 and all(v is None for v in b0)
@@ -602,16 +602,20 @@ def test_a_failed_pinned_step_is_cut_into_parts_chained_from_its_start(monkeypat
     in two parts (``strain.max_cuts``), the second from the first's state, multipliers and
     committed friction history: the state and history equal those of the two parts run one
     after the other directly, bit for bit; the record names the cut and the parts, and its
-    step dissipation is the two parts' sum. With ``max_cuts: 0`` the failure stands."""
+    step dissipation is the two parts' sum; the first try ends a stalled frictional fallback
+    early (``CUT_STALL_WINDOW``), the last one has all of it. With ``max_cuts: 0`` the failure
+    stands."""
     import rve.homogenisation.strain as strain
+    from rve.homogenisation.cell_statics import CUT_STALL_WINDOW
     from rve.homogenisation.strain import friction_record, multiplier_record, strain_step
 
     real = strain._quasi_static_step
-    calls = []
+    calls, stalls = [], []
 
     def failing_once(*a, **k):
         x, system, info = real(*a, **k)
         calls.append(info["converged"])
+        stalls.append(k["fallback_stall"])
         return x, system, (dict(info, converged=False) if len(calls) == 1 else info)
 
     cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, max_cuts=2)
@@ -624,6 +628,7 @@ def test_a_failed_pinned_step_is_cut_into_parts_chained_from_its_start(monkeypat
     x2, s2, i2 = real(cfg, fab, mesh, x1, x0, "shear", 1, eps / 2, eps, multipliers=multiplier_record(s1),
                       friction=friction_record(s1))
     assert info["converged"] and info["cuts"][0]["substeps"] == 1 and len(info["parts"]) == 2
+    assert stalls == [CUT_STALL_WINDOW] * 3      # the two-part try could still be cut to four
     assert info["strain"] == eps and info["strain_increment"] == eps
     np.testing.assert_array_equal(x, x2)
     rec, rec2 = friction_record(system), friction_record(s2)
@@ -633,7 +638,8 @@ def test_a_failed_pinned_step_is_cut_into_parts_chained_from_its_start(monkeypat
         i1["friction"]["step_dissipated"] + i2["friction"]["step_dissipated"], rel=1e-12)
     assert info["friction"]["dissipated"] == i2["friction"]["dissipated"]
     calls.clear()
+    stalls.clear()
     none = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, max_cuts=0)
     monkeypatch.setattr(strain, "_quasi_static_step", failing_once)
     _, _, info0 = strain_step(none, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=rec0)
-    assert not info0["converged"] and "cuts" not in info0 and len(calls) == 1
+    assert not info0["converged"] and "cuts" not in info0 and len(calls) == 1 and stalls == [None]

@@ -10,6 +10,9 @@
   each round ended by a map rebuild, and the solution committed unless ``commit=False``
   (the Uzawa loop of ``multipliers.equilibrium`` commits once, at its converged state);
 * :func:`static_polish` -- bounded capped-step Newton solves, |F| never increases;
+* :func:`cut_retries` -- the step cut of both cells: a step solved again from its start in
+  twice as many increments where it fails, a try that can still be cut with the frictional
+  fallback's stall window (``CUT_STALL_WINDOW``);
 * :func:`free_residual` -- |F(x, 0)| on the free dofs (N);
 * :func:`trellis_gradient` -- the picture frame's in-plane deformation gradient.
 """
@@ -165,6 +168,32 @@ def static_polish(system, x, atol: float, rounds: int, max_iter: int) -> tuple:
 def _active(system, x):
     act = system.active_pairs(x)
     return system.map.e_plus[act], system.map.e_minus[act]
+
+
+#: the stall window of the frictional capped-Newton fallback in a try that can still be cut
+#: (no pseudo-transient continuation): a fallback that creeps on converges (the AL cell's
+#: uniaxial step 2: |F| -5 % an iteration, 104 iterations), one that stalls with no progress
+#: is cut (the imperfect cell's step 1: 1000 iterations at |F| = 6.82e-6 N, then converged in
+#: two sub-increments; docs/fault_tolerance.md)
+CUT_STALL_WINDOW = 20
+
+
+def cut_retries(attempt, n: int, max_cuts: int, label: str) -> tuple:
+    """The step cut shared by the pinned and the periodic cell: ``attempt(n, fallback_stall)
+    -> (out, converged, residual_N)`` solves the step from its start in ``n`` increments or
+    parts; where it fails, again in twice as many, at most ``max_cuts`` times. A try that can
+    still be cut gets ``CUT_STALL_WINDOW`` (its frictional fallback ends where it stalls), the
+    last one None (all of it). Returns ``(out of the last try, its n, cuts)``, ``cuts`` the
+    failed tries' ``{"substeps": n, "residual_N": |F|}``."""
+    cuts = []
+    while True:
+        last = len(cuts) >= int(max_cuts)
+        out, converged, residual = attempt(n, None if last else CUT_STALL_WINDOW)
+        if converged or last:
+            return out, n, cuts
+        cuts.append({"substeps": n, "residual_N": float(residual)})
+        log.warning("%s: not converged in %d increment(s) (|F| = %.3e N); cut to %d", label, n, residual, 2 * n)
+        n *= 2
 
 
 def free_residual(system, x) -> float:

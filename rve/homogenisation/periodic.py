@@ -51,7 +51,7 @@ from ..fem.assembly import DofLayout
 from ..model import BeamMaterial, BeamModel, ContactSystem
 from ..model.periodic import PeriodicSystem, fibril_end_ties
 from ..solvers.system import friction_of
-from .cell_statics import free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .cell_statics import cut_retries, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
 from .multipliers import equilibrium, seed_multipliers
 
 __all__ = ["cell_ties", "periodic_system", "macro_gradient", "periodic_relax", "periodic_strain_step",
@@ -245,14 +245,6 @@ def _affine_predictor(x_prev, dF, centre) -> np.ndarray:
     return x
 
 
-#: the stall window of the frictional capped-Newton fallback in a try that can still be cut
-#: (no pseudo-transient continuation): a fallback that creeps on converges (the AL cell's
-#: uniaxial step 2: |F| -5 % an iteration, 104 iterations), one that stalls with no progress
-#: is cut (the imperfect cell's step 1: 1000 iterations at |F| = 6.82e-6 N, then converged in
-#: two sub-increments; docs/fault_tolerance.md)
-CUT_STALL_WINDOW = 20
-
-
 def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_range=None, multipliers=None,
                          friction=None):
     """One strain step of the periodic cell from ``x_prev`` (full, n_nodes x 9) at strain
@@ -268,8 +260,8 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     slip each), on one system (``set_macro``); otherwise one. A step whose solve fails is cut:
     solved again from ``x_prev`` (its multipliers and friction history) in twice as many
     sub-increments, at most ``strain.max_cuts`` times (``info["cuts"]``); a try that can still
-    be cut ends the frictional solve's fallback where it stalls (``CUT_STALL_WINDOW``), the
-    last try has all of it. Returns ``(x
+    be cut ends the frictional solve's fallback where it stalls (``cell_statics.cut_retries``),
+    the last try has all of it. Returns ``(x
     (n_nodes, 9), full system, info)``."""
     from .friction_history import friction_summary
 
@@ -282,18 +274,13 @@ def periodic_strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, e
     eps_from, eps_to = (float(levels[step - 1]), float(levels[step])) if eps_range is None else map(float, eps_range)
     n = int(sp_.substeps) if sp_.path == "quasi_static" else 1
     x_prev = np.asarray(x_prev, float).reshape(mesh.n_nodes, 9)
-    cuts = []
-    while True:
-        last = len(cuts) >= int(sp_.max_cuts)
-        x_full, psys, fr, d_start, sinfo, sub_info, F_next, xs = _increments(
-            cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, n, multipliers, friction,
-            fallback_stall=None if last else CUT_STALL_WINDOW)
-        if sinfo["converged"] or last:
-            break
-        cuts.append({"substeps": n, "residual_N": free_residual(psys, xs)})
-        log.warning("%s step %d (periodic): not converged in %d increment(s) (|F| = %.3e N); cut to %d", mode, step,
-                    n, cuts[-1]["residual_N"], 2 * n)
-        n *= 2
+
+    def attempt(k, stall):
+        out = _increments(cfg, fab, mesh, x_prev, mode, step, eps_from, eps_to, k, multipliers, friction, stall)
+        return out, out[4]["converged"], free_residual(out[1], out[7])
+
+    out, n, cuts = cut_retries(attempt, n, sp_.max_cuts, f"{mode} step {step} (periodic)")
+    x_full, psys, fr, d_start, sinfo, sub_info, F_next, xs = out
     sinfo["wall_s"] = time.perf_counter() - t0
     info = {"mode": mode, "step": int(step), "strain": eps_to,
             "strain_increment": eps_to - eps_from, "boundary": "periodic",

@@ -81,15 +81,16 @@ from ..model import ContactSystem
 from ..solvers.frictional import friction_of
 from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .branch import BRANCH_COUNTS
-from .cell_statics import cycle_levels, free_residual, static_minimize, static_polish, strain_levels, trellis_gradient
+from .cell_statics import (cut_retries, cycle_levels, free_residual, static_minimize, static_polish, strain_levels,
+                           trellis_gradient)
 from .continuation import periodic_arc, pinned_arc
 from .friction_history import friction_law, friction_record, friction_summary, seed_friction
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
 __all__ = ["mech_system", "relax_fabric", "strain_step", "strain_levels", "cycle_levels", "affine_velocity", "free_residual",
            "static_polish", "static_minimize", "MODE_DIRECTION", "MODE_SOURCE", "trellis_gradient", "secant_velocity",
-           "end_targets", "pinned_energy", "cut_step", "friction_law", "friction_record", "seed_friction", "friction_start",
-           "friction_summary"]
+           "end_targets", "pinned_energy", "cut_step", "friction_law", "friction_record", "seed_friction",
+           "friction_start", "friction_summary"]
 
 log = logging.getLogger("rve.homogenisation.strain")
 
@@ -293,9 +294,9 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         stepper = _quasi_static_step if sp_.path == "quasi_static" else _algorithm_step
 
         def part(x, e_from, e_to, whole=False, lam=multipliers, fr=friction):
-            return cut_step(lambda xs, a, b, lam_, fr_: stepper(cfg, fab, mesh, xs, origin, mode, step, a, b,
-                                                               multipliers=lam_, friction=fr_),
-                            x, e_from, e_to, lam, fr, int(sp_.max_cuts), f"{mode} step {step}")
+            return cut_step(lambda xs, a, b, lam_, fr_, stall: stepper(
+                cfg, fab, mesh, xs, origin, mode, step, a, b, multipliers=lam_, friction=fr_, fallback_stall=stall),
+                x, e_from, e_to, lam, fr, int(sp_.max_cuts), f"{mode} step {step}")
 
         def energy(system, x, e):
             if system is None:
@@ -338,33 +339,30 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
 
 
 def cut_step(solve, x_prev, e_from: float, e_to: float, multipliers, friction, max_cuts: int, label: str = "step"):
-    """``solve(x, e_a, e_b, multipliers, friction) -> (x, system, info)`` from ``x_prev`` over
-    [e_from, e_to]; where ``info["converged"]`` is False, again from ``x_prev`` (its
-    multipliers and friction history) in 2, then 4, ... equal parts, each from the state,
-    multipliers and committed friction history of the part before, at most ``max_cuts``
-    times. The pinned cell's step cut (the periodic cell cuts inside its own step,
+    """``solve(x, e_a, e_b, multipliers, friction, fallback_stall) -> (x, system, info)`` from
+    ``x_prev`` over [e_from, e_to], cut where it fails (``cell_statics.cut_retries``): again
+    from ``x_prev`` (its multipliers and friction history) in 2, then 4, ... equal parts, each
+    from the state, multipliers and committed friction history of the part before. The
+    pinned cell's step cut (the periodic cell cuts into sub-increments of its own step,
     ``periodic.periodic_strain_step``). The record is the last part's, over the whole range,
     with ``cuts`` (each failed try's parts and |F|) and ``parts`` (strain, converged, wall
     time of each part) where cut; the step's friction dissipation sums the parts'."""
-    t0, n, cuts = time.perf_counter(), 1, []
-    while True:
+    t0 = time.perf_counter()
+
+    def attempt(n, stall):
         x, lam, fr, parts, dissipated = x_prev, multipliers, friction, [], 0.0
         for k in range(n):
-            a = e_from + (e_to - e_from) * k / n
             b = e_to if k == n - 1 else e_from + (e_to - e_from) * (k + 1) / n
-            x, system, info = solve(x, a, b, lam, fr)
+            x, system, info = solve(x, e_from + (e_to - e_from) * k / n, b, lam, fr, stall)
             parts.append({"strain": float(b), "converged": bool(info["converged"]),
                           "wall_s": float(info.get("wall_s", 0.0))})
             dissipated += float((info.get("friction") or {}).get("step_dissipated", 0.0))
             if not info["converged"]:
                 break
             lam, fr = multiplier_record(system), friction_record(system)
-        if info["converged"] or len(cuts) >= max_cuts:
-            break
-        cuts.append({"substeps": n, "residual_N": float(info.get("residual_N", np.nan))})
-        log.warning("%s: not converged in %d part(s) (|F| = %.3e N); cut to %d", label, n, cuts[-1]["residual_N"],
-                    2 * n)
-        n *= 2
+        return (x, system, info, parts, dissipated), info["converged"], float(info.get("residual_N", np.nan))
+
+    (x, system, info, parts, dissipated), n, cuts = cut_retries(attempt, 1, max_cuts, label)
     if n > 1:
         info = dict(info, strain=float(e_to), strain_increment=float(e_to - e_from), parts=parts,
                     wall_s=time.perf_counter() - t0)
@@ -436,7 +434,7 @@ def pinned_energy(fab, mesh, system, x, origin, mode: str, eps: float) -> tuple:
 
 
 def _quasi_static_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
-                       multipliers=None, friction=None):
+                       multipliers=None, friction=None, fallback_stall=None):
     """``strain.path: quasi_static`` from ``x_prev`` at ``eps_prev`` to ``eps``: ``strain.substeps``
     equal sub-increments, each the affine increment of the mode applied to every node as the
     predictor (``affine_velocity`` / ``secant_velocity`` times a unit time; the ends exactly on
@@ -463,7 +461,8 @@ def _quasi_static_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps
             "path": "quasi_static", "substeps": []}
 
     def static(xs):
-        return static_minimize(system, xs, sp_.static_atol, sp_.static_max_iter, commit=False)
+        return static_minimize(system, xs, sp_.static_atol, sp_.static_max_iter, commit=False,
+                               fallback_stall=fallback_stall)
 
     sinfo = {"converged": True}
     for k in range(1, n + 1):
@@ -496,7 +495,7 @@ def _quasi_static_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps
 
 
 def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_prev: float, eps: float,
-                    multipliers=None, friction=None):
+                    multipliers=None, friction=None, fallback_stall=None):
     """Algorithm 7.1 from ``x_prev`` at strain ``eps_prev`` to ``eps`` (module docstring;
     ``step`` labels the record). The multipliers (``strain_step``) pass from phase to phase;
     the static solve is in the Uzawa loop (``multipliers.equilibrium``). So does the friction
@@ -561,7 +560,8 @@ def _algorithm_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, eps_pr
     t0 = time.perf_counter()
     if sp_.static_method == "energy":
         def static(xs):
-            return static_minimize(sys2, xs, sp_.static_atol, sp_.static_max_iter, commit=False)
+            return static_minimize(sys2, xs, sp_.static_atol, sp_.static_max_iter, commit=False,
+                                   fallback_stall=fallback_stall)
     else:
         def static(xs):
             return static_polish(sys2, xs, sp_.static_atol, sp_.static_rounds, sp_.static_max_iter)

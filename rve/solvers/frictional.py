@@ -337,7 +337,7 @@ def _corrector(system, x, t, out, atol, rtol, corrector_iter, backend, chunk: in
         xs, res, nres = _full_steps(system, x, t, atol, lin)
         done = len(res) - 1
         if not nres.converged:
-            res = res[:1] + ([min(res[1:])] if min(res) < res[0] else [])
+            res = [res[0]] + ([min(res)] if min(res) < res[0] else [])   # the start, then the best
             while done < corrector_iter:
                 n = min(chunk, corrector_iter - done)
                 xs, _, nres = static_solve(system, xs, np.zeros(system.n), t, {
