@@ -132,6 +132,11 @@ def _static_frictional(system, x, atol: float, max_iter: int, fallback_stall: Op
         info["rounds"].append({"method": how, "iterations": its, "converged": converged,
                                "new_active_pairs": len(after - before), "residual_N": residual,
                                "stick": int(st.stick.sum()), "slip": int(st.slip.sum())})
+        if fr.provisional:
+            # a provisional re-solve: its state only feeds the next multiplier update
+            # (``multipliers.equilibrium``), so it is not driven to atol
+            info["provisional"] = True
+            return x, info
         if not converged or residual <= atol:
             break
     info["converged"] = bool(info["converged"] and residual <= atol)

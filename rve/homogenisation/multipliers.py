@@ -52,6 +52,11 @@ __all__ = ["multiplier_record", "seed_multipliers", "equilibrium"]
 
 log = logging.getLogger("rve.homogenisation.multipliers")
 
+#: the frictional re-solves whose state only feeds a multiplier update are provisional: one
+#: predictor round at the held loads (``FrictionTerm.provisional``); the state that meets the
+#: tolerance is then solved in full at its multipliers and checked again (module docstring)
+PROVISIONAL_RESOLVES = True
+
 
 def _term(system):
     full = getattr(system, "full", system)   # a PeriodicSystem holds the ContactSystem as .full
@@ -79,24 +84,42 @@ def equilibrium(system, solve, x):
         x, info = solve(x)
         return x, _commit(system, x, info)
     loop = AugmentedLagrangian(system)
-    solves, iterations, walls = 0, [], []
+    solves, iterations, walls, provisional = 0, [], [], 0
     fr = friction_of(system)
+    exact = fr is None or not PROVISIONAL_RESOLVES
+    if not exact:
+        fr.provisional = True
     try:
         while True:
             t0 = time.perf_counter()
+            x0 = x
             x, info = solve(x)
             solves += 1
             iterations.append(info.get("iterations"))
             walls.append(time.perf_counter() - t0)
+            if info.get("provisional", False):
+                provisional += 1
+                if not info.get("converged", False):
+                    # the provisional round failed: the full re-solve from the same start
+                    x, exact, fr.provisional = x0, True, False
+                    continue
+                if loop.update(x) or loop.exhausted:
+                    # the provisional state met the tolerance (or the updates ran out): the
+                    # equilibrium at these multipliers, solved in full and checked again
+                    exact, fr.provisional = True, False
+                else:
+                    fr.resolving = True
+                continue
             if not info.get("converged", False):
                 break
             if loop.update(x) or loop.exhausted:
                 break
-            if fr is not None:   # the re-solves: the frictional predictor in rounds (module docstring)
-                fr.resolving = True
+            if fr is not None:   # the re-solves (module docstring)
+                fr.resolving, fr.provisional = True, not exact
     finally:
         if fr is not None:
             fr.resolving = False
+            fr.provisional = False
     loop.finish(x)
     pen = float(system.max_penetration(x))
     info = dict(info)
@@ -104,6 +127,7 @@ def equilibrium(system, solve, x):
         "updates": int(loop.updates), "solves": solves, "tolerance": float(loop.tolerance),
         "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
         "penalties": [float(p) for p in loop.penalties], "solve_iterations": iterations,
+        "provisional_solves": provisional,
         "solve_wall_s": [float(t) for t in walls],
         "history": [[int(k), float(p)] for k, p in loop.history]}
     if pen > loop.tolerance:   # an equilibrium at these multipliers, not yet the impenetrable limit

@@ -138,6 +138,8 @@ class FrictionalResult(NewtonResult):
     fallback_iterations: int = 0
     load_changes: list = field(default_factory=list)
     method: str = ""
+    #: whether the last predictor round's minimisation converged
+    round_converged: bool = False
     #: wall time (s) of every predictor round, then of the corrector, then of the fallback
     walls: list = field(default_factory=list)
 
@@ -215,6 +217,12 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         max_rounds = RESOLVE_ROUNDS if resolve else 4
     # (stages, fallback) of each pass: a re-solve takes the law's stage alone first and, where
     # that fails, the caller's stages from the same start (module docstring)
+    if getattr(fr, "provisional", False):
+        xs, out = _provisional(system, fr, x, t, atol, rtol, min(max_iter, predictor_iter), predictor_rtol, step_cap,
+                               backend, resolve, smoothing, freeze)
+        if out.converged:
+            fr.hold_loads(xs)
+        return xs, out
     passes = [(smoothing, fallback)]
     if resolve and RESOLVE_SMOOTHING is not None and tuple(RESOLVE_SMOOTHING) != tuple(smoothing):
         passes.insert(0, (RESOLVE_SMOOTHING, False))
@@ -281,6 +289,32 @@ def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, ret
     return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend, fallback_stall)
 
 
+def _provisional(system, fr, x, t, atol, rtol, max_iter, predictor_rtol, step_cap, backend, resolve, smoothing,
+                 freeze):
+    """A provisional solve (``fr.provisional``): the first predictor stage alone, no corrector;
+    ``converged`` is the stage's (module docstring). A re-solve's stage: the law at the held
+    loads, to ``predictor_rtol`` of the start's |F|; a step's first solve: its first stage
+    (the smoothed one, ten times looser, where ``smoothing`` has one) with the loads
+    refrozen at every accepted iterate."""
+    x = np.array(x, float, copy=True)
+    system.rebuild(x)
+    out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
+    if resolve:
+        refreeze, start, eta = False, "held", 0.0
+    else:
+        etas = [float(v) for v in smoothing if v > 0]
+        refreeze, eta = True, (etas[0] if etas else 0.0)
+        start = "committed" if fr._committed_loads is not None and freeze == "committed" else None
+    tol = predictor_rtol * (10.0 if eta > 0 else 1.0)
+    xs = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, refreeze, 1, 0.0, start,
+                    step_cap, backend, eta)
+    out.converged = bool(out.round_converged)
+    out.u = xs if out.converged else None
+    out.method = "provisional"
+    out.reason = "" if out.converged else "the provisional stage did not converge"
+    return xs, out
+
+
 def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, start, step_cap,
                backend, eta=0.0, blend=1.0):
     """The predictor rounds from ``x`` (module docstring); returns the last round's state.
@@ -307,6 +341,7 @@ def _predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds
         finally:
             fr.unfreeze()
         out.rounds += 1
+        out.round_converged = bool(mres.converged)
         out.walls.append(time.perf_counter() - t0)
         out.predictor_iterations += int(mres.iterations)
         out.iterations += int(mres.iterations)

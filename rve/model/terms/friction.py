@@ -185,6 +185,10 @@ class FrictionTerm:
         #: True while ``multipliers.equilibrium`` re-solves the step at updated multipliers:
         #: ``frictional_solve`` then takes its predictor in rounds (``RESOLVE_ROUNDS``)
         self.resolving = False
+        #: True while a re-solve's state only feeds the next multiplier update
+        #: (``multipliers.equilibrium``): ``frictional_solve`` then takes one predictor round
+        #: at the held loads and stops there (``rve.solvers.frictional.provisional_solve``)
+        self.provisional = False
         #: ``(keys, loads)``: the loads (``loads_at``) of the last converged solve of the Uzawa
         #: loop by point key (``hold_loads``), or None
         self._held_loads = None
