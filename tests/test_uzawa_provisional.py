@@ -56,12 +56,13 @@ class _Script:
 
     def __init__(self, system, script, honours=True):
         self.system, self.script, self.honours = system, list(script), honours
-        self.seen, self.starts = [], []
+        self.seen, self.starts, self.penalties = [], [], []
 
     def __call__(self, x):
         fr = self.system.friction_view
         flags = (False, False) if fr is None else (fr.resolving, fr.provisional)
         self.seen.append(flags)
+        self.penalties.append(self.system.penalty)
         self.starts.append(x["n"])
         overlap, ok = self.script.pop(0)
         info = {"converged": ok, "iterations": 1}
@@ -91,6 +92,17 @@ def test_provisional_until_the_tolerance_then_the_full_solve_checked_again():
     assert al["solves"] == al["updates"] + 2
     assert x["n"] == 5 and sysm.friction_view.commits == [x]
     assert sysm.friction_view.resolving is False and sysm.friction_view.provisional is False
+
+
+def test_the_full_solve_keeps_the_raised_penalty_until_the_loop_ends(monkeypatch):
+    """The loop raises P* where an update leaves more than a quarter of the overlap; the full
+    solve after the provisional state that met the tolerance runs at that P*, and P* is back
+    at its start after the loop."""
+    sysm = _System()
+    monkeypatch.setattr(_Params, "al_penalty_growth", 4.0)
+    x, info, solve = _run(sysm, [(1e-2, True), (8e-3, True), (5e-5, True), (6e-5, True)])
+    assert solve.seen == [(False, True), (True, True), (True, True), (True, False)]
+    assert solve.penalties == [1.0, 1.0, 4.0, 4.0] and sysm.penalty == 1.0
 
 
 def test_a_first_solve_that_meets_the_tolerance_is_solved_in_full_once():

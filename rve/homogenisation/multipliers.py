@@ -39,6 +39,18 @@ record untouched, so the penalty path is bit-identical.
   previous converged solve (kept by ``frictional_solve`` before the update, ``FrictionTerm.
   hold_loads``; docs/contact.md "Friction with the augmented Lagrangian and the periodic
   cell").
+
+  **Provisional solves** (``PROVISIONAL_RESOLVES``, friction only): every solve of the loop
+  whose state only feeds a multiplier update is provisional (``FrictionTerm.provisional``:
+  ``frictional_solve`` takes its first predictor stage alone and the solve reports
+  ``info["provisional"]``): the first solve and the re-solves, until a provisional state
+  meets the tolerance (or the updates run out). That state's equilibrium at its multipliers
+  and P* (not yet back at the configured one) is then solved in full and checked again; the loop goes on with full re-solves where it
+  does not meet the tolerance. A provisional solve that fails is replaced by the full solve
+  from its start. A solve that does not report ``provisional`` (one that does not call
+  ``frictional_solve``) is a full solve, and the loop is the plain one.
+  ``info["augmented_lagrangian"]["provisional_solves"]`` counts them (docs/contact.md
+  "Provisional re-solves").
 """
 from __future__ import annotations
 
@@ -103,9 +115,12 @@ def equilibrium(system, solve, x):
                     # the provisional round failed: the full re-solve from the same start
                     x, exact, fr.provisional = x0, True, False
                     continue
-                if loop.update(x) or loop.exhausted:
+                if loop.update(x, finish=False) or loop.exhausted:
                     # the provisional state met the tolerance (or the updates ran out): the
-                    # equilibrium at these multipliers, solved in full and checked again
+                    # equilibrium at these multipliers and P*, solved in full and checked again
+                    # (at the configured P* a step whose loop raised it would move the overlap
+                    # above the tolerance again: the cell is softer there against the
+                    # friction's change from the provisional loads)
                     exact, fr.provisional = True, False
                 else:
                     fr.resolving = True

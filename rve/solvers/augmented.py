@@ -30,10 +30,10 @@ The system needs (the protocol, no model imported here): ``augmented`` (bool),
 unconditionally.
 
 * ``AugmentedLagrangian(system, tolerance=None, max_updates=None, growth=None, decrease=0.25,
-  max_growth=1e3)``: ``update(x) -> bool``
+  max_growth=1e3)``: ``update(x, finish=True) -> bool``
   at a converged solve's state: True when the penetration is below the tolerance (the
-  multipliers are left as they are), else one Uzawa update and False (solve again from
-  ``x``). ``history`` lists ``(updates, max_penetration)`` of every check;
+  multipliers are left as they are; P* back to its start unless ``finish=False``), else one
+  Uzawa update and False (solve again from ``x``). ``history`` lists ``(updates, max_penetration)`` of every check;
   ``exhausted`` is True once ``max_updates`` updates were made without convergence;
   ``penalties`` the P* of every solve after an update; ``finish(x)`` returns to the starting
   P* (called by ``update`` when it ends the loop; idempotent).
@@ -79,20 +79,24 @@ class AugmentedLagrangian:
     def active(self) -> bool:
         return bool(getattr(self.system, "augmented", False))
 
-    def update(self, x) -> bool:
+    def update(self, x, finish: bool = True) -> bool:
         """True when the state ``x`` meets the tolerance (or the system has no multipliers);
         otherwise one Uzawa update (and the penalty increase where it is due) and False
-        (False with ``exhausted`` when no update is left: the caller stops and reports)."""
+        (False with ``exhausted`` when no update is left: the caller stops and reports).
+        ``finish=False``: P* is left as it is where the loop ends (the caller solves once
+        more at these multipliers and P*, and checks again)."""
         if not self.active:
             return True
         pen = float(self.system.max_penetration(x))
         self.history.append((self.updates, pen))
         if pen <= self.tolerance:
-            self.finish(x)
+            if finish:
+                self.finish(x)
             return True
         if self.updates >= self.max_updates:
             self.exhausted = True
-            self.finish(x)
+            if finish:
+                self.finish(x)
             return False
         self.system.update_multipliers(x)
         self.updates += 1

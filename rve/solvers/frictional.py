@@ -74,6 +74,14 @@ matrix to a symmetric factorisation).
      many iterations (``capped_newton(stall_window=...)``), and no continuation follows (a
      caller that cuts the step where the solve fails).
 
+  **Provisional solves** (``fr.provisional``, set by ``multipliers.equilibrium`` while a
+  solve's state only feeds the next multiplier update): the first predictor stage alone, no
+  corrector and no fallback, ``converged`` the stage's minimisation's, ``method``
+  "provisional" (``_provisional``). A re-solve's stage is one round of the law at the held
+  loads (to ``predictor_rtol``); a step's first solve its first stage (the smoothed one, ten
+  times looser, where ``smoothing`` has one) with the loads refrozen at every accepted
+  iterate. The held loads are then those at its state.
+
   A start already within ``direct_atol`` (N; default 1e4 atol) of equilibrium (the re-solve after a commit)
   goes to the corrector first, and to the predictor only if it stalls. The first pass's
   predictor stages stop after ``predictor_iter`` iterations each (the trust region crawls on
