@@ -56,13 +56,14 @@ class _Script:
 
     def __init__(self, system, script, honours=True):
         self.system, self.script, self.honours = system, list(script), honours
-        self.seen, self.starts, self.penalties = [], [], []
+        self.seen, self.starts, self.penalties, self.fallbacks = [], [], [], []
 
     def __call__(self, x):
         fr = self.system.friction_view
         flags = (False, False) if fr is None else (fr.resolving, fr.provisional)
         self.seen.append(flags)
         self.penalties.append(self.system.penalty)
+        self.fallbacks.append(None if fr is None else getattr(fr, "fallback", True))
         self.starts.append(x["n"])
         overlap, ok = self.script.pop(0)
         info = {"converged": ok, "iterations": 1}
@@ -103,6 +104,21 @@ def test_the_full_solve_keeps_the_raised_penalty_until_the_loop_ends(monkeypatch
     x, info, solve = _run(sysm, [(1e-2, True), (8e-3, True), (5e-5, True), (6e-5, True)])
     assert solve.seen == [(False, True), (True, True), (True, True), (True, False)]
     assert solve.penalties == [1.0, 1.0, 4.0, 4.0] and sysm.penalty == 1.0
+
+
+def test_a_failed_full_solve_at_a_raised_penalty_is_solved_again_at_the_configured_one(monkeypatch):
+    """The full solve at the raised P* runs without the frictional fallback; where it fails,
+    the same start (the provisional state) is solved again at the configured P* with it."""
+    sysm = _System()
+    monkeypatch.setattr(_Params, "al_penalty_growth", 4.0)
+    x, info, solve = _run(sysm, [(1e-2, True), (8e-3, True), (5e-5, True), (1.0, False), (6e-5, True)])
+    assert solve.seen == [(False, True), (True, True), (True, True), (True, False), (True, False)]
+    assert solve.penalties == [1.0, 1.0, 4.0, 4.0, 1.0] and sysm.penalty == 1.0
+    assert solve.fallbacks == [True, True, True, False, True]
+    assert solve.starts[-2:] == [3, 3] and x["n"] == 5
+    al = info["augmented_lagrangian"]
+    assert al["retries"] == 1 and al["met"] and info["converged"]
+    assert sysm.friction_view.fallback is True
 
 
 def test_a_first_solve_that_meets_the_tolerance_is_solved_in_full_once():

@@ -47,7 +47,10 @@ record untouched, so the penalty path is bit-identical.
   meets the tolerance (or the updates run out). That state's equilibrium at its multipliers
   and P* (not yet back at the configured one) is then solved in full and checked again; the loop goes on with full re-solves where it
   does not meet the tolerance. A provisional solve that fails is replaced by the full solve
-  from its start. A solve that does not report ``provisional`` (one that does not call
+  from its start. Where the loop had raised P*, that full solve runs without the frictional
+  fallback (``FrictionTerm.fallback``), and if it fails it is solved again from the same
+  start at the configured P* (the line loads kept), with the fallback
+  (``info["augmented_lagrangian"]["retries"]``). A solve that does not report ``provisional`` (one that does not call
   ``frictional_solve``) is a full solve, and the loop is the plain one.
   ``info["augmented_lagrangian"]["provisional_solves"]`` counts them (docs/contact.md
   "Provisional re-solves").
@@ -96,59 +99,89 @@ def equilibrium(system, solve, x):
         x, info = solve(x)
         return x, _commit(system, x, info)
     loop = AugmentedLagrangian(system)
-    solves, iterations, walls, provisional = 0, [], [], 0
     fr = friction_of(system)
-    exact = fr is None or not PROVISIONAL_RESOLVES
-    if not exact:
-        fr.provisional = True
+    run = _Solves(solve)
     try:
-        while True:
-            t0 = time.perf_counter()
-            x0 = x
-            x, info = solve(x)
-            solves += 1
-            iterations.append(info.get("iterations"))
-            walls.append(time.perf_counter() - t0)
-            if info.get("provisional", False):
-                provisional += 1
-                if not info.get("converged", False):
-                    # the provisional round failed: the full re-solve from the same start
-                    x, exact, fr.provisional = x0, True, False
-                    continue
-                if loop.update(x, finish=False) or loop.exhausted:
-                    # the provisional state met the tolerance (or the updates ran out): the
-                    # equilibrium at these multipliers and P*, solved in full and checked again
-                    # (at the configured P* a step whose loop raised it would move the overlap
-                    # above the tolerance again: the cell is softer there against the
-                    # friction's change from the provisional loads)
-                    exact, fr.provisional = True, False
-                else:
-                    fr.resolving = True
-                continue
-            if not info.get("converged", False):
-                break
-            if loop.update(x) or loop.exhausted:
-                break
-            if fr is not None:   # the re-solves (module docstring)
-                fr.resolving, fr.provisional = True, not exact
+        x, info = _uzawa(loop, fr, run, x)
     finally:
         if fr is not None:
-            fr.resolving = False
-            fr.provisional = False
+            fr.resolving = fr.provisional = False
+            fr.fallback = True
     loop.finish(x)
     pen = float(system.max_penetration(x))
     info = dict(info)
     info["augmented_lagrangian"] = {
-        "updates": int(loop.updates), "solves": solves, "tolerance": float(loop.tolerance),
+        "updates": int(loop.updates), "solves": run.solves, "tolerance": float(loop.tolerance),
         "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
-        "penalties": [float(p) for p in loop.penalties], "solve_iterations": iterations,
-        "provisional_solves": provisional,
-        "solve_wall_s": [float(t) for t in walls],
+        "penalties": [float(p) for p in loop.penalties], "solve_iterations": run.iterations,
+        "provisional_solves": run.provisional, "retries": run.retries,
+        "solve_wall_s": [float(t) for t in run.walls],
         "history": [[int(k), float(p)] for k, p in loop.history]}
     if pen > loop.tolerance:   # an equilibrium at these multipliers, not yet the impenetrable limit
         log.warning("augmented Lagrangian: largest overlap %.2e R above al_tolerance %.1e R after %d updates%s",
                     pen, loop.tolerance, loop.updates, "" if info.get("converged") else " (the solve did not converge)")
     return x, _commit(system, x, info)
+
+
+class _Solves:
+    """``solve`` counted: solves, provisional ones, retries, iterations and wall time of each."""
+
+    def __init__(self, solve):
+        self.solve = solve
+        self.solves = self.provisional = self.retries = 0
+        self.iterations, self.walls = [], []
+
+    def __call__(self, x):
+        t0 = time.perf_counter()
+        x, info = self.solve(x)
+        self.solves += 1
+        self.provisional += int(bool(info.get("provisional", False)))
+        self.iterations.append(info.get("iterations"))
+        self.walls.append(time.perf_counter() - t0)
+        return x, info
+
+
+def _uzawa(loop, fr, run, x):
+    """The solves and updates of ``equilibrium`` (module docstring); ``(x, info)`` of the last
+    solve."""
+    if fr is not None and PROVISIONAL_RESOLVES:
+        fr.provisional = True
+    retry = None      # the start of a full solve at a raised P*, to solve again at the configured one
+    while True:
+        x0 = x
+        x, info = run(x)
+        if info.get("provisional", False):
+            if not info.get("converged", False):
+                x, fr.provisional = x0, False       # the full re-solve from the same start
+            elif loop.update(x, finish=False) or loop.exhausted:
+                # the provisional state met the tolerance (or the updates ran out): the
+                # equilibrium at these multipliers and P*, solved in full and checked again (at
+                # the configured P* the cell is softer against the friction's change from the
+                # provisional loads, and the overlap rises above the tolerance again); at a
+                # raised P* without the frictional fallback, since a failure is solved again
+                # at the configured P*
+                fr.provisional = False
+                if loop.raised:
+                    retry, fr.fallback = x, False
+            else:
+                fr.resolving = True
+            continue
+        if not info.get("converged", False):
+            if retry is None:
+                return x, info
+            log.info("augmented Lagrangian: the full solve at P* = %g failed (%s); again from the same start at "
+                     "the configured P*", loop.system.penalty, info.get("reason", ""))
+            loop.finish(retry)
+            x, retry, fr.fallback = retry, None, True
+            run.retries += 1
+            continue
+        retry = None
+        if fr is not None:
+            fr.fallback = True
+        if loop.update(x) or loop.exhausted:
+            return x, info
+        if fr is not None:   # the re-solves (module docstring)
+            fr.resolving = True
 
 
 def _commit(system, x, info):

@@ -35,8 +35,9 @@ unconditionally.
   multipliers are left as they are; P* back to its start unless ``finish=False``), else one
   Uzawa update and False (solve again from ``x``). ``history`` lists ``(updates, max_penetration)`` of every check;
   ``exhausted`` is True once ``max_updates`` updates were made without convergence;
-  ``penalties`` the P* of every solve after an update; ``finish(x)`` returns to the starting
-  P* (called by ``update`` when it ends the loop; idempotent).
+  ``penalties`` the P* of every solve after an update; ``raised`` whether P* is above its
+  start; ``finish(x)`` returns to the starting P* (called by ``update`` when it ends the
+  loop; idempotent).
 * ``solve_with_multipliers(system, solve, x, tolerance=None, max_updates=None)``: repeats
   ``x = solve(x)`` with updates in between; returns ``(x, loop)``. ``solve`` returns the new
   state (a position vector ``x`` of the system) or a tuple whose first item is it.
@@ -108,6 +109,11 @@ class AugmentedLagrangian:
         if self.penalty0 is not None:
             self.penalties.append(float(self.system.penalty))
         return False
+
+    @property
+    def raised(self) -> bool:
+        """True while P* is above its starting value (the penalty increase)."""
+        return self.penalty0 is not None and float(self.system.penalty) != self.penalty0
 
     def finish(self, x) -> None:
         """P* back to its starting value, the line loads at ``x`` kept (module docstring)."""

@@ -219,6 +219,7 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     if fr is None:
         raise ValueError("frictional_solve: the system has no friction")
     resolve = refreeze is None and bool(getattr(fr, "resolving", False))
+    fallback = fallback and bool(getattr(fr, "fallback", True))
     if refreeze is None:   # an augmented-Lagrangian re-solve: rounds (module docstring)
         refreeze = not resolve
     if max_rounds is None:

@@ -189,6 +189,9 @@ class FrictionTerm:
         #: (``multipliers.equilibrium``): ``frictional_solve`` then takes one predictor round
         #: at the held loads and stops there (``rve.solvers.frictional.provisional_solve``)
         self.provisional = False
+        #: False while the caller solves a failed solve again itself: ``frictional_solve`` then
+        #: skips its fallback (``multipliers.equilibrium``'s full solve at a raised P*)
+        self.fallback = True
         #: ``(keys, loads)``: the loads (``loads_at``) of the last converged solve of the Uzawa
         #: loop by point key (``hold_loads``), or None
         self._held_loads = None
