@@ -228,7 +228,9 @@ def test_a_fallback_with_a_stall_window_skips_the_continuation(monkeypatch):
 def test_capped_newton_stall_test():
     """``capped_newton``'s stall test: |F| that fell by less than 1 % over the window's
     accepted iterations is a stall; a steady 5 % an iteration (the fallback that converges in
-    ~100 iterations) is not, nor is a history shorter than the window, nor no window."""
+    ~100 iterations) is not, nor is a history shorter than the window, nor no window; a
+    creep whose rate over the window would need more iterations than are left to reach the
+    tolerance is a stall."""
     from rve.solvers.minimize import _stalled
 
     flat = [5.2e-5, 1.1e-5] + [6.82e-6 * (1 - 1e-5 * k) for k in range(25)]
@@ -236,6 +238,13 @@ def test_capped_newton_stall_test():
     assert _stalled(flat, 20) and not _stalled(flat[:21], 20)
     assert not _stalled(creep, 20)
     assert not _stalled(flat, None) and not _stalled(flat, 0)
+    # with the tolerance and the budget left: the AL cell's creep (|F| -0.07 % an iteration
+    # at 4.9e-7 N, 1e-9 N about 9000 iterations away) is a stall with 900 iterations left;
+    # the 5 % creep from 2.7e-5 N (about 200 iterations to 1e-9 N) is not, and is with 100
+    slow = [4.9e-7 * (1 - 7e-4) ** k for k in range(25)]
+    assert not _stalled(slow, 20) and _stalled(slow, 20, 1e-9, 900) and not _stalled(slow, 20, 1e-9, 10 ** 5)
+    assert not _stalled(creep, 20, 1e-9, 900) and _stalled(creep, 20, 1e-9, 100)
+    assert not _stalled([1e-8] * 5 + [5e-10], 3, 1e-9, 1)     # converged: no stall
 
 
 class _ScriptedProblem:

@@ -96,7 +96,8 @@ def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.0
     with ``(K + sigma M) du = -F`` (sigma raised 8x per rejection, lowered 4x after an
     accepted step, down to pure Newton). ``backend``: the linear solver (one instance for
     the run, ``options.run_backend``). ``stall_window``: stop, not converged, where |F| fell
-    by less than ``STALL_DROP`` over that many accepted iterations. Returns ``(x, w,
+    by less than ``STALL_DROP`` over that many accepted iterations, or where at that
+    window's rate the tolerance is out of reach within the iterations left. Returns ``(x, w,
     NewtonResult)``."""
     with options.run_backend(backend) as solver:
         return _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver,
@@ -107,10 +108,19 @@ def capped_newton(system, x, t, atol=1e-9, rtol=1e-12, max_iter=60, step_cap=0.0
 STALL_DROP = 0.01
 
 
-def _stalled(residuals, window) -> bool:
+def _stalled(residuals, window, tol: Optional[float] = None, left: Optional[int] = None) -> bool:
     """|F| (``residuals``: the start, then every accepted iterate) fell by less than
-    ``STALL_DROP`` over the last ``window`` iterations."""
-    return bool(window) and len(residuals) > window and residuals[-1] > (1.0 - STALL_DROP) * residuals[-1 - window]
+    ``STALL_DROP`` over the last ``window`` iterations, or (``tol``, ``left`` given) at the
+    window's mean rate it would take more than the ``left`` iterations of the budget to
+    reach ``tol``: a creep that cannot converge in time."""
+    if not window or len(residuals) <= window:
+        return False
+    drop = residuals[-1] / residuals[-1 - window]
+    if drop > 1.0 - STALL_DROP:
+        return True
+    if tol is None or left is None or residuals[-1] <= tol:
+        return False
+    return window * np.log(tol / residuals[-1]) / np.log(drop) > left
 
 
 def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, max_rejections, solver, keep_stored,
@@ -171,7 +181,7 @@ def _capped_newton(system, x, t, atol, rtol, max_iter, step_cap, max_halvings, m
             rates = convergence_rates(res)
             log.info("capped newton it=%d |r|=%.3e step=%.3g sigma=%.3g rate=%s pairs=%d", it, rn, step, sigma,
                      f"{rates[-1]:.2f}" if rates else "-", system.map.n_pairs)
-            if _stalled(res, stall_window):
+            if _stalled(res, stall_window, max(atol, rtol * r0), max_iter - it):
                 return (*prob.state(u), NewtonResult(u, False, it, res, f"stalled: |r| {res[-1 - stall_window]:.3e} -> "
                                                      f"{rn:.3e} in the last {stall_window} iterations"))
             continue
