@@ -241,14 +241,11 @@ def test_re_solves_from_the_held_loads_with_blended_rounds_find_the_unmodified_r
 def test_provisional_re_solves_end_at_an_exact_root_of_the_full_loop(boundary, monkeypatch):
     """With and without provisional re-solves (``multipliers.PROVISIONAL_RESOLVES``): both
     states exact frictional roots at their multipliers with every overlap below
-    al_tolerance, within 1e-5 R of each other and their dissipations within 1e-4 relative.
-    The frictional step's root is not unique (the loads depend on the state): the
-    provisional solves, which stop at 1e-2 of their start's |F|, end at a neighbouring root
-    of the same history (on this step 2.5e-7 mm = 1.7e-6 R and 2e-5 in the dissipation
-    from the full loop's, the same at al_tolerance 1e-6, 1e-7 and 1e-8, so not the
-    tolerance's; with the stages at 1e-4 the two agreed to 5e-9 mm and 2e-6), far below any
-    figure the tables state. At al_tolerance 1e-6: the module's 1e-5 leaves the full loop's
-    own dissipation 1e-3 from its limit."""
+    al_tolerance, and they agree to the tolerance's scale (ten times al_tolerance R in the
+    state, ten times al_tolerance relative in the dissipation): the provisional solves change
+    the way to the multipliers, not the equilibrium. At al_tolerance 1e-6 (the module's 1e-5
+    leaves the two dissipations of the periodic step 1e-3 apart, each as far from those at
+    1e-6 and 1e-7, which agree to 2e-6)."""
     import rve.homogenisation.multipliers as multipliers
     from rve.config import validate_config
     from rve.homogenisation.multipliers import multiplier_record
@@ -269,8 +266,8 @@ def test_provisional_re_solves_end_at_an_exact_root_of_the_full_loop(boundary, m
         runs[on] = (np.asarray(x, float).reshape(mesh.n_nodes, 9), info["static"]["dissipated"])
     radius = float(mesh.radius.min())
     (xp, dp), (xf, df) = runs[True], runs[False]
-    assert np.abs(xp[:, :3] - xf[:, :3]).max() <= 1e-5 * radius
-    assert dp == pytest.approx(df, rel=1e-4)
+    assert np.abs(xp[:, :3] - xf[:, :3]).max() <= 10 * tol * radius
+    assert dp == pytest.approx(df, rel=10 * tol)
 
 
 def test_held_loads_freeze_by_key_and_blend_as_the_mean():

@@ -76,11 +76,11 @@ matrix to a symmetric factorisation).
 
   **Provisional solves** (``fr.provisional``, set by ``multipliers.equilibrium`` while a
   solve's state only feeds the next multiplier update): the first predictor stage alone, no
-  corrector and no fallback, to ``PROVISIONAL_RTOL`` (1e-2) of the start's |F|,
-  ``converged`` the stage's minimisation's, ``method`` "provisional" (``_provisional``). A
-  re-solve's stage is one round of the law at the held loads; a step's first solve its
-  first stage (the smoothed one where ``smoothing`` has one) with the loads refrozen at
-  every accepted iterate. The held loads are then those at its state.
+  corrector and no fallback, ``converged`` the stage's minimisation's, ``method``
+  "provisional" (``_provisional``). A re-solve's stage is one round of the law at the held
+  loads (to ``predictor_rtol``); a step's first solve its first stage (the smoothed one, ten
+  times looser, where ``smoothing`` has one) with the loads refrozen at every accepted
+  iterate. The held loads are then those at its state.
 
   A start already within ``direct_atol`` (N; default 1e4 atol) of equilibrium (the re-solve after a commit)
   goes to the corrector first, and to the predictor only if it stalls. The first pass's
@@ -197,12 +197,6 @@ def _refreezer(fr):
 #: predictor rounds per stage of an augmented-Lagrangian re-solve (``fr.resolving``; module docstring)
 RESOLVE_ROUNDS = 8
 
-#: a provisional solve's stage stops at this fraction of its start's |F|: its state only feeds
-#: a multiplier update (the AL cell's uniaxial step 1: 1e-2 against the full solve's 1e-4 and
-#: 1e-3 took the frictional step from 1.5 to 1.15 times the frictionless one, to the same
-#: equilibrium; docs/contact.md "Provisional re-solves")
-PROVISIONAL_RTOL = 1e-2
-
 #: a re-solve's first round freezes the loads of the last converged solve (``hold_loads``)
 RESOLVE_HELD = True
 #: weight of the loads at the round's start in a re-solve round's frozen normal forces, the
@@ -233,8 +227,8 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     # (stages, fallback) of each pass: a re-solve takes the law's stage alone first and, where
     # that fails, the caller's stages from the same start (module docstring)
     if getattr(fr, "provisional", False):
-        xs, out = _provisional(system, fr, x, t, atol, rtol, min(max_iter, predictor_iter), step_cap, backend, resolve,
-                               smoothing, freeze)
+        xs, out = _provisional(system, fr, x, t, atol, rtol, min(max_iter, predictor_iter), predictor_rtol, step_cap,
+                               backend, resolve, smoothing, freeze)
         if out.converged:
             fr.hold_loads(xs)
         return xs, out
@@ -304,11 +298,12 @@ def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, ret
     return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend, fallback_stall)
 
 
-def _provisional(system, fr, x, t, atol, rtol, max_iter, step_cap, backend, resolve, smoothing, freeze):
-    """A provisional solve (``fr.provisional``): the first predictor stage alone to
-    ``PROVISIONAL_RTOL`` of the start's |F|, no corrector; ``converged`` is the stage's
-    (module docstring). A re-solve's stage: the law at the held loads; a step's first
-    solve: its first stage (the smoothed one where ``smoothing`` has one) with the loads
+def _provisional(system, fr, x, t, atol, rtol, max_iter, predictor_rtol, step_cap, backend, resolve, smoothing,
+                 freeze):
+    """A provisional solve (``fr.provisional``): the first predictor stage alone, no corrector;
+    ``converged`` is the stage's (module docstring). A re-solve's stage: the law at the held
+    loads, to ``predictor_rtol`` of the start's |F|; a step's first solve: its first stage
+    (the smoothed one, ten times looser, where ``smoothing`` has one) with the loads
     refrozen at every accepted iterate."""
     x = np.array(x, float, copy=True)
     system.rebuild(x)
@@ -319,8 +314,9 @@ def _provisional(system, fr, x, t, atol, rtol, max_iter, step_cap, backend, reso
         etas = [float(v) for v in smoothing if v > 0]
         refreeze, eta = True, (etas[0] if etas else 0.0)
         start = "committed" if fr._committed_loads is not None and freeze == "committed" else None
-    xs = _predictor(system, fr, x, t, out, max(atol, PROVISIONAL_RTOL * out.residuals[0]), rtol, max_iter, refreeze,
-                    1, 0.0, start, step_cap, backend, eta)
+    tol = predictor_rtol * (10.0 if eta > 0 else 1.0)
+    xs = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, refreeze, 1, 0.0, start,
+                    step_cap, backend, eta)
     out.converged = bool(out.round_converged)
     out.u = xs if out.converged else None
     out.method = "provisional"
