@@ -45,13 +45,14 @@ record untouched, so the penalty path is bit-identical.
   ``frictional_solve`` takes its first predictor stage alone and the solve reports
   ``info["provisional"]``): the first solve and the re-solves, until a provisional state
   meets the tolerance (or the updates run out). That state's equilibrium at its multipliers
-  and P* (not yet back at the configured one) is then solved in full and checked again; the loop goes on with full re-solves where it
-  does not meet the tolerance. A provisional solve that fails is replaced by the full solve
-  from its start. Where the loop had raised P*, that full solve runs without the frictional
-  fallback (``FrictionTerm.fallback``), and if it fails it is solved again from the same
-  start at the configured P* (the line loads kept), with the fallback
-  (``info["augmented_lagrangian"]["retries"]``). A solve that does not report ``provisional`` (one that does not call
-  ``frictional_solve``) is a full solve, and the loop is the plain one.
+  and P* (not yet back at the configured one) is then solved in full and checked again; the
+  loop goes on with full re-solves where it does not meet the tolerance. A provisional solve
+  that fails is replaced by the full solve from its start. Where the loop had raised P*,
+  that full solve runs without the frictional fallback (``FrictionTerm.fallback``), and if
+  it fails it is solved again from the same start at the configured P* (the line loads
+  kept), with the fallback (``info["augmented_lagrangian"]["retries"]``). A solve that does
+  not report ``provisional`` (one that does not call ``frictional_solve``) is a full solve,
+  and the loop is the plain one.
   ``info["augmented_lagrangian"]["provisional_solves"]`` counts them (docs/contact.md
   "Provisional re-solves").
 """
@@ -67,8 +68,8 @@ __all__ = ["multiplier_record", "seed_multipliers", "equilibrium"]
 
 log = logging.getLogger("rve.homogenisation.multipliers")
 
-#: the frictional re-solves whose state only feeds a multiplier update are provisional: one
-#: predictor round at the held loads (``FrictionTerm.provisional``); the state that meets the
+#: the frictional solves whose state only feeds a multiplier update are provisional: the
+#: first predictor stage alone (``FrictionTerm.provisional``); the state that meets the
 #: tolerance is then solved in full at its multipliers and checked again (module docstring)
 PROVISIONAL_RESOLVES = True
 

@@ -33,7 +33,8 @@ unconditionally.
   max_growth=1e3)``: ``update(x, finish=True) -> bool``
   at a converged solve's state: True when the penetration is below the tolerance (the
   multipliers are left as they are; P* back to its start unless ``finish=False``), else one
-  Uzawa update and False (solve again from ``x``). ``history`` lists ``(updates, max_penetration)`` of every check;
+  Uzawa update and False (solve again from ``x``). ``history`` lists ``(updates,
+  max_penetration)`` of every check;
   ``exhausted`` is True once ``max_updates`` updates were made without convergence;
   ``penalties`` the P* of every solve after an update; ``raised`` whether P* is above its
   start; ``finish(x)`` returns to the starting P* (called by ``update`` when it ends the

@@ -185,9 +185,9 @@ class FrictionTerm:
         #: True while ``multipliers.equilibrium`` re-solves the step at updated multipliers:
         #: ``frictional_solve`` then takes its predictor in rounds (``RESOLVE_ROUNDS``)
         self.resolving = False
-        #: True while a re-solve's state only feeds the next multiplier update
-        #: (``multipliers.equilibrium``): ``frictional_solve`` then takes one predictor round
-        #: at the held loads and stops there (``rve.solvers.frictional.provisional_solve``)
+        #: True while a solve's state only feeds the next multiplier update
+        #: (``multipliers.equilibrium``): ``frictional_solve`` then takes its first predictor
+        #: stage alone and stops there (``rve.solvers.frictional._provisional``)
         self.provisional = False
         #: False while the caller solves a failed solve again itself: ``frictional_solve`` then
         #: skips its fallback (``multipliers.equilibrium``'s full solve at a raised P*)
