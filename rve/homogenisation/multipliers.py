@@ -149,6 +149,9 @@ def _uzawa(loop, fr, run, x):
         fr.provisional = True
     retry = None      # the start of a full solve at a raised P*, to solve again at the configured one
     while True:
+        if fr is not None:
+            # a full solve that is retried at the configured P* goes without the fallback
+            fr.fallback = retry is None
         x0 = x
         x, info = run(x)
         if info.get("provisional", False):
@@ -158,12 +161,9 @@ def _uzawa(loop, fr, run, x):
                 # the provisional state met the tolerance (or the updates ran out): the
                 # equilibrium at these multipliers and P*, solved in full and checked again (at
                 # the configured P* the cell is softer against the friction's change from the
-                # provisional loads, and the overlap rises above the tolerance again); at a
-                # raised P* without the frictional fallback, since a failure is solved again
-                # at the configured P*
+                # provisional loads, and the overlap rises above the tolerance again)
                 fr.provisional = False
-                if loop.raised:
-                    retry, fr.fallback = x, False
+                retry = x if loop.raised else None
             else:
                 fr.resolving = True
             continue
@@ -173,12 +173,10 @@ def _uzawa(loop, fr, run, x):
             log.info("augmented Lagrangian: the full solve at P* = %g failed (%s); again from the same start at "
                      "the configured P*", loop.system.penalty, info.get("reason", ""))
             loop.finish(retry)
-            x, retry, fr.fallback = retry, None, True
+            x, retry = retry, None
             run.retries += 1
             continue
         retry = None
-        if fr is not None:
-            fr.fallback = True
         if loop.update(x) or loop.exhausted:
             return x, info
         if fr is not None:   # the re-solves (module docstring)

@@ -224,14 +224,14 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
         refreeze = not resolve
     if max_rounds is None:
         max_rounds = RESOLVE_ROUNDS if resolve else 4
-    # (stages, fallback) of each pass: a re-solve takes the law's stage alone first and, where
-    # that fails, the caller's stages from the same start (module docstring)
     if getattr(fr, "provisional", False):
         xs, out = _provisional(system, fr, x, t, atol, rtol, min(max_iter, predictor_iter), predictor_rtol, step_cap,
                                backend, resolve, smoothing, freeze)
         if out.converged:
             fr.hold_loads(xs)
         return xs, out
+    # (stages, fallback) of each pass: a re-solve takes the law's stage alone first and, where
+    # that fails, the caller's stages from the same start (module docstring)
     passes = [(smoothing, fallback)]
     if resolve and RESOLVE_SMOOTHING is not None and tuple(RESOLVE_SMOOTHING) != tuple(smoothing):
         passes.insert(0, (RESOLVE_SMOOTHING, False))
@@ -271,8 +271,7 @@ def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, ret
             return xs, out
         if np.isfinite(nres.residuals[-1]) and nres.residuals[-1] < nres.residuals[0]:
             x = xs
-    first = "held" if resolve and RESOLVE_HELD else \
-        ("committed" if fr._committed_loads is not None and freeze == "committed" else None)
+    first = _first_loads(fr, freeze, resolve)
     for ptol in (predictor_rtol, retry_rtol):
         # the retry goes on from the corrector's start with the law itself
         etas = (tuple(float(v) for v in smoothing if v > 0) if ptol == predictor_rtol else ()) + (0.0,)
@@ -298,25 +297,31 @@ def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, ret
     return _fallback(system, x, t, out, atol, rtol, max_iter, step_cap, backend, fallback_stall)
 
 
+def _first_loads(fr, freeze, resolve):
+    """The loads the first predictor round freezes (``_predictor``'s ``start``): a re-solve's
+    held ones (``RESOLVE_HELD``), else the committed ones where kept and asked for, else
+    those at the start."""
+    if resolve and RESOLVE_HELD:
+        return "held"
+    return "committed" if fr._committed_loads is not None and freeze == "committed" else None
+
+
 def _provisional(system, fr, x, t, atol, rtol, max_iter, predictor_rtol, step_cap, backend, resolve, smoothing,
                  freeze):
     """A provisional solve (``fr.provisional``): the first predictor stage alone, no corrector;
-    ``converged`` is the stage's (module docstring). A re-solve's stage: the law at the held
-    loads, to ``predictor_rtol`` of the start's |F|; a step's first solve: its first stage
-    (the smoothed one, ten times looser, where ``smoothing`` has one) with the loads
+    ``converged`` is the stage's (module docstring). The first stage of ``_solve``'s first
+    pass: a re-solve's is the law at its first loads (``_first_loads``: the held ones), to
+    ``predictor_rtol`` of the start's |F|; a step's first solve's is its first stage (the
+    smoothed one where ``smoothing`` has one, a decade looser per later stage) with the loads
     refrozen at every accepted iterate."""
     x = np.array(x, float, copy=True)
     system.rebuild(x)
     out = FrictionalResult(None, False, 0, [_exact_residual(system, x, t)])
-    if resolve:
-        refreeze, start, eta = False, "held", 0.0
-    else:
-        etas = [float(v) for v in smoothing if v > 0]
-        refreeze, eta = True, (etas[0] if etas else 0.0)
-        start = "committed" if fr._committed_loads is not None and freeze == "committed" else None
-    tol = predictor_rtol * (10.0 if eta > 0 else 1.0)
-    xs = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, refreeze, 1, 0.0, start,
-                    step_cap, backend, eta)
+    # the first stage of ``_solve``'s first pass, with its loads and tolerance
+    etas = (0.0,) if resolve else tuple(float(v) for v in smoothing if v > 0) + (0.0,)
+    tol = predictor_rtol * 10.0 ** (len(etas) - 1)
+    xs = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, max_iter, not resolve, 1, 0.0,
+                    _first_loads(fr, freeze, resolve), step_cap, backend, etas[0])
     out.converged = bool(out.round_converged)
     out.u = xs if out.converged else None
     out.method = "provisional"
