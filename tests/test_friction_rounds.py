@@ -1,6 +1,6 @@
 """The stop rules of the frictional predictor's rounds (``rve.solvers.frictional._predictor``
-with ``refreeze=False``; docs/contact.md "Provisional re-solves"), on a scripted friction and
-minimiser: the rounds end where the loads change by at most ``load_rtol``, where the exact
+with ``refreeze=False``; docs/contact.md "When a re-solve's rounds hand over to the
+corrector"), on a scripted friction and minimiser: the rounds end where the loads change by at most ``load_rtol``, where the exact
 |F| meets the stage's tolerance, where a round's load change jumps to more than
 ``LOAD_JUMP`` times the round before's (a point flipped, and more rounds cycle), or at
 ``max_rounds``; a re-solve of the Uzawa loop hands over at ``RESOLVE_LOAD_RTOL`` and lets
@@ -15,28 +15,27 @@ import rve.solvers.minimize as minimize
 
 
 class _Friction:
-    """Freezing and blending recorded; one point whose frozen load is the round's index."""
+    """What ``_predictor`` asks of a friction term: one point, its loads fixed (the rounds'
+    load changes are scripted through ``_load_change``)."""
 
     def __init__(self):
         self.keys = np.zeros((1, 6), np.int64)
         self.smoothing = 0.0
-        self._f0 = np.ones((1, 1))
-        self.log = []
 
     def freeze(self, x):
-        self.log.append(("freeze", x))
+        pass
 
     def freeze_held(self):
         return False
 
     def blend_frozen(self, keys, f0, weight):
-        self.log.append(("blend", weight))
+        pass
 
     def frozen_loads(self):
-        return {"f0": self._f0.copy()}
+        return {"f0": np.ones((1, 1))}
 
     def unfreeze(self):
-        self.log.append(("unfreeze",))
+        pass
 
 
 class _System:
@@ -96,7 +95,7 @@ def test_rounds_stop_at_max_rounds(monkeypatch):
 def test_a_re_solve_hands_over_at_its_load_tolerance_and_its_retry_rounds_settle_the_loads(monkeypatch, resolve):
     """A re-solve's rounds hand over to the corrector at ``RESOLVE_LOAD_RTOL`` and, after that
     corrector failed, the retry's rounds go on to ``RESOLVE_RETRY_LOAD_RTOL``. Any other solve:
-    0.05 in both passes."""
+    ``LOAD_RTOL`` in both passes."""
     predictors, correctors = [], []
 
     def spied_predictor(system, fr, x, t, out, ptol, rtol, max_iter, refreeze, max_rounds, load_rtol, *rest):
@@ -121,6 +120,6 @@ def test_a_re_solve_hands_over_at_its_load_tolerance_and_its_retry_rounds_settle
     assert out.converged and len(predictors) == 2 and len(correctors) == 2
     if resolve:
         assert predictors == [frictional.RESOLVE_LOAD_RTOL, frictional.RESOLVE_RETRY_LOAD_RTOL]
-        assert frictional.RESOLVE_RETRY_LOAD_RTOL < frictional.RESOLVE_LOAD_RTOL < 0.05
+        assert frictional.RESOLVE_RETRY_LOAD_RTOL < frictional.RESOLVE_LOAD_RTOL < frictional.LOAD_RTOL
     else:
-        assert predictors == [0.05, 0.05]
+        assert predictors == [frictional.LOAD_RTOL] * 2

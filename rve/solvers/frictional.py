@@ -35,17 +35,18 @@ matrix to a symmetric factorisation).
      these ``eta`` first (each to ten times the next stage's tolerance), then the law
      (``eta = 0``) to ``predictor_rtol`` (default 1e-4) of the step's initial |F|.
      ``refreeze=False``: rounds of converged minimisations at fixed loads, refrozen between
-     rounds until the loads change by at most ``load_rtol`` (default 0.05; at most
-     ``max_rounds``, default 4), or until a round's load change exceeds ``LOAD_JUMP`` times
-     the round before's (a point flipped between contact or stick and slip, and more rounds
-     cycle). ``refreeze=None`` (default): False, with ``max_rounds`` default ``RESOLVE_ROUNDS``
-     (8), when the friction is ``resolving`` (the re-solves of ``multipliers.equilibrium``'s
-     Uzawa loop at updated multipliers and raised P*), else True. A re-solve's rounds hand
-     over to the corrector at ``load_rtol`` default ``RESOLVE_LOAD_RTOL`` (3 %) and, where that
-     corrector fails, its retry's rounds go on to ``RESOLVE_RETRY_LOAD_RTOL`` (1 %): on the
-     periodic cell's uniaxial steps a corrector from loads still changing by 2-4 % failed, one
-     from below 1 % converged, while in its shear steps one from 2.6 % converged and the
-     rounds to 1 % took twice the iterations (docs/contact.md "Provisional re-solves"). Measured on the periodic 2 x 2 weave's
+     rounds until the loads change by at most ``load_rtol`` (default ``LOAD_RTOL``, 5 %; at
+     most ``max_rounds``, default 4), or until a round's load change exceeds ``LOAD_JUMP``
+     times the round before's (a point flipped between contact or stick and slip, and more
+     rounds cycle). ``refreeze=None`` (default): False, with ``max_rounds`` default
+     ``RESOLVE_ROUNDS`` (8), when the friction is ``resolving`` (the re-solves of
+     ``multipliers.equilibrium``'s Uzawa loop at updated multipliers and raised P*), else
+     True. A re-solve's rounds hand over to the corrector at ``RESOLVE_LOAD_RTOL`` (3 %) and,
+     where that corrector fails, its retry's rounds go on to ``RESOLVE_RETRY_LOAD_RTOL``
+     (1 %): on the periodic cell's uniaxial steps a corrector from loads still changing by
+     2-4 % failed, one from below 1 % converged, while in its shear steps one from 2.6 %
+     converged and the rounds to 1 % took twice the iterations (docs/contact.md "When a
+     re-solve's rounds hand over to the corrector"). Measured on the periodic 2 x 2 weave's
      shear step (docs/contact.md "Friction with the augmented Lagrangian and the periodic
      cell"): at a re-solve's start the normal loads jump with the raised P*, and refreezing
      them at every accepted iterate makes the minimiser's merit jump at each refreeze and the
@@ -209,8 +210,10 @@ RESOLVE_HELD = True
 #: weight of the loads at the round's start in a re-solve round's frozen normal forces, the
 #: rest the last round's (1: the loads at the start alone)
 RESOLVE_BLEND = 0.5
-#: the load change at which a re-solve's rounds hand over to the corrector, and to which its
-#: retry's rounds go on after that corrector failed
+#: the load change at which the predictor's rounds hand over to the corrector
+LOAD_RTOL = 0.05
+#: the same for a re-solve, and the one to which its retry's rounds go on after that
+#: corrector failed
 RESOLVE_LOAD_RTOL, RESOLVE_RETRY_LOAD_RTOL = 0.03, 0.01
 #: a round whose load change exceeds this many times the round before's ends the rounds
 LOAD_JUMP = 2.0
@@ -237,7 +240,7 @@ def frictional_solve(system, x, t: float = 0.0, *, atol: float = 1e-9, rtol: flo
     if max_rounds is None:
         max_rounds = RESOLVE_ROUNDS if resolve else 4
     if load_rtol is None:
-        load_rtol = RESOLVE_LOAD_RTOL if resolve else 0.05
+        load_rtol = RESOLVE_LOAD_RTOL if resolve else LOAD_RTOL
     if getattr(fr, "provisional", False):
         xs, out = _provisional(system, fr, x, t, atol, rtol, min(max_iter, predictor_iter), predictor_rtol, step_cap,
                                backend, resolve, smoothing, freeze)
@@ -287,15 +290,15 @@ def _solve(system, fr, x, t, atol, rtol, max_iter, refreeze, predictor_rtol, ret
             x = xs
     first = _first_loads(fr, freeze, resolve)
     for ptol in (predictor_rtol, retry_rtol):
-        # the retry goes on from the corrector's start with the law itself
+        # the retry goes on from the corrector's start with the law itself; a re-solve's
+        # retry rounds go on until the loads have settled (module docstring)
         etas = (tuple(float(v) for v in smoothing if v > 0) if ptol == predictor_rtol else ()) + (0.0,)
+        lr = min(load_rtol, RESOLVE_RETRY_LOAD_RTOL) if resolve and ptol != predictor_rtol else load_rtol
         for i, eta in enumerate(etas):
             tol = ptol * 10.0 ** (len(etas) - 1 - i)      # a decade looser per smoother stage
             # the first pass hands over to Newton after predictor_iter iterations: the law's
             # corner makes the trust region crawl, while Newton converges from far less close
             its = min(max_iter, predictor_iter) if ptol == predictor_rtol else max_iter
-            # a re-solve's retry rounds go on until the loads have settled (module docstring)
-            lr = min(load_rtol, RESOLVE_RETRY_LOAD_RTOL) if resolve and ptol != predictor_rtol else load_rtol
             x = _predictor(system, fr, x, t, out, max(atol, tol * out.residuals[0]), rtol, its, refreeze,
                            max_rounds, lr, first, step_cap, backend, eta, RESOLVE_BLEND if resolve else 1.0)
             first = None

@@ -357,9 +357,10 @@ class ContactTerm:
         """P* of the law (and so the Uzawa step) to ``penalty``. Without ``x`` the
         multipliers are kept (the method of multipliers' penalty increase: for the linear law
         the line load at zero overlap is unchanged; with the onset ε it is ``φ'(lambda/P*)``,
-        which drops as P* rises, docs/contact.md "Penalty increase"); with ``x`` they are re-expressed so that every point's
-        line load ``φ'(g + lambda/P*)`` at ``x`` is unchanged: x stays the equilibrium it was
-        (used to return to the configured P* at the end of a loop)."""
+        which drops as P* rises, docs/contact.md "Penalty increase"); with ``x`` they are
+        re-expressed so that every point's line load ``φ'(g + lambda/P*)`` at ``x`` is
+        unchanged: x stays the equilibrium it was (used to return to the configured P* at the
+        end of a loop)."""
         if self.multipliers is None:
             raise ValueError("set_penalty needs enforcement 'augmented_lagrangian'")
         P0, P1 = float(self.params.penalty), float(penalty)
