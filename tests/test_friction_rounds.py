@@ -1,10 +1,11 @@
 """The stop rules of the frictional predictor's rounds (``rve.solvers.frictional._predictor``
 with ``refreeze=False``; docs/contact.md "When a re-solve's rounds hand over to the
-corrector"), on a scripted friction and minimiser: the rounds end where the loads change by at most ``load_rtol``, where the exact
-|F| meets the stage's tolerance, where a round's load change jumps to more than
-``LOAD_JUMP`` times the round before's (a point flipped, and more rounds cycle), or at
-``max_rounds``; a re-solve of the Uzawa loop hands over at ``RESOLVE_LOAD_RTOL`` and lets
-its retry's rounds settle the loads to ``RESOLVE_RETRY_LOAD_RTOL``."""
+corrector"), on a scripted friction and minimiser: the rounds end where the loads change by
+at most ``load_rtol``, where the exact |F| meets the stage's tolerance, where a round's load
+change jumps to more than ``LOAD_JUMP`` times the round before's (a point flipped, and more
+rounds cycle), or at ``max_rounds``; a re-solve of the Uzawa loop hands over at
+``RESOLVE_LOAD_RTOL`` and lets its retry's rounds settle the loads to
+``RESOLVE_RETRY_LOAD_RTOL``."""
 from __future__ import annotations
 
 import numpy as np
