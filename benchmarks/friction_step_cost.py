@@ -18,10 +18,11 @@ The periodic cell with the augmented Lagrangian (docs/contact.md "Friction with 
 Lagrangian and the periodic cell"): ``--run work_precision_geometry --set
 strain.follow_branch=false --steps 1 --runs 1``.
 
-``--director-blocks``: a third side, the frictional steps with every contact pair's blocks
-widened to its nodes' directors (``pad_director_blocks``: the sparsity an objective law
-carried by the - fibril's directors would have, docs/contact.md "Objectivity"), printed as its
-ratio to the frictionless step.
+``--director-blocks [N ...]``: a side per N (none given: 6), the frictional steps with every
+contact pair's blocks widened by its nodes' first N director components
+(``pad_director_blocks``: with 6 the sparsity an objective law carried by the - fibril's
+directors would have, with 1 that of a law reading one twist combination per node;
+docs/contact.md "Objectivity"), printed as its ratio to the frictionless step.
 
 A side's worker: ``python benchmarks/friction_step_cost.py --worker SPEC.json COMBO STATE``.
 """
@@ -47,11 +48,13 @@ def _spec(run: str, mu: float, extra=()) -> dict:
     return spec
 
 
-def pad_director_blocks() -> None:
+def pad_director_blocks(n_directors: int = 6) -> None:
     """The counterfactual of an objective friction law carried by the - fibril's directors
     (docs/contact.md "Objectivity"): every frictional contact pair's blocks widened from the
-    centroid (and field) components of its nodes to all nine mechanical ones (r, g1, g2), the
-    new entries zero, so the same law is solved on the sparsity such a law would have. The
+    centroid (and field) components of its nodes by the first ``n_directors`` director
+    components (6: all nine mechanical ones, r, g1, g2; 1: one more per node, the sparsity of
+    a law that reads one twist combination per node in a node basis aligned with it), the new
+    entries zero, so the same law is solved on the sparsity such a law would have. The
     friction term's own layout is unchanged; only the assembled structure grows."""
     from rve.model.terms import contact as C
 
@@ -61,7 +64,7 @@ def pad_director_blocks() -> None:
         init(self, *a, **k)
         self._comps_law = self.comps
         if self.friction is not None:
-            self.comps = np.array(list(range(9)) + list(self.comps[3:]), np.int64)
+            self.comps = np.array(list(range(3 + n_directors)) + list(self.comps[3:]), np.int64)
 
     def padded_forms(self, x, w, jacobian=True):
         if self.friction is None:
@@ -73,7 +76,7 @@ def pad_director_blocks() -> None:
         finally:
             self.nC = nC
         m, P = self.m, act.size
-        cols = np.array([0, 1, 2] + list(range(9, 9 + nCn - 3)))
+        cols = np.array([0, 1, 2] + list(range(3 + n_directors, n_directors + nCn)))
         ix = np.ix_(range(P), range(m), cols, range(m), cols)
         Rl = np.zeros((P, m, nC))
         Rl[:, :, cols] = np.asarray(R).reshape(P, m, nCn)
@@ -93,14 +96,14 @@ def pad_director_blocks() -> None:
 
 
 def worker(spec_file: str, combo: str, state: str, mode: str, steps: int, out_dir: str,
-           director_blocks: bool = False) -> None:
+           director_blocks: int = 0) -> None:
     """Steps 1..steps of ``mode`` from ``state``; one JSON line with each step's figures
-    (``director_blocks``: ``pad_director_blocks`` first)."""
+    (``director_blocks`` > 0: ``pad_director_blocks(director_blocks)`` first)."""
     from rve.homogenisation.checkpoint import load_state
     from rve.homogenisation.jobs import strain_job
 
     if director_blocks:
-        pad_director_blocks()
+        pad_director_blocks(director_blocks)
     spec = json.loads(Path(spec_file).read_text())
     prev, recs = Path(state), []
     for step in range(1, steps + 1):
@@ -136,12 +139,13 @@ def main():
                     help="an override added to the run's (repeatable), e.g. strain.follow_branch=false for a run "
                          "whose config follows the branch, which friction refuses")
     ap.add_argument("--relaxed", nargs=2, metavar=("MU0", "MU"), help="the two relaxed states, if built already")
-    ap.add_argument("--director-blocks", action="store_true",
-                    help="also time the frictional steps with every contact pair's blocks widened to the nodes' "
-                         "directors (pad_director_blocks: the sparsity of a director-carried law)")
+    ap.add_argument("--director-blocks", type=int, nargs="*", metavar="N",
+                    help="also time the frictional steps with every contact pair's blocks widened by the nodes' "
+                         "first N director components, a side per N (no N: 6, all; pad_director_blocks, the "
+                         "sparsity of a director-carried law)")
     a = ap.parse_args()
     if a.worker:
-        return worker(*a.worker, a.mode, a.steps, a.out, a.director_blocks)
+        return worker(*a.worker, a.mode, a.steps, a.out, (a.director_blocks or [0])[0])
     work = Path(a.work or tempfile.mkdtemp(prefix="friction_step_cost_"))
     work.mkdir(parents=True, exist_ok=True)
     spec = _spec(a.run, a.mu, a.set)
@@ -162,13 +166,15 @@ def main():
 
     sides = {"frictionless": side("frictionless", spec_file, c0, states[0]),
              f"mu={a.mu:g}": side(f"mu={a.mu:g}", spec_file, c1, states[1])}
-    if a.director_blocks:
-        def padded(k):
-            out = work / "runs" / f"director_blocks_{k}"
+    padded_sides = {}
+    for n in ([6] if a.director_blocks == [] else a.director_blocks or []):
+        def padded(k, n=n):
+            out = work / "runs" / f"director_blocks_{n}_{k}"
             out.mkdir(parents=True, exist_ok=True)
             return run_json([sys.executable, __file__, "--worker", spec_file, c1, states[1], "--mode", a.mode,
-                             "--steps", a.steps, "--out", out, "--director-blocks"], env=worker_env())
-        sides[f"mu={a.mu:g}, director blocks"] = padded
+                             "--steps", a.steps, "--out", out, "--director-blocks", n], env=worker_env())
+        padded_sides[n] = f"mu={a.mu:g}, {n} director components"
+        sides[padded_sides[n]] = padded
     if a.algorithm_7_1:
         alg = dict(spec, overrides=[*(spec.get("overrides") or []), "strain.path=algorithm_7_1"])
         (work / "spec_algorithm_7_1.json").write_text(json.dumps(alg))
@@ -195,15 +201,15 @@ def main():
             p = float(np.median([r["steps"][step - 1]["cpu_s"] for r in alg if "error" not in r]))
             print(f"  step {step} frictionless on the Algorithm 7.1 path (driven + damped phases): median {w:.1f} s "
                   f"wall / {p:.1f} s CPU")
-    pad = recs.get(f"mu={a.mu:g}, director blocks")
-    if pad:
+    for n, name in padded_sides.items():
+        pad = recs[name]
         for step in range(1, a.steps + 1):
             w = float(np.median([r["steps"][step - 1]["wall_s"] for r in pad if "error" not in r]))
             p = float(np.median([r["steps"][step - 1]["cpu_s"] for r in pad if "error" not in r]))
             w0 = float(np.median([r["steps"][step - 1]["wall_s"] for r in fl if "error" not in r]))
             p0 = float(np.median([r["steps"][step - 1]["cpu_s"] for r in fl if "error" not in r]))
-            print(f"  step {step} with friction on director blocks: median {w:.1f} s wall / {p:.1f} s CPU: ratio "
-                  f"{w / w0:.2f} wall, {p / p0:.2f} CPU to the frictionless step")
+            print(f"  step {step} with friction on {n} director components' blocks: median {w:.1f} s wall / "
+                  f"{p:.1f} s CPU: ratio {w / w0:.2f} wall, {p / p0:.2f} CPU to the frictionless step")
     for rs in (fl, fr) + ((alg,) if alg else ()):
         for r in rs:
             if "error" not in r:
