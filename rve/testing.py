@@ -30,11 +30,11 @@ def fd_jacobian(fun, u, cols=None, eps: float = 1e-6) -> np.ndarray:
 
 def fd_nodes(fun, X, h: float = 1e-7) -> np.ndarray:
     """Central differences of ``fun(X)`` (P, ...) with respect to every node coordinate of
-    ``X`` (P, n, 3), batched over P: returns (P, ..., n, 3)."""
+    ``X`` (P, n, c) (c components a node, e.g. 3), batched over P: returns (P, ..., n, c)."""
     f0 = fun(X)
     out = np.zeros(f0.shape + X.shape[1:])
     for k in range(X.shape[1]):
-        for i in range(3):
+        for i in range(X.shape[2]):
             Xp, Xm = X.copy(), X.copy()
             Xp[:, k, i] += h
             Xm[:, k, i] -= h

@@ -78,6 +78,13 @@ weights of the jump between the + points and the - points at parameters ``s`` (e
   ``start_history``, ``moved_history`` and ``frozen_potential`` take the chord's ``s_plus``
   or, on any geometry, ``weights``: a function ``s -> (P, G, M)`` material weights (e.g.
   ``geo.material_weights``; ``s_plus`` is then not read).
+* **The frame law** (``frame_friction_forces``; the reference forms, not yet the assembled
+  term's law): the anchor carried by the - cross-section's frame ``(h, b_hat, h x b_hat)``,
+  ``b_hat`` the unit part of the - side's first director g1 across ``h`` (``section_frame``,
+  ``framed_anchor``), so the gap is objective under every rotation, the twist about the -
+  fibril included; the history adds ``m_ref``, ``b_hat`` at the commit. Residual and tangent
+  in the centroid and g1 components of the local nodes (6 a node); the couple's twist part,
+  which a chord cannot take, goes to g1 (docs/contact.md "Objectivity").
 """
 from __future__ import annotations
 
@@ -89,7 +96,7 @@ from .contact_forms import chord_direction_weights
 
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
            "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "turned_anchor",
-           "frozen_turn"]
+           "frozen_turn", "section_frame", "framed_anchor", "frame_friction_forces"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -153,6 +160,48 @@ def turned_anchor(anchor, d_ref, h, jacobian: bool = False):
     dz = -_skew(w) @ Sr + _skew(v) @ dw
     J = dw + dz / c1[..., None, None] - z[..., :, None] * r[..., None, :] / (c1 * c1)[..., None, None]
     return out, J
+
+
+def section_frame(h, g):
+    """``(b_hat, w_hat, |b|)`` (P, G, 3), (P, G, 3), (P, G): the - cross-section's frame
+    ``(h, b_hat, w_hat = h x b_hat)`` from the unit - direction ``h`` and the - side's
+    director ``g`` (g1 at the point): ``b = g - h (h . g)``, its part across ``h``."""
+    b = g - np.einsum("pgi,pgi->pg", h, g)[..., None] * h
+    bn = np.sqrt(np.einsum("pgi,pgi->pg", b, b))
+    bh = b / np.where(bn > 0, bn, 1.0)[..., None]
+    return bh, np.cross(h, bh), bn
+
+
+def framed_anchor(anchor, d_ref, m_ref, h, g, jacobian: bool = False):
+    """``Q anchor`` (P, G, 3) with ``Q = F(h, g) F_ref^T`` the rotation that takes the
+    committed frame ``F_ref = (d_ref, m_ref, d_ref x m_ref)`` of the - cross-section to its
+    current one ``F = (h, b_hat, h x b_hat)`` (``section_frame``): the anchor carried by the
+    - cross-section, so a rigid rotation about any axis, the - fibril's own included, turns
+    it with the pair. With ``jacobian`` also ``(Jh, Jg)`` (P, G, 3, 3), ``d(Q anchor)/dh``
+    and ``d(Q anchor)/dg`` (``Jg = (h x (Q anchor)) w_hat^T / |b|``: only the director's
+    component along ``w_hat`` turns the frame)."""
+    a = np.asarray(anchor, float)
+    r, m = np.asarray(d_ref, float), np.asarray(m_ref, float)
+    al1 = np.einsum("pgi,pgi->pg", r, a)
+    al2 = np.einsum("pgi,pgi->pg", m, a)
+    al3 = np.einsum("pgi,pgi->pg", np.cross(r, m), a)
+    bh, wh, bn = section_frame(h, g)
+    out = al1[..., None] * h + al2[..., None] * bh + al3[..., None] * wh
+    if not jacobian:
+        return out
+    I3 = np.eye(3)
+    inv_b = 1.0 / np.where(bn > 0, bn, 1.0)
+    hg = np.einsum("pgi,pgi->pg", h, g)
+    # d b_hat = (I - b_hat b_hat^T) db / |b|, db = (I - h h^T) dg - ((h . g) I + h g^T) dh
+    Pb = (I3 - bh[..., :, None] * bh[..., None, :]) * inv_b[..., None, None]
+    dbh_dh = -Pb @ (hg[..., None, None] * I3 + h[..., :, None] * g[..., None, :])
+    dbh_dg = Pb @ (I3 - h[..., :, None] * h[..., None, :])
+    Sh = _skew(h)
+    # d w_hat = -S(b_hat) dh + S(h) d b_hat
+    Jh = (al1[..., None, None] * I3 + al2[..., None, None] * dbh_dh
+          + al3[..., None, None] * (-_skew(bh) + Sh @ dbh_dh))
+    Jg = (al2[..., None, None] * I3 + al3[..., None, None] * Sh) @ dbh_dg
+    return out, (Jh, Jg)
 
 
 def frozen_turn(X, D, n, rho, active):
@@ -475,3 +524,128 @@ def _frozen_smooth(X, cb, anchor, f0, n0, kT, mu, jacobian, eta, turn=None):
     ee = ehat[..., :, None] * ehat[..., None, :]
     D = a[..., None, None] * ee + b[..., None, None] * (P0 - ee)
     return psi, R, _frozen_hessian(cb, turn, D)
+
+
+# --------------------------------------------------------------------------- the frame law
+def _dmul(A, dV):
+    """``A dV`` for per-point matrices ``A`` (P, G, 3, 3) and derivatives ``dV`` (P, G, M, 3, c)."""
+    return np.einsum("pgij,pgljc->pglic", A, dV)
+
+
+def _outer_d(v, ds):
+    """``v ds^T`` as a derivative (P, G, M, 3, c): ``v`` (P, G, 3), ``ds`` (P, G, M, c)."""
+    return v[:, :, None, :, None] * ds[:, :, :, None, :]
+
+
+def _vdot_d(v, dV):
+    """``v^T dV`` (P, G, M, c) for ``v`` (P, G, 3)."""
+    return np.einsum("pgi,pglic->pglc", v, dV)
+
+
+def frame_friction_forces(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kN, kT, mu, director_weights,
+                          jacobian: bool = True):
+    """The friction law with the anchor carried by the - cross-section's frame
+    (``framed_anchor``): residual (P, M, 6) and tangent (P, M, 6, M, 6) (None without
+    ``jacobian``) in the local nodes' centroid and first-director components ``Y = (X, G)``.
+
+    ``G`` (P, M, 3) the local nodes' g1; ``director_weights(s)`` -> ``(gw, gw_ds)`` (P, G, M)
+    the weights of the - side's g1 at the - parameter ``s`` and their s-derivative (zero on
+    the + nodes); ``d_ref``, ``m_ref`` (P, G, 3) the committed frame (``m_ref`` the unit part of
+    g1 across ``d_ref`` then). The law is that of ``friction_forces`` with ``u = Q anchor +
+    j(X; s_bar)``; its couple is the work of the frame's turn at the current state with the
+    anchor ``a = -rho n``: the turn's angular velocity is ``h x dh + h (w_hat . dg - (h . g)
+    w_hat . dh) / |b|``, so with ``m = a x t`` the - direction's ends carry ``+-C_h``, ``C_h =
+    (m x h - (h . g)(h . m) w_hat / |b|) / |d|`` (the first term ``friction_forces``'s couple),
+    and the - side's g1 the force ``gw_k C_g``, ``C_g = (h . m) w_hat / |b|``: together the
+    moment ``-rho n x t`` that balances the friction forces' pair, its twist about the -
+    fibril included."""
+    mu = _per_point(mu, f.shape)
+    active = geo.active & (f > 0.0) & (mu > 0.0)
+    P_, G_ = f.shape
+    M_ = X.shape[1]
+    I3 = np.eye(3)
+    cb = geo.material_weights(s_bar)
+    D = geo.direction_weights(geo.s_minus)
+    h, _, dn = minus_direction(X, D)
+    gw, gw_ds = director_weights(geo.s_minus)
+    g = np.einsum("pgk,pki->pgi", gw, G)
+    if jacobian:
+        Qa, (Jh, Jg) = framed_anchor(anchor, d_ref, m_ref, h, g, jacobian=True)
+    else:
+        Qa = framed_anchor(anchor, d_ref, m_ref, h, g)
+    u = Qa + np.einsum("pgk,pki->pgi", cb, X)
+    n = geo.n
+    un = np.einsum("pgi,pgi->pg", n, u)
+    e = u - un[..., None] * n
+    en, stick, slip, t = _return_map(e, f, kT, mu, active)
+    bh, wh, bn = section_frame(h, g)
+    inv_b = 1.0 / np.where(bn > 0, bn, 1.0)
+    inv_d = 1.0 / np.where(dn > 0, dn, 1.0)
+    rho = np.where(active, geo.rho, 0.0)
+    m = -rho[..., None] * np.cross(n, t)
+    k = np.einsum("pgi,pgi->pg", h, m)
+    hg = np.einsum("pgi,pgi->pg", h, g)
+    Nh = np.cross(m, h) - (hg * k * inv_b)[..., None] * wh
+    Ch = Nh * inv_d[..., None]
+    Cg = (k * inv_b)[..., None] * wh
+    R = np.zeros((P_, M_, 6))
+    R[..., :3] = np.einsum("pgk,pgi->pki", geo.c, t) + np.einsum("pgk,pgi->pki", D, Ch)
+    R[..., 3:] = np.einsum("pgk,pgi->pki", gw, Cg)
+    if not jacobian:
+        return R, None
+    # derivatives with respect to Y_l = (X_l, G_l): vectors (P, G, M, 3, 6), scalars (P, G, M, 6)
+    dS = np.zeros((P_, G_, M_, 6))
+    dS[..., :3] = geo.ds
+    cI = np.zeros((P_, G_, M_, 3, 6))
+    cI[..., :3] = geo.c[..., None, None] * I3
+    jd = np.einsum("pgk,pki->pgi", geo.dc_ds, X)
+    dJ = cI + _outer_d(jd, dS)                                   # the current jump
+    rho_s = np.where(active, geo.rho, 1.0)
+    Pn = I3 - n[..., :, None] * n[..., None, :]
+    dN = _dmul(Pn, dJ) / rho_s[..., None, None, None]            # the normal
+    drho = _vdot_d(n, dJ)
+    Dp = geo.direction_weights_ds(geo.s_minus)
+    dd = np.zeros((P_, G_, M_, 3, 6))
+    dd[..., :3] = D[..., None, None] * I3
+    dd = dd + _outer_d(np.einsum("pgk,pki->pgi", Dp, X), dS)       # d = sum_k D_k(s-) X_k
+    Ph = I3 - h[..., :, None] * h[..., None, :]
+    dh = _dmul(Ph, dd) * inv_d[..., None, None, None]
+    ddn = _vdot_d(h, dd)
+    dg = np.zeros((P_, G_, M_, 3, 6))
+    dg[..., 3:] = gw[..., None, None] * I3
+    dg = dg + _outer_d(np.einsum("pgk,pki->pgi", gw_ds, G), dS)    # g = sum_k gw_k(s-) G_k
+    cbI = np.zeros((P_, G_, M_, 3, 6))
+    cbI[..., :3] = cb[..., None, None] * I3
+    du = cbI + _dmul(Jh, dh) + _dmul(Jg, dg)
+    de = _dmul(Pn, du) - un[..., None, None, None] * dN - n[:, :, None, :, None] * _vdot_d(e, dN)[:, :, :, None, :]
+    ehat = e / np.where(en > 0, en, 1.0)[..., None]
+    proj = I3 - ehat[..., :, None] * ehat[..., None, :]
+    a_slip = np.where(slip, mu * f / np.where(en > 0, en, 1.0), 0.0)
+    df = -(kN * mu)[..., None, None] * drho                       # mu df/dY_l
+    dT = np.where(stick[..., None, None, None], kT[..., None, None, None] * de, 0.0)
+    dT = dT + np.where(slip[..., None, None, None],
+                       a_slip[..., None, None, None] * _dmul(proj, de) + _outer_d(ehat, df), 0.0)
+    # the frame's parts and the couples
+    Pb = (I3 - bh[..., :, None] * bh[..., None, :]) * inv_b[..., None, None]
+    dbh = (_dmul(-Pb @ (hg[..., None, None] * I3 + h[..., :, None] * g[..., None, :]), dh) + _dmul(Pb @ Ph, dg))
+    dwh = _dmul(-_skew(bh), dh) + _dmul(_skew(h), dbh)
+    dbn = _vdot_d(bh, dg) - hg[..., None, None] * _vdot_d(bh, dh)
+    dhg = _vdot_d(g, dh) + _vdot_d(h, dg)
+    nt = np.cross(n, t)
+    dm = (-nt[:, :, None, :, None] * drho[:, :, :, None, :] + rho[..., None, None, None] * _dmul(_skew(t), dN)
+          - rho[..., None, None, None] * _dmul(_skew(n), dT))
+    dk = _vdot_d(m, dh) + _vdot_d(h, dm)
+    q = hg * k * inv_b
+    dq = (k[..., None, None] * dhg + hg[..., None, None] * dk) * inv_b[..., None, None] - (q * inv_b)[..., None, None] * dbn
+    dNh = (_dmul(-_skew(h), dm) + _dmul(_skew(m), dh) - wh[:, :, None, :, None] * dq[:, :, :, None, :]
+           - q[..., None, None, None] * dwh)
+    dCh = dNh * inv_d[..., None, None, None] - _outer_d(Nh * (inv_d * inv_d)[..., None], ddn)
+    dCg = (_outer_d(wh, dk * inv_b[..., None, None] - (k * inv_b * inv_b)[..., None, None] * dbn)
+           + (k * inv_b)[..., None, None, None] * dwh)
+    on = active[..., None, None, None]
+    dCh, dCg = np.where(on, dCh, 0.0), np.where(on, dCg, 0.0)
+    K = np.zeros((P_, M_, 6, M_, 6))
+    K[:, :, :3] = (np.einsum("pgk,pglic->pkilc", geo.c, dT) + np.einsum("pgk,pgi,pglc->pkilc", geo.dc_ds, t, dS)
+                   + np.einsum("pgk,pglic->pkilc", D, dCh) + np.einsum("pgk,pgi,pglc->pkilc", Dp, Ch, dS))
+    K[:, :, 3:] = (np.einsum("pgk,pglic->pkilc", gw, dCg) + np.einsum("pgk,pgi,pglc->pkilc", gw_ds, Cg, dS))
+    return R, K.reshape(P_, M_, 6, M_, 6)

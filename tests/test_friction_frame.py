@@ -1,0 +1,177 @@
+"""The friction law with the anchor carried by the - cross-section's frame
+(``rve.physics.friction_forms.frame_friction_forces``, ``framed_anchor``): exact tangents in
+the centroid and director components, objectivity under every rigid rotation (the twist
+about the - fibril included), the balance of forces and moments, and the twist that the
+position-based law cannot tell from sliding."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from rve.physics.contact_forms import chord_geometry, penalty_law
+from rve.physics.friction_forms import (framed_anchor, frame_friction_forces, friction_forces, minus_direction,
+                                        section_frame, start_history, turned_anchor)
+from rve.testing import fd_nodes
+
+R2 = 0.3  # R+ + R-
+PEN = 50.0
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _director_weights(s):
+    """The chord's - side g1 at s: (0, 0, 1 - s, s), and its s-derivative."""
+    s = np.asarray(s, float)
+    z = np.zeros_like(s)
+    return np.stack([z, z, 1.0 - s, s], -1), np.stack([z, z, -np.ones_like(s), np.ones_like(s)], -1)
+
+
+def _cell(P=5, G=3, overlap=0.04, seed=3):
+    """P crossing chord pairs (centroids R2 - overlap apart, with noise) and the g1 of their
+    four nodes, roughly across the chords with a tilt along them."""
+    rng = np.random.default_rng(seed)
+    ap = rng.normal(size=(P, 3)) * 0.03 + [-0.1, 0.0, 0.0]
+    bp = ap + [0.2, 0.0, 0.0] + rng.normal(size=(P, 3)) * 0.03
+    am = rng.normal(size=(P, 3)) * 0.03 + [0.0, -0.3, -(R2 - overlap)]
+    bm = am + [0.0, 0.6, 0.0] + rng.normal(size=(P, 3)) * 0.03
+    X = np.stack([ap, bp, am, bm], axis=1)
+    Gd = np.array([0.0, 0.2, 1.0])[None, None] + rng.normal(size=(P, 4, 3)) * 0.2
+    sp = np.broadcast_to((np.arange(G) + 0.5) / G, (P, G)).copy()
+    return np.concatenate([X, Gd], -1), sp
+
+
+def _history(Y0, sp):
+    """The history of points with no elastic gap committed at ``Y0``: material point, anchor,
+    and the frame (the - direction and the unit part of g1 across it)."""
+    X0, G0 = Y0[..., :3], Y0[..., 3:]
+    g0 = chord_geometry(*(X0[:, k] for k in range(4)), sp, np.full(X0.shape[0], R2))
+    s_bar, anchor = start_history(X0, sp, g0.s_minus)
+    d_ref = minus_direction(X0, g0.direction_weights(g0.s_minus))[0]
+    m_ref = section_frame(d_ref, np.einsum("pgk,pki->pgi", _director_weights(g0.s_minus)[0], G0))[0]
+    return s_bar, anchor, d_ref, m_ref
+
+
+def _forces(Y, sp, hist, mu, ratio, jac=True):
+    X, G = Y[..., :3], Y[..., 3:]
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    w = np.full(geo.g.shape, 0.05)
+    _, p1, p2 = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
+    f = np.where(geo.active, w * p1, 0.0)
+    kN = np.where(geo.active, w * p2, 0.0)
+    R, K = frame_friction_forces(geo, X, G, *hist, f, kN, w * ratio * PEN, np.full(X.shape[0], mu),
+                                 _director_weights, jac)
+    return R, K, geo, f
+
+
+def test_framed_anchor_derivatives_and_rotation():
+    rng = np.random.default_rng(1)
+    h = _unit(rng.normal(size=(3, 2, 3)))
+    g = rng.normal(size=(3, 2, 3))
+    r = _unit(rng.normal(size=(3, 2, 3)))
+    m = _unit(np.cross(r, rng.normal(size=(3, 2, 3))))
+    a = rng.normal(size=(3, 2, 3))
+    _, (Jh, Jg) = framed_anchor(a, r, m, h, g, jacobian=True)
+    eps = 1e-6
+    for J, which in ((Jh, 0), (Jg, 1)):
+        fd = np.zeros_like(J)
+        for i in range(3):
+            dv = np.zeros(3)
+            dv[i] = eps
+            args_p = (h + dv, g) if which == 0 else (h, g + dv)
+            args_m = (h - dv, g) if which == 0 else (h, g - dv)
+            fd[..., i] = (framed_anchor(a, r, m, *args_p) - framed_anchor(a, r, m, *args_m)) / (2 * eps)
+        np.testing.assert_allclose(J, fd, atol=1e-8 * np.abs(J).max())
+    # committed at (r, g0): the identity there, any rotation of (r, g0) turns the anchor with it
+    g0 = rng.normal(size=(3, 2, 3))
+    m0 = section_frame(r, g0)[0]
+    np.testing.assert_allclose(framed_anchor(a, r, m0, r, g0), a, atol=1e-14)
+    Q = Rotation.from_rotvec([0.3, -1.1, 0.7]).as_matrix()
+    np.testing.assert_allclose(framed_anchor(a, r, m0, r @ Q.T, g0 @ Q.T), a @ Q.T, atol=1e-14)
+
+
+def test_framed_anchor_is_the_smallest_rotation_without_a_twist():
+    """With g1 across the - direction and carried by the smallest rotation from ``d_ref`` to
+    ``h`` (no twist), the frame's turn is the position-based law's turn."""
+    rng = np.random.default_rng(2)
+    r = _unit(rng.normal(size=(4, 2, 3)))
+    h = _unit(r + 0.3 * rng.normal(size=(4, 2, 3)))
+    m = _unit(np.cross(r, rng.normal(size=(4, 2, 3))))
+    a = rng.normal(size=(4, 2, 3))
+    g = 2.0 * turned_anchor(m, r, h)
+    np.testing.assert_allclose(framed_anchor(a, r, m, h, g), turned_anchor(a, r, h), atol=1e-13)
+
+
+@pytest.mark.parametrize("regime, mu, ratio", [("stick", 1.5, 0.05), ("slip", 0.2, 50.0), ("mixed", 0.5, 2.0)])
+def test_frame_tangent_matches_finite_differences(regime, mu, ratio):
+    Y, sp = _cell()
+    rng = np.random.default_rng(5)
+    hist = _history(Y + rng.normal(size=Y.shape) * np.r_[0.02, 0.02, 0.02, 0.05, 0.05, 0.05], sp)
+    R, K, geo, f = _forces(Y, sp, hist, mu, ratio)
+    assert int((f > 0).sum()) >= 5 and np.abs(R).max() > 1e-4
+    Kfd = fd_nodes(lambda Z: _forces(Z, sp, hist, mu, ratio, False)[0], Y)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-7 * np.abs(K).max())
+    # the director blocks are there: the twist's couple on g1 and g1's turn of the gap
+    assert np.abs(K[:, :, 3:]).max() > 1e-3 * np.abs(K).max()
+    assert np.abs(K[:, :, :3, :, 3:]).max() > 1e-3 * np.abs(K).max()
+
+
+@pytest.mark.parametrize("mu, ratio", [(0.2, 50.0), (1.5, 0.05)])
+def test_frame_forces_balance_forces_and_moments(mu, ratio):
+    """No net force and no net moment on a pair: sum R_X = 0 and sum X x R_X + G x R_G = 0 (a
+    rigid rotation of a pair does no work against its residual), the twist part included."""
+    Y, sp = _cell()
+    rng = np.random.default_rng(6)
+    hist = _history(Y + rng.normal(size=Y.shape) * 0.03, sp)
+    R, _, _, _ = _forces(Y, sp, hist, mu, ratio, jac=False)
+    scale = np.abs(R).max()
+    assert scale > 1e-4
+    np.testing.assert_allclose(R[..., :3].sum(axis=1), 0.0, atol=1e-13 * scale)
+    moment = (np.cross(Y[..., :3], R[..., :3]) + np.cross(Y[..., 3:], R[..., 3:])).sum(axis=1)
+    np.testing.assert_allclose(moment, 0.0, atol=1e-12 * scale)
+
+
+def test_frame_makes_every_rigid_rotation_slip_free():
+    """History committed with no elastic gap, then every pair (centroids and directors) turned
+    rigidly by 0.2 rad about three axes, one of them the - chord's own: no friction force. The
+    position-based law reads the rotation about the - chord as a slip."""
+    from test_friction_forms import _forces_turned
+
+    Y, sp = _cell()
+    hist = _history(Y, sp)
+    s_bar, anchor, d_ref, _ = hist
+    h = d_ref[:, 0]
+    a1 = _unit(np.cross(h, [0.0, 0.0, 1.0]))
+    f_scale = None
+    for axis in (a1, np.cross(h, a1), h):
+        Rm = Rotation.from_rotvec(0.2 * axis).as_matrix()                     # (P, 3, 3)
+        centre = Y[..., :3].mean(axis=1, keepdims=True)
+        Xr = np.einsum("pij,pkj->pki", Rm, Y[..., :3] - centre) + centre
+        Gr = np.einsum("pij,pkj->pki", Rm, Y[..., 3:])
+        R, _, geo, f = _forces(np.concatenate([Xr, Gr], -1), sp, hist, 0.3, 1.0, jac=False)
+        f_scale = 0.3 * f.max()
+        assert f_scale > 0
+        assert np.abs(R).max() <= 1e-12 * f_scale
+    R_pos = _forces_turned(Xr, sp, s_bar, anchor, d_ref, 0.3, 1.0, False)[0]
+    assert np.abs(R_pos).max() > 0.1 * f_scale
+
+
+def test_frame_reads_sliding_around_the_fibril_as_slip():
+    """The + side carried around the - fibril (about the - chord's axis) with the - fibril's
+    directors held: the position-based law and the frame law both read it as a slip, with the
+    same force (the frame has not turned)."""
+    Y, sp = _cell()
+    hist = _history(Y, sp)
+    s_bar, anchor, d_ref, _ = hist
+    h = d_ref[:, 0]
+    Rm = Rotation.from_rotvec(0.05 * h).as_matrix()
+    axis_point = Y[:, 2, :3][:, None]
+    Xs = Y[..., :3].copy()
+    Xs[:, :2] = np.einsum("pij,pkj->pki", Rm, Xs[:, :2] - axis_point) + axis_point
+    Ys = np.concatenate([Xs, Y[..., 3:]], -1)
+    R, _, geo, f = _forces(Ys, sp, hist, 0.3, 1.0, jac=False)
+    assert np.abs(R[:, :2, :3]).max() > 0.1 * 0.3 * f.max()
+    w = np.full(geo.g.shape, 0.05)
+    R_pos, _ = friction_forces(geo, Xs, s_bar, anchor, f, np.zeros_like(f), w * PEN, np.full(Ys.shape[0], 0.3),
+                               False, d_ref=d_ref)
+    np.testing.assert_allclose(R[:, :2, :3], R_pos[:, :2], atol=1e-12 * np.abs(R_pos).max())
