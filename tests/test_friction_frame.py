@@ -8,8 +8,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rve.physics.contact_forms import chord_geometry, penalty_law
-from rve.physics.friction_forms import (framed_anchor, frame_friction_forces, friction_forces, minus_direction,
-                                        section_frame, start_history, turned_anchor)
+from rve.physics.friction_forms import (framed_anchor, frame_friction_forces, frame_friction_state, friction_forces,
+                                        minus_direction, section_frame, start_history, turned_anchor)
 from rve.testing import fd_nodes
 
 R2 = 0.3  # R+ + R-
@@ -25,6 +25,13 @@ def _director_weights(s):
     s = np.asarray(s, float)
     z = np.zeros_like(s)
     return np.stack([z, z, 1.0 - s, s], -1), np.stack([z, z, -np.ones_like(s), np.ones_like(s)], -1)
+
+
+def _section_weights(s):
+    """The - element's section director: its first node's g1 (the p = 1 choice), at every s."""
+    s = np.asarray(s, float)
+    z = np.zeros_like(s)
+    return np.stack([z, z, np.ones_like(s), z], -1), np.zeros(s.shape + (4,))
 
 
 def _cell(P=5, G=3, overlap=0.04, seed=3):
@@ -52,15 +59,14 @@ def _history(Y0, sp):
     return s_bar, anchor, d_ref, m_ref
 
 
-def _forces(Y, sp, hist, mu, ratio, jac=True):
+def _forces(Y, sp, hist, mu, ratio, jac=True, weights=_director_weights):
     X, G = Y[..., :3], Y[..., 3:]
     geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
     w = np.full(geo.g.shape, 0.05)
     _, p1, p2 = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
     f = np.where(geo.active, w * p1, 0.0)
     kN = np.where(geo.active, w * p2, 0.0)
-    R, K = frame_friction_forces(geo, X, G, *hist, f, kN, w * ratio * PEN, np.full(X.shape[0], mu),
-                                 _director_weights, jac)
+    R, K = frame_friction_forces(geo, X, G, *hist, f, kN, w * ratio * PEN, np.full(X.shape[0], mu), weights, jac)
     return R, K, geo, f
 
 
@@ -102,14 +108,20 @@ def test_framed_anchor_is_the_smallest_rotation_without_a_twist():
     np.testing.assert_allclose(framed_anchor(a, r, m, h, g), turned_anchor(a, r, h), atol=1e-13)
 
 
-@pytest.mark.parametrize("regime, mu, ratio", [("stick", 1.5, 0.05), ("slip", 0.2, 50.0), ("mixed", 0.5, 2.0)])
-def test_frame_tangent_matches_finite_differences(regime, mu, ratio):
+@pytest.mark.parametrize("weights", [_director_weights, _section_weights])
+@pytest.mark.parametrize("regime, mu, ratio", [("stick", 1.5, 0.05), ("slip", 0.2, 50.0), ("mixed", 0.5, 1.0)])
+def test_frame_tangent_matches_finite_differences(regime, mu, ratio, weights):
+    """g1 interpolated at the closest point, or the element's section node's."""
     Y, sp = _cell()
     rng = np.random.default_rng(5)
     hist = _history(Y + rng.normal(size=Y.shape) * np.r_[0.02, 0.02, 0.02, 0.05, 0.05, 0.05], sp)
-    R, K, geo, f = _forces(Y, sp, hist, mu, ratio)
+    R, K, geo, f = _forces(Y, sp, hist, mu, ratio, weights=weights)
     assert int((f > 0).sum()) >= 5 and np.abs(R).max() > 1e-4
-    Kfd = fd_nodes(lambda Z: _forces(Z, sp, hist, mu, ratio, False)[0], Y)
+    st = frame_friction_state(geo, Y[..., :3], Y[..., 3:], *hist, f, np.full(f.shape, 0.05 * ratio * PEN),
+                              np.full(5, mu), weights)
+    n_stick, n_slip = int(st.stick.sum()), int(st.slip.sum())
+    assert {"stick": n_slip == 0, "slip": n_stick == 0, "mixed": n_stick > 0 and n_slip > 0}[regime]
+    Kfd = fd_nodes(lambda Z: _forces(Z, sp, hist, mu, ratio, False, weights)[0], Y)
     np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-7 * np.abs(K).max())
     # the director blocks are there: the twist's couple on g1 and g1's turn of the gap
     assert np.abs(K[:, :, 3:]).max() > 1e-3 * np.abs(K).max()
@@ -175,3 +187,19 @@ def test_frame_reads_sliding_around_the_fibril_as_slip():
     R_pos, _ = friction_forces(geo, Xs, s_bar, anchor, f, np.zeros_like(f), w * PEN, np.full(Ys.shape[0], 0.3),
                                False, d_ref=d_ref)
     np.testing.assert_allclose(R[:, :2, :3], R_pos[:, :2], atol=1e-12 * np.abs(R_pos).max())
+
+
+@pytest.mark.parametrize("mu, ratio", [(0.2, 50.0), (1.5, 0.05), (0.5, 2.0)])
+def test_frame_commit_changes_no_force(mu, ratio):
+    """The history committed at a state (``frame_friction_state``: the closest point, the
+    elastic gap, the frame there) gives the same residual at that state: a converged state
+    stays an equilibrium under its own history."""
+    Y, sp = _cell()
+    rng = np.random.default_rng(8)
+    hist = _history(Y + rng.normal(size=Y.shape) * 0.03, sp)
+    R0, _, geo, f = _forces(Y, sp, hist, mu, ratio, jac=False)
+    kT = np.full(f.shape, 0.05 * ratio * PEN)
+    st = frame_friction_state(geo, Y[..., :3], Y[..., 3:], *hist, f, kT, np.full(5, mu), _director_weights)
+    R1, _, _, _ = _forces(Y, sp, (st.s_bar, st.anchor, st.d_ref, st.m_ref), mu, ratio, jac=False)
+    np.testing.assert_allclose(R1, R0, atol=1e-12 * np.abs(R0).max())
+    assert np.abs(R0).max() > 1e-4

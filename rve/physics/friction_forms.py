@@ -96,7 +96,7 @@ from .contact_forms import chord_direction_weights
 
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
            "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "turned_anchor",
-           "frozen_turn", "section_frame", "framed_anchor", "frame_friction_forces"]
+           "frozen_turn", "section_frame", "framed_anchor", "frame_friction_forces", "frame_friction_state"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -260,6 +260,11 @@ class FrictionPoints:
     d_ref: np.ndarray = None
     couple: np.ndarray = None
     chord_weights: np.ndarray = None
+    #: the frame law (``frame_friction_state``): the committed frame's ``b_hat``, the couple
+    #: ``C_g`` on the - side's g1 and its weights (P, G, M)
+    m_ref: np.ndarray = None
+    director_couple: np.ndarray = None
+    director_weights: np.ndarray = None
 
 
 def _trial(geo, X, s_bar, anchor, d_ref=None):
@@ -542,16 +547,73 @@ def _vdot_d(v, dV):
     return np.einsum("pgi,pglic->pglc", v, dV)
 
 
+def _frame_trial(geo, X, G, s_bar, anchor, d_ref, m_ref, director_weights, directions, jacobian):
+    """The frame law's trial gap: ``(cb, D, Dp, h, |d|, gw, gw_ds, g, u, e, J)`` with ``J =
+    (Jh, Jg)`` of ``framed_anchor`` (None without ``jacobian``)."""
+    cb = geo.material_weights(s_bar)
+    if directions is None:
+        D, Dp = geo.direction_weights(geo.s_minus), geo.direction_weights_ds(geo.s_minus)
+    else:
+        D, Dp = directions(geo.s_minus)
+    h, _, dn = minus_direction(X, D)
+    gw, gw_ds = director_weights(geo.s_minus)
+    g = np.einsum("pgk,pki->pgi", gw, G)
+    J = None
+    if jacobian:
+        Qa, J = framed_anchor(anchor, d_ref, m_ref, h, g, jacobian=True)
+    else:
+        Qa = framed_anchor(anchor, d_ref, m_ref, h, g)
+    u = Qa + np.einsum("pgk,pki->pgi", cb, X)
+    e = u - np.einsum("pgi,pgi->pg", geo.n, u)[..., None] * geo.n
+    return cb, D, Dp, h, dn, gw, gw_ds, g, u, e, J
+
+
+def _frame_couples(geo, t, h, dn, g, active):
+    """``(C_h, C_g, m, k, b_hat, w_hat, |b|)`` of the frame law (``frame_friction_forces``)."""
+    bh, wh, bn = section_frame(h, g)
+    inv_b = 1.0 / np.where(bn > 0, bn, 1.0)
+    inv_d = 1.0 / np.where(dn > 0, dn, 1.0)
+    rho = np.where(active, geo.rho, 0.0)
+    m = -rho[..., None] * np.cross(geo.n, t)
+    k = np.einsum("pgi,pgi->pg", h, m)
+    hg = np.einsum("pgi,pgi->pg", h, g)
+    Ch = (np.cross(m, h) - (hg * k * inv_b)[..., None] * wh) * inv_d[..., None]
+    Cg = (k * inv_b)[..., None] * wh
+    return Ch, Cg, m, k, bh, wh, bn
+
+
+def frame_friction_state(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kT, mu, director_weights,
+                         directions=None) -> FrictionPoints:
+    """``friction_state`` of the frame law (``frame_friction_forces``): the return mapping at
+    ``(X, G)`` and the history a commit there takes (``s_bar`` the closest point, ``anchor =
+    t/kT - j``, ``d_ref = h`` and ``m_ref = b_hat`` the frame there), with the couples
+    ``couple`` (C_h, on the - direction's weights ``chord_weights``) and ``director_couple``
+    (C_g, on ``director_weights``)."""
+    mu = _per_point(mu, f.shape)
+    active = geo.active & (f > 0.0) & (mu > 0.0)
+    _, D, _, h, dn, gw, _, g, _, e, _ = _frame_trial(geo, X, G, s_bar, anchor, d_ref, m_ref, director_weights,
+                                                     directions, False)
+    _, stick, slip, t = _return_map(e, f, kT, mu, active)
+    el = np.where(active[..., None], t / np.where(kT > 0, kT, 1.0)[..., None], 0.0)
+    diss = np.where(slip, np.einsum("pgi,pgi->pg", t, e - el), 0.0)
+    Ch, Cg, _, _, bh, _, _ = _frame_couples(geo, t, h, dn, g, active)
+    return FrictionPoints(t=t, slip=slip, stick=stick, e=e, s_bar=np.array(geo.s_minus, float, copy=True),
+                          anchor=el - geo.j, dissipation=diss, normal=np.asarray(f, float), d_ref=h, couple=Ch,
+                          chord_weights=D, m_ref=bh, director_couple=Cg, director_weights=gw)
+
+
 def frame_friction_forces(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kN, kT, mu, director_weights,
-                          jacobian: bool = True):
+                          jacobian: bool = True, directions=None):
     """The friction law with the anchor carried by the - cross-section's frame
     (``framed_anchor``): residual (P, M, 6) and tangent (P, M, 6, M, 6) (None without
     ``jacobian``) in the local nodes' centroid and first-director components ``Y = (X, G)``.
 
     ``G`` (P, M, 3) the local nodes' g1; ``director_weights(s)`` -> ``(gw, gw_ds)`` (P, G, M)
     the weights of the - side's g1 at the - parameter ``s`` and their s-derivative (zero on
-    the + nodes); ``d_ref``, ``m_ref`` (P, G, 3) the committed frame (``m_ref`` the unit part of
-    g1 across ``d_ref`` then). The law is that of ``friction_forces`` with ``u = Q anchor +
+    the + nodes); ``directions(s)`` -> ``(D, D_s)`` the weights of the - direction ``h`` and
+    their s-derivative (None: the geometry's; the section frame of the contact term takes the
+    - element's chord); ``d_ref``, ``m_ref`` (P, G, 3) the committed frame (``m_ref`` the unit
+    part of g1 across ``d_ref`` then). The law is that of ``friction_forces`` with ``u = Q anchor +
     j(X; s_bar)``; its couple is the work of the frame's turn at the current state with the
     anchor ``a = -rho n``: the turn's angular velocity is ``h x dh + h (w_hat . dg - (h . g)
     w_hat . dh) / |b|``, so with ``m = a x t`` the - direction's ends carry ``+-C_h``, ``C_h =
@@ -564,35 +626,23 @@ def frame_friction_forces(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kN, kT, mu,
     P_, G_ = f.shape
     M_ = X.shape[1]
     I3 = np.eye(3)
-    cb = geo.material_weights(s_bar)
-    D = geo.direction_weights(geo.s_minus)
-    h, _, dn = minus_direction(X, D)
-    gw, gw_ds = director_weights(geo.s_minus)
-    g = np.einsum("pgk,pki->pgi", gw, G)
-    if jacobian:
-        Qa, (Jh, Jg) = framed_anchor(anchor, d_ref, m_ref, h, g, jacobian=True)
-    else:
-        Qa = framed_anchor(anchor, d_ref, m_ref, h, g)
-    u = Qa + np.einsum("pgk,pki->pgi", cb, X)
+    cb, D, Dp, h, dn, gw, gw_ds, g, u, e, J = _frame_trial(geo, X, G, s_bar, anchor, d_ref, m_ref, director_weights,
+                                                            directions, jacobian)
     n = geo.n
     un = np.einsum("pgi,pgi->pg", n, u)
-    e = u - un[..., None] * n
     en, stick, slip, t = _return_map(e, f, kT, mu, active)
-    bh, wh, bn = section_frame(h, g)
+    Ch, Cg, m, k, bh, wh, bn = _frame_couples(geo, t, h, dn, g, active)
     inv_b = 1.0 / np.where(bn > 0, bn, 1.0)
     inv_d = 1.0 / np.where(dn > 0, dn, 1.0)
     rho = np.where(active, geo.rho, 0.0)
-    m = -rho[..., None] * np.cross(n, t)
-    k = np.einsum("pgi,pgi->pg", h, m)
     hg = np.einsum("pgi,pgi->pg", h, g)
-    Nh = np.cross(m, h) - (hg * k * inv_b)[..., None] * wh
-    Ch = Nh * inv_d[..., None]
-    Cg = (k * inv_b)[..., None] * wh
+    Nh = Ch * dn[..., None]
     R = np.zeros((P_, M_, 6))
     R[..., :3] = np.einsum("pgk,pgi->pki", geo.c, t) + np.einsum("pgk,pgi->pki", D, Ch)
     R[..., 3:] = np.einsum("pgk,pgi->pki", gw, Cg)
     if not jacobian:
         return R, None
+    Jh, Jg = J
     # derivatives with respect to Y_l = (X_l, G_l): vectors (P, G, M, 3, 6), scalars (P, G, M, 6)
     dS = np.zeros((P_, G_, M_, 6))
     dS[..., :3] = geo.ds
@@ -604,7 +654,6 @@ def frame_friction_forces(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kN, kT, mu,
     Pn = I3 - n[..., :, None] * n[..., None, :]
     dN = _dmul(Pn, dJ) / rho_s[..., None, None, None]            # the normal
     drho = _vdot_d(n, dJ)
-    Dp = geo.direction_weights_ds(geo.s_minus)
     dd = np.zeros((P_, G_, M_, 3, 6))
     dd[..., :3] = D[..., None, None] * I3
     dd = dd + _outer_d(np.einsum("pgk,pki->pgi", Dp, X), dS)       # d = sum_k D_k(s-) X_k
