@@ -203,3 +203,56 @@ def test_frame_commit_changes_no_force(mu, ratio):
     R1, _, _, _ = _forces(Y, sp, (st.s_bar, st.anchor, st.d_ref, st.m_ref), mu, ratio, jac=False)
     np.testing.assert_allclose(R1, R0, atol=1e-12 * np.abs(R0).max())
     assert np.abs(R0).max() > 1e-4
+
+
+def _frozen_setup(mu=0.3, ratio=1.0, seed=9):
+    """Loads and point frozen at the state Y itself, from a history committed elsewhere."""
+    from rve.physics.friction_forms import frame_frozen_turn, frame_moved_history
+
+    Y, sp = _cell()
+    rng = np.random.default_rng(seed)
+    hist = _history(Y + rng.normal(size=Y.shape) * 0.03, sp)
+    X, G = Y[..., :3], Y[..., 3:]
+    geo = chord_geometry(*(X[:, k] for k in range(4)), sp, np.full(X.shape[0], R2))
+    w = np.full(geo.g.shape, 0.05)
+    _, p1, _ = penalty_law(np.where(geo.active, geo.g, 0.0), PEN)
+    f = np.where(geo.active, w * p1, 0.0)
+    kT = w * ratio * PEN
+    sm = geo.s_minus
+    s1, a1, _, _ = frame_moved_history(X, G, *hist, sm, geo.material_weights, geo.direction_weights,
+                                       lambda s: _director_weights(s)[0])
+    Dw, Jd, d, gw, Jg, g = frame_frozen_turn(X, G, geo.direction_weights(sm), _director_weights(sm)[0], geo.n,
+                                             geo.rho, geo.active)
+    anchor = a1 - np.einsum("pgij,pgj->pgi", Jd, d) - np.einsum("pgij,pgj->pgi", Jg, g)
+    frozen = (geo.material_weights(s1), anchor, f, np.where(geo.active[..., None], geo.n, 0.0), kT,
+              np.full(f.shape, mu), (Dw, Jd, gw, Jg))
+    return Y, sp, hist, frozen, mu, ratio
+
+
+def test_frame_frozen_potential_is_the_law_at_its_state():
+    """At loads, point and frame frozen at the state itself the frozen potential's gradient is
+    the frame law's residual there (its couples included)."""
+    from rve.physics.friction_forms import frame_frozen_potential
+
+    Y, sp, hist, (cb, anchor, f0, n0, kT, mu, turn), mu_, ratio = _frozen_setup()
+    _, Rf, _ = frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, False, 0.0, turn)
+    R, _, _, _ = _forces(Y, sp, hist, mu_, ratio, jac=False)
+    assert np.abs(R).max() > 1e-4
+    np.testing.assert_allclose(Rf, R, atol=1e-11 * np.abs(R).max())
+
+
+@pytest.mark.parametrize("eta", [0.0, 0.5])
+def test_frame_frozen_potential_derivatives(eta):
+    """R is the gradient of psi and K the (symmetric) derivative of R, centroids and g1."""
+    from rve.physics.friction_forms import frame_frozen_potential
+
+    Y, _, _, (cb, anchor, f0, n0, kT, mu, turn), _, _ = _frozen_setup()
+    rng = np.random.default_rng(4)
+    Y1 = Y + rng.normal(size=Y.shape) * 0.01
+    _, R, K = frame_frozen_potential(Y1, cb, anchor, f0, n0, kT, mu, True, eta, turn)
+    psi_sum = lambda Z: frame_frozen_potential(Z, cb, anchor, f0, n0, kT, mu, False, eta, turn)[0].sum(axis=1)
+    np.testing.assert_allclose(R, fd_nodes(psi_sum, Y1), atol=1e-7 * np.abs(R).max())
+    Kfd = fd_nodes(lambda Z: frame_frozen_potential(Z, cb, anchor, f0, n0, kT, mu, False, eta, turn)[1], Y1)
+    np.testing.assert_allclose(K, Kfd, rtol=1e-5, atol=1e-7 * np.abs(K).max())
+    KT = np.swapaxes(np.swapaxes(K, 1, 3), 2, 4)
+    np.testing.assert_allclose(K, KT, atol=1e-12 * np.abs(K).max())

@@ -96,7 +96,8 @@ from .contact_forms import chord_direction_weights
 
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
            "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "turned_anchor",
-           "frozen_turn", "section_frame", "framed_anchor", "frame_friction_forces", "frame_friction_state"]
+           "frozen_turn", "section_frame", "framed_anchor", "frame_friction_forces", "frame_friction_state",
+           "frame_moved_history", "frame_frozen_turn", "frame_frozen_potential"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -698,3 +699,74 @@ def frame_friction_forces(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kN, kT, mu,
                    + np.einsum("pgk,pglic->pkilc", D, dCh) + np.einsum("pgk,pgi,pglc->pkilc", Dp, Ch, dS))
     K[:, :, 3:] = (np.einsum("pgk,pglic->pkilc", gw, dCg) + np.einsum("pgk,pgi,pglc->pkilc", gw_ds, Cg, dS))
     return R, K.reshape(P_, M_, 6, M_, 6)
+
+
+def frame_moved_history(X, G, s_bar, anchor, d_ref, m_ref, s_star, weights, directions, director_weights):
+    """``moved_history`` of the frame law: ``(s_star, anchor', d_ref', m_ref')``, the material
+    point moved to ``s_star`` (P, G) and the anchor re-expressed in the frame there, the trial
+    gap at ``(X, G)`` unchanged: ``anchor' = Q anchor + j(X; s_bar) - j(X; s_star)``."""
+    jb = np.einsum("pgk,pki->pgi", weights(s_bar), X)
+    js = np.einsum("pgk,pki->pgi", weights(s_star), X)
+    h = minus_direction(X, directions(s_star))[0]
+    g = np.einsum("pgk,pki->pgi", director_weights(s_star), G)
+    Qa = framed_anchor(anchor, d_ref, m_ref, h, g)
+    return np.array(s_star, float, copy=True), Qa + jb - js, h, section_frame(h, g)[0]
+
+
+def frame_frozen_turn(X, G, D, gw, n, rho, active):
+    """``(Dw, Jd, d, gw, Jg, g)``: the frame's turn frozen at ``(X, G)`` as linear in the -
+    direction ``d = sum_k D_k X_k`` and the - side's g1 ``g = sum_k gw_k G_k`` (``frozen_turn``
+    of the frame law): ``Jd = Jh (I - h h^T) / |d|`` and ``Jg`` the derivatives of the frame's
+    turn of ``a = -rho n`` at the state's own frame (zero where not ``active``)."""
+    h, Dw, dn = minus_direction(X, D)
+    g = np.einsum("pgk,pki->pgi", gw, G)
+    a = -np.where(active, rho, 0.0)[..., None] * n
+    bh = section_frame(h, g)[0]
+    _, (Jh, Jg) = framed_anchor(a, h, bh, h, g, jacobian=True)
+    Pi = np.eye(3) - h[..., :, None] * h[..., None, :]
+    Jd = Jh @ Pi / np.where(dn > 0, dn, 1.0)[..., None, None]
+    return Dw, Jd, h * dn[..., None], np.asarray(gw, float), Jg, g
+
+
+def frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, turn):
+    """``frozen_potential`` of the frame law at local nodes ``Y`` (P, M, 6) (centroids, g1):
+    ``u = anchor + sum_k W_k Y_k`` with ``W_k = (cb_k I + Dw_k Jd, gw_k Jg)`` (3 x 6), ``turn
+    = (Dw, Jd, gw, Jg)`` (``frame_frozen_turn``); ``(psi (P, G), R (P, M, 6), K (P, M, 6, M,
+    6) or None)``, ``R_k = W_k^T t``, ``K_kl = W_k^T D W_l``."""
+    Dw, Jd, gw, Jg = turn
+    P_, G_, M_ = cb.shape
+    W = np.zeros((P_, G_, M_, 3, 6))
+    W[..., :3] = Dw[..., None, None] * Jd[:, :, None]
+    i3 = np.arange(3)
+    W[..., i3, i3] += cb[..., None]
+    W[..., 3:] = gw[..., None, None] * Jg[:, :, None]
+    mu = _per_point(mu, f0.shape)
+    u = anchor + np.einsum("pgkic,pkc->pgi", W, Y)
+    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
+    on = (f0 > 0.0) & (mu > 0.0) & (kT > 0.0)
+    L = np.where(on, mu * f0, 0.0)
+    kTs = np.where(kT > 0, kT, 1.0)
+    en = np.sqrt(np.einsum("pgi,pgi->pg", e, e))
+    ehat = e / np.where(en > 0, en, 1.0)[..., None]
+    I3 = np.eye(3)
+    P0 = I3 - n0[..., :, None] * n0[..., None, :]
+    ee = ehat[..., :, None] * ehat[..., None, :]
+    if eta > 0.0:
+        delta = np.where(on, L / kTs, 1.0)
+        Phi, phi, dphi, over = _smooth_cone(en / delta, eta)
+        psi = np.where(on, L * delta * Phi, 0.0)
+        t = np.where(on, L * phi, 0.0)[..., None] * ehat
+        a = np.where(on, kTs * dphi, 0.0)
+        b = np.where(on, kTs * over, 0.0)
+        Dm = a[..., None, None] * ee + b[..., None, None] * (P0 - ee)
+    else:
+        _, stick, slip, t = _return_map(e, L, kT, 1.0, L > 0.0)
+        psi = np.where(stick, 0.5 * kT * en * en, np.where(slip, L * en - 0.5 * L * L / kTs, 0.0))
+        a_slip = np.where(slip, L / np.where(en > 0, en, 1.0), 0.0)
+        Dm = np.where(stick, kT, 0.0)[..., None, None] * P0 + a_slip[..., None, None] * (P0 - ee)
+    R = np.einsum("pgkic,pgi->pkc", W, t)
+    if not jacobian:
+        return psi, R, None
+    B = np.ascontiguousarray(W.transpose(0, 1, 3, 2, 4)).reshape(P_, G_, 3, 6 * M_)
+    K = (np.swapaxes(B, -1, -2) @ Dm @ B).sum(axis=1).reshape(P_, M_, 6, M_, 6)
+    return psi, R, K
