@@ -10,6 +10,11 @@ Contract
   ``warp-weft`` and ``weft-warp`` are one key), ``stiffness`` eps_T / P* (the tangential
   penalty relative to the normal one, > 0). ``law_args()`` is ``(coefficient, stiffness,
   ((family_a, family_b, mu), ...))``, the arguments of ``rve.model.terms.friction.FrictionLaw``.
+* :class:`RVEFrictionSection`: the RVE's ``friction`` section, the above plus ``frame``, the
+  frame the anchor of the stick history turns with: ``chord`` (default; the position-based
+  law, the - direction's smallest rotation) or ``section`` (the - cross-section's frame from
+  its first director, objective under every rotation; built for ``contact.geometry: chord``
+  at ``mesh.order: 1``; docs/contact.md "Objectivity").
 * :class:`ImpactFrictionSection`: the impact's ``friction`` section, the above plus
   ``projectile`` mu_p of the projectile-fibril sphere contact (0 <= mu_p <= 2, default 0:
   frictionless; its own key, not the fibrils' coefficient: docs/impact.md "Friction at the
@@ -33,7 +38,7 @@ from pydantic import Field, field_validator
 from .fields import Angle, Dimensionless, Force, Integer, Length, Penalty, SceneConfig, Section, Stress
 from .sections import Newton
 
-__all__ = ["FrictionSection", "ImpactFrictionSection", "FIBRIL_FAMILIES", "MAX_FRICTION_COEFFICIENT", "CapstanConfig",
+__all__ = ["FrictionSection", "RVEFrictionSection", "ImpactFrictionSection", "FIBRIL_FAMILIES", "MAX_FRICTION_COEFFICIENT", "CapstanConfig",
            "FrictionCrossingConfig"]
 
 #: the fibril families a pair coefficient may name (the yarn directions of rve.fabrics)
@@ -69,6 +74,13 @@ class FrictionSection(Section):
     def law_args(self) -> tuple:
         pairs = tuple((*k.split("-"), float(mu)) for k, mu in self.pairs.items())
         return float(self.coefficient), float(self.stiffness), pairs
+
+
+class RVEFrictionSection(FrictionSection):
+    frame: Literal["chord", "section"] = Field(
+        "chord", description="frame the stick history's anchor turns with: chord (position-based) or section (the - "
+                             "cross-section's, from its first director: objective under every rotation; contact.geometry "
+                             "chord at mesh.order 1)")
 
 
 class ImpactFrictionSection(FrictionSection):

@@ -20,7 +20,7 @@ from typing import Literal, Optional
 from pydantic import Field, field_validator, model_validator
 
 from .weaves import WEAVE_PATTERNS
-from .friction import FrictionSection
+from .friction import FrictionSection, RVEFrictionSection
 from .fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
 from .fields import (
     DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, SceneConfig, Section, ThermalConductivity,
@@ -299,8 +299,8 @@ class RVEConfig(SceneConfig):
                               "smallest repeat with periodic ties (section cell)")
     cell: PeriodicCell = Field(default_factory=PeriodicCell, description="the periodic cell (boundary: periodic)")
     pullout: Pullout = Field(default_factory=Pullout, description="yarn pull-out (rve_pullout; docs/rve_pipeline.md)")
-    friction: FrictionSection = Field(
-        default_factory=FrictionSection,
+    friction: RVEFrictionSection = Field(
+        default_factory=RVEFrictionSection,
         description="regularised Coulomb friction between fibrils along the strain path (mu = 0: none; the "
                     "relaxation is frictionless; docs/contact.md 'Friction in the RVE pipeline')")
 
@@ -314,6 +314,13 @@ class RVEConfig(SceneConfig):
         if self.strain.cycle_modes and self.boundary != "pinned":
             raise ValueError(f"strain.cycle_modes = {self.strain.cycle_modes}: loading-unloading cycles are "
                              f"available in the pinned cell only (boundary = {self.boundary!r})")
+        return self
+
+    @model_validator(mode="after")
+    def _section_frame_is_built(self):
+        if self.friction.frame == "section" and (self.contact.geometry != "chord" or self.mesh.order != 1):
+            raise ValueError(f"friction.frame = 'section' is built for contact.geometry = 'chord' at mesh.order = 1, "
+                             f"got contact.geometry = {self.contact.geometry!r}, mesh.order = {self.mesh.order}")
         return self
 
     @model_validator(mode="after")

@@ -26,7 +26,7 @@ def friction_law(cfg):
         return None
     from ..model.terms.friction import FrictionLaw
 
-    return FrictionLaw(*cfg.friction.law_args())
+    return FrictionLaw(*cfg.friction.law_args(), frame=cfg.friction.frame)
 
 
 def friction_record(system):

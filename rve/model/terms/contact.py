@@ -200,6 +200,15 @@ class ContactTerm:
         law = params.friction
         #: the friction of the contact points (None: frictionless)
         self.friction: Optional[FrictionTerm] = FrictionTerm(self, law) if law is not None and law.enabled else None
+        #: the positions of the normal forms' components among ``comps``: all of them, or, with
+        #: the section frame's friction (which also acts on the first directors g1), the
+        #: centroid and field ones of the widened ``comps``
+        self._normal_cols = None
+        if self.friction is not None and self.friction.frame:
+            n_fields = self.nC - 3
+            self.comps = np.array([0, 1, 2, 3, 4, 5] + list(self.comps[3:]), dtype=np.int64)
+            self._normal_cols = np.array([0, 1, 2] + list(range(6, 6 + n_fields)), dtype=np.int64)
+            self.nC = len(self.comps)
 
     def set_periodic(self, images=None, wrap=None, field_jumps=None, lattice=None) -> None:
         """Periodic images for the next ``rebuild``: ``images`` (K, 3) lattice translations
@@ -551,10 +560,38 @@ class ContactTerm:
         active pair indices, ``R`` (len(act), m*nC) laid out as the pair dofs, ``Kx``/``Kw``
         (len(act), (m*nC)^2) (None without jacobian; Kw None for mechanics only); with
         friction, its forces on the same pairs are added."""
-        out = self._normal_forms(x, w, jacobian)
+        if self._normal_cols is None:
+            out = self._normal_forms(x, w, jacobian)
+        else:
+            out = self._widened_normal_forms(x, w, jacobian)
         if self.friction is None:
             return out
         return self.friction.add_to(x, *out, jacobian)
+
+    def _widened_normal_forms(self, x, w, jacobian: bool):
+        """``_normal_forms`` on the normal components, laid out in the widened ``comps`` (the
+        director columns zero)."""
+        nC, cols = self.nC, self._normal_cols
+        self.nC = cols.size
+        try:
+            act, R, Kx, Kw = self._normal_forms(x, w, jacobian)
+        finally:
+            self.nC = nC
+        m, P = self.m, np.size(act)
+        Rl = np.zeros((P, m, nC))
+        Rl[:, :, cols] = np.asarray(R, float).reshape(P, m, cols.size)
+        if not jacobian:
+            return act, Rl.reshape(P, -1), None, None
+        out = []
+        for A in (Kx, Kw):
+            if A is None:
+                out.append(None)
+                continue
+            B = np.zeros((P, m, nC, m, nC))
+            B[np.ix_(range(P), range(m), cols, range(m), cols)] = np.asarray(A, float).reshape(P, m, cols.size, m,
+                                                                                             cols.size)
+            out.append(B.reshape(P, -1))
+        return act, Rl.reshape(P, -1), out[0], out[1]
 
     def _normal_forms(self, x, w, jacobian: bool):
         none = np.zeros(0, np.int64), np.zeros(0), None, None

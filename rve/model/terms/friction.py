@@ -70,9 +70,10 @@ import numpy as np
 from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
-from ...physics.friction_forms import (friction_forces, friction_state, frozen_potential, frozen_turn,
-                                      material_weights, minus_direction, moved_history, start_history,
-                                      tangential_gap)
+from ...physics.friction_forms import (frame_friction_forces, frame_friction_state, frame_frozen_potential,
+                                      frame_frozen_turn, frame_moved_history, friction_forces, friction_state,
+                                      frozen_potential, frozen_turn, material_weights, minus_direction, moved_history,
+                                      section_frame, start_history, tangential_gap)
 from ...kernels import use_numba
 from .contact_pairs import HalfPasses
 
@@ -89,9 +90,14 @@ class FrictionLaw:
     coefficient: float = 0.0
     stiffness: float = 1.0
     pairs: tuple = ()
+    #: the frame the anchor turns with: "chord" (the - direction's smallest rotation) or
+    #: "section" (the - cross-section's frame from its first director; the chord geometry at p = 1)
+    frame: str = "chord"
 
     def __post_init__(self):
         _check_mu("friction coefficient", self.coefficient)
+        if self.frame not in ("chord", "section"):
+            raise ValueError(f"friction frame must be 'chord' or 'section', got {self.frame!r}")
         if not self.stiffness > 0:
             raise ValueError(f"friction stiffness (eps_T / P*) must be > 0, got {self.stiffness}")
         for item in self.pairs:
@@ -169,6 +175,13 @@ class FrictionTerm:
         self.s_bar = None
         self.anchor = None
         self.d_ref = None
+        #: the section frame (``law.frame == "section"``): the anchor turns with the - cross-section's
+        #: frame, ``m_ref`` (rows, G, 3) its first director's unit part across ``d_ref`` then
+        self.frame = law.frame == "section"
+        self.m_ref = None
+        if self.frame and (contact.curve or contact.mesh.order != 1):
+            raise ValueError("friction frame 'section' is built for the chord geometry at mesh order 1 (the pairs' "
+                             "local nodes the chord ends)")
         #: energy dissipated by slip over the committed states (N mm)
         self.dissipated = 0.0
         self.mu_pair = np.zeros(0)
@@ -211,7 +224,7 @@ class FrictionTerm:
 
     def set_coefficient(self, mu: float) -> None:
         """One coefficient for every pair from now on (the history is kept)."""
-        self.law = FrictionLaw(float(mu), self.law.stiffness, ())
+        self.law = FrictionLaw(float(mu), self.law.stiffness, (), self.law.frame)
         self._mu_matrix = self.law.matrix(self.family_names)
         self._pair_coefficients()
 
@@ -260,6 +273,27 @@ class FrictionTerm:
             Xb = Xb + ps.b_shift[rows][:, None, :]
         return np.concatenate([Xa, Xb], axis=1)
 
+    def _directors(self, x, rows) -> np.ndarray:
+        """The rows' chord ends' first directors g1 (n, 4, 3) at ``x`` (no periodic shift: an
+        image is a translated copy)."""
+        c = self.contact
+        g = c.layout.as_nodal(np.asarray(x, float))[:, 3:6]
+        return np.stack([g[c.map.nodes_plus[rows, 0]], g[c.map.nodes_plus[rows, 1]], g[c.map.nodes_minus[rows, 0]],
+                         g[c.map.nodes_minus[rows, 1]]], axis=1)
+
+    @staticmethod
+    def _section_weights(s):
+        """The - element's section director, its first node's g1 (local node 2), at every
+        ``s``: ``(gw, d gw/ds)`` (n, G, 4)."""
+        w = np.zeros(np.shape(s) + (4,))
+        w[..., 2] = 1.0
+        return w, np.zeros_like(w)
+
+    def _section_m(self, x, rows, d):
+        """``b_hat`` (n, G, 3): the unit part across ``d`` (n, G, 3) of the rows' section g1."""
+        g = self._directors(x, rows)[:, 2][:, None, :]
+        return section_frame(d, np.broadcast_to(g, d.shape))[0]
+
     def _s_plus(self, rows) -> np.ndarray:
         """The + points' parameters (n, G) of ``rows``."""
         c = self.contact
@@ -306,7 +340,7 @@ class FrictionTerm:
         local arrays ``Rl`` (., m, nC), ``K5`` (., m, nC, m, nC) at pair positions ``pos``:
         on the chord ends' slots (``endpos``), or on every local node for the curves."""
         c = self.contact
-        whole = c.nC == 3 and (c.curve or np.array_equal(c.endpos, np.arange(Rl.shape[1])))
+        whole = c.nC == Rf.shape[-1] and (c.curve or np.array_equal(c.endpos, np.arange(Rl.shape[1])))
         if whole:   # mechanics only, the pair's local nodes those of the forms: one add per pair
             Rl[pos] += Rf
             if K5 is not None:
@@ -317,10 +351,10 @@ class FrictionTerm:
             if K5 is not None:
                 K5[pos, :, 0:3, :, 0:3] += Kf
             return
-        ep = c.endpos
-        Rl[pos[:, None], ep[None, :], 0:3] += Rf
-        if K5 is not None:   # one scatter: (pairs, k, l) advanced, the 3 x 3 blocks sliced
-            K5[pos[:, None, None], ep[None, :, None], 0:3, ep[None, None, :], 0:3] += Kf.transpose(0, 1, 3, 2, 4)
+        ep, nc = c.endpos, Rf.shape[-1]
+        Rl[pos[:, None], ep[None, :], 0:nc] += Rf
+        if K5 is not None:   # one scatter: (pairs, k, l) advanced, the nc x nc blocks sliced
+            K5[pos[:, None, None], ep[None, :, None], 0:nc, ep[None, None, :], 0:nc] += Kf.transpose(0, 1, 3, 2, 4)
 
     # ------------------------------------------------------------------ history
     def on_rebuild(self, x) -> None:
@@ -338,6 +372,7 @@ class FrictionTerm:
             d_new = minus_direction(X, geo.direction_weights(geo.s_minus))[0]
         else:
             s_new, a_new, d_new = np.zeros((0, G)), np.zeros((0, G, 3)), np.zeros((0, G, 3))
+        m_new = self._section_m(x, rows, d_new).reshape(-1, 3) if self.frame and P else np.zeros((P * G, 3))
         hit = np.zeros(P * G, bool)
         if self.keys is not None and P:
             idx = match_rows(keys, self.keys)
@@ -348,11 +383,14 @@ class FrictionTerm:
             s_new[hit] = self.s_bar.reshape(-1)[idx[hit]]
             a_new[hit] = self.anchor.reshape(-1, 3)[idx[hit]]
             d_new[hit] = self.d_ref.reshape(-1, 3)[idx[hit]]
+            if self.frame:
+                m_new[hit] = self.m_ref.reshape(-1, 3)[idx[hit]]
         old_keys = self.keys
         self.keys = keys
         self.s_bar = s_new.reshape(P, G)
         self.anchor = a_new.reshape(P, G, 3)
         self.d_ref = d_new.reshape(P, G, 3)
+        self.m_ref = m_new.reshape(P, G, 3) if self.frame else None
         if P and not hit.all():
             self.share_along_fibrils(x, receivers=~hit.reshape(P, G), geo=geo)
         if self._frozen is not None:
@@ -374,6 +412,10 @@ class FrictionTerm:
         rows = self._rows(sel)
         geo = self._geometry(x, rows)
         f, _, kT = self._loads(geo, rows)
+        if self.frame:
+            return frame_friction_state(geo, self._local(x, rows), self._directors(x, rows), self.s_bar[rows],
+                                        self.anchor[rows], self.d_ref[rows], self.m_ref[rows], f, kT, self._mu(rows),
+                                        self._section_weights)
         return friction_state(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kT, self._mu(rows),
                               d_ref=self.d_ref[rows])
 
@@ -385,18 +427,31 @@ class FrictionTerm:
         rows = self._rows()
         geo = self.contact.geometry(x)
         f, _, kT = self._loads(geo, rows)
-        st = friction_state(geo, self._local(x, rows), self.s_bar, self.anchor, f, kT, self._mu(rows),
-                            d_ref=self.d_ref)
+        X = self._local(x, rows)
+        if self.frame:
+            Gl = self._directors(x, rows)
+            st = frame_friction_state(geo, X, Gl, self.s_bar, self.anchor, self.d_ref, self.m_ref, f, kT,
+                                      self._mu(rows), self._section_weights)
+        else:
+            st = friction_state(geo, X, self.s_bar, self.anchor, f, kT, self._mu(rows), d_ref=self.d_ref)
         self._committed_loads = (np.array(self.keys, np.int64), np.array(f, float), np.array(geo.n, float),
                                  np.array(geo.s_plus, float))
         self.last = st
         self.s_bar, self.anchor, self.d_ref = st.s_bar, st.anchor, st.d_ref
         # the committed state's frozen form (``freeze(None)``): its turn, and the anchor less
         # the turn's linear part, so that the frozen gap is the law's at the state
-        Dw, Jd, d = frozen_turn(self._local(x, rows), geo.direction_weights(geo.s_minus), geo.n, geo.rho,
-                                geo.active)
-        self._committed_history = (self.s_bar.copy(), self.anchor - np.einsum("pgij,pgj->pgi", Jd, d),
-                                   self.d_ref.copy(), Jd, Dw)
+        D = geo.direction_weights(geo.s_minus)
+        if self.frame:
+            self.m_ref = st.m_ref
+            gw = self._section_weights(geo.s_minus)[0]
+            Dw, Jd, d, gw, Jg, g = frame_frozen_turn(X, Gl, D, gw, geo.n, geo.rho, geo.active)
+            anchor_f = self.anchor - np.einsum("pgij,pgj->pgi", Jd, d) - np.einsum("pgij,pgj->pgi", Jg, g)
+            self._committed_history = (self.s_bar.copy(), anchor_f, self.d_ref.copy(), Jd, Dw, self.m_ref.copy(),
+                                       Jg, gw)
+        else:
+            Dw, Jd, d = frozen_turn(X, D, geo.n, geo.rho, geo.active)
+            self._committed_history = (self.s_bar.copy(), self.anchor - np.einsum("pgij,pgj->pgi", Jd, d),
+                                       self.d_ref.copy(), Jd, Dw)
         self.share_along_fibrils(x, receivers=(st.normal <= 0.0) & ~self._owners(geo), geo=geo)
         d = float(st.dissipation.sum())
         self.dissipated += d
@@ -465,7 +520,12 @@ class FrictionTerm:
         length = S0[off[1:] - 1] + h[off[1:] - 1] - S0[off[:-1]]
         seam = np.where(ahead[r] & (em[r] < em[d]), 1.0, 0.0) - np.where(behind[r] & (em[r] > em[d]), 1.0, 0.0)
         sb = (S - seam * length[fib] - S0[em[r]]) / h[em[r]]
-        e = tangential_gap(geo, X, self.s_bar, self.anchor, self.d_ref).reshape(-1, 3)[d]
+        if self.frame:
+            e = frame_friction_state(geo, X, self._directors(x, rows), self.s_bar, self.anchor, self.d_ref,
+                                     self.m_ref, np.zeros(geo.g.shape), np.ones(geo.g.shape), 0.0,
+                                     self._section_weights).e.reshape(-1, 3)[d]
+        else:
+            e = tangential_gap(geo, X, self.s_bar, self.anchor, self.d_ref).reshape(-1, 3)[d]
         pr = r // G
         wr = self._weights(pr, geo.s_plus.reshape(-1)[r][:, None])
         cb = wr(sb[:, None])[:, 0]     # (n, M)
@@ -477,14 +537,21 @@ class FrictionTerm:
         via = d if c.curve else r
         Dv = geo.direction_weights(geo.s_minus).reshape(P * G, -1)[via]
         d_flat[r] = minus_direction(X[via // G], Dv[:, None, :])[0][:, 0]
+        if self.frame:   # and the receiver's section frame at x
+            m_flat = self.m_ref.reshape(-1, 3).copy()
+            m_flat[r] = self._section_m(x, r // G, d_flat[r][:, None, :])[:, 0]
+            self.m_ref = m_flat.reshape(P, G, 3)
         self.s_bar, self.anchor, self.d_ref = s_flat.reshape(P, G), a_flat.reshape(P, G, 3), d_flat.reshape(P, G, 3)
 
     def record(self) -> dict:
         """The history by point key (copies): ``keys`` (n, 6), ``s_bar`` (n,), ``anchor``
         (n, 3), ``d_ref`` (n, 3), ``dissipated``."""
-        return {"keys": np.array(self.keys, np.int64), "s_bar": np.array(self.s_bar, float).reshape(-1),
-                "anchor": np.array(self.anchor, float).reshape(-1, 3), "d_ref": np.array(self.d_ref, float).reshape(-1, 3),
-                "dissipated": float(self.dissipated)}
+        rec = {"keys": np.array(self.keys, np.int64), "s_bar": np.array(self.s_bar, float).reshape(-1),
+               "anchor": np.array(self.anchor, float).reshape(-1, 3), "d_ref": np.array(self.d_ref, float).reshape(-1, 3),
+               "dissipated": float(self.dissipated)}
+        if self.frame:
+            rec["m_ref"] = np.array(self.m_ref, float).reshape(-1, 3)
+        return rec
 
     def seed(self, record) -> None:
         """The history of the current map from a ``record`` (by point key; a point not in the
@@ -499,6 +566,10 @@ class FrictionTerm:
         a[hit] = np.asarray(record["anchor"], float).reshape(-1, 3)[idx[hit]]
         if record.get("d_ref") is not None:
             d[hit] = np.asarray(record["d_ref"], float).reshape(-1, 3)[idx[hit]]
+        if self.frame and record.get("m_ref") is not None:
+            m = self.m_ref.reshape(-1, 3).copy()
+            m[hit] = np.asarray(record["m_ref"], float).reshape(-1, 3)[idx[hit]]
+            self.m_ref = m.reshape(self.anchor.shape)
         self.s_bar, self.anchor = s.reshape(self.s_bar.shape), a.reshape(self.anchor.shape)
         self.d_ref = d.reshape(self.anchor.shape)
         self.dissipated = float(record.get("dissipated", 0.0))
@@ -530,6 +601,8 @@ class FrictionTerm:
         out = {"f0": np.zeros(P * G), "n0": np.zeros((P * G, 3)), "s_plus": np.full(P * G, 0.5),
                "s_bar": self.s_bar.reshape(-1).copy(), "anchor": self.anchor.reshape(-1, 3).copy(),
                "d_ref": self.d_ref.reshape(-1, 3).copy(), "Jd": np.zeros((P * G, 3, 3)), "Dw": np.zeros((P * G, M))}
+        if self.frame:
+            out.update(m_ref=self.m_ref.reshape(-1, 3).copy(), Jg=np.zeros((P * G, 3, 3)), gw=np.zeros((P * G, M)))
         for k, v in out.items():
             v[hit] = np.asarray(loads[k], float).reshape((-1,) + v.shape[1:])[idx[hit]]
         return {k: v.reshape((P, G) + v.shape[1:]) for k, v in out.items()}
@@ -542,9 +615,11 @@ class FrictionTerm:
             if self._committed_loads is None:
                 raise ValueError("freeze(None): no committed state yet")
             keys, f, n, s_plus = self._committed_loads
-            s_bar, anchor, d_ref, Jd, Dw = self._committed_history
+            s_bar, anchor, d_ref, Jd, Dw = self._committed_history[:5]
             by_key = {"f0": f, "n0": n, "s_plus": s_plus, "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref,
                       "Jd": Jd, "Dw": Dw}
+            if self.frame:
+                by_key.update(zip(("m_ref", "Jg", "gw"), self._committed_history[5:]))
             self._frozen = self._loads_by_key(keys, by_key)
             return
         self._frozen = self.loads_at(x)
@@ -562,6 +637,9 @@ class FrictionTerm:
         s_bar, anchor, d_ref = self.s_bar.copy(), self.anchor.copy(), self.d_ref.copy()
         M = self._local(x, np.arange(min(P, 1))).shape[1] if P else 0
         Jd, Dw = np.zeros((P, G, 3, 3)), np.zeros((P, G, M))
+        extra = {}
+        if self.frame:
+            extra = {"m_ref": self.m_ref.copy(), "Jg": np.zeros((P, G, 3, 3)), "gw": np.zeros((P, G, M))}
         if sel.size:
             geo = self._geometry(x, sel)
             f, _, _ = self._loads(geo, sel)
@@ -569,13 +647,24 @@ class FrictionTerm:
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
             sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
             X = self._local(x, sel)
-            Dw[sel], Jd[sel], d = frozen_turn(X, geo.direction_weights(sm), geo.n, geo.rho, geo.active)
-            s_bar[sel], a_sel, d_ref[sel] = moved_history(X, None, self.s_bar[sel], self.anchor[sel], sm,
-                                                          weights=geo.material_weights, d_ref=self.d_ref[sel],
-                                                          directions=geo.direction_weights)
-            anchor[sel] = a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
+            if self.frame:
+                Gl = self._directors(x, sel)
+                gw = self._section_weights(sm)[0]
+                Dw[sel], Jd[sel], d, extra["gw"][sel], extra["Jg"][sel], g = frame_frozen_turn(
+                    X, Gl, geo.direction_weights(sm), gw, geo.n, geo.rho, geo.active)
+                s_bar[sel], a_sel, d_ref[sel], extra["m_ref"][sel] = frame_moved_history(
+                    X, Gl, self.s_bar[sel], self.anchor[sel], self.d_ref[sel], self.m_ref[sel], sm,
+                    geo.material_weights, geo.direction_weights, lambda s: self._section_weights(s)[0])
+                anchor[sel] = (a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
+                               - np.einsum("pgij,pgj->pgi", extra["Jg"][sel], g))
+            else:
+                Dw[sel], Jd[sel], d = frozen_turn(X, geo.direction_weights(sm), geo.n, geo.rho, geo.active)
+                s_bar[sel], a_sel, d_ref[sel] = moved_history(X, None, self.s_bar[sel], self.anchor[sel], sm,
+                                                              weights=geo.material_weights, d_ref=self.d_ref[sel],
+                                                              directions=geo.direction_weights)
+                anchor[sel] = a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
         return {"f0": f0, "n0": n0, "s_plus": np.array(self._s_plus(np.arange(P)), float),
-                "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref, "Jd": Jd, "Dw": Dw}
+                "s_bar": s_bar, "anchor": anchor, "d_ref": d_ref, "Jd": Jd, "Dw": Dw, **extra}
 
     def hold_loads(self, x) -> None:
         """Keep the loads at ``x`` (``loads_at``: at the current multipliers and P*) by point
@@ -630,8 +719,10 @@ class FrictionTerm:
         cb = self._weights(rows, fz["s_plus"][rows])(fz["s_bar"][rows])
         mu = np.broadcast_to(np.asarray(self._mu(rows), float)[:, None], f0.shape)
         c = np.ascontiguousarray
-        out = (rows, tuple(c(a, dtype=float) for a in (cb, fz["anchor"][rows], f0, fz["n0"][rows], kT, mu,
-                                                      fz["Dw"][rows], fz["Jd"][rows])))
+        arrays = (cb, fz["anchor"][rows], f0, fz["n0"][rows], kT, mu, fz["Dw"][rows], fz["Jd"][rows])
+        if self.frame:
+            arrays = arrays + (fz["gw"][rows], fz["Jg"][rows])
+        out = (rows, tuple(c(a, dtype=float) for a in arrays))
         self._frozen_cache = (fz, np.array(sel, copy=True), out)
         return out
 
@@ -639,8 +730,15 @@ class FrictionTerm:
         """``(psi (rows, G), R, K)`` of the frozen potential on the map pairs ``sel``, R and K
         in the pairs' local layout (the compiled kernel ``rve.kernels.friction`` when
         ``use_numba()``, else ``friction_forms.frozen_potential``: the same arrays)."""
-        rows, (cb, anchor, f0, n0, kT, mu, Dw, Jd) = self._frozen_inputs(sel)
+        rows, arrays = self._frozen_inputs(sel)
         X = self._local(x, rows)
+        if self.frame:   # the section frame's potential (numpy forms), in centroids and g1
+            cb, anchor, f0, n0, kT, mu, Dw, Jd, gw, Jg = arrays
+            Y = np.concatenate([X, self._directors(x, rows)], axis=-1)
+            psi, R, K = frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, jacobian, self.smoothing,
+                                               (Dw, Jd, gw, Jg))
+            return (psi,) + self._fold(R, K)
+        cb, anchor, f0, n0, kT, mu, Dw, Jd = arrays
         if use_numba():
             from ...kernels.friction import frozen_potential as compiled
 
@@ -704,6 +802,10 @@ class FrictionTerm:
         geo = self.contact.geometry(x, sel)
         f, kN, kT = self._loads(geo, rows)
         X = self._local(x, rows)
+        if self.frame:   # the section frame's law (numpy forms), in centroids and g1
+            return frame_friction_forces(geo, X, self._directors(x, rows), self.s_bar[rows], self.anchor[rows],
+                                         self.d_ref[rows], self.m_ref[rows], f, kN, kT, self._mu(rows),
+                                         self._section_weights, jacobian)
         if use_numba():   # the compiled law (rve.kernels.friction): the same arrays
             from ...kernels.friction import friction_forces as compiled
 
