@@ -45,6 +45,8 @@ contact_friction_s_bar      friction_point               1        its - side mat
 contact_friction_anchor     friction_point, xyz          mm       elastic gap minus the jump
 contact_friction_d_ref      friction_point, xyz          1        the - chord's direction
                                                                   the anchor is stored in
+contact_friction_m_ref      friction_point, xyz          1        (the section frame) the -
+                                                                  section's g1 across d_ref
 ==========================  ===========================  =======  ==========================
 
 Attributes: ``rve_state_format``, ``kind`` (initial | relaxed | strained), ``mode``,
@@ -210,6 +212,10 @@ def _contact_arrays(state: State, contact) -> dict:
             data["contact_friction_d_ref"] = (("friction_point", "xyz"), np.asarray(fr["d_ref"], float),
                                               {"long_name": "unit direction of the - chord the anchor is stored "
                                                             "in (the anchor turns with the chord)"})
+        if fr.get("m_ref") is not None:
+            data["contact_friction_m_ref"] = (("friction_point", "xyz"), np.asarray(fr["m_ref"], float),
+                                              {"long_name": "unit part across d_ref of the - section's first "
+                                                            "director (the section frame the anchor turns with)"})
     return data
 
 
@@ -313,6 +319,8 @@ def _friction_record(ds):
             "s_bar": np.asarray(ds["contact_friction_s_bar"].values, float),
             "anchor": np.asarray(ds["contact_friction_anchor"].values, float),
             "d_ref": (np.asarray(ds["contact_friction_d_ref"].values, float) if "contact_friction_d_ref" in ds
+                      else None),
+            "m_ref": (np.asarray(ds["contact_friction_m_ref"].values, float) if "contact_friction_m_ref" in ds
                       else None),
             "dissipated": float(ds.attrs.get("friction_dissipated", 0.0))}
 
