@@ -633,10 +633,7 @@ def frame_friction_forces(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kN, kT, mu,
     un = np.einsum("pgi,pgi->pg", n, u)
     en, stick, slip, t = _return_map(e, f, kT, mu, active)
     Ch, Cg, m, k, bh, wh, bn = _frame_couples(geo, t, h, dn, g, active)
-    inv_b = 1.0 / np.where(bn > 0, bn, 1.0)
-    inv_d = 1.0 / np.where(dn > 0, dn, 1.0)
     rho = np.where(active, geo.rho, 0.0)
-    hg = np.einsum("pgi,pgi->pg", h, g)
     Nh = Ch * dn[..., None]
     R = np.zeros((P_, M_, 6))
     R[..., :3] = np.einsum("pgk,pgi->pki", geo.c, t) + np.einsum("pgk,pgi->pki", D, Ch)
@@ -644,61 +641,85 @@ def frame_friction_forces(geo, X, G, s_bar, anchor, d_ref, m_ref, f, kN, kT, mu,
     if not jacobian:
         return R, None
     Jh, Jg = J
-    # derivatives with respect to Y_l = (X_l, G_l): vectors (P, G, M, 3, 6), scalars (P, G, M, 6)
+    dS, dN, drho, dh, ddn, dg = _frame_geometry_d(geo, X, G, D, Dp, h, dn, gw, gw_ds, active)
+    # the trial gap: du_l = cb_l (I, 0) + Jh dh_l + Jg dg_l, de_l from it and the turning normal
+    cbI = np.zeros((P_, G_, M_, 3, 6))
+    cbI[..., :3] = cb[..., None, None] * I3
+    du = cbI + _dmul(Jh, dh) + _dmul(Jg, dg)
+    Pn = I3 - n[..., :, None] * n[..., None, :]
+    de = _dmul(Pn, du) - un[..., None, None, None] * dN - n[:, :, None, :, None] * _vdot_d(e, dN)[:, :, :, None, :]
+    dT = _return_map_d(e, en, de, f, kN, kT, mu, stick, slip, drho)
+    dCh, dCg = _frame_couples_d(n, t, h, g, m, k, bh, wh, bn, dn, rho, Nh, dN, drho, dh, ddn, dg, dT, active)
+    K = np.zeros((P_, M_, 6, M_, 6))
+    K[:, :, :3] = (np.einsum("pgk,pglic->pkilc", geo.c, dT) + np.einsum("pgk,pgi,pglc->pkilc", geo.dc_ds, t, dS)
+                   + np.einsum("pgk,pglic->pkilc", D, dCh) + np.einsum("pgk,pgi,pglc->pkilc", Dp, Ch, dS))
+    K[:, :, 3:] = (np.einsum("pgk,pglic->pkilc", gw, dCg) + np.einsum("pgk,pgi,pglc->pkilc", gw_ds, Cg, dS))
+    return R, K.reshape(P_, M_, 6, M_, 6)
+
+
+def _frame_geometry_d(geo, X, G, D, Dp, h, dn, gw, gw_ds, active):
+    """The derivatives with respect to ``Y_l = (X_l, G_l)`` of the frame law's geometry:
+    ``(dS, dN, drho, dh, d|d|, dg)``, vectors (P, G, M, 3, 6), scalars (P, G, M, 6): the closest
+    point, the normal, the distance, the - direction, its length and the - side's g1."""
+    P_, G_, M_ = geo.c.shape
+    I3 = np.eye(3)
     dS = np.zeros((P_, G_, M_, 6))
     dS[..., :3] = geo.ds
     cI = np.zeros((P_, G_, M_, 3, 6))
     cI[..., :3] = geo.c[..., None, None] * I3
-    jd = np.einsum("pgk,pki->pgi", geo.dc_ds, X)
-    dJ = cI + _outer_d(jd, dS)                                   # the current jump
+    dJ = cI + _outer_d(np.einsum("pgk,pki->pgi", geo.dc_ds, X), dS)      # the current jump
+    n = geo.n
     rho_s = np.where(active, geo.rho, 1.0)
-    Pn = I3 - n[..., :, None] * n[..., None, :]
-    dN = _dmul(Pn, dJ) / rho_s[..., None, None, None]            # the normal
+    dN = _dmul(I3 - n[..., :, None] * n[..., None, :], dJ) / rho_s[..., None, None, None]
     drho = _vdot_d(n, dJ)
     dd = np.zeros((P_, G_, M_, 3, 6))
     dd[..., :3] = D[..., None, None] * I3
-    dd = dd + _outer_d(np.einsum("pgk,pki->pgi", Dp, X), dS)       # d = sum_k D_k(s-) X_k
-    Ph = I3 - h[..., :, None] * h[..., None, :]
-    dh = _dmul(Ph, dd) * inv_d[..., None, None, None]
-    ddn = _vdot_d(h, dd)
+    dd = dd + _outer_d(np.einsum("pgk,pki->pgi", Dp, X), dS)              # d = sum_k D_k(s-) X_k
+    dh = _dmul(I3 - h[..., :, None] * h[..., None, :], dd) / np.where(dn > 0, dn, 1.0)[..., None, None, None]
     dg = np.zeros((P_, G_, M_, 3, 6))
     dg[..., 3:] = gw[..., None, None] * I3
-    dg = dg + _outer_d(np.einsum("pgk,pki->pgi", gw_ds, G), dS)    # g = sum_k gw_k(s-) G_k
-    cbI = np.zeros((P_, G_, M_, 3, 6))
-    cbI[..., :3] = cb[..., None, None] * I3
-    du = cbI + _dmul(Jh, dh) + _dmul(Jg, dg)
-    de = _dmul(Pn, du) - un[..., None, None, None] * dN - n[:, :, None, :, None] * _vdot_d(e, dN)[:, :, :, None, :]
+    dg = dg + _outer_d(np.einsum("pgk,pki->pgi", gw_ds, G), dS)           # g = sum_k gw_k(s-) G_k
+    return dS, dN, drho, dh, _vdot_d(h, dd), dg
+
+
+def _return_map_d(e, en, de, f, kN, kT, mu, stick, slip, drho):
+    """``dt/dY_l`` (P, G, M, 3, c) of the return map from ``de`` and the normal force's
+    ``df = -kN drho``: stick ``kT de``, slip ``mu e_hat df + (mu f/|e|)(I - e_hat e_hat^T) de``."""
     ehat = e / np.where(en > 0, en, 1.0)[..., None]
-    proj = I3 - ehat[..., :, None] * ehat[..., None, :]
+    proj = np.eye(3) - ehat[..., :, None] * ehat[..., None, :]
     a_slip = np.where(slip, mu * f / np.where(en > 0, en, 1.0), 0.0)
-    df = -(kN * mu)[..., None, None] * drho                       # mu df/dY_l
+    df = -(kN * mu)[..., None, None] * drho                              # mu df/dY_l
     dT = np.where(stick[..., None, None, None], kT[..., None, None, None] * de, 0.0)
-    dT = dT + np.where(slip[..., None, None, None],
-                       a_slip[..., None, None, None] * _dmul(proj, de) + _outer_d(ehat, df), 0.0)
-    # the frame's parts and the couples
+    return dT + np.where(slip[..., None, None, None],
+                         a_slip[..., None, None, None] * _dmul(proj, de) + _outer_d(ehat, df), 0.0)
+
+
+def _frame_couples_d(n, t, h, g, m, k, bh, wh, bn, dn, rho, Nh, dN, drho, dh, ddn, dg, dT, active):
+    """``(dC_h, dC_g)`` (P, G, M, 3, 6) of ``_frame_couples`` (``Nh = |d| C_h``)."""
+    I3 = np.eye(3)
+    inv_b = 1.0 / np.where(bn > 0, bn, 1.0)
+    inv_d = 1.0 / np.where(dn > 0, dn, 1.0)
+    hg = np.einsum("pgi,pgi->pg", h, g)
     Pb = (I3 - bh[..., :, None] * bh[..., None, :]) * inv_b[..., None, None]
+    Ph = I3 - h[..., :, None] * h[..., None, :]
     dbh = (_dmul(-Pb @ (hg[..., None, None] * I3 + h[..., :, None] * g[..., None, :]), dh) + _dmul(Pb @ Ph, dg))
     dwh = _dmul(-_skew(bh), dh) + _dmul(_skew(h), dbh)
     dbn = _vdot_d(bh, dg) - hg[..., None, None] * _vdot_d(bh, dh)
     dhg = _vdot_d(g, dh) + _vdot_d(h, dg)
     nt = np.cross(n, t)
-    dm = (-nt[:, :, None, :, None] * drho[:, :, :, None, :] + rho[..., None, None, None] * _dmul(_skew(t), dN)
-          - rho[..., None, None, None] * _dmul(_skew(n), dT))
+    r = rho[..., None, None, None]
+    dm = -nt[:, :, None, :, None] * drho[:, :, :, None, :] + r * _dmul(_skew(t), dN) - r * _dmul(_skew(n), dT)
     dk = _vdot_d(m, dh) + _vdot_d(h, dm)
     q = hg * k * inv_b
-    dq = (k[..., None, None] * dhg + hg[..., None, None] * dk) * inv_b[..., None, None] - (q * inv_b)[..., None, None] * dbn
+    dq = ((k[..., None, None] * dhg + hg[..., None, None] * dk) * inv_b[..., None, None]
+          - (q * inv_b)[..., None, None] * dbn)
     dNh = (_dmul(-_skew(h), dm) + _dmul(_skew(m), dh) - wh[:, :, None, :, None] * dq[:, :, :, None, :]
            - q[..., None, None, None] * dwh)
     dCh = dNh * inv_d[..., None, None, None] - _outer_d(Nh * (inv_d * inv_d)[..., None], ddn)
     dCg = (_outer_d(wh, dk * inv_b[..., None, None] - (k * inv_b * inv_b)[..., None, None] * dbn)
            + (k * inv_b)[..., None, None, None] * dwh)
     on = active[..., None, None, None]
-    dCh, dCg = np.where(on, dCh, 0.0), np.where(on, dCg, 0.0)
-    K = np.zeros((P_, M_, 6, M_, 6))
-    K[:, :, :3] = (np.einsum("pgk,pglic->pkilc", geo.c, dT) + np.einsum("pgk,pgi,pglc->pkilc", geo.dc_ds, t, dS)
-                   + np.einsum("pgk,pglic->pkilc", D, dCh) + np.einsum("pgk,pgi,pglc->pkilc", Dp, Ch, dS))
-    K[:, :, 3:] = (np.einsum("pgk,pglic->pkilc", gw, dCg) + np.einsum("pgk,pgi,pglc->pkilc", gw_ds, Cg, dS))
-    return R, K.reshape(P_, M_, 6, M_, 6)
+    return np.where(on, dCh, 0.0), np.where(on, dCg, 0.0)
 
 
 def frame_moved_history(X, G, s_bar, anchor, d_ref, m_ref, s_star, weights, directions, director_weights):
