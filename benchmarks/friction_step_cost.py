@@ -9,7 +9,8 @@ Then, ``--runs`` rounds, alternating the two sides, each side a fresh process th
 steps 1..``--steps`` of ``--mode`` from its relaxed state, the step chain of the pipeline.
 Prints per run and step the wall and CPU time of the step, its iterations and the stick/slip
 counts, then per step and over the chain the median wall and CPU times of each side and their
-ratios (friction / frictionless), and the peak RSS.
+ratios (friction / frictionless), per side and step the x+ face force and the dissipation
+so far (what the step ends at), and the peak RSS.
 
     nice -n 10 python benchmarks/friction_step_cost.py [--mu 0.2] [--mode shear] [--steps 2]
         [--runs 3] [--run plain_weave_friction] [--set KEY=VALUE ...] [--work DIR] [--relaxed MU0.nc MU.nc]
@@ -118,6 +119,8 @@ def worker(spec_file: str, combo: str, state: str, mode: str, steps: int, out_di
                    contact_points=int(st.contact_count))
         fr = info.get("friction") or {}
         rec.update({k: fr[k] for k in ("stick", "slip", "dissipated") if k in fr})
+        if st.reaction_force:
+            rec["reaction_x+"] = [float(v) for v in st.reaction_force.get("x+", [])[:2]]
         recs.append(rec)
         prev = out
     print(json.dumps({"steps": recs}, default=float))
@@ -210,6 +213,13 @@ def main():
             p0 = float(np.median([r["steps"][step - 1]["cpu_s"] for r in fl if "error" not in r]))
             print(f"  step {step} with friction on {n} director components' blocks: median {w:.1f} s wall / "
                   f"{p:.1f} s CPU: ratio {w / w0:.2f} wall, {p / p0:.2f} CPU to the frictionless step")
+    for name, rs in recs.items():   # what the steps end at (the same every run: run 0's)
+        ok = [r for r in rs if "error" not in r]
+        for s in (ok[0]["steps"] if ok else []):
+            fx = s.get("reaction_x+")
+            print(f"  {name}, step {s['step']}: x+ face force "
+                  + (f"({fx[0]:.5g}, {fx[1]:.5g}) N" if fx else "n/a")
+                  + (f", dissipated {s['dissipated']:.6g} N mm so far" if "dissipated" in s else ""))
     for rs in (fl, fr) + ((alg,) if alg else ()):
         for r in rs:
             if "error" not in r:
