@@ -189,6 +189,11 @@ def main():
                 print(json.dumps({"side": name, "run": k, **s}, default=lambda v: round(float(v), 4)))
             if "error" in r:
                 print(json.dumps({"side": name, "run": k, "error": r["error"]}))
+    failed = [name for name, rs in recs.items() if rs and all("error" in r for r in rs)]
+    if failed:
+        for name in failed:
+            print(f"{name}: every run failed: {recs[name][0]['error']}", file=sys.stderr)
+        return 1
     fl, fr = recs["frictionless"], recs[f"mu={a.mu:g}"]
     alg = recs.get("frictionless, Algorithm 7.1")
     print(f"{a.run}, {a.mode} steps 1..{a.steps}, mu = 0 against mu = {a.mu:g} ({a.runs} runs each, alternating):")
@@ -232,4 +237,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
