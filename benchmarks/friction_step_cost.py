@@ -51,49 +51,22 @@ def _spec(run: str, mu: float, extra=()) -> dict:
 
 def pad_director_blocks(n_directors: int = 6) -> None:
     """The counterfactual of an objective friction law carried by the - fibril's directors
-    (docs/contact.md "Objectivity"): every frictional contact pair's blocks widened from the
-    centroid (and field) components of its nodes by the first ``n_directors`` director
-    components (6: all nine mechanical ones, r, g1, g2; 1: one more per node, the sparsity of
-    a law that reads one twist combination per node in a node basis aligned with it), the new
-    entries zero, so the same law is solved on the sparsity such a law would have. The
-    friction term's own layout is unchanged; only the assembled structure grows."""
+    (docs/contact.md "Objectivity"): every frictional contact term's blocks widened by the
+    first ``n_directors`` director components of its local nodes
+    (``ContactTerm.widen_by_directors``; 6: all nine mechanical ones, r, g1, g2; 1: one more
+    per node, the sparsity of a law that reads one twist combination per node in a node basis
+    aligned with it), the new entries zero, so the same law is solved on the sparsity such a
+    law would have."""
     from rve.model.terms import contact as C
 
-    init, forms = C.ContactTerm.__init__, C.ContactTerm.forms
+    init = C.ContactTerm.__init__
 
     def padded_init(self, *a, **k):
         init(self, *a, **k)
-        self._comps_law = self.comps
         if self.friction is not None:
-            self.comps = np.array(list(range(3 + n_directors)) + list(self.comps[3:]), np.int64)
+            self.widen_by_directors(n_directors)
 
-    def padded_forms(self, x, w, jacobian=True):
-        if self.friction is None:
-            return forms(self, x, w, jacobian)
-        nC, nCn = len(self.comps), len(self._comps_law)
-        self.nC = nCn
-        try:
-            act, R, Kx, Kw = forms(self, x, w, jacobian)
-        finally:
-            self.nC = nC
-        m, P = self.m, act.size
-        cols = np.array([0, 1, 2] + list(range(3 + n_directors, n_directors + nCn)))
-        ix = np.ix_(range(P), range(m), cols, range(m), cols)
-        Rl = np.zeros((P, m, nC))
-        Rl[:, :, cols] = np.asarray(R).reshape(P, m, nCn)
-        if not jacobian:
-            return act, Rl.reshape(P, -1), None, None
-        out = []
-        for A in (Kx, Kw):
-            if A is None:
-                out.append(None)
-                continue
-            B = np.zeros((P, m, nC, m, nC))
-            B[ix] = np.asarray(A).reshape(P, m, nCn, m, nCn)
-            out.append(B.reshape(P, -1))
-        return act, Rl.reshape(P, -1), out[0], out[1]
-
-    C.ContactTerm.__init__, C.ContactTerm.forms = padded_init, padded_forms
+    C.ContactTerm.__init__ = padded_init
 
 
 def worker(spec_file: str, combo: str, state: str, mode: str, steps: int, out_dir: str,

@@ -11,9 +11,7 @@ from rve.physics.contact_forms import chord_geometry, penalty_law
 from rve.physics.friction_forms import (framed_anchor, frame_friction_forces, frame_friction_state, friction_forces,
                                         minus_direction, section_frame, start_history, turned_anchor)
 from rve.testing import fd_nodes
-
-R2 = 0.3  # R+ + R-
-PEN = 50.0
+from test_friction_forms import PEN, R2, _forces_turned, _pairs
 
 
 def _unit(v):
@@ -34,17 +32,11 @@ def _section_weights(s):
     return np.stack([z, z, np.ones_like(s), z], -1), np.zeros(s.shape + (4,))
 
 
-def _cell(P=5, G=3, overlap=0.04, seed=3):
-    """P crossing chord pairs (centroids R2 - overlap apart, with noise) and the g1 of their
-    four nodes, roughly across the chords with a tilt along them."""
-    rng = np.random.default_rng(seed)
-    ap = rng.normal(size=(P, 3)) * 0.03 + [-0.1, 0.0, 0.0]
-    bp = ap + [0.2, 0.0, 0.0] + rng.normal(size=(P, 3)) * 0.03
-    am = rng.normal(size=(P, 3)) * 0.03 + [0.0, -0.3, -(R2 - overlap)]
-    bm = am + [0.0, 0.6, 0.0] + rng.normal(size=(P, 3)) * 0.03
-    X = np.stack([ap, bp, am, bm], axis=1)
-    Gd = np.array([0.0, 0.2, 1.0])[None, None] + rng.normal(size=(P, 4, 3)) * 0.2
-    sp = np.broadcast_to((np.arange(G) + 0.5) / G, (P, G)).copy()
+def _cell(seed=3):
+    """The crossing chord pairs of ``test_friction_forms._pairs`` with the g1 of their four
+    nodes, roughly across the chords with a tilt along them."""
+    X, sp, _, _ = _pairs(seed=seed)
+    Gd = np.array([0.0, 0.2, 1.0]) + np.random.default_rng(seed + 100).normal(size=X.shape) * 0.2
     return np.concatenate([X, Gd], -1), sp
 
 
@@ -147,8 +139,6 @@ def test_frame_makes_every_rigid_rotation_slip_free():
     """History committed with no elastic gap, then every pair (centroids and directors) turned
     rigidly by 0.2 rad about three axes, one of them the - chord's own: no friction force. The
     position-based law reads the rotation about the - chord as a slip."""
-    from test_friction_forms import _forces_turned
-
     Y, sp = _cell()
     hist = _history(Y, sp)
     s_bar, anchor, d_ref, _ = hist

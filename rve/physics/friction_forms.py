@@ -97,7 +97,7 @@ from .contact_forms import chord_direction_weights
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
            "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "turned_anchor",
            "frozen_turn", "section_frame", "framed_anchor", "frame_friction_forces", "frame_friction_state",
-           "frame_moved_history", "frame_frozen_turn", "frame_frozen_potential"]
+           "frame_tangential_gap", "frame_moved_history", "frame_frozen_turn", "frame_frozen_potential"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -567,6 +567,11 @@ def _frame_trial(geo, X, G, s_bar, anchor, d_ref, m_ref, director_weights, direc
     u = Qa + np.einsum("pgk,pki->pgi", cb, X)
     e = u - np.einsum("pgi,pgi->pg", geo.n, u)[..., None] * geo.n
     return cb, D, Dp, h, dn, gw, gw_ds, g, u, e, J
+
+
+def frame_tangential_gap(geo, X, G, s_bar, anchor, d_ref, m_ref, director_weights, directions=None) -> np.ndarray:
+    """``tangential_gap`` of the frame law: the trial tangential gap ``e`` (P, G, 3) at ``(X, G)``."""
+    return _frame_trial(geo, X, G, s_bar, anchor, d_ref, m_ref, director_weights, directions, False)[9]
 
 
 def _frame_couples(geo, t, h, dn, g, active):

@@ -176,6 +176,9 @@ class ContactTerm:
         self.scalar = [f for f, on in (("T", self.use_T), ("V", self.use_V)) if on]
         self.comps = np.array([0, 1, 2] + [layout.offset[f] for f in self.scalar], dtype=np.int64)
         self.nC = len(self.comps)
+        #: the components of the normal forms (``comps`` unless the blocks are widened by
+        #: directors, ``widen_by_directors``) and their positions among ``comps``
+        self.normal_comps, self._normal_cols = self.comps, None
         self.g_eps = float(params.g_eps) * float(mesh.radius.min())
         #: with multipliers, the width regularisation as a line load (N/mm): E* g_eps R, the
         #: load whose Hertz width is ~ sqrt(g_eps) R (independent of P*)
@@ -200,15 +203,17 @@ class ContactTerm:
         law = params.friction
         #: the friction of the contact points (None: frictionless)
         self.friction: Optional[FrictionTerm] = FrictionTerm(self, law) if law is not None and law.enabled else None
-        #: the positions of the normal forms' components among ``comps``: all of them, or, with
-        #: the section frame's friction (which also acts on the first directors g1), the
-        #: centroid and field ones of the widened ``comps``
-        self._normal_cols = None
         if self.friction is not None and self.friction.frame:
-            n_fields = self.nC - 3
-            self.comps = np.array([0, 1, 2, 3, 4, 5] + list(self.comps[3:]), dtype=np.int64)
-            self._normal_cols = np.array([0, 1, 2] + list(range(6, 6 + n_fields)), dtype=np.int64)
-            self.nC = len(self.comps)
+            self.widen_by_directors(3)    # the section frame's friction also acts on g1
+
+    def widen_by_directors(self, n: int) -> None:
+        """The pairs' blocks widened by the first ``n`` director components of every local
+        node (before the fields); the normal forms keep their own components, laid out in
+        the widened ``comps`` with the director columns zero."""
+        normal = self.normal_comps
+        self.comps = np.array(list(range(3 + n)) + list(normal[3:]), dtype=np.int64)
+        self._normal_cols = np.array([0, 1, 2] + list(range(3 + n, n + normal.size)), dtype=np.int64)
+        self.nC = len(self.comps)
 
     def set_periodic(self, images=None, wrap=None, field_jumps=None, lattice=None) -> None:
         """Periodic images for the next ``rebuild``: ``images`` (K, 3) lattice translations
@@ -569,14 +574,9 @@ class ContactTerm:
         return self.friction.add_to(x, *out, jacobian)
 
     def _widened_normal_forms(self, x, w, jacobian: bool):
-        """``_normal_forms`` on the normal components, laid out in the widened ``comps`` (the
-        director columns zero)."""
+        """``_normal_forms`` laid out in the widened ``comps`` (the director columns zero)."""
         nC, cols = self.nC, self._normal_cols
-        self.nC = cols.size
-        try:
-            act, R, Kx, Kw = self._normal_forms(x, w, jacobian)
-        finally:
-            self.nC = nC
+        act, R, Kx, Kw = self._normal_forms(x, w, jacobian)
         m, P = self.m, np.size(act)
         Rl = np.zeros((P, m, nC))
         Rl[:, :, cols] = np.asarray(R, float).reshape(P, m, cols.size)
@@ -612,7 +612,7 @@ class ContactTerm:
         return self._with_scalars_chord(x, w, act, geo, wgt, Rm, Km, jacobian)
 
     def _with_scalars_chord(self, x, w, act, geo, wgt, Rm, Km, jacobian):
-        m, nC, Pa = self.m, self.nC, act.size
+        m, nC, Pa = self.m, self.normal_comps.size, act.size
         Rl = np.zeros((Pa, m, nC))
         Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
         Kw = np.zeros((Pa, m, nC, m, nC)) if jacobian else None
@@ -672,7 +672,7 @@ class ContactTerm:
         Pa = act.size
         if not self.scalar:
             return act, Rm, (Km.reshape(Pa, -1) if jacobian else None), None
-        m, nC = self.m, self.nC
+        m, nC = self.m, self.normal_comps.size
         Rl = np.zeros((Pa, m, nC))
         Rl[:, :, 0:3] = Rm
         Kx = np.zeros((Pa, m, nC, m, nC)) if jacobian else None

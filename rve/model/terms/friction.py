@@ -71,9 +71,9 @@ from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
 from ...physics.friction_forms import (frame_friction_forces, frame_friction_state, frame_frozen_potential,
-                                      frame_frozen_turn, frame_moved_history, friction_forces, friction_state,
-                                      frozen_potential, frozen_turn, material_weights, minus_direction, moved_history,
-                                      section_frame, start_history, tangential_gap)
+                                      frame_frozen_turn, frame_moved_history, frame_tangential_gap, friction_forces,
+                                      friction_state, frozen_potential, frozen_turn, material_weights,
+                                      minus_direction, moved_history, section_frame, start_history, tangential_gap)
 from ...kernels import use_numba
 from .contact_pairs import HalfPasses
 
@@ -521,9 +521,8 @@ class FrictionTerm:
         seam = np.where(ahead[r] & (em[r] < em[d]), 1.0, 0.0) - np.where(behind[r] & (em[r] > em[d]), 1.0, 0.0)
         sb = (S - seam * length[fib] - S0[em[r]]) / h[em[r]]
         if self.frame:
-            e = frame_friction_state(geo, X, self._directors(x, rows), self.s_bar, self.anchor, self.d_ref,
-                                     self.m_ref, np.zeros(geo.g.shape), np.ones(geo.g.shape), 0.0,
-                                     self._section_weights).e.reshape(-1, 3)[d]
+            e = frame_tangential_gap(geo, X, self._directors(x, rows), self.s_bar, self.anchor, self.d_ref,
+                                     self.m_ref, self._section_weights).reshape(-1, 3)[d]
         else:
             e = tangential_gap(geo, X, self.s_bar, self.anchor, self.d_ref).reshape(-1, 3)[d]
         pr = r // G
