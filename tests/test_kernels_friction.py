@@ -155,3 +155,84 @@ def test_law_term_forms_equal_on_both_paths(monkeypatch, shift):
     a, b = out["numpy"], out["numba"]
     assert np.abs(a[0] - b[0]).max() <= 1e-12 * np.abs(a[0]).max()
     assert np.abs(a[1] - b[1]).max() <= 1e-12 * np.abs(a[1]).max()
+
+
+def _frame_points(seed=2, P=300, G=4, M=4):
+    rng = np.random.default_rng(seed)
+    X, cb, anchor, f0, n0, kT, mu, Dw, Jd = _points(M, seed, P, G)
+    Y = np.concatenate([X, rng.normal(size=(P, M, 3))], axis=-1)
+    gw = np.zeros((P, G, M))
+    gw[..., 2] = 1.0                          # the section node: the - element's first
+    gw[::3] = rng.normal(size=gw[::3].shape)  # and arbitrary weights on a third of the pairs
+    Jg = 0.1 * rng.normal(size=(P, G, 3, 3))
+    return Y, cb, anchor, f0, n0, kT, mu, (Dw, Jd, gw, Jg)
+
+
+@pytest.mark.parametrize("eta", [0.0, 0.3, 1.0])
+@pytest.mark.parametrize("jacobian", [True, False])
+def test_frame_frozen_potential_kernel_matches_numpy(eta, jacobian):
+    """``rve.kernels.friction.frame_frozen_potential`` against the numpy reference
+    (``friction_forms.frame_frozen_potential``) on random points in stick and slip, without a
+    load and at the smoothed cone, with the frame's turn in the centroids and g1."""
+    from rve.kernels.friction import frame_frozen_potential as compiled_frame
+    from rve.physics.friction_forms import frame_frozen_potential
+
+    args = _frame_points()
+    ref = frame_frozen_potential(*args[:7], jacobian, eta, args[7])
+    out = compiled_frame(*args[:7], jacobian, eta, args[7])
+    tol = 1e-13 if eta == 0.0 else 1e-11      # as for the chord's kernel above
+    for a, b in zip(ref, out):
+        if a is None:
+            assert b is None
+            continue
+        assert a.shape == b.shape
+        assert np.abs(a - b).max() <= tol * np.abs(a).max()
+    Y, cb, anchor, f0, n0, kT, mu, (Dw, Jd, gw, Jg) = args
+    u = (anchor + np.einsum("pgk,pki->pgi", cb, Y[..., :3])
+         + np.einsum("pgij,pgj->pgi", Jd, np.einsum("pgk,pki->pgi", Dw, Y[..., :3]))
+         + np.einsum("pgij,pgj->pgi", Jg, np.einsum("pgk,pki->pgi", gw, Y[..., 3:])))
+    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
+    on = (f0 > 0) & (mu > 0)
+    stick = on & (kT * np.linalg.norm(e, axis=-1) <= mu * f0)
+    assert stick.sum() > 10 and (on & ~stick).sum() > 10
+    assert np.abs(ref[1][..., 3:]).max() > 0        # g1 carries a force
+
+
+@pytest.mark.parametrize("eta", [0.0, 1.0])
+def test_frame_frozen_term_forms_equal_on_both_paths(monkeypatch, eta):
+    """The pinned cell's system with ``friction.frame: section`` after a frictional step, its
+    loads frozen at a trial state off it: residual, tangent and potential of the compiled path
+    equal the numpy path's."""
+    from test_rve_friction_al_periodic import _cfg, _relaxed
+
+    from rve.homogenisation.strain import strain_step
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    assert info["converged"]
+    x = np.asarray(x1, float).reshape(-1)
+    y = x + np.random.default_rng(4).normal(size=system.n) * 3e-5
+    fr = system.term.friction
+    system.rebuild(x)
+    fr.freeze(x)
+    fr.smoothing = eta
+    w = np.zeros(system.n)
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        F, J, _ = system.evaluate(y, w, 0.0)
+        out[path] = (np.asarray(F, float), J.toarray(), fr.potential(y))
+    a, b = out["numpy"], out["numba"]
+    # the gap u = anchor + sum W_k Y_k is mm-sized terms cancelling to a micron-sized gap, summed
+    # in another order by each path: its rounding, ~eps |anchor|, times kT bounds the forces'
+    rows, arrays = fr._frozen_inputs(fr._frozen_pairs())
+    anchor, kT = arrays[1], arrays[4]
+    bound = 64 * np.finfo(float).eps * np.abs(anchor).max() * kT.max()
+    assert a[2] > 0
+    assert np.abs(a[0] - b[0]).max() <= bound
+    # a slip point's stiffness (mu f/|e|)(P - e_hat e_hat^T) turns that rounding of e by
+    # |anchor|/|e| more (a few 1e-12 of the largest entry here); a wrong layout or term would
+    # differ by O(1)
+    assert np.abs(a[1] - b[1]).max() <= 1e-9 * np.abs(a[1]).max()
+    assert abs(a[2] - b[2]) <= 1e-12 * abs(a[2])

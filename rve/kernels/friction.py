@@ -12,6 +12,11 @@ cb_k X_k + Jd sum_k Dw_k X_k``, ``e = (I - n0 n0^T) u``, the return map (or the 
 cone), ``psi``, ``R_k += W_k^T t`` and ``K_kl += W_k^T D W_l``, with no (P, G, M, 3, 3)
 temporaries. ``X`` (P, M, 3) local nodes, ``cb``/``Dw`` (P, G, M), ``anchor``/``n0`` (P, G,
 3), ``f0``/``kT``/``mu`` (P, G), ``Jd`` (P, G, 3, 3).
+
+``frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, jacobian, eta, (Dw, Jd, gw, Jg))``:
+the same for the section frame's potential (``friction_forms.frame_frozen_potential``), in
+the centroids and g1 of the local nodes ``Y`` (P, M, 6): ``W_k = (cb_k I + Dw_k Jd, gw_k
+Jg)`` (3 x 6), ``R`` (P, M, 6), ``K`` (P, M, 6, M, 6).
 """
 from __future__ import annotations
 
@@ -23,7 +28,7 @@ from ..threads import run_chunked
 #: pairs per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
 MIN_CHUNK = 512
 
-__all__ = ["frozen_potential", "friction_forces"]
+__all__ = ["frozen_potential", "frame_frozen_potential", "friction_forces"]
 
 
 @njit(cache=True, nogil=True)
@@ -49,6 +54,13 @@ def _point(X, cb, anchor, f0, n0, kT, mu, eta, Dw, Jd, p, g, u, e, t, D):
         d2 += w * X[p, k, 2]
     for i in range(3):
         u[i] += Jd[p, g, i, 0] * d0 + Jd[p, g, i, 1] * d1 + Jd[p, g, i, 2] * d2
+    return _cone(u, n0, f0[p, g], mu[p, g], kT[p, g], eta, p, g, e, t, D)
+
+
+@njit(cache=True, nogil=True)
+def _cone(u, n0, f, m, k_t, eta, p, g, e, t, D):
+    """The tangential part ``e`` of the gap ``u`` at point (p, g), the return map's (or the
+    smoothed cone's) force ``t`` and stiffness ``D``; returns psi."""
     un = n0[p, g, 0] * u[0] + n0[p, g, 1] * u[1] + n0[p, g, 2] * u[2]
     en2 = 0.0
     for i in range(3):
@@ -59,7 +71,6 @@ def _point(X, cb, anchor, f0, n0, kT, mu, eta, Dw, Jd, p, g, u, e, t, D):
         t[i] = 0.0
         for j in range(3):
             D[i, j] = 0.0
-    f, m, k_t = f0[p, g], mu[p, g], kT[p, g]
     if eta > 0.0:
         if not (f > 0.0 and m > 0.0 and k_t > 0.0):
             return 0.0
@@ -157,6 +168,71 @@ def frozen_potential(X, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, 
                                        Dw[a:b], Jd[a:b], jac, psi[a:b], R[a:b], K[a:b] if jac else K), MIN_CHUNK)
     return psi, R, (K if jac else None)
 
+
+
+@njit(cache=True, nogil=True)
+def _frame_forms(Y, cb, anchor, f0, n0, kT, mu, eta, Dw, Jd, gw, Jg, jacobian, psi, R, K):
+    P, M = Y.shape[0], Y.shape[1]
+    G = cb.shape[1]
+    u, e, t = np.zeros(3), np.zeros(3), np.zeros(3)
+    D = np.zeros((3, 3))
+    W = np.zeros((M, 3, 6))
+    DW = np.zeros((M, 3, 6))
+    for p in range(P):
+        for g in range(G):
+            if not (f0[p, g] > 0.0 and mu[p, g] > 0.0):
+                continue          # no frozen load: no potential, force or stiffness
+            # W_k = (cb_k I + Dw_k Jd, gw_k Jg): the gap's weights of node k's centroid and g1
+            for k in range(M):
+                a, b, c = cb[p, g, k], Dw[p, g, k], gw[p, g, k]
+                for i in range(3):
+                    for j in range(3):
+                        W[k, i, j] = b * Jd[p, g, i, j] + (a if i == j else 0.0)
+                        W[k, i, 3 + j] = c * Jg[p, g, i, j]
+            for i in range(3):
+                u[i] = anchor[p, g, i]
+            for k in range(M):
+                for i in range(3):
+                    acc = 0.0
+                    for c in range(6):
+                        acc += W[k, i, c] * Y[p, k, c]
+                    u[i] += acc
+            psi[p, g] = _cone(u, n0, f0[p, g], mu[p, g], kT[p, g], eta, p, g, e, t, D)
+            for k in range(M):
+                for c in range(6):
+                    R[p, k, c] += W[k, 0, c] * t[0] + W[k, 1, c] * t[1] + W[k, 2, c] * t[2]
+            if not jacobian:
+                continue
+            for l in range(M):
+                for i in range(3):
+                    for c in range(6):
+                        DW[l, i, c] = D[i, 0] * W[l, 0, c] + D[i, 1] * W[l, 1, c] + D[i, 2] * W[l, 2, c]
+            for k in range(M):
+                for c in range(6):
+                    for l in range(M):
+                        for d in range(6):
+                            K[p, k, c, l, d] += (W[k, 0, c] * DW[l, 0, d] + W[k, 1, c] * DW[l, 1, d]
+                                                 + W[k, 2, c] * DW[l, 2, d])
+
+
+def frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, turn):
+    """``(psi (P, G), R (P, M, 6), K (P, M, 6, M, 6) or None)`` of the section frame's
+    frozen-load potential at local nodes ``Y`` (P, M, 6) (centroids, g1), ``turn = (Dw, Jd, gw,
+    Jg)``: the arrays of ``rve.physics.friction_forms.frame_frozen_potential``."""
+    f = lambda a: np.ascontiguousarray(a, dtype=np.float64)   # noqa: E731
+    Dw, Jd, gw, Jg = turn
+    Y, cb, anchor, f0, n0, kT, Dw, Jd, gw, Jg = map(f, (Y, cb, anchor, f0, n0, kT, Dw, Jd, gw, Jg))
+    mu = f(np.broadcast_to(mu, f0.shape))
+    P, M = Y.shape[0], Y.shape[1]
+    psi = np.zeros(f0.shape)
+    R = np.zeros((P, M, 6))
+    jac = bool(jacobian)
+    K = np.zeros((P, M, 6, M, 6)) if jac else np.zeros((0, M, 6, M, 6))
+    e = float(eta)
+    run_chunked(P, lambda a, b: _frame_forms(Y[a:b], cb[a:b], anchor[a:b], f0[a:b], n0[a:b], kT[a:b], mu[a:b], e,
+                                             Dw[a:b], Jd[a:b], gw[a:b], Jg[a:b], jac, psi[a:b], R[a:b],
+                                             K[a:b] if jac else K), MIN_CHUNK)
+    return psi, R, (K if jac else None)
 
 @njit(cache=True, nogil=True)
 def _cross(a, b, out):

@@ -728,14 +728,17 @@ class FrictionTerm:
     def _frozen_forms(self, x, sel, jacobian: bool):
         """``(psi (rows, G), R, K)`` of the frozen potential on the map pairs ``sel``, R and K
         in the pairs' local layout (the compiled kernel ``rve.kernels.friction`` when
-        ``use_numba()``, else ``friction_forms.frozen_potential``: the same arrays)."""
+        ``use_numba()``, else ``friction_forms.frozen_potential`` or, with the section frame,
+        ``frame_frozen_potential``: the same arrays)."""
         rows, arrays = self._frozen_inputs(sel)
         X = self._local(x, rows)
         if self.frame:   # the section frame's potential (numpy forms), in centroids and g1
             cb, anchor, f0, n0, kT, mu, Dw, Jd, gw, Jg = arrays
             Y = np.concatenate([X, self._directors(x, rows)], axis=-1)
-            psi, R, K = frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, jacobian, self.smoothing,
-                                               (Dw, Jd, gw, Jg))
+            potential = frame_frozen_potential
+            if use_numba():
+                from ...kernels.friction import frame_frozen_potential as potential
+            psi, R, K = potential(Y, cb, anchor, f0, n0, kT, mu, jacobian, self.smoothing, (Dw, Jd, gw, Jg))
             return (psi,) + self._fold(R, K)
         cb, anchor, f0, n0, kT, mu, Dw, Jd = arrays
         if use_numba():
