@@ -582,14 +582,18 @@ class ContactTerm:
         Rl[:, :, cols] = np.asarray(R, float).reshape(P, m, cols.size)
         if not jacobian:
             return act, Rl.reshape(P, -1), None, None
+        # the normal components are two runs, the centroids and the fields after the directors
+        runs = [(slice(0, 3), slice(0, 3)), (slice(3, cols.size), slice(int(cols[3]) if cols.size > 3 else nC, nC))]
         out = []
         for A in (Kx, Kw):
             if A is None:
                 out.append(None)
                 continue
+            A = np.asarray(A, float).reshape(P, m, cols.size, m, cols.size)
             B = np.zeros((P, m, nC, m, nC))
-            B[np.ix_(range(P), range(m), cols, range(m), cols)] = np.asarray(A, float).reshape(P, m, cols.size, m,
-                                                                                             cols.size)
+            for a_src, a_dst in runs:
+                for b_src, b_dst in runs:
+                    B[:, :, a_dst, :, b_dst] = A[:, :, a_src, :, b_src]
             out.append(B.reshape(P, -1))
         return act, Rl.reshape(P, -1), out[0], out[1]
 

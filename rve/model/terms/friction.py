@@ -346,12 +346,12 @@ class FrictionTerm:
             if K5 is not None:
                 K5[pos] += Kf
             return
-        if c.curve:
-            Rl[pos, :, 0:3] += Rf
-            if K5 is not None:
-                K5[pos, :, 0:3, :, 0:3] += Kf
-            return
         ep, nc = c.endpos, Rf.shape[-1]
+        if c.curve or np.array_equal(ep, np.arange(Rl.shape[1])):   # the forms' nodes in order: slices
+            Rl[pos, :, 0:nc] += Rf
+            if K5 is not None:
+                K5[pos, :, 0:nc, :, 0:nc] += Kf
+            return
         Rl[pos[:, None], ep[None, :], 0:nc] += Rf
         if K5 is not None:   # one scatter: (pairs, k, l) advanced, the nc x nc blocks sliced
             K5[pos[:, None, None], ep[None, :, None], 0:nc, ep[None, None, :], 0:nc] += Kf.transpose(0, 1, 3, 2, 4)
