@@ -352,6 +352,32 @@ def test_union_pattern_structure_and_slots(dense, path, monkeypatch):
     assert dense == ("_union_tables" in pat.__dict__)
 
 
+def test_restricted_union_hands_out_the_kept_entries_only():
+    """``UnionPattern.restrict``: a matrix on union data is handed out on the kept entries, in
+    canonical CSR, equal to the whole union's where the left-out entries are zero; None
+    restores the whole union."""
+    from rve.fem.assembly import DofLayout, ElementPattern, UnionPattern
+
+    rng = np.random.default_rng(7)
+    nodes = 40
+    conn = np.stack([np.arange(nodes - 1), np.arange(1, nodes)], axis=1)
+    conn = conn[np.arange(nodes - 1) % 10 != 9]
+    pat = ElementPattern(DofLayout(nodes, ("mech",)), conn)
+    local = np.concatenate([conn[rng.integers(0, len(conn), 30)], conn[rng.integers(0, len(conn), 30)]], axis=1)
+    u = UnionPattern(pat, local, np.arange(6))
+    data = rng.normal(size=u.nnz)
+    keep = rng.random(u.nnz) < 0.6
+    keep[u.base_map] = True
+    whole = u.csr(np.where(keep, data, 0.0))
+    u.restrict(keep)
+    kept = u.csr(data)
+    assert kept.nnz == keep.sum() and kept.has_canonical_format
+    assert (kept.toarray() == whole.toarray()).all()
+    assert u.csr(data).indices is kept.indices          # one structure for every matrix
+    u.restrict(None)
+    assert u.csr(data).nnz == u.nnz
+
+
 def test_rebuild_keeps_the_union_when_the_pairs_are_unchanged():
     sysm, x = _mech_contact_system()
     ca = sysm.assembler

@@ -552,6 +552,39 @@ def test_section_frame_tangent_of_the_assembled_system():
     assert np.abs(Fx.toarray()[np.ix_(other, g1)]).max() > 0
 
 
+@pytest.mark.parametrize("boundary", ["pinned", "periodic"])
+def test_section_frame_matrices_leave_out_only_the_structural_zeros(boundary):
+    """With ``friction.frame: section`` the contact blocks widened by g1 are handed out on the
+    entries the forms can fill (``ContactTerm.local_sparsity``, ``UnionPattern.restrict``):
+    the tangent equals the one on the whole widened union entry by entry (nothing filled was
+    left out), with the exact law and at frozen loads, on fewer stored entries."""
+    from rve.homogenisation.strain import strain_step
+
+    cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1, frame="section")
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    assert info["converged"]
+    x = np.asarray(x1, float).reshape(-1) + np.random.default_rng(5).normal(size=system.n) * 3e-5
+    system.rebuild(x)
+    fr = system.term.friction
+    union = system.assembler.union
+    w = np.zeros(system.n)
+    for frozen in (False, True):
+        if frozen:
+            fr.freeze(x)
+        y = x + np.random.default_rng(6).normal(size=system.n) * 1e-5
+        kept = system.evaluate(y, w, 0.0)[1]
+        keep = union.keep
+        assert keep is not None
+        union.restrict(None)
+        whole = system.evaluate(y, w, 0.0)[1]
+        union.restrict(np.isin(np.arange(union.nnz), keep))
+        assert kept.nnz < whole.nnz
+        assert abs(whole).max() > 0
+        assert (kept.toarray() == whole.toarray()).all()
+    fr.unfreeze()
+
+
 # --------------------------------------------------------------------------- mu = 0
 @pytest.mark.parametrize("boundary, enforcement", [("pinned", "augmented_lagrangian"),
                                                    ("periodic", "augmented_lagrangian"), ("periodic", "penalty")])

@@ -25,7 +25,8 @@ touch only the components ``comps`` of each node (the contact pairs). ``base_map
 the pattern's data in the union, ``slots`` (P, (m nC)^2) and ``gdofs`` (P, m nC) the pair
 elements' entries; ``add(data, A)`` adds a CSR matrix on the pattern (or the union) into
 union data; ``csr(data)`` wraps union data (every matrix shares the union's index
-arrays). Used by ``rve.model.assembler`` (docs/contact.md).
+arrays; after ``restrict(keep)`` those of the kept entries, the structural zeros of the pair
+elements left out). Used by ``rve.model.assembler`` (docs/contact.md).
 """
 from __future__ import annotations
 
@@ -263,6 +264,27 @@ class UnionPattern:
         self._matcache: dict = {}
         self._keys = None
         self._template = None
+        #: ``restrict``: the union data positions the matrices are handed out on (None: all)
+        self.keep = None
+        self._kept_template = None
+
+    def restrict(self, keep) -> None:
+        """Hand out ``csr`` matrices on the union entries ``keep`` (bool over the union data)
+        only: the pair elements' entries that their forms never fill (structural zeros, e.g.
+        the components of a block widened for one node of the pair) are left out, so a
+        solver that analyses the stored pattern does not order them. The data arrays stay
+        on the whole union; None: every entry."""
+        if keep is None or bool(np.all(keep)):
+            self.keep, self._kept_template = None, None
+            return
+        self.keep, self._kept_template = None, None
+        self.csr(np.zeros(self.nnz))   # the union's template first: its index arrays
+        self.keep = np.flatnonzero(keep)
+        rows = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.indptr))[self.keep]
+        indptr = np.zeros(self.n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(rows, minlength=self.n), out=indptr[1:])
+        self._kept_template = sp.csr_matrix((np.zeros(self.keep.size), self.indices[self.keep],
+                                             indptr.astype(self.indptr.dtype)), shape=(self.n, self.n))
 
     def _union_keys(self, pattern, bkeys, nkey, Nn: int):
         """``(keys, isbase, locate)``: the sorted node-pair keys of the union (the base
@@ -319,6 +341,10 @@ class UnionPattern:
         if self._template is None:
             self._template = sp.csr_matrix((np.zeros(self.nnz), self.indices, self.indptr), shape=(self.n, self.n))
             self.indices, self.indptr = self._template.indices, self._template.indptr
+        if self.keep is not None:   # ``restrict``: the kept entries' own index arrays
+            A = copy.copy(self._kept_template)
+            A.data = np.asarray(data, dtype=float)[self.keep]
+            return A
         A = copy.copy(self._template)
         A.data = np.asarray(data, dtype=float)
         return A

@@ -223,9 +223,22 @@ class ContactAssembler:
             return False
         self._local, self._comps = np.array(local, copy=True), comps.copy()
         self.union = UnionPattern(self.elements.pattern, local, comps)
+        self.union.restrict(self._filled(self.union))
         self._fw_cache = None
         self._M = None
         return True
+
+    def _filled(self, union):
+        """The union entries the forms can fill (bool over the union data), or None (all):
+        the elements' and those of the pairs' ``local_sparsity`` (the contact term's)."""
+        local = getattr(self.term, "local_sparsity", None)
+        local = None if local is None else local()
+        if local is None or union.slots.size == 0:
+            return None
+        keep = np.zeros(union.nnz, bool)
+        keep[union.base_map] = True
+        keep[union.slots[:, np.asarray(local, bool).ravel()].ravel()] = True
+        return keep
 
     def mass(self, M_elements):
         if self._M is None or self._M[0] is not M_elements:
