@@ -274,10 +274,9 @@ class UnionPattern:
         the components of a block widened for one node of the pair) are left out, so a
         solver that analyses the stored pattern does not order them. The data arrays stay
         on the whole union; None: every entry."""
-        if keep is None or bool(np.all(keep)):
-            self.keep, self._kept_template = None, None
-            return
         self.keep, self._kept_template = None, None
+        if keep is None or bool(np.all(keep)):
+            return
         self.csr(np.zeros(self.nnz))   # the union's template first: its index arrays
         self.keep = np.flatnonzero(keep)
         rows = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.indptr))[self.keep]
