@@ -238,3 +238,51 @@ def test_frame_frozen_term_forms_equal_on_both_paths(monkeypatch, eta):
     # the potential's rounding: that of the gap times the forces it is the work of
     _, Rf, _ = fr._frozen_forms(y, fr._frozen_pairs(), False)
     assert abs(a[2] - b[2]) <= 64 * np.finfo(float).eps * np.abs(anchor).max() * np.abs(Rf).sum()
+
+
+@pytest.mark.parametrize("jacobian", [True, False])
+def test_framed_anchor_kernel_matches_numpy(jacobian):
+    """``rve.kernels.friction.framed_anchor`` against ``friction_forms.framed_anchor`` (the
+    refreeze's frame carrier) on random frames, with g1 at all angles to h."""
+    from rve.kernels.friction import framed_anchor as compiled_framed
+    from rve.physics.friction_forms import framed_anchor, section_frame
+
+    rng = np.random.default_rng(8)
+    P, G = 200, 4
+    unit = lambda v: v / np.linalg.norm(v, axis=-1)[..., None]   # noqa: E731
+    d_ref, h = unit(rng.normal(size=(P, G, 3))), unit(rng.normal(size=(P, G, 3)))
+    m_ref = section_frame(d_ref, rng.normal(size=(P, G, 3)))[0]
+    g = rng.normal(size=(P, G, 3)) * rng.choice([0.1, 1.0, 3.0], size=(P, G, 1))
+    anchor = rng.normal(size=(P, G, 3))
+    ref = framed_anchor(anchor, d_ref, m_ref, h, g, jacobian=jacobian)
+    out = compiled_framed(anchor, d_ref, m_ref, h, g, jacobian=jacobian)
+    if jacobian:
+        ref, out = (ref[0],) + tuple(ref[1]), (out[0],) + tuple(out[1])
+    else:
+        ref, out = (ref,), (out,)
+    for a, b in zip(ref, out):
+        assert a.shape == b.shape
+        assert np.abs(a - b).max() <= 1e-13 * np.abs(a).max()
+
+
+def test_frame_loads_equal_on_both_paths(monkeypatch):
+    """``FrictionTerm.loads_at`` with ``friction.frame: section`` (the refreeze of the
+    predictor: the frame's turn and the moved history) on both paths, at a trial state off the
+    pinned cell's frictional step."""
+    from test_rve_friction_al_periodic import _cfg, _relaxed
+
+    from rve.homogenisation.strain import strain_step
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    y = np.asarray(x1, float).reshape(-1) + np.random.default_rng(9).normal(size=system.n) * 3e-5
+    system.rebuild(y)
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        out[path] = system.term.friction.loads_at(y)
+    assert np.abs(out["numpy"]["Jg"]).max() > 0
+    for k, a in out["numpy"].items():
+        b = out["numba"][k]
+        assert np.abs(a - b).max() <= 1e-12 * max(np.abs(a).max(), 1e-300), k
