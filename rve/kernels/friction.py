@@ -28,7 +28,7 @@ from ..threads import run_chunked
 #: pairs per thread below which the kernel runs on one thread (``rve.threads.run_chunked``)
 MIN_CHUNK = 512
 
-__all__ = ["frozen_potential", "frame_frozen_potential", "framed_anchor", "friction_forces"]
+__all__ = ["frozen_potential", "frame_frozen_potential", "friction_forces"]
 
 
 @njit(cache=True, nogil=True)
@@ -233,79 +233,6 @@ def frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: f
                                              Dw[a:b], Jd[a:b], gw[a:b], Jg[a:b], jac, psi[a:b], R[a:b],
                                              K[a:b] if jac else K), MIN_CHUNK)
     return psi, R, (K if jac else None)
-
-
-@njit(cache=True, nogil=True)
-def _framed(anchor, d_ref, m_ref, h, g, jacobian, out, Jh, Jg):
-    P, G = anchor.shape[0], anchor.shape[1]
-    rm, bh, wh = np.zeros(3), np.zeros(3), np.zeros(3)
-    Pb, A, B, Sh, dh, dg = (np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)),
-                            np.zeros((3, 3)), np.zeros((3, 3)))
-    for p in range(P):
-        for q in range(G):
-            r, m, a, hh, gg = d_ref[p, q], m_ref[p, q], anchor[p, q], h[p, q], g[p, q]
-            rm[0] = r[1] * m[2] - r[2] * m[1]
-            rm[1] = r[2] * m[0] - r[0] * m[2]
-            rm[2] = r[0] * m[1] - r[1] * m[0]
-            al1 = r[0] * a[0] + r[1] * a[1] + r[2] * a[2]
-            al2 = m[0] * a[0] + m[1] * a[1] + m[2] * a[2]
-            al3 = rm[0] * a[0] + rm[1] * a[1] + rm[2] * a[2]
-            hg = hh[0] * gg[0] + hh[1] * gg[1] + hh[2] * gg[2]
-            for i in range(3):
-                bh[i] = gg[i] - hg * hh[i]
-            bn = np.sqrt(bh[0] * bh[0] + bh[1] * bh[1] + bh[2] * bh[2])
-            inv_b = 1.0 / bn if bn > 0 else 1.0
-            for i in range(3):
-                bh[i] *= inv_b
-            wh[0] = hh[1] * bh[2] - hh[2] * bh[1]
-            wh[1] = hh[2] * bh[0] - hh[0] * bh[2]
-            wh[2] = hh[0] * bh[1] - hh[1] * bh[0]
-            for i in range(3):
-                out[p, q, i] = al1 * hh[i] + al2 * bh[i] + al3 * wh[i]
-            if not jacobian:
-                continue
-            # d b_hat = Pb db, Pb = (I - b_hat b_hat^T)/|b|, db = (I - h h^T) dg - ((h.g) I + h g^T) dh
-            for i in range(3):
-                for j in range(3):
-                    e = 1.0 if i == j else 0.0
-                    Pb[i, j] = (e - bh[i] * bh[j]) * inv_b
-                    A[i, j] = hg * e + hh[i] * gg[j]
-                    B[i, j] = e - hh[i] * hh[j]
-            Sh[0, 0], Sh[0, 1], Sh[0, 2] = 0.0, -hh[2], hh[1]
-            Sh[1, 0], Sh[1, 1], Sh[1, 2] = hh[2], 0.0, -hh[0]
-            Sh[2, 0], Sh[2, 1], Sh[2, 2] = -hh[1], hh[0], 0.0
-            for i in range(3):
-                for j in range(3):
-                    dh[i, j] = -(Pb[i, 0] * A[0, j] + Pb[i, 1] * A[1, j] + Pb[i, 2] * A[2, j])
-                    dg[i, j] = Pb[i, 0] * B[0, j] + Pb[i, 1] * B[1, j] + Pb[i, 2] * B[2, j]
-            # Jh = al1 I + al2 dbh_dh + al3 (-S(b_hat) + S(h) dbh_dh); Jg = (al2 I + al3 S(h)) dbh_dg
-            for i in range(3):
-                for j in range(3):
-                    e = 1.0 if i == j else 0.0
-                    sb = 0.0
-                    if i != j:
-                        k = 3 - i - j
-                        sb = bh[k] if (i - j) % 3 == 1 else -bh[k]   # S(b_hat)[i, j]
-                    Shdh = Sh[i, 0] * dh[0, j] + Sh[i, 1] * dh[1, j] + Sh[i, 2] * dh[2, j]
-                    Shdg = Sh[i, 0] * dg[0, j] + Sh[i, 1] * dg[1, j] + Sh[i, 2] * dg[2, j]
-                    Jh[p, q, i, j] = al1 * e + al2 * dh[i, j] + al3 * (-sb + Shdh)
-                    Jg[p, q, i, j] = al2 * dg[i, j] + al3 * Shdg
-
-
-def framed_anchor(anchor, d_ref, m_ref, h, g, jacobian: bool = False):
-    """``rve.physics.friction_forms.framed_anchor`` compiled: the anchor carried from the
-    committed frame ``(d_ref, m_ref)`` to the current one of ``(h, g)``, with ``(Jh, Jg)``
-    when ``jacobian``; the same arrays (P, G, 3) and (P, G, 3, 3)."""
-    f = lambda a: np.ascontiguousarray(a, dtype=np.float64)   # noqa: E731
-    anchor, d_ref, m_ref, h, g = map(f, (anchor, d_ref, m_ref, h, g))
-    P, G = anchor.shape[0], anchor.shape[1]
-    out = np.empty((P, G, 3))
-    jac = bool(jacobian)
-    Jh = np.empty((P, G, 3, 3) if jac else (0, 0, 3, 3))
-    Jg = np.empty_like(Jh)
-    run_chunked(P, lambda a, b: _framed(anchor[a:b], d_ref[a:b], m_ref[a:b], h[a:b], g[a:b], jac, out[a:b],
-                                        Jh[a:b] if jac else Jh, Jg[a:b] if jac else Jg), MIN_CHUNK)
-    return (out, (Jh, Jg)) if jac else out
 
 @njit(cache=True, nogil=True)
 def _cross(a, b, out):

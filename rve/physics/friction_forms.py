@@ -727,32 +727,28 @@ def _frame_couples_d(n, t, h, g, m, k, bh, wh, bn, dn, rho, Nh, dN, drho, dh, dd
     return np.where(on, dCh, 0.0), np.where(on, dCg, 0.0)
 
 
-def frame_moved_history(X, G, s_bar, anchor, d_ref, m_ref, s_star, weights, directions, director_weights,
-                        framed=framed_anchor):
+def frame_moved_history(X, G, s_bar, anchor, d_ref, m_ref, s_star, weights, directions, director_weights):
     """``moved_history`` of the frame law: ``(s_star, anchor', d_ref', m_ref')``, the material
     point moved to ``s_star`` (P, G) and the anchor re-expressed in the frame there, the trial
-    gap at ``(X, G)`` unchanged: ``anchor' = Q anchor + j(X; s_bar) - j(X; s_star)``.
-    ``framed``: the function that carries an anchor between frames (``framed_anchor``, or a
-    compiled one with its signature)."""
+    gap at ``(X, G)`` unchanged: ``anchor' = Q anchor + j(X; s_bar) - j(X; s_star)``."""
     jb = np.einsum("pgk,pki->pgi", weights(s_bar), X)
     js = np.einsum("pgk,pki->pgi", weights(s_star), X)
     h = minus_direction(X, directions(s_star))[0]
     g = np.einsum("pgk,pki->pgi", director_weights(s_star), G)
-    Qa = framed(anchor, d_ref, m_ref, h, g)
+    Qa = framed_anchor(anchor, d_ref, m_ref, h, g)
     return np.array(s_star, float, copy=True), Qa + jb - js, h, section_frame(h, g)[0]
 
 
-def frame_frozen_turn(X, G, D, gw, n, rho, active, framed=framed_anchor):
+def frame_frozen_turn(X, G, D, gw, n, rho, active):
     """``(Dw, Jd, d, gw, Jg, g)``: the frame's turn frozen at ``(X, G)`` as linear in the -
     direction ``d = sum_k D_k X_k`` and the - side's g1 ``g = sum_k gw_k G_k`` (``frozen_turn``
     of the frame law): ``Jd = Jh (I - h h^T) / |d|`` and ``Jg`` the derivatives of the frame's
-    turn of ``a = -rho n`` at the state's own frame (zero where not ``active``); ``framed`` as
-    in ``frame_moved_history``."""
+    turn of ``a = -rho n`` at the state's own frame (zero where not ``active``)."""
     h, Dw, dn = minus_direction(X, D)
     g = np.einsum("pgk,pki->pgi", gw, G)
     a = -np.where(active, rho, 0.0)[..., None] * n
     bh = section_frame(h, g)[0]
-    _, (Jh, Jg) = framed(a, h, bh, h, g, jacobian=True)
+    _, (Jh, Jg) = framed_anchor(a, h, bh, h, g, jacobian=True)
     Pi = np.eye(3) - h[..., :, None] * h[..., None, :]
     Jd = Jh @ Pi / np.where(dn > 0, dn, 1.0)[..., None, None]
     return Dw, Jd, h * dn[..., None], np.asarray(gw, float), Jg, g

@@ -71,8 +71,7 @@ from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
 from ...physics.friction_forms import (frame_friction_forces, frame_friction_state, frame_frozen_potential,
-                                      frame_frozen_turn, frame_moved_history, frame_tangential_gap, framed_anchor,
-                                      friction_forces,
+                                      frame_frozen_turn, frame_moved_history, frame_tangential_gap, friction_forces,
                                       friction_state, frozen_potential, frozen_turn, material_weights,
                                       minus_direction, moved_history, section_frame, start_history, tangential_gap)
 from ...kernels import use_numba
@@ -650,15 +649,11 @@ class FrictionTerm:
             if self.frame:
                 Gl = self._directors(x, sel)
                 gw = self._section_weights(sm)[0]
-                framed = framed_anchor
-                if use_numba():   # the compiled frame carrier (rve.kernels.friction): the same arrays
-                    from ...kernels.friction import framed_anchor as framed
                 Dw[sel], Jd[sel], d, extra["gw"][sel], extra["Jg"][sel], g = frame_frozen_turn(
-                    X, Gl, geo.direction_weights(sm), gw, geo.n, geo.rho, geo.active, framed=framed)
+                    X, Gl, geo.direction_weights(sm), gw, geo.n, geo.rho, geo.active)
                 s_bar[sel], a_sel, d_ref[sel], extra["m_ref"][sel] = frame_moved_history(
                     X, Gl, self.s_bar[sel], self.anchor[sel], self.d_ref[sel], self.m_ref[sel], sm,
-                    geo.material_weights, geo.direction_weights, lambda s: self._section_weights(s)[0],
-                    framed=framed)
+                    geo.material_weights, geo.direction_weights, lambda s: self._section_weights(s)[0])
                 anchor[sel] = (a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
                                - np.einsum("pgij,pgj->pgi", extra["Jg"][sel], g))
             else:
