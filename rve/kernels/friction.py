@@ -153,21 +153,32 @@ def _forms(X, cb, anchor, f0, n0, kT, mu, eta, Dw, Jd, jacobian, psi, R, K):
                             K[p, k, i, l, j] += c1 * D[i, j] + c2 * DJ[i, j] + c3 * JtD[i, j] + c4 * JtDJ[i, j]
 
 
-def frozen_potential(X, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, Dw, Jd):
-    """``(psi, R, K)`` of the frozen-load potential (module docstring)."""
+def _potential(kernel, nc: int, Y, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, turn):
+    """``(psi, R (P, M, nc), K or None)``: ``kernel(Y, cb, anchor, f0, n0, kT, mu, eta, *turn,
+    jacobian, psi, R, K)`` run over chunks of the pairs (``rve.threads.run_chunked``) on
+    contiguous float64 copies of its inputs."""
     f = lambda a: np.ascontiguousarray(a, dtype=np.float64)   # noqa: E731
-    X, cb, anchor, f0, n0, kT, Dw, Jd = map(f, (X, cb, anchor, f0, n0, kT, Dw, Jd))
+    Y, cb, anchor, f0, n0, kT = map(f, (Y, cb, anchor, f0, n0, kT))
+    turn = tuple(map(f, turn))
     mu = f(np.broadcast_to(mu, f0.shape))
-    P, M = X.shape[0], X.shape[1]
+    P, M = Y.shape[0], Y.shape[1]
     psi = np.zeros(f0.shape)
-    R = np.zeros((P, M, 3))
+    R = np.zeros((P, M, nc))
     jac = bool(jacobian)
-    K = np.zeros((P, M, 3, M, 3)) if jac else np.zeros((0, M, 3, M, 3))
+    K = np.zeros((P, M, nc, M, nc)) if jac else np.zeros((0, M, nc, M, nc))
     e = float(eta)
-    run_chunked(P, lambda a, b: _forms(X[a:b], cb[a:b], anchor[a:b], f0[a:b], n0[a:b], kT[a:b], mu[a:b], e,
-                                       Dw[a:b], Jd[a:b], jac, psi[a:b], R[a:b], K[a:b] if jac else K), MIN_CHUNK)
+
+    def chunk(a, b):
+        kernel(Y[a:b], cb[a:b], anchor[a:b], f0[a:b], n0[a:b], kT[a:b], mu[a:b], e, *(t[a:b] for t in turn), jac,
+               psi[a:b], R[a:b], K[a:b] if jac else K)
+
+    run_chunked(P, chunk, MIN_CHUNK)
     return psi, R, (K if jac else None)
 
+
+def frozen_potential(X, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: float, Dw, Jd):
+    """``(psi, R, K)`` of the frozen-load potential (module docstring)."""
+    return _potential(_forms, 3, X, cb, anchor, f0, n0, kT, mu, jacobian, eta, (Dw, Jd))
 
 
 @njit(cache=True, nogil=True)
@@ -219,20 +230,8 @@ def frame_frozen_potential(Y, cb, anchor, f0, n0, kT, mu, jacobian: bool, eta: f
     """``(psi (P, G), R (P, M, 6), K (P, M, 6, M, 6) or None)`` of the section frame's
     frozen-load potential at local nodes ``Y`` (P, M, 6) (centroids, g1), ``turn = (Dw, Jd, gw,
     Jg)``: the arrays of ``rve.physics.friction_forms.frame_frozen_potential``."""
-    f = lambda a: np.ascontiguousarray(a, dtype=np.float64)   # noqa: E731
-    Dw, Jd, gw, Jg = turn
-    Y, cb, anchor, f0, n0, kT, Dw, Jd, gw, Jg = map(f, (Y, cb, anchor, f0, n0, kT, Dw, Jd, gw, Jg))
-    mu = f(np.broadcast_to(mu, f0.shape))
-    P, M = Y.shape[0], Y.shape[1]
-    psi = np.zeros(f0.shape)
-    R = np.zeros((P, M, 6))
-    jac = bool(jacobian)
-    K = np.zeros((P, M, 6, M, 6)) if jac else np.zeros((0, M, 6, M, 6))
-    e = float(eta)
-    run_chunked(P, lambda a, b: _frame_forms(Y[a:b], cb[a:b], anchor[a:b], f0[a:b], n0[a:b], kT[a:b], mu[a:b], e,
-                                             Dw[a:b], Jd[a:b], gw[a:b], Jg[a:b], jac, psi[a:b], R[a:b],
-                                             K[a:b] if jac else K), MIN_CHUNK)
-    return psi, R, (K if jac else None)
+    return _potential(_frame_forms, 6, Y, cb, anchor, f0, n0, kT, mu, jacobian, eta, turn)
+
 
 @njit(cache=True, nogil=True)
 def _cross(a, b, out):
