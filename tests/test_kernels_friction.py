@@ -30,6 +30,24 @@ def _points(M, seed=0, P=300, G=4):
     return X, cb, anchor, f0, n0, kT, mu, Dw, Jd
 
 
+def _assert_same(ref, out, tol):
+    """The kernel's ``(psi, R, K)`` equal the reference's to ``tol`` of each one's largest entry."""
+    for a, b in zip(ref, out):
+        if a is None:
+            assert b is None
+            continue
+        assert a.shape == b.shape
+        assert np.abs(a - b).max() <= tol * np.abs(a).max()
+
+
+def _stick_and_slip(u, n0, f0, mu, kT):
+    """``(stick, slip)`` point counts of the gaps ``u`` at the frozen loads."""
+    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
+    on = (f0 > 0) & (mu > 0)
+    stick = on & (kT * np.linalg.norm(e, axis=-1) <= mu * f0)
+    return int(stick.sum()), int((on & ~stick).sum())
+
+
 @pytest.mark.parametrize("M", [4, 6, 8])
 @pytest.mark.parametrize("eta", [0.0, 0.3, 1.0])
 @pytest.mark.parametrize("jacobian", [True, False])
@@ -41,12 +59,7 @@ def test_frozen_potential_kernel_matches_numpy(M, eta, jacobian):
     # here: the two arcsinh implementations' last bits, amplified by that cancellation, give
     # ~x^2 eps relative to the largest entry; the law (eta = 0) agrees to a few ulps
     tol = 1e-13 if eta == 0.0 else 1e-11
-    for a, b in zip(ref, out):
-        if a is None:
-            assert b is None
-            continue
-        assert a.shape == b.shape
-        assert np.abs(a - b).max() <= tol * np.abs(a).max()
+    _assert_same(ref, out, tol)
 
 
 def test_frozen_potential_kernel_sees_stick_and_slip():
@@ -54,10 +67,8 @@ def test_frozen_potential_kernel_sees_stick_and_slip():
     above would not compare both branches)."""
     X, cb, anchor, f0, n0, kT, mu, Dw, Jd = _points(4)
     u = anchor + np.einsum("pgk,pki->pgi", cb, X) + np.einsum("pgij,pgj->pgi", Jd, np.einsum("pgk,pki->pgi", Dw, X))
-    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
-    on = (f0 > 0) & (mu > 0)
-    stick = on & (kT * np.linalg.norm(e, axis=-1) <= mu * f0)
-    assert stick.sum() > 10 and (on & ~stick).sum() > 10
+    stick, slip = _stick_and_slip(u, n0, f0, mu, kT)
+    assert stick > 10 and slip > 10
 
 
 @pytest.mark.parametrize("eta", [0.0, 1.0])
@@ -181,20 +192,13 @@ def test_frame_frozen_potential_kernel_matches_numpy(eta, jacobian):
     ref = frame_frozen_potential(*args[:7], jacobian, eta, args[7])
     out = compiled_frame(*args[:7], jacobian, eta, args[7])
     tol = 1e-13 if eta == 0.0 else 1e-11      # as for the chord's kernel above
-    for a, b in zip(ref, out):
-        if a is None:
-            assert b is None
-            continue
-        assert a.shape == b.shape
-        assert np.abs(a - b).max() <= tol * np.abs(a).max()
+    _assert_same(ref, out, tol)
     Y, cb, anchor, f0, n0, kT, mu, (Dw, Jd, gw, Jg) = args
     u = (anchor + np.einsum("pgk,pki->pgi", cb, Y[..., :3])
          + np.einsum("pgij,pgj->pgi", Jd, np.einsum("pgk,pki->pgi", Dw, Y[..., :3]))
          + np.einsum("pgij,pgj->pgi", Jg, np.einsum("pgk,pki->pgi", gw, Y[..., 3:])))
-    e = u - np.einsum("pgi,pgi->pg", n0, u)[..., None] * n0
-    on = (f0 > 0) & (mu > 0)
-    stick = on & (kT * np.linalg.norm(e, axis=-1) <= mu * f0)
-    assert stick.sum() > 10 and (on & ~stick).sum() > 10
+    stick, slip = _stick_and_slip(u, n0, f0, mu, kT)
+    assert stick > 10 and slip > 10
     assert np.abs(ref[1][..., 3:]).max() > 0        # g1 carries a force
 
 

@@ -231,8 +231,7 @@ class ContactAssembler:
     def _filled(self, union):
         """The union entries the forms can fill (bool over the union data), or None (all):
         the elements' and those of the pairs' ``local_sparsity`` (the contact term's)."""
-        local = getattr(self.term, "local_sparsity", None)
-        local = None if local is None else local()
+        local = self.term.local_sparsity()
         if local is None or union.slots.size == 0:
             return None
         keep = np.zeros(union.nnz, bool)

@@ -219,15 +219,15 @@ class ContactTerm:
         """The entries of a pair's local blocks (m, nC, m, nC) its forms can fill, or None
         (all of them): with the section frame's friction the normal forms fill their own
         components and the friction the centroids of the chord ends and g1 of the - element's
-        section node (local node 2 of the chord: ``FrictionTerm._section_weights``), so the
-        other director entries of the widened blocks are structural zeros
-        (``UnionPattern.restrict``)."""
+        section node (``FrictionTerm.SECTION_NODE``), so the other director entries of the
+        widened blocks are structural zeros (``UnionPattern.restrict``)."""
         if self._normal_cols is None or self.friction is None or not self.friction.frame:
             return None
         m, nC, cols = self.m, self.nC, self._normal_cols
         mask = np.zeros((m, nC, m, nC), bool)
         mask[np.ix_(range(m), cols, range(m), cols)] = True
-        ends, sec, r, g1 = np.asarray(self.endpos), int(self.endpos[2]), np.arange(3), np.arange(3, 6)
+        ends, r, g1 = np.asarray(self.endpos), np.arange(3), np.arange(3, 6)
+        sec = int(ends[self.friction.SECTION_NODE])
         mask[np.ix_([sec], g1, ends, r)] = True
         mask[np.ix_(ends, r, [sec], g1)] = True
         mask[np.ix_([sec], g1, [sec], g1)] = True

@@ -281,12 +281,15 @@ class FrictionTerm:
         return np.stack([g[c.map.nodes_plus[rows, 0]], g[c.map.nodes_plus[rows, 1]], g[c.map.nodes_minus[rows, 0]],
                          g[c.map.nodes_minus[rows, 1]]], axis=1)
 
-    @staticmethod
-    def _section_weights(s):
-        """The - element's section director, its first node's g1 (local node 2), at every
-        ``s``: ``(gw, d gw/ds)`` (n, G, 4)."""
+    #: the chord's local node whose g1 the section frame reads: the - element's first node
+    SECTION_NODE = 2
+
+    @classmethod
+    def _section_weights(cls, s):
+        """The - element's section director, its first node's g1 (local node
+        ``SECTION_NODE``), at every ``s``: ``(gw, d gw/ds)`` (n, G, 4)."""
         w = np.zeros(np.shape(s) + (4,))
-        w[..., 2] = 1.0
+        w[..., cls.SECTION_NODE] = 1.0
         return w, np.zeros_like(w)
 
     def _section_m(self, x, rows, d):
@@ -340,12 +343,6 @@ class FrictionTerm:
         local arrays ``Rl`` (., m, nC), ``K5`` (., m, nC, m, nC) at pair positions ``pos``:
         on the chord ends' slots (``endpos``), or on every local node for the curves."""
         c = self.contact
-        whole = c.nC == Rf.shape[-1] and (c.curve or np.array_equal(c.endpos, np.arange(Rl.shape[1])))
-        if whole:   # mechanics only, the pair's local nodes those of the forms: one add per pair
-            Rl[pos] += Rf
-            if K5 is not None:
-                K5[pos] += Kf
-            return
         ep, nc = c.endpos, Rf.shape[-1]
         if c.curve or np.array_equal(ep, np.arange(Rl.shape[1])):   # the forms' nodes in order: slices
             Rl[pos, :, 0:nc] += Rf
