@@ -29,10 +29,13 @@ def _snakemake(cwd: Path, *args: str, timeout: float = 600) -> subprocess.Comple
 
 @pytest.fixture(scope="module")
 def ci_run(tmp_path_factory):
-    """Run the whole DAG of the CI config once (7 solves)."""
+    """Run the static-wire study of the CI config once (7 solves). Only its outputs: the CI
+    config's RVE table, which the default target also builds, is tests/test_rve_pipeline.py's."""
     pytest.importorskip("snakemake")
+    from rve.studies import layout as study_layout
+
     work = workflow_copy(tmp_path_factory.mktemp("pipeline_ci"))
-    proc = _snakemake(work, "-j2", "--configfile", CI_CONFIG)
+    proc = _snakemake(work, "-j2", *study_layout.STATIC_WIRE_OUTPUTS, "--configfile", CI_CONFIG)
     if proc.returncode != 0:
         logs = "\n".join(f"== {p}\n{p.read_text()[-3000:]}" for p in sorted(work.glob("results/logs/**/*.log")))
         pytest.fail(f"snakemake failed ({proc.returncode}):\n{proc.stderr[-5000:]}\n{logs}")
@@ -47,6 +50,19 @@ def ci_dataset(ci_run):
 
 
 # --------------------------------------------------------------------------- pipeline
+def test_default_target_builds_the_static_wire_study_and_the_rve_table(tmp_path):
+    """`snakemake` without a target (the README's main line) plans both groups of the CI
+    config's default_targets: the static-wire study's report and the RVE table's."""
+    pytest.importorskip("snakemake")
+    work = workflow_copy(tmp_path)
+    proc = _snakemake(work, "-n", "--configfile", CI_CONFIG, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    jobs = {line.split()[0]: int(line.split()[1]) for line in proc.stdout.splitlines()
+            if len(line.split()) == 2 and line.split()[1].isdigit()}
+    assert jobs.get("static_wire_point") == 7 and jobs.get("static_wire_report") == 1, jobs
+    assert jobs.get("rve_gather") == 1 and jobs.get("rve_report") == 1 and jobs.get("rve_exports") == 1, jobs
+
+
 def test_pipeline_outputs(ci_run):
     res = ci_run / "results"
     for rel in ("verification/static_wire.nc", "verification/static_wire_radius.png",
