@@ -5,7 +5,7 @@ tests/test_rve_friction_al_periodic.py), run at more step sizes or angles than t
     python benchmarks/friction_path_checks.py cycle      # tiny cell, mu = 0.3: work - dPi against D, 4/8/16 steps per leg
     python benchmarks/friction_path_checks.py branch     # tiny cell: the energy test's miss at 3 step sizes, mu = 0.1, 0.3
     python benchmarks/friction_path_checks.py transient  # tiny cell, mu = 0.3: the stick transient at the loading start
-    python benchmarks/friction_path_checks.py rotation   # periodic 2 x 2 stacked cell turned by 0.05 and 0.2 rad, mu = 0.3, both frames
+    python benchmarks/friction_path_checks.py rotation [--geometry G --order p]   # periodic 2 x 2 stacked cell turned by 0.05 and 0.2 rad, mu = 0.3, both frames
     python benchmarks/friction_path_checks.py weave [--run R] [--mu 0.3] [--steps 3] [--start-up F]   # the frictional one-path test on a run
 """
 from __future__ import annotations
@@ -87,14 +87,21 @@ def transient():
 
 def rotation():
     """Both frames of the law (``friction.frame``: chord, the position-based one; section, the
-    - cross-section's)."""
+    - cross-section's). ``--geometry G --order p``: the contact geometry and mesh order
+    (default the chords at p = 1)."""
+    import argparse
+
     import test_rve_friction_al_periodic as T
 
+    ap = argparse.ArgumentParser(prog="friction_path_checks.py rotation")
+    ap.add_argument("--geometry", default="chord", choices=["chord", "curve", "smooth"])
+    ap.add_argument("--order", type=int, default=1)
+    a = ap.parse_args(sys.argv[2:])
     for frame in ("chord", "section"):
         for theta in (0.05, 0.2):
-            P0, R, P_pred, P_solved, t_pred = T._rotation(0.3, theta, frame=frame)
+            P0, R, P_pred, P_solved, t_pred = T._rotation(0.3, theta, frame=frame, geometry=a.geometry, order=a.order)
             sc = np.abs(P0).max()
-            print(f"frame {frame}, theta = {theta} rad: |P - R P0| / |P0| = {np.abs(P_pred - R @ P0).max() / sc:.2e} "
+            print(f"{a.geometry}, p = {a.order}, frame {frame}, theta = {theta} rad: |P - R P0| / |P0| = {np.abs(P_pred - R @ P0).max() / sc:.2e} "
                   f"at the turned state, {np.abs(P_solved - R @ P0).max() / sc:.2e} after the static solve; largest "
                   f"friction force at the turned state {t_pred:.3e} N")
 

@@ -24,10 +24,11 @@ ATOL = 1e-9
 STACKED = [2, 2]
 
 
-def _scene(boundary, enforcement, mu, substeps=2, rows=(1,), frame=None, **strain):
+def _scene(boundary, enforcement, mu, substeps=2, rows=(1,), frame=None, geometry="chord", order=1, **strain):
     scene = {"scene": "rve", "boundary": boundary, "fabric": {"kind": "plain", "rows": list(rows)},
-             "mesh": {"elements": 6},
-             "contact": {"onset": 0.05, "penalty": 50.0, "enforcement": enforcement, "al_tolerance": TOL},
+             "mesh": {"elements": 6, "order": order},
+             "contact": {"onset": 0.05, "penalty": 50.0, "enforcement": enforcement, "al_tolerance": TOL,
+                         "geometry": geometry},
              "relaxation": {"static_atol": ATOL},
              "strain": {"modes": ["shear"], "total": 0.1, "steps": 2, "static_atol": ATOL, "follow_branch": False,
                         "path": "quasi_static", "substeps": substeps, **strain},
@@ -365,6 +366,23 @@ def _image_points(record):
     return np.flatnonzero((np.asarray(record["keys"])[:, 3:5] != 0).any(axis=1))
 
 
+@pytest.mark.parametrize("frame", ["chord", "section"])
+def test_a_periodic_cell_on_the_smooth_curve_starts_its_history_with_no_elastic_gap(frame):
+    """A periodic system built at a state starts every point's friction history there with
+    no elastic gap, so no point carries a friction force at that state. On the C¹ curve the
+    wraps join the curves across the seams, so a history from the plain cell's first map
+    (before the wraps) would hold other closest points near the fibril ends."""
+    from rve.homogenisation.periodic import periodic_system
+    from rve.solvers.system import friction_of
+
+    cfg = _cfg("periodic", "penalty", 0.3, rows=STACKED, frame=frame, **CURVES[1])
+    fab, mesh, x0, _, _ = _relaxed(cfg)
+    psys = periodic_system(cfg, fab, mesh, x0, np.eye(3), friction=True)
+    st = friction_of(psys).state(psys.restrict(x0.reshape(-1)))
+    assert (st.normal > 0).sum() > 100
+    assert np.abs(st.t).max() <= 1e-12 * st.normal.max()
+
+
 def test_periodic_history_of_a_pair_across_a_cell_face_is_carried_by_key():
     """After a periodic shear step with friction some points of pairs with a periodic image
     (a lattice translation in the key) carry a friction force; a system built from scratch
@@ -455,17 +473,18 @@ def test_periodic_al_friction_jobs_resume_bit_identical(tmp_path):
     assert sa.reaction_force == sb.reaction_force
 
 
-def _rotation(mu, theta=0.05, frame=None):
+def _rotation(mu, theta=0.05, frame=None, **geometry):
     """The relaxed periodic cell turned rigidly by ``theta`` about z (F = R, the affine map
     about the held node), friction from the relaxed history; ``(P0, R, P at the turned
-    state, P after the static solve, the friction force there)``."""
+    state, P after the static solve, the friction force there)`` (``geometry``: the contact
+    geometry and mesh order, ``_scene``'s keys)."""
     from rve.homogenisation.cell_statics import static_minimize
     from rve.homogenisation.multipliers import equilibrium
     from rve.homogenisation.periodic import _affine_predictor, periodic_system
     from rve.homogenisation.strain import seed_friction
     from rve.solvers.system import friction_of
 
-    cfg = _cfg("periodic", "penalty", mu, rows=STACKED, frame=frame)
+    cfg = _cfg("periodic", "penalty", mu, rows=STACKED, frame=frame, **geometry)
     fab, mesh, x0, _, fr0 = _relaxed(cfg)
     p0 = periodic_system(cfg, fab, mesh, x0, np.eye(3))
     P0 = p0.macro_stress(p0.restrict(x0.reshape(-1)))
@@ -509,13 +528,17 @@ def test_rigid_rotation_with_friction_gives_the_frictionless_macro_stress():
     assert np.abs(P_solved - R @ P0).max() <= 1e-6 * np.abs(P0).max()
 
 
-@pytest.mark.parametrize("theta", [0.05, 0.3])
-def test_rigid_rotation_with_the_section_frame_gives_the_frictionless_macro_stress(theta):
+#: the contact geometries and mesh orders the section frame is checked on beyond the chords at p = 1
+CURVES = [{"geometry": "curve", "order": 2}, {"geometry": "smooth", "order": 2}]
+
+
+@pytest.mark.parametrize("theta, geometry", [(0.05, {}), (0.3, {}), (0.3, CURVES[1])])
+def test_rigid_rotation_with_the_section_frame_gives_the_frictionless_macro_stress(theta, geometry):
     """With the anchor carried by the - cross-section's frame (``friction.frame: section``)
     the rigidly turned cell has no friction force, before or after the solve, and P = R P0 to
-    round-off, the twist about the tilted chords included."""
-    P0, R, P_pred, P_solved, t_pred = _rotation(0.3, theta, frame="section")
-    t_chord = _rotation(0.3, theta)[4]          # the position-based law's spurious slip force there
+    round-off, the twist about the tilted chords included (on the C¹ curve at p = 2 too)."""
+    P0, R, P_pred, P_solved, t_pred = _rotation(0.3, theta, frame="section", **geometry)
+    t_chord = _rotation(0.3, theta, **geometry)[4]   # the position-based law's spurious slip force there
     scale = np.abs(P0).max()
     assert t_pred <= 1e-9 * t_chord
     assert np.abs(P_pred - R @ P0).max() <= 1e-10 * scale
@@ -552,15 +575,50 @@ def test_section_frame_tangent_of_the_assembled_system():
     assert np.abs(Fx.toarray()[np.ix_(other, g1)]).max() > 0
 
 
-@pytest.mark.parametrize("boundary", ["pinned", "periodic"])
-def test_section_frame_matrices_leave_out_only_the_structural_zeros(boundary):
+@pytest.mark.parametrize("boundary, geometry", [("pinned", CURVES[0]), ("periodic", CURVES[1])])
+def test_section_frame_tangent_on_the_curves(boundary, geometry):
+    """The section frame on the curve geometries at p = 2 (the section node the - element's
+    middle one): after a frictional step, at a trial state off it with points in stick and in
+    slip, the assembled tangent's columns of the centroids and g1 of the local nodes of rows
+    in contact match central differences (their error falls as eps²: 1e-8 here), and the
+    section node's g1 couples to the other side."""
+    from rve.homogenisation.strain import strain_step
+    from rve.testing import fd_jacobian
+
+    cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1, frame="section", **geometry)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    assert info["converged"]
+    xs = np.asarray(x1, float).reshape(-1)
+    x = xs + np.random.default_rng(3).normal(size=xs.size) * 1e-5
+    fr, term = system.term.friction, system.term
+    system.rebuild(x)
+    st = fr.state(x)
+    assert st.stick.any() and st.slip.any()
+    rows = np.flatnonzero((st.stick | st.slip).any(axis=1))[:4]
+    ps, conn = term.passes, mesh.conn
+    a_nodes, b_nodes = ps.side_nodes(conn, ps.a_elem[rows]), ps.side_nodes(conn, ps.b_elem[rows])
+    nodes = np.unique(np.concatenate([a_nodes.ravel(), b_nodes.ravel()]))
+    cols = np.concatenate([system.layout.dofs("r", nodes), system.layout.dofs("g1", nodes)])
+    w = np.zeros(system.n)
+    F, Fx, _ = system.evaluate(x, w, 0.0)
+    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], x, cols, eps=1e-8)
+    A = Fx.toarray()[:, cols]
+    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    section = conn[ps.b_elem[rows], fr.section_node()]
+    g1, other = system.layout.dofs("g1", section), system.layout.dofs("r", a_nodes.ravel())
+    assert np.abs(Fx.toarray()[np.ix_(other, g1)]).max() > 0
+
+
+@pytest.mark.parametrize("boundary, geometry", [("pinned", {}), ("periodic", {}), ("periodic", CURVES[1])])
+def test_section_frame_matrices_leave_out_only_the_structural_zeros(boundary, geometry):
     """With ``friction.frame: section`` the contact blocks widened by g1 are handed out on the
     entries the forms can fill (``ContactTerm.local_sparsity``, ``UnionPattern.restrict``):
     the tangent equals the one on the whole widened union entry by entry (nothing filled was
     left out), with the exact law and at frozen loads, on fewer stored entries."""
     from rve.homogenisation.strain import strain_step
 
-    cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1, frame="section")
+    cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1, frame="section", **geometry)
     fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
     x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
     assert info["converged"]

@@ -13,8 +13,8 @@ Contract
 * :class:`RVEFrictionSection`: the RVE's ``friction`` section, the above plus ``frame``, the
   frame the anchor of the stick history turns with: ``chord`` (default; the position-based
   law, the - direction's smallest rotation) or ``section`` (the - cross-section's frame from
-  its first director, objective under every rotation; built for ``contact.geometry: chord``
-  at ``mesh.order: 1``; docs/contact.md "Objectivity").
+  the first director of one node of the - element, objective under every rotation; on
+  every contact geometry and mesh order; docs/contact.md "Objectivity").
 * :class:`ImpactFrictionSection`: the impact's ``friction`` section, the above plus
   ``projectile`` mu_p of the projectile-fibril sphere contact (0 <= mu_p <= 2, default 0:
   frictionless; its own key, not the fibrils' coefficient: docs/impact.md "Friction at the
@@ -79,8 +79,8 @@ class FrictionSection(Section):
 class RVEFrictionSection(FrictionSection):
     frame: Literal["chord", "section"] = Field(
         "chord", description="frame the stick history's anchor turns with: chord (position-based) or section (the - "
-                             "cross-section's, from its first director: objective under every rotation; contact.geometry "
-                             "chord at mesh.order 1)")
+                             "cross-section's, from the first director of a node of the - element: objective under every "
+                             "rotation)")
 
 
 class ImpactFrictionSection(FrictionSection):

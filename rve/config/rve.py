@@ -317,13 +317,6 @@ class RVEConfig(SceneConfig):
         return self
 
     @model_validator(mode="after")
-    def _section_frame_is_built(self):
-        if self.friction.frame == "section" and (self.contact.geometry != "chord" or self.mesh.order != 1):
-            raise ValueError(f"friction.frame = 'section' is built for contact.geometry = 'chord' at mesh.order = 1, "
-                             f"got contact.geometry = {self.contact.geometry!r}, mesh.order = {self.mesh.order}")
-        return self
-
-    @model_validator(mode="after")
     def _unique_probe_names(self):
         names = [p.name for p in self.probes]
         if len(set(names)) != len(names):

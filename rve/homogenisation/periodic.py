@@ -98,9 +98,11 @@ def periodic_system(cfg, fab, mesh, x_full, F, damping: float = 0.0, params=None
     full = ContactSystem(base, params, x_full)
     ties = cell_ties(fab, mesh)
     psys = PeriodicSystem(full, ties, gauge_dofs(ties, mesh), 0.0, F=F, contact_images=cfg.cell.contact_images)
+    fr = friction_of(psys)
+    if fr is not None:   # the plain cell's first map had no wraps: on the C¹ curve its ends differ
+        fr.forget()
     # the map at the state the reduced dofs describe (the images where F puts them)
     psys.rebuild(psys.restrict(x_full))
-    fr = friction_of(psys)
     if fr is not None:
         fr.set_families([fab.yarns[int(y)].direction for y in fab.fibril_yarn])
     return psys

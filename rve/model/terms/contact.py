@@ -218,19 +218,20 @@ class ContactTerm:
     def local_sparsity(self):
         """The entries of a pair's local blocks (m, nC, m, nC) its forms can fill, or None
         (all of them): with the section frame's friction the normal forms fill their own
-        components and the friction the centroids of the chord ends and g1 of the - element's
-        section node (``FrictionTerm.SECTION_NODE``), so the other director entries of the
-        widened blocks are structural zeros (``UnionPattern.restrict``)."""
+        components and the friction the centroids of the chord ends (on the curves of every
+        local node) and g1 of the - element's section node (``FrictionTerm.
+        section_positions``), so the other director entries of the widened blocks are
+        structural zeros (``UnionPattern.restrict``)."""
         if self._normal_cols is None or self.friction is None or not self.friction.frame:
             return None
         m, nC, cols = self.m, self.nC, self._normal_cols
         mask = np.zeros((m, nC, m, nC), bool)
         mask[np.ix_(range(m), cols, range(m), cols)] = True
-        ends, r, g1 = np.asarray(self.endpos), np.arange(3), np.arange(3, 6)
-        sec = int(ends[self.friction.SECTION_NODE])
-        mask[np.ix_([sec], g1, ends, r)] = True
-        mask[np.ix_(ends, r, [sec], g1)] = True
-        mask[np.ix_([sec], g1, [sec], g1)] = True
+        nodes = np.arange(m) if self.curve else np.asarray(self.endpos)
+        r, g1, sec = np.arange(3), np.arange(3, 6), self.friction.section_positions()
+        mask[np.ix_(sec, g1, nodes, r)] = True
+        mask[np.ix_(nodes, r, sec, g1)] = True
+        mask[np.ix_(sec, g1, sec, g1)] = True
         return mask
 
     def set_periodic(self, images=None, wrap=None, field_jumps=None, lattice=None) -> None:

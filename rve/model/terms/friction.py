@@ -91,7 +91,8 @@ class FrictionLaw:
     stiffness: float = 1.0
     pairs: tuple = ()
     #: the frame the anchor turns with: "chord" (the - direction's smallest rotation) or
-    #: "section" (the - cross-section's frame from its first director; the chord geometry at p = 1)
+    #: "section" (the - cross-section's frame from the first director of the - element's
+    #: section node, ``FrictionTerm.section_node``)
     frame: str = "chord"
 
     def __post_init__(self):
@@ -179,9 +180,6 @@ class FrictionTerm:
         #: frame, ``m_ref`` (rows, G, 3) its first director's unit part across ``d_ref`` then
         self.frame = law.frame == "section"
         self.m_ref = None
-        if self.frame and (contact.curve or contact.mesh.order != 1):
-            raise ValueError("friction frame 'section' is built for the chord geometry at mesh order 1 (the pairs' "
-                             "local nodes the chord ends)")
         #: energy dissipated by slip over the committed states (N mm)
         self.dissipated = 0.0
         self.mu_pair = np.zeros(0)
@@ -274,27 +272,69 @@ class FrictionTerm:
         return np.concatenate([Xa, Xb], axis=1)
 
     def _directors(self, x, rows) -> np.ndarray:
-        """The rows' chord ends' first directors g1 (n, 4, 3) at ``x`` (no periodic shift: an
-        image is a translated copy)."""
+        """The rows' local nodes' first directors g1 (n, M, 3) at ``x``, in the layout of
+        ``_local`` (no periodic shift: an image is a translated copy)."""
         c = self.contact
         g = c.layout.as_nodal(np.asarray(x, float))[:, 3:6]
-        return np.stack([g[c.map.nodes_plus[rows, 0]], g[c.map.nodes_plus[rows, 1]], g[c.map.nodes_minus[rows, 0]],
-                         g[c.map.nodes_minus[rows, 1]]], axis=1)
+        if not c.curve:
+            return np.stack([g[c.map.nodes_plus[rows, 0]], g[c.map.nodes_plus[rows, 1]],
+                             g[c.map.nodes_minus[rows, 0]], g[c.map.nodes_minus[rows, 1]]], axis=1)
+        ps, conn = c.passes, c.mesh.conn
+        return np.concatenate([g[ps.side_nodes(conn, ps.a_elem[rows])], g[ps.side_nodes(conn, ps.b_elem[rows])]],
+                              axis=1)
 
     #: the chord's local node whose g1 the section frame reads: the - element's first node
     SECTION_NODE = 2
 
-    @classmethod
-    def _section_weights(cls, s):
-        """The - element's section director, its first node's g1 (local node
-        ``SECTION_NODE``), at every ``s``: ``(gw, d gw/ds)`` (n, G, 4)."""
-        w = np.zeros(np.shape(s) + (4,))
-        w[..., cls.SECTION_NODE] = 1.0
-        return w, np.zeros_like(w)
+    def section_node(self) -> int:
+        """The node of a - element whose g1 the section frame reads, as an index into the
+        element's nodes: its first on the chords (a chord end); on the curves the one nearest
+        the element's middle (``order // 2``: the first at p = 1, the middle one at p = 2)."""
+        return self.contact.mesh.order // 2 if self.contact.curve else 0
+
+    def section_slots(self, rows) -> np.ndarray:
+        """(n,) the position of each row's section node among its local nodes (``_local``):
+        ``SECTION_NODE`` on the chords; on the curves b's side, after a's ``width`` nodes (on
+        the C¹ curve the node's slot in b's stencil)."""
+        c = self.contact
+        rows = np.asarray(rows, np.int64)
+        if not c.curve:
+            return np.full(rows.size, self.SECTION_NODE, np.int64)
+        ps, k = c.passes, self.section_node()
+        width = ps.width(c.mesh.conn.shape[1])
+        slot = np.full(rows.size, k, np.int64) if ps.stencil is None else ps.stencil.own[ps.b_elem[rows], k]
+        return width + slot
+
+    def section_positions(self) -> np.ndarray:
+        """The positions among a pair's local nodes (the contact term's ``m``) where a section
+        node can sit: the - chord end ``a-`` on the chords; on the curves the section slots
+        of both halves (each half pass presses one side on the other: either element is a
+        row's - side), every slot a stencil gives it."""
+        c = self.contact
+        if not c.curve:
+            return np.array([c.endpos[self.SECTION_NODE]], np.int64)
+        ps, k = c.passes, self.section_node()
+        width = ps.width(c.mesh.conn.shape[1])
+        slots = np.array([k]) if ps.stencil is None else np.unique(ps.stencil.own[:, k])
+        return np.concatenate([slots, width + slots]).astype(np.int64)
+
+    def _section_weights(self, rows):
+        """``s -> (gw, d gw/ds)`` (n, G, M): the weights of the rows' section director, the g1
+        of their - element's section node (``section_slots``), the same at every ``s``."""
+        slots = self.section_slots(rows)
+        M = 4 if not self.contact.curve else 2 * self.contact.passes.width(self.contact.mesh.conn.shape[1])
+
+        def weights(s):
+            w = np.zeros(np.shape(s) + (M,))
+            np.put_along_axis(w, np.broadcast_to(slots.reshape((-1,) + (1,) * np.ndim(s)), np.shape(s) + (1,)), 1.0,
+                              axis=-1)
+            return w, np.zeros_like(w)
+        return weights
 
     def _section_m(self, x, rows, d):
         """``b_hat`` (n, G, 3): the unit part across ``d`` (n, G, 3) of the rows' section g1."""
-        g = self._directors(x, rows)[:, 2][:, None, :]
+        rows = np.asarray(rows, np.int64)
+        g = self._directors(x, rows)[np.arange(rows.size), self.section_slots(rows)][:, None, :]
         return section_frame(d, np.broadcast_to(g, d.shape))[0]
 
     def _s_plus(self, rows) -> np.ndarray:
@@ -393,6 +433,12 @@ class FrictionTerm:
         if self._frozen is not None:
             self._frozen = self._loads_by_key(old_keys, self._frozen)
 
+    def forget(self) -> None:
+        """Drop the history's point keys: the next map rebuild starts every point anew, with
+        no elastic gap at its state (a history started on a map of other curves, e.g. before a
+        periodic cell's wraps joined the C¹ curves across the seams, is not carried)."""
+        self.keys = None
+
     def _loads(self, geo, rows):
         c = self.contact
         w = np.asarray(c.weight[rows], float)
@@ -412,7 +458,7 @@ class FrictionTerm:
         if self.frame:
             return frame_friction_state(geo, self._local(x, rows), self._directors(x, rows), self.s_bar[rows],
                                         self.anchor[rows], self.d_ref[rows], self.m_ref[rows], f, kT, self._mu(rows),
-                                        self._section_weights)
+                                        self._section_weights(rows))
         return friction_state(geo, self._local(x, rows), self.s_bar[rows], self.anchor[rows], f, kT, self._mu(rows),
                               d_ref=self.d_ref[rows])
 
@@ -428,7 +474,7 @@ class FrictionTerm:
         if self.frame:
             Gl = self._directors(x, rows)
             st = frame_friction_state(geo, X, Gl, self.s_bar, self.anchor, self.d_ref, self.m_ref, f, kT,
-                                      self._mu(rows), self._section_weights)
+                                      self._mu(rows), self._section_weights(rows))
         else:
             st = friction_state(geo, X, self.s_bar, self.anchor, f, kT, self._mu(rows), d_ref=self.d_ref)
         self._committed_loads = (np.array(self.keys, np.int64), np.array(f, float), np.array(geo.n, float),
@@ -440,7 +486,7 @@ class FrictionTerm:
         D = geo.direction_weights(geo.s_minus)
         if self.frame:
             self.m_ref = st.m_ref
-            gw = self._section_weights(geo.s_minus)[0]
+            gw = self._section_weights(rows)(geo.s_minus)[0]
             Dw, Jd, d, gw, Jg, g = frame_frozen_turn(X, Gl, D, gw, geo.n, geo.rho, geo.active)
             anchor_f = self.anchor - np.einsum("pgij,pgj->pgi", Jd, d) - np.einsum("pgij,pgj->pgi", Jg, g)
             self._committed_history = (self.s_bar.copy(), anchor_f, self.d_ref.copy(), Jd, Dw, self.m_ref.copy(),
@@ -519,7 +565,7 @@ class FrictionTerm:
         sb = (S - seam * length[fib] - S0[em[r]]) / h[em[r]]
         if self.frame:
             e = frame_tangential_gap(geo, X, self._directors(x, rows), self.s_bar, self.anchor, self.d_ref,
-                                     self.m_ref, self._section_weights).reshape(-1, 3)[d]
+                                     self.m_ref, self._section_weights(rows)).reshape(-1, 3)[d]
         else:
             e = tangential_gap(geo, X, self.s_bar, self.anchor, self.d_ref).reshape(-1, 3)[d]
         pr = r // G
@@ -645,12 +691,13 @@ class FrictionTerm:
             X = self._local(x, sel)
             if self.frame:
                 Gl = self._directors(x, sel)
-                gw = self._section_weights(sm)[0]
+                section = self._section_weights(sel)
+                gw = section(sm)[0]
                 Dw[sel], Jd[sel], d, extra["gw"][sel], extra["Jg"][sel], g = frame_frozen_turn(
                     X, Gl, geo.direction_weights(sm), gw, geo.n, geo.rho, geo.active)
                 s_bar[sel], a_sel, d_ref[sel], extra["m_ref"][sel] = frame_moved_history(
                     X, Gl, self.s_bar[sel], self.anchor[sel], self.d_ref[sel], self.m_ref[sel], sm,
-                    geo.material_weights, geo.direction_weights, lambda s: self._section_weights(s)[0])
+                    geo.material_weights, geo.direction_weights, lambda s: section(s)[0])
                 anchor[sel] = (a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
                                - np.einsum("pgij,pgj->pgi", extra["Jg"][sel], g))
             else:
@@ -802,9 +849,9 @@ class FrictionTerm:
         f, kN, kT = self._loads(geo, rows)
         X = self._local(x, rows)
         if self.frame:   # the section frame's law (numpy forms), in centroids and g1
-            return frame_friction_forces(geo, X, self._directors(x, rows), self.s_bar[rows], self.anchor[rows],
-                                         self.d_ref[rows], self.m_ref[rows], f, kN, kT, self._mu(rows),
-                                         self._section_weights, jacobian)
+            return self._fold(*frame_friction_forces(geo, X, self._directors(x, rows), self.s_bar[rows],
+                                                     self.anchor[rows], self.d_ref[rows], self.m_ref[rows], f, kN, kT,
+                                                     self._mu(rows), self._section_weights(rows), jacobian))
         if use_numba():   # the compiled law (rve.kernels.friction): the same arrays
             from ...kernels.friction import friction_forces as compiled
 
