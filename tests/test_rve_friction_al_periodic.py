@@ -523,7 +523,7 @@ def test_rigid_rotation_with_friction_gives_the_frictionless_macro_stress():
     turned cell should carry no friction force and P = R P0 (the friction forces of pairs across
     the faces enter P as the normal forces of those pairs do, so any spurious slip shows
     there)."""
-    P0, R, _, P_solved, t_pred = _rotation(0.3)
+    P0, R, _, P_solved, t_pred = _rotation(0.3, frame="chord")
     assert t_pred > 0
     assert np.abs(P_solved - R @ P0).max() <= 1e-6 * np.abs(P0).max()
 
@@ -538,7 +538,7 @@ def test_rigid_rotation_with_the_section_frame_gives_the_frictionless_macro_stre
     the rigidly turned cell has no friction force, before or after the solve, and P = R P0 to
     round-off, the twist about the tilted chords included (on the C¹ curve at p = 2 too)."""
     P0, R, P_pred, P_solved, t_pred = _rotation(0.3, theta, frame="section", **geometry)
-    t_chord = _rotation(0.3, theta, **geometry)[4]   # the position-based law's spurious slip force there
+    t_chord = _rotation(0.3, theta, frame="chord", **geometry)[4]   # the position-based law's slip force there
     scale = np.abs(P0).max()
     assert t_pred <= 1e-9 * t_chord
     assert np.abs(P_pred - R @ P0).max() <= 1e-10 * scale
@@ -608,6 +608,30 @@ def test_section_frame_tangent_on_the_curves(boundary, geometry):
     section = conn[ps.b_elem[rows], fr.section_node()]
     g1, other = system.layout.dofs("g1", section), system.layout.dofs("r", a_nodes.ravel())
     assert np.abs(Fx.toarray()[np.ix_(other, g1)]).max() > 0
+
+
+def test_section_frame_term_with_no_pair_in_contact():
+    """The section frame's widened blocks with no pair in contact (the map built at the relaxed
+    cell, the fibrils then moved apart across the plane): the residual and tangent are the
+    frictionless system's, no contact force at all."""
+    from rve.homogenisation.strain import mech_system
+
+    cfg = _cfg("pinned", "penalty", 0.3, frame="section")
+    fab, mesh, x0, _, _ = _relaxed(cfg)
+    xf = np.asarray(x0, float).reshape(-1)
+    far = np.asarray(x0, float).copy()
+    far[:, 2] *= 4.0                      # the crossings' gaps opened fourfold
+    far = far.reshape(-1)
+    with_friction = mech_system(fab, mesh, cfg, 0.0, xf)
+    frictionless = mech_system(fab, mesh, cfg, 0.0, xf, friction=False)
+    assert with_friction.term.map.n_pairs > 0 and with_friction.term.friction.frame
+    w = np.zeros(with_friction.n)
+    for jac in (False, True):
+        F, Fx, _ = with_friction.evaluate(far, w, 0.0, jacobian=jac)
+        F0, Fx0, _ = frictionless.evaluate(far, w, 0.0, jacobian=jac)
+        np.testing.assert_allclose(F, F0, rtol=0, atol=1e-12 * np.abs(F0).max())
+        if jac:
+            assert abs(Fx - Fx0).max() <= 1e-12 * abs(Fx0).max()
 
 
 @pytest.mark.parametrize("boundary, geometry", [("pinned", {}), ("periodic", {}), ("periodic", CURVES[1])])

@@ -600,7 +600,7 @@ class ContactTerm:
         Rl = np.zeros((P, m, nC))
         Rl[:, :, cols] = np.asarray(R, float).reshape(P, m, cols.size)
         if not jacobian:
-            return act, Rl.reshape(P, -1), None, None
+            return act, Rl.reshape(P, m * nC), None, None
         # the normal components are two runs, the centroids and the fields after the directors
         runs = [(slice(0, 3), slice(0, 3)), (slice(3, cols.size), slice(int(cols[3]) if cols.size > 3 else nC, nC))]
         out = []
@@ -613,8 +613,8 @@ class ContactTerm:
             for a_src, a_dst in runs:
                 for b_src, b_dst in runs:
                     B[:, :, a_dst, :, b_dst] = A[:, :, a_src, :, b_src]
-            out.append(B.reshape(P, -1))
-        return act, Rl.reshape(P, -1), out[0], out[1]
+            out.append(B.reshape(P, (m * nC) ** 2))
+        return act, Rl.reshape(P, m * nC), out[0], out[1]
 
     def _normal_forms(self, x, w, jacobian: bool):
         none = np.zeros(0, np.int64), np.zeros(0), None, None
