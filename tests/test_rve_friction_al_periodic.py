@@ -273,6 +273,56 @@ def test_provisional_re_solves_end_at_an_exact_root_of_the_full_loop(boundary, m
     assert dp == pytest.approx(df, rel=10 * tol)
 
 
+def test_stalled_provisional_re_solves_go_on_in_full_to_the_tolerance():
+    """With the section frame on the pinned cell at al_tolerance 1e-6 R the provisional
+    states' own error sets an overlap floor above the tolerance (1e-5 to 1.5e-4 R from the
+    eighth update on, so 20 provisional updates ended at 8.4e-6 R, not met): the provisional
+    solves stall (``provisional_stalled``) and full re-solves take the overlap below the
+    tolerance, at an exact root of the held history."""
+    from rve.config import validate_config
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import strain_step
+
+    scene = _scene("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
+    tol = scene["contact"]["al_tolerance"] = 0.1 * TOL
+    cfg = validate_config(scene)
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    al = info["static"]["augmented_lagrangian"]
+    assert info["converged"] and al["met"] and al["provisional_stalled"]
+    assert 0 < al["provisional_solves"] < al["solves"] and al["updates"] < 20
+    assert system.max_penetration(np.asarray(x, float).reshape(-1)) <= tol
+    assert _fresh_residual(cfg, fab, mesh, x, multiplier_record(system), fr0) <= ATOL
+
+
+class _Loop:
+    """The history and penalties of an ``AugmentedLagrangian`` after its updates."""
+
+    def __init__(self, overlaps, penalties, penalty0=50.0):
+        self.history = list(enumerate(overlaps))
+        self.penalties = list(penalties)
+        self.penalty0 = penalty0
+
+
+def test_provisional_stall_counts_the_updates_at_the_final_penalty_only():
+    """``provisional_stalled``: three solves at the current P* without a new smallest overlap
+    there stall the provisional solves; rises while P* still grew do not count, and a new
+    smallest overlap among the last three does not stall."""
+    from rve.homogenisation.multipliers import provisional_stalled
+
+    # P* grew for the solves 1-3 (their overlaps rise and fall), then stays at 800
+    grow = ([8e-3, 1.6e-3, 4e-3, 2e-3], [200.0, 800.0, 800.0, 800.0])
+    assert not provisional_stalled(_Loop(*grow))
+    # at 800: 2e-3 (solve 3, the first at 800), 5e-4, 1.7e-5, then 1.3e-4, 6e-5, 1.5e-4
+    stalled = ([8e-3, 1.6e-3, 4e-3, 2e-3, 5e-4, 1.7e-5, 1.3e-4, 6e-5, 1.5e-4],
+               [200.0] + [800.0] * 8)
+    assert provisional_stalled(_Loop(*stalled))
+    assert not provisional_stalled(_Loop(stalled[0][:-1], stalled[1][:-1]))     # only two after the minimum
+    assert not provisional_stalled(_Loop(stalled[0][:-1] + [1e-5], stalled[1]))  # a new minimum
+    # the same overlaps while P* still grew at every update: no stall
+    assert not provisional_stalled(_Loop(stalled[0], [50.0 * 2 ** k for k in range(1, 10)]))
+
+
 def test_held_loads_freeze_by_key_and_blend_as_the_mean():
     """``hold_loads(x)`` then ``freeze_held()`` freezes the loads ``loads_at(x)`` (after a
     rebuild at the same state, by point key); ``blend_frozen`` with weight 1/2 gives the mean

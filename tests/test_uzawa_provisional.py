@@ -95,6 +95,19 @@ def test_provisional_until_the_tolerance_then_the_full_solve_checked_again():
     assert sysm.friction_view.resolving is False and sysm.friction_view.provisional is False
 
 
+def test_provisional_solves_that_stall_give_way_to_full_re_solves():
+    """Three provisional states after the smallest overlap without a smaller one (their own
+    error is the floor): the next re-solves are full, and the loop ends at the tolerance."""
+    sysm = _System()
+    script = [(1e-2, True), (2e-3, True), (3e-4, True), (8e-4, True), (5e-4, True), (4e-4, True),
+              (2e-4, True), (5e-5, True)]
+    x, info, solve = _run(sysm, script)
+    assert solve.seen == [(False, True)] + [(True, True)] * 5 + [(True, False)] * 2
+    al = info["augmented_lagrangian"]
+    assert al["provisional_stalled"] and al["provisional_solves"] == 6 and al["met"] and x["n"] == 8
+    assert sysm.friction_view.provisional is False
+
+
 def test_the_full_solve_keeps_the_raised_penalty_until_the_loop_ends(monkeypatch):
     """The loop raises P* where an update leaves more than a quarter of the overlap; the full
     solve after the provisional state that met the tolerance runs at that P*, and P* is back

@@ -46,7 +46,9 @@ record untouched, so the penalty path is bit-identical.
   ``info["provisional"]``): the first solve and the re-solves, until a provisional state
   meets the tolerance (or the updates run out). That state's equilibrium at its multipliers
   and P* (not yet back at the configured one) is then solved in full and checked again; the
-  loop goes on with full re-solves where it does not meet the tolerance. A provisional solve
+  loop goes on with full re-solves where it does not meet the tolerance, and also once the
+  provisional solves stall (``provisional_stalled``: ``PROVISIONAL_STALL`` updates at the final
+  P* without a smaller overlap; ``info["augmented_lagrangian"]["provisional_stalled"]``). A provisional solve
   that fails is replaced by the full solve from its start. Where the loop had raised P*,
   that full solve runs without the frictional fallback (``FrictionTerm.fallback``), and if
   it fails it is solved again from the same start at the configured P* (the line loads
@@ -72,6 +74,30 @@ log = logging.getLogger("rve.homogenisation.multipliers")
 #: first predictor stage alone (``FrictionTerm.provisional``); the state that meets the
 #: tolerance is then solved in full at its multipliers and checked again (module docstring)
 PROVISIONAL_RESOLVES = True
+
+#: provisional solves end, and the loop goes on with full re-solves, once this many
+#: consecutive updates at the final P* have not lowered the smallest overlap of the updates
+#: at that P*: the provisional states' own error is then the floor of the overlap
+PROVISIONAL_STALL = 3
+
+
+def provisional_stalled(loop, stall: int = PROVISIONAL_STALL) -> bool:
+    """True when, of the solves of the Uzawa ``loop`` (``AugmentedLagrangian``) at the P* of
+    its next solve, the last ``stall`` have none of their overlaps below the smallest of
+    the ones before them at that P*."""
+    if not loop.penalties:
+        return False
+    # the P* each overlap of the history was solved at: P*0, then P* after each update
+    solved_at = [loop.penalty0] + list(loop.penalties[:len(loop.history) - 1])
+    run = []
+    for (_, pen), P in zip(reversed(loop.history), reversed(solved_at)):
+        if P != loop.penalties[-1]:
+            break
+        run.append(pen)
+    run.reverse()
+    if len(run) <= stall:
+        return False
+    return min(run[-stall:]) >= min(run[:-stall])
 
 
 def _term(system):
@@ -115,7 +141,7 @@ def equilibrium(system, solve, x):
         "updates": int(loop.updates), "solves": run.solves, "tolerance": float(loop.tolerance),
         "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
         "penalties": [float(p) for p in loop.penalties], "solve_iterations": run.iterations,
-        "provisional_solves": run.provisional, "retries": run.retries,
+        "provisional_solves": run.provisional, "provisional_stalled": run.stalled, "retries": run.retries,
         "solve_wall_s": [float(t) for t in run.walls],
         "history": [[int(k), float(p)] for k, p in loop.history]}
     if pen > loop.tolerance:   # an equilibrium at these multipliers, not yet the impenetrable limit
@@ -131,6 +157,8 @@ class _Solves:
         self.solve = solve
         self.solves = self.provisional = self.retries = 0
         self.iterations, self.walls = [], []
+        #: True once the provisional solves stalled (``provisional_stalled``)
+        self.stalled = False
 
     def __call__(self, x):
         t0 = time.perf_counter()
@@ -166,6 +194,12 @@ def _uzawa(loop, fr, run, x):
                 retry = x if loop.raised else None
             else:
                 fr.resolving = True
+                if provisional_stalled(loop):
+                    log.info("augmented Lagrangian: %d provisional updates at P* = %g without a smaller overlap "
+                             "(%.2e R): full re-solves from here", PROVISIONAL_STALL, loop.system.penalty,
+                             loop.history[-1][1])
+                    fr.provisional = False
+                    run.stalled = True
             continue
         if not info.get("converged", False):
             if retry is None:
