@@ -11,10 +11,11 @@ Contract
   penalty relative to the normal one, > 0). ``law_args()`` is ``(coefficient, stiffness,
   ((family_a, family_b, mu), ...))``, the arguments of ``rve.model.terms.friction.FrictionLaw``.
 * :class:`RVEFrictionSection`: the RVE's ``friction`` section, the above plus ``frame``, the
-  frame the anchor of the stick history turns with: ``chord`` (default; the position-based
-  law, the - direction's smallest rotation) or ``section`` (the - cross-section's frame from
-  the first director of one node of the - element, objective under every rotation; on
-  every contact geometry and mesh order; docs/contact.md "Objectivity").
+  frame the anchor of the stick history turns with: ``section`` (default) or ``chord`` (the
+  position-based law, the - direction's smallest rotation). ``section`` is the -
+  cross-section's frame from the first director of one node of the - element, objective
+  under every rotation, on every contact geometry and mesh order (docs/contact.md
+  "Objectivity").
 * :class:`ImpactFrictionSection`: the impact's ``friction`` section, the above plus
   ``projectile`` mu_p of the projectile-fibril sphere contact (0 <= mu_p <= 2, default 0:
   frictionless; its own key, not the fibrils' coefficient: docs/impact.md "Friction at the
@@ -78,9 +79,9 @@ class FrictionSection(Section):
 
 class RVEFrictionSection(FrictionSection):
     frame: Literal["chord", "section"] = Field(
-        "chord", description="frame the stick history's anchor turns with: chord (position-based) or section (the - "
-                             "cross-section's, from the first director of a node of the - element: objective under every "
-                             "rotation)")
+        "section", description="frame the stick history's anchor turns with: section (the - cross-section's, from the "
+                             "first director of a node of the - element: objective under every rotation) or chord "
+                             "(position-based: a twist of a - fibril at a sticking contact reads as slip)")
 
 
 class ImpactFrictionSection(FrictionSection):
