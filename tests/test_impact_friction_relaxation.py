@@ -83,10 +83,13 @@ def test_history_starts_without_gap_and_is_committed_every_step(monkeypatch):
     cfg = _cfg(FRICTIONAL)
     # the start: the first map rebuild gives every point its material point at the start
     # state, so no point carries a tangential force there although the crossings are loaded
+    # (with the section frame the anchor is taken apart in the section's frame and put back
+    # together: its rounding, a few eps of the anchor, the jump -j of ~2R, is left)
     p = impact.setup(cfg, "relax")
     ChunkedRebuild(p.system, 1.0, 1, 5, 0.15).rebuild(p.x0)
     st = p.friction.term.state(p.system.split(p.x0)[0])
-    assert st.normal.max() > 0 and np.abs(st.t).max() == 0.0
+    assert st.normal.max() > 0 and p.friction.term.frame
+    assert np.abs(st.e).max() <= 64 * np.finfo(float).eps * np.abs(st.anchor).max()
     committed = []
     real = DynamicFriction.commit
 

@@ -16,6 +16,9 @@ Contract
   cross-section's frame from the first director of one node of the - element, objective
   under every rotation, on every contact geometry and mesh order (docs/contact.md
   "Objectivity").
+* :class:`DynamicFrictionSection`: the induced deformation's ``friction`` section, the RVE's
+  (``frame`` included; the dynamic scenes' friction power and checkpoints carry the section
+  frame's director part: ``rve.scenes.dynamic_friction``).
 * :class:`ImpactFrictionSection`: the impact's ``friction`` section, the above plus
   ``projectile`` mu_p of the projectile-fibril sphere contact (0 <= mu_p <= 2, default 0:
   frictionless; its own key, not the fibrils' coefficient: docs/impact.md "Friction at the
@@ -39,7 +42,7 @@ from pydantic import Field, field_validator
 from .fields import Angle, Dimensionless, Force, Integer, Length, Penalty, SceneConfig, Section, Stress
 from .sections import Newton
 
-__all__ = ["FrictionSection", "RVEFrictionSection", "ImpactFrictionSection", "FIBRIL_FAMILIES", "MAX_FRICTION_COEFFICIENT", "CapstanConfig",
+__all__ = ["FrictionSection", "RVEFrictionSection", "DynamicFrictionSection", "ImpactFrictionSection", "FIBRIL_FAMILIES", "MAX_FRICTION_COEFFICIENT", "CapstanConfig",
            "FrictionCrossingConfig"]
 
 #: the fibril families a pair coefficient may name (the yarn directions of rve.fabrics)
@@ -84,7 +87,11 @@ class RVEFrictionSection(FrictionSection):
                              "(position-based: a twist of a - fibril at a sticking contact reads as slip)")
 
 
-class ImpactFrictionSection(FrictionSection):
+class DynamicFrictionSection(RVEFrictionSection):
+    """The ``friction`` section of the dynamic fabric scenes: the RVE's, ``frame`` included."""
+
+
+class ImpactFrictionSection(DynamicFrictionSection):
     projectile: Dimensionless = Field(
         0.0, ge=0, le=MAX_FRICTION_COEFFICIENT,
         description="Coulomb coefficient mu_p of the projectile-fibril (sphere) contact (0: none; not the fibrils' "

@@ -10,7 +10,7 @@ from typing import Literal, Optional, Union
 
 from pydantic import Field, field_validator, model_validator
 
-from .friction import FrictionSection
+from .friction import DynamicFrictionSection
 from .fields import (
     CircuitConductance, ContactConductance, CurrentDensity, Dimensionless, HeatTransferCoefficient, Integer, Length,
     MagneticField, Penalty, SceneConfig, Section, SeebeckCoefficient, SofteningRate, Temperature, Time, Velocity,
@@ -169,8 +169,8 @@ class InducedDeformationConfig(SceneConfig):
     mesh: LinearMesh
     time: InducedTime
     newton: InducedNewton
-    friction: FrictionSection = Field(
-        default_factory=FrictionSection,
+    friction: DynamicFrictionSection = Field(
+        default_factory=DynamicFrictionSection,
         description="Coulomb friction between fibrils (rve.config.friction; default mu = 0: frictionless)")
     output: SceneOutput
     end_temperature: Temperature = Field("0 K", description="T held at every fibril end")

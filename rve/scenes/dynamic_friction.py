@@ -20,7 +20,9 @@ Contract
   ``|t|^2 / (2 kT)`` of the tangential spring at that state.
 * ``on_step(inner)``: an ``on_step`` callable that commits, then calls ``inner``.
 * ``power(w)``: the power (W = mJ/ms) the friction forces of the last committed state take
-  from the motion ``w``: sum over the points of t . (v+ - v-) at their material points.
+  from the motion ``w``: sum over the points of t . (v+ - v-) at their material points, the
+  couple's forces on the - chord ends and, with the section frame (``friction.frame``), its
+  force on the - section's first director.
 * ``terms(w=None)`` -> ``{"friction_dissipated": D, "energy_friction": E, "power_friction":
   P}`` (mJ, mJ, W; ``P`` only with ``w``): ``D`` the energy dissipated since the start
   (``FrictionTerm.dissipated``, the work of the return maps' slip, plus the elastic energy
@@ -32,7 +34,7 @@ Contract
 * ``FrictionBalances(balances, friction)``: a balances callable whose dict has ``terms()``
   added.
 * ``arrays()`` -> the history as plain arrays (names ``friction/...``, for an npz
-  checkpoint); ``restore(x, arrays)``: after the map rebuild at the resumed state, the
+  checkpoint; the section frame's committed frames as ``friction/m_ref``); ``restore(x, arrays)``: after the map rebuild at the resumed state, the
   history as the uninterrupted run has it after its rebuild there (the points of the saved
   map by key, the new points as ``FrictionTerm.on_rebuild`` gives them).
 """
@@ -54,7 +56,7 @@ def contact_params_with_friction(params, section):
     if section is None:
         return params
     mu, stiffness, pairs = section.law_args()
-    law = FrictionLaw(mu, stiffness, pairs)
+    law = FrictionLaw(mu, stiffness, pairs, frame=getattr(section, "frame", "chord"))
     if not law.enabled:
         return params
     return dataclasses.replace(params, friction=law)
@@ -119,7 +121,8 @@ class DynamicFriction:
     def power(self, w) -> float:
         """The power the friction forces of the last committed state take from the motion
         ``w`` (W = mJ/ms): sum over the points of t . (v+ - v-) at the material points, and
-        of the couple's forces on the - chord ends."""
+        of the couple's forces on the - chord ends (with the section frame also its force
+        on the - section's first director)."""
         st, c = self.term.last, self.term.contact
         if st is None or st.t.size == 0 or c.map is None or c.row_pair.size != st.t.shape[0]:
             return 0.0
@@ -130,6 +133,9 @@ class DynamicFriction:
         p = float(np.einsum("pgk,pki,pgi->", cb, V, st.t))
         if st.couple is not None:   # the couple on the - chord ends (rve.physics.friction_forms)
             p += float(np.einsum("pgk,pki,pgi->", st.chord_weights, V, st.couple))
+        if st.director_couple is not None:   # and the section frame's on the - section's g1
+            Vg = self.term._directors(self.part(w), self.term._rows())
+            p += float(np.einsum("pgk,pki,pgi->", st.director_weights, Vg, st.director_couple))
         return p
 
     def terms(self, w=None) -> dict:
@@ -142,10 +148,13 @@ class DynamicFriction:
     # ------------------------------------------------------------------ checkpoints
     def arrays(self) -> dict:
         rec = self.term.record()
-        return {PREFIX + "keys": rec["keys"], PREFIX + "s_bar": rec["s_bar"], PREFIX + "anchor": rec["anchor"],
-                PREFIX + "d_ref": rec["d_ref"],
-                PREFIX + "dissipated": np.array(rec["dissipated"]), PREFIX + "released": np.array(self.released),
-                PREFIX + "energy_keys": self._keys, PREFIX + "energy": self._energy}
+        out = {PREFIX + "keys": rec["keys"], PREFIX + "s_bar": rec["s_bar"], PREFIX + "anchor": rec["anchor"],
+               PREFIX + "d_ref": rec["d_ref"],
+               PREFIX + "dissipated": np.array(rec["dissipated"]), PREFIX + "released": np.array(self.released),
+               PREFIX + "energy_keys": self._keys, PREFIX + "energy": self._energy}
+        if rec.get("m_ref") is not None:   # the section frame's committed frames
+            out[PREFIX + "m_ref"] = rec["m_ref"]
+        return out
 
     def restore(self, x, arrays) -> None:
         """The saved history on the map just rebuilt at ``x`` (module docstring)."""
@@ -153,6 +162,7 @@ class DynamicFriction:
         x = self.part(x)
         rec = {"keys": np.asarray(arrays[PREFIX + "keys"], np.int64), "s_bar": arrays[PREFIX + "s_bar"],
                "anchor": arrays[PREFIX + "anchor"], "d_ref": arrays[PREFIX + "d_ref"] if PREFIX + "d_ref" in arrays else None,
+               "m_ref": arrays[PREFIX + "m_ref"] if PREFIX + "m_ref" in arrays else None,
                "dissipated": float(arrays[PREFIX + "dissipated"])}
         self.released = float(arrays[PREFIX + "released"])
         self._keys = np.asarray(arrays[PREFIX + "energy_keys"], np.int64).reshape(-1, 6)
