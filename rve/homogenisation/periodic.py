@@ -179,6 +179,7 @@ def periodic_friction_start(cfg, fab, mesh, x_full):
     if fr is None:
         return None
     fr.commit(psys.restrict(np.asarray(x_full, float).reshape(-1)))
+    fr.dissipated = 0.0   # the start dissipates nothing (strain.friction_start)
     return fr.record()
 
 
