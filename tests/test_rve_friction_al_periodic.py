@@ -604,13 +604,25 @@ def test_rigid_rotation_with_the_section_frame_gives_the_frictionless_macro_stre
     assert np.abs(P_solved - R @ P0).max() <= 1e-10 * scale
 
 
+def _tangent_matches_differences(system, x, nodes, eps):
+    """The assembled tangent at ``x``'s columns of the centroids and first directors of
+    ``nodes`` against central differences of the residual (step ``eps``); the tangent, dense."""
+    from rve.testing import fd_jacobian
+
+    cols = np.concatenate([system.layout.dofs("r", nodes), system.layout.dofs("g1", nodes)])
+    w = np.zeros(system.n)
+    K = system.evaluate(x, w, 0.0)[1].toarray()
+    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], x, cols, eps=eps)
+    np.testing.assert_allclose(K[:, cols], J, rtol=1e-5, atol=1e-6 * np.abs(K[:, cols]).max())
+    return K
+
+
 def test_section_frame_tangent_of_the_assembled_system():
     """The pinned cell's system after a frictional step with ``friction.frame: section``, at a
     trial state off it (points in stick and in slip): the assembled tangent's columns of the
     centroids and first directors of the - sections in contact match differences of the
     residual, and the section frame's blocks couple the directors with the other fibril."""
     from rve.homogenisation.strain import strain_step
-    from rve.testing import fd_jacobian
 
     cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
     fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
@@ -623,15 +635,10 @@ def test_section_frame_tangent_of_the_assembled_system():
     assert st.stick.any() and st.slip.any()
     act = np.flatnonzero((st.stick | st.slip).any(axis=1))[:4]
     nodes = np.unique(np.concatenate([system.term.map.nodes_minus[act, 0], system.term.map.nodes_plus[act, 0]]))
-    cols = np.concatenate([system.layout.dofs("r", nodes), system.layout.dofs("g1", nodes)])
-    w = np.zeros(system.n)
-    F, Fx, _ = system.evaluate(x, w, 0.0)
-    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], x, cols, eps=1e-7)
-    A = Fx.toarray()[:, cols]
-    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    K = _tangent_matches_differences(system, x, nodes, eps=1e-7)
     g1 = system.layout.dofs("g1", system.term.map.nodes_minus[act, 0])
     other = system.layout.dofs("r", system.term.map.nodes_plus[act, 0])
-    assert np.abs(Fx.toarray()[np.ix_(other, g1)]).max() > 0
+    assert np.abs(K[np.ix_(other, g1)]).max() > 0
 
 
 @pytest.mark.parametrize("boundary, geometry", [("pinned", CURVES[0]), ("periodic", CURVES[1])])
@@ -642,7 +649,6 @@ def test_section_frame_tangent_on_the_curves(boundary, geometry):
     in contact match central differences (their error falls as eps²: 1e-8 here), and the
     section node's g1 couples to the other side."""
     from rve.homogenisation.strain import strain_step
-    from rve.testing import fd_jacobian
 
     cfg = _cfg(boundary, "augmented_lagrangian", 0.3, substeps=1, frame="section", **geometry)
     fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
@@ -658,15 +664,10 @@ def test_section_frame_tangent_on_the_curves(boundary, geometry):
     ps, conn = term.passes, mesh.conn
     a_nodes, b_nodes = ps.side_nodes(conn, ps.a_elem[rows]), ps.side_nodes(conn, ps.b_elem[rows])
     nodes = np.unique(np.concatenate([a_nodes.ravel(), b_nodes.ravel()]))
-    cols = np.concatenate([system.layout.dofs("r", nodes), system.layout.dofs("g1", nodes)])
-    w = np.zeros(system.n)
-    F, Fx, _ = system.evaluate(x, w, 0.0)
-    J = fd_jacobian(lambda v: system.evaluate(v, w, 0.0, jacobian=False)[0], x, cols, eps=1e-8)
-    A = Fx.toarray()[:, cols]
-    np.testing.assert_allclose(A, J, rtol=1e-5, atol=1e-6 * np.abs(A).max())
+    K = _tangent_matches_differences(system, x, nodes, eps=1e-8)
     section = conn[ps.b_elem[rows], fr.section_node()]
     g1, other = system.layout.dofs("g1", section), system.layout.dofs("r", a_nodes.ravel())
-    assert np.abs(Fx.toarray()[np.ix_(other, g1)]).max() > 0
+    assert np.abs(K[np.ix_(other, g1)]).max() > 0
 
 
 def test_section_frame_term_with_no_pair_in_contact():

@@ -178,8 +178,7 @@ def periodic_friction_start(cfg, fab, mesh, x_full):
     fr = friction_of(psys)
     if fr is None:
         return None
-    fr.commit(psys.restrict(np.asarray(x_full, float).reshape(-1)))
-    fr.dissipated = 0.0   # the start dissipates nothing (strain.friction_start)
+    fr.start(psys.restrict(np.asarray(x_full, float).reshape(-1)))
     return fr.record()
 
 

@@ -131,12 +131,7 @@ def friction_start(cfg, fab, mesh, x):
 
         return periodic_friction_start(cfg, fab, mesh, x)
     system = mech_system(fab, mesh, cfg, cfg.strain.relax_damping, np.asarray(x, float).reshape(-1))
-    fr = friction_of(system)
-    fr.commit(np.asarray(x, float).reshape(-1))
-    # the start dissipates nothing: its trial gaps vanish, with the section frame to the
-    # rounding of the anchor taken apart in the section's frame and put back together, which
-    # the return map of a point with a vanishing normal force can count as a slip (~1e-33 N mm)
-    fr.dissipated = 0.0
+    friction_of(system).start(np.asarray(x, float).reshape(-1))
     return friction_record(system)
 
 

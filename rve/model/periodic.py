@@ -39,7 +39,7 @@ of the total potential with respect to F is ``A P`` (``tests/test_periodic.py``)
 
 Friction (a ``ContactSystem`` whose term carries a ``FrictionTerm``): ``friction_view`` is
 a :class:`ReducedFriction`, the term's friction taking reduced states (expanded before every
-call that reads a state: ``commit``, ``freeze``, ``loads_at``, ``state``,
+call that reads a state: ``commit``, ``start``, ``freeze``, ``loads_at``, ``state``,
 ``share_along_fibrils``; everything else is the term's), so the frictional solvers
 (``rve.solvers.frictional``) run on the cell unchanged. The history is keyed by point as in
 any cell; a pair with a periodic image carries its lattice translation in the key, and its
@@ -179,6 +179,9 @@ class ReducedFriction:
 
     def commit(self, x) -> float:
         return self._term.commit(self._full(x))
+
+    def start(self, x) -> None:
+        self._term.start(self._full(x))
 
     def freeze(self, x=None) -> None:
         self._term.freeze(self._full(x))

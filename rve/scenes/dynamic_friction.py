@@ -134,7 +134,7 @@ class DynamicFriction:
         if st.couple is not None:   # the couple on the - chord ends (rve.physics.friction_forms)
             p += float(np.einsum("pgk,pki,pgi->", st.chord_weights, V, st.couple))
         if st.director_couple is not None:   # and the section frame's on the - section's g1
-            Vg = self.term._directors(self.part(w), self.term._rows())
+            Vg = self.term.local_directors(self.part(w))
             p += float(np.einsum("pgk,pki,pgi->", st.director_weights, Vg, st.director_couple))
         return p
 

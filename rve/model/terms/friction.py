@@ -30,7 +30,10 @@ layout. The contact term calls
   pairs added to the contact term's local arrays (the mechanical block of the chord ends, or
   of every local node on the curves).
 
-Drivers call ``commit(x)`` at every converged state (the history becomes that state's, the
+``start(x)`` commits the state the history started at (no elastic gap anywhere: nothing is
+dissipated, whatever rounding the frame's turn leaves; ``forget()`` before a map rebuild
+makes that rebuild start every point anew). Drivers call ``commit(x)`` at every converged
+state (the history becomes that state's, the
 points out of contact take that of a point in contact on the same + point and - fibril, on
 the curves of the point whose row owns the closest point where none is in contact, and
 the dissipated energy is accumulated in ``dissipated``); the history of a point is its
@@ -41,8 +44,9 @@ history to another system or through a checkpoint (by point key; a record withou
 takes the directions at the seeding state);
 ``set_families(labels)`` names the family of every fibril (default: one family);
 ``state(x)`` the return mapping at ``x`` from the held history (``FrictionPoints``, per row);
-``material_weights(s_bar)`` and ``local_nodes(v)`` the rows' material weights and local
-values of a nodal field (the dynamic scenes' friction power);
+``material_weights(s_bar)``, ``local_nodes(v)`` and ``local_directors(v)`` the rows'
+material weights and local values of a nodal field and of its first-director part (the
+dynamic scenes' friction power);
 ``last`` the return mapping of the last committed state and ``points()`` its summary (total
 friction and normal force, stick and slip counts).
 
@@ -292,18 +296,24 @@ class FrictionTerm:
         the element's middle (``order // 2``: the first at p = 1, the middle one at p = 2)."""
         return self.contact.mesh.order // 2 if self.contact.curve else 0
 
+    def _side_width(self) -> int:
+        """On the curves: the local nodes per side of a row (an element's, or its stencil's)."""
+        return self.contact.passes.width(self.contact.mesh.conn.shape[1])
+
+    def _side_slots(self, elems) -> np.ndarray:
+        """On the curves: the slot of the section node of each element of ``elems`` among its
+        side's local nodes (on the C¹ curve its slot in the element's stencil)."""
+        ps, k = self.contact.passes, self.section_node()
+        elems = np.asarray(elems, np.int64)
+        return np.full(elems.size, k, np.int64) if ps.stencil is None else ps.stencil.own[elems, k]
+
     def section_slots(self, rows) -> np.ndarray:
         """(n,) the position of each row's section node among its local nodes (``_local``):
-        ``SECTION_NODE`` on the chords; on the curves b's side, after a's ``width`` nodes (on
-        the C¹ curve the node's slot in b's stencil)."""
-        c = self.contact
+        ``SECTION_NODE`` on the chords; on the curves in b's side, after a's nodes."""
         rows = np.asarray(rows, np.int64)
-        if not c.curve:
+        if not self.contact.curve:
             return np.full(rows.size, self.SECTION_NODE, np.int64)
-        ps, k = c.passes, self.section_node()
-        width = ps.width(c.mesh.conn.shape[1])
-        slot = np.full(rows.size, k, np.int64) if ps.stencil is None else ps.stencil.own[ps.b_elem[rows], k]
-        return width + slot
+        return self._side_width() + self._side_slots(self.contact.passes.b_elem[rows])
 
     def section_positions(self) -> np.ndarray:
         """The positions among a pair's local nodes (the contact term's ``m``) where a section
@@ -313,16 +323,14 @@ class FrictionTerm:
         c = self.contact
         if not c.curve:
             return np.array([c.endpos[self.SECTION_NODE]], np.int64)
-        ps, k = c.passes, self.section_node()
-        width = ps.width(c.mesh.conn.shape[1])
-        slots = np.array([k]) if ps.stencil is None else np.unique(ps.stencil.own[:, k])
-        return np.concatenate([slots, width + slots]).astype(np.int64)
+        slots = np.unique(self._side_slots(np.arange(c.mesh.conn.shape[0])))
+        return np.concatenate([slots, self._side_width() + slots])
 
     def _section_weights(self, rows):
         """``s -> (gw, d gw/ds)`` (n, G, M): the weights of the rows' section director, the g1
         of their - element's section node (``section_slots``), the same at every ``s``."""
         slots = self.section_slots(rows)
-        M = 4 if not self.contact.curve else 2 * self.contact.passes.width(self.contact.mesh.conn.shape[1])
+        M = 2 * self._side_width() if self.contact.curve else 4
 
         def weights(s):
             w = np.zeros(np.shape(s) + (M,))
@@ -500,6 +508,15 @@ class FrictionTerm:
         self.dissipated += d
         return d
 
+    def start(self, x) -> None:
+        """Commit ``x``, the state the history started at (``on_rebuild`` with no keys, or
+        after ``forget``): its trial gaps vanish, with the section frame to the rounding of the
+        anchor taken apart in the section's frame and put back together, which the return map
+        of a point with a vanishing normal force can count as a slip (~1e-33 N mm); the start
+        dissipates nothing."""
+        self.commit(x)
+        self.dissipated = 0.0
+
     def _owners(self, geo) -> np.ndarray:
         """(rows, G) bool: on the curves the points whose closest point their row owns (an
         interior one, ``CurveGeometry.owned``), in contact or not; none on the chords."""
@@ -626,6 +643,11 @@ class FrictionTerm:
         """``(rows, M, 3)``: a nodal field ``v`` at every row's local nodes (positions with the
         - side's periodic shift, ``shifted``; a velocity field without)."""
         return self._local(v, self._rows(), shifted)
+
+    def local_directors(self, v) -> np.ndarray:
+        """``(rows, M, 3)``: the first-director part of a nodal field ``v`` at every row's local
+        nodes (the section frame's director weights act on them)."""
+        return self._directors(v, self._rows())
 
     # ------------------------------------------------------------------ frozen loads
     @property
