@@ -165,3 +165,89 @@ def test_penalty_increase_takes_fewer_updates_and_ends_at_the_configured_penalty
         runs[growth] = loop.updates, sysm.fibril_contact_forces(xs)[0, 2], max(loop.penalties, default=5.0)
     assert runs[4.0][0] < runs[1.0][0] and runs[4.0][2] > 5.0 and runs[1.0][2] == 5.0
     assert runs[4.0][1] == pytest.approx(runs[1.0][1], rel=1e-3)
+
+
+class _Seesaw:
+    """Two contact points on a rocking fibril, linear: a solve at multipliers lam gives the
+    overlaps g = c (F - M lam), M = [[1, -m], [-m, 1]] (pushing one point out presses the
+    other in). The plain update's map lam -> lam + P c (F - M lam) has the eigenvalues
+    1 - P c (1 -+ m); with P c (1 + m) = 2 the rocking mode's is -1: a two-cycle."""
+
+    augmented = True
+
+    def __init__(self, F=(1.0, 0.9), m=0.5):
+        self.F, self.M = np.asarray(F, float), np.array([[1.0, -m], [-m, 1.0]])
+        self.penalty = 1.0
+        self.c = 2.0 / (1.0 + m)
+        self.lam = np.zeros(2)
+        self.relaxations = []
+
+    def solve(self, _x):
+        return self.c * (self.F - self.M @ self.lam)
+
+    def max_penetration(self, g):
+        return float(max(0.0, np.max(g)))
+
+    def update_multipliers(self, g, relaxation=1.0):
+        self.relaxations.append(relaxation)
+        new = np.maximum(0.0, self.lam + self.penalty * g)
+        self.lam = relaxation * new + (1.0 - relaxation) * self.lam
+
+    def set_penalty(self, P, x=None):
+        self.penalty = P
+
+
+@pytest.mark.parametrize("growth", [1.0, 4.0])
+def test_a_cycling_loop_converges_with_relaxed_updates(growth):
+    """The plain updates of the seesaw cycle for ever (the overlap stays put); the loop's
+    relaxed updates, switched on where the overlap stops falling at the largest P*, reach the
+    fixed point lam = M^-1 F (with growth 4, P* may not grow: max_growth 1)."""
+    plain = _Seesaw()
+    loop = AugmentedLagrangian(plain, tolerance=1e-8, max_updates=40, growth=growth, max_growth=1.0,
+                               relaxation=1.0)
+    x, loop = _loop(plain, loop)
+    assert loop.exhausted and loop.relaxed_from is None
+    pens = [p for _, p in loop.history]
+    assert min(pens[-10:]) > 0.5 * max(pens[-10:]) > 1e-3      # a cycle, not a slow decrease
+
+    relaxed = _Seesaw()
+    loop = AugmentedLagrangian(relaxed, tolerance=1e-8, max_updates=40, growth=growth, max_growth=1.0)
+    x, loop = _loop(relaxed, loop)
+    assert not loop.exhausted and loop.history[-1][1] <= 1e-8
+    assert loop.relaxed_from is not None
+    assert relaxed.relaxations[:loop.relaxed_from] == [1.0] * loop.relaxed_from
+    assert set(relaxed.relaxations[loop.relaxed_from:]) == {0.5}
+    np.testing.assert_allclose(relaxed.lam, np.linalg.solve(relaxed.M, relaxed.F), rtol=1e-6)
+
+
+def _loop(system, loop):
+    x = system.solve(None)
+    while not (loop.update(x) or loop.exhausted):
+        x = system.solve(x)
+    return x, loop
+
+
+def test_a_loop_that_converges_keeps_the_plain_updates(geometry="curve"):
+    """Where the overlap keeps falling the updates stay plain (``relaxed_from`` None): the
+    two crossed fibrils' loop."""
+    sysm, x = _pressed(2, 50.0, enforcement="augmented_lagrangian", geometry=geometry, al_tolerance=1e-6)
+    _, loop = _solve(sysm, x, [])
+    assert not loop.exhausted and loop.updates >= 2 and loop.relaxed_from is None
+
+
+def test_relaxed_update_is_the_weighted_mean_of_the_plain_one_and_the_old_multipliers():
+    sysm, x = _pressed(2, 50.0, enforcement="augmented_lagrangian")
+    xs, _, res = static_solve(sysm, x, np.zeros(sysm.n), 0.0, {"atol": 1e-11, "rtol": 1e-13, "max_iter": 40})
+    assert res.converged
+    sysm.update_multipliers(xs)
+    old = np.array(sysm.term.multipliers, copy=True)
+    assert old.max() > 0
+    xs, _, res = static_solve(sysm, xs, np.zeros(sysm.n), 0.0, {"atol": 1e-11, "rtol": 1e-13, "max_iter": 40})
+    sysm.update_multipliers(xs)
+    plain = np.array(sysm.term.multipliers, copy=True)
+    sysm.term.multipliers = old.copy()
+    sysm.update_multipliers(xs, 0.3)
+    np.testing.assert_allclose(sysm.term.multipliers, 0.3 * plain + 0.7 * old, rtol=1e-13, atol=1e-15)
+    assert np.abs(plain - old).max() > 1e-3 * old.max()
+    with pytest.raises(ValueError, match="relaxation"):
+        sysm.update_multipliers(xs, 0.0)

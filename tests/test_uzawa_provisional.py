@@ -44,7 +44,7 @@ class _System:
     def max_penetration(self, x):
         return x["overlap"]
 
-    def update_multipliers(self, x):
+    def update_multipliers(self, x, relaxation=1.0):
         self.updates.append(x["n"])
 
     def set_penalty(self, P, x=None):

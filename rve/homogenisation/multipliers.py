@@ -140,7 +140,8 @@ def equilibrium(system, solve, x):
     info["augmented_lagrangian"] = {
         "updates": int(loop.updates), "solves": run.solves, "tolerance": float(loop.tolerance),
         "max_penetration_over_R": pen, "met": bool(pen <= loop.tolerance),
-        "penalties": [float(p) for p in loop.penalties], "solve_iterations": run.iterations,
+        "penalties": [float(p) for p in loop.penalties], "relaxed_from": loop.relaxed_from,
+        "solve_iterations": run.iterations,
         "provisional_solves": run.provisional, "provisional_stalled": run.stalled, "retries": run.retries,
         "solve_wall_s": [float(t) for t in run.walls],
         "history": [[int(k), float(p)] for k, p in loop.history]}

@@ -178,10 +178,10 @@ class ContactSystem:
         """Largest true overlap over the radius at ``x`` (g / min(R+, R-), 0 if none)."""
         return self.term.max_penetration(x)
 
-    def update_multipliers(self, x) -> None:
-        """One Uzawa update of the multipliers at ``x`` (``ContactTerm.update_multipliers``);
-        the structure is unchanged."""
-        self.term.update_multipliers(x)
+    def update_multipliers(self, x, relaxation: float = 1.0) -> None:
+        """One Uzawa update of the multipliers at ``x`` (``ContactTerm.update_multipliers``,
+        under-relaxed by ``relaxation``); the structure is unchanged."""
+        self.term.update_multipliers(x, relaxation)
 
     @property
     def penalty(self) -> float:

@@ -360,8 +360,8 @@ class PeriodicSystem:
     def max_penetration(self, x) -> float:
         return self.full.max_penetration(self.expand(x))
 
-    def update_multipliers(self, x) -> None:
-        self.full.update_multipliers(self.expand(x))
+    def update_multipliers(self, x, relaxation: float = 1.0) -> None:
+        self.full.update_multipliers(self.expand(x), relaxation)
 
     @property
     def penalty(self) -> float:

@@ -22,15 +22,29 @@ the caller: ``finish``) P* returns to its starting value with the multipliers re
 so that every point's line load at the final state is unchanged: the state stays the
 equilibrium it is, at the configured P*. ``growth=1`` is the plain Uzawa loop.
 
+**Relaxed updates** once the loop cycles: when P* can grow no further and the last
+``stall`` (2) checks found no overlap below ``STALL_DECREASE`` (0.75) times the smallest
+before them while one of them rose above the check before it (a zigzag), or none below
+``STALL_FLAT`` (0.99) times it (a flat run), every later update of the loop is
+under-relaxed, ``lambda <- w max(0, lambda
++ P* g) + (1 - w) lambda`` with ``w = relaxation`` (0.5; ``relaxed_from`` the update it
+started at). Why: on the fine periodic cells the loop settled into a two-cycle at the largest
+P* (overlap 3.0e-4 / 3.6e-4 R for 14 updates): two sets of points on one fibril take turns,
+the multipliers of one set push the fibril off it onto the other, and the full update then
+drops the first set's multipliers to zero. The cycle is an eigenvalue of the update near -1,
+which w = 0.5 takes to about 0: each relaxed update halved the overlap (docs/contact.md
+"Relaxed updates when the loop cycles"). ``relaxation=1`` keeps the plain updates.
+
 The system needs (the protocol, no model imported here): ``augmented`` (bool),
 ``max_penetration(x) -> float`` (largest true overlap over min(R+, R-)),
-``update_multipliers(x)``, ``penalty`` / ``set_penalty(P, x=None)`` (for the increase), and
+``update_multipliers(x)`` (and ``update_multipliers(x, relaxation)`` for the relaxed
+updates), ``penalty`` / ``set_penalty(P, x=None)`` (for the increase), and
 ``params.al_tolerance`` / ``params.al_max_iter`` for the defaults. A system with
 ``augmented`` False is converged at once (no update), so a caller can wrap every solve
 unconditionally.
 
 * ``AugmentedLagrangian(system, tolerance=None, max_updates=None, growth=None, decrease=0.25,
-  max_growth=1e3)``: ``update(x, finish=True) -> bool``
+  max_growth=1e3, relaxation=0.5, stall=2)``: ``update(x, finish=True) -> bool``
   at a converged solve's state: True when the penetration is below the tolerance (the
   multipliers are left as they are; P* back to its start unless ``finish=False``), else one
   Uzawa update and False (solve again from ``x``). ``history`` lists ``(updates,
@@ -54,12 +68,18 @@ __all__ = ["AugmentedLagrangian", "solve_with_multipliers"]
 PENALTY_GROWTH = 4.0
 SUFFICIENT_DECREASE = 0.25
 MAX_PENALTY_GROWTH = 1e3
+#: the relaxed updates of a cycling loop (module docstring)
+RELAXATION = 0.5
+STALL_UPDATES = 2
+STALL_DECREASE = 0.75
+STALL_FLAT = 0.99
 
 
 class AugmentedLagrangian:
     def __init__(self, system, tolerance: Optional[float] = None, max_updates: Optional[int] = None,
                  growth: Optional[float] = None, decrease: float = SUFFICIENT_DECREASE,
-                 max_growth: float = MAX_PENALTY_GROWTH):
+                 max_growth: float = MAX_PENALTY_GROWTH, relaxation: float = RELAXATION,
+                 stall: int = STALL_UPDATES):
         self.system = system
         params = getattr(system, "params", None)
         self.tolerance = float(tolerance if tolerance is not None else getattr(params, "al_tolerance", 1e-4))
@@ -71,6 +91,11 @@ class AugmentedLagrangian:
             raise ValueError(f"need growth >= 1, 0 < decrease < 1, max_growth >= 1; got {growth}, {decrease}, "
                              f"{max_growth}")
         self.growth, self.decrease, self.max_growth = float(growth), float(decrease), float(max_growth)
+        if not (0 < relaxation <= 1 and int(stall) >= 1):
+            raise ValueError(f"need 0 < relaxation <= 1 and stall >= 1; got {relaxation}, {stall}")
+        self.relaxation, self.stall = float(relaxation), int(stall)
+        #: the update from which the updates are relaxed (None: plain updates so far)
+        self.relaxed_from: Optional[int] = None
         self.updates = 0
         self.history: list = []
         self.penalties: list = []
@@ -100,7 +125,12 @@ class AugmentedLagrangian:
             if finish:
                 self.finish(x)
             return False
-        self.system.update_multipliers(x)
+        if self.relaxed_from is None and self._cycling():
+            self.relaxed_from = self.updates
+        if self.relaxed_from is None:
+            self.system.update_multipliers(x)
+        else:
+            self.system.update_multipliers(x, self.relaxation)
         self.updates += 1
         if (self.penalty0 is not None and self.growth > 1 and len(self.history) > 1
                 and pen > self.decrease * self.history[-2][1]):
@@ -110,6 +140,23 @@ class AugmentedLagrangian:
         if self.penalty0 is not None:
             self.penalties.append(float(self.system.penalty))
         return False
+
+    def _cycling(self) -> bool:
+        """P* can grow no further, and the last ``stall`` checks found no overlap below
+        ``STALL_DECREASE`` times the smallest before them with one of them a rise (a zigzag),
+        or none below ``STALL_FLAT`` times it (a flat run). A loop that falls slowly but
+        steadily keeps the plain updates, which relaxing would slow."""
+        if self.relaxation >= 1.0 or self.penalty0 is None:
+            return False
+        P = float(self.system.penalty)
+        if self.growth > 1 and P * self.growth <= self.max_growth * self.penalty0 * (1 + 1e-12):
+            return False
+        pens = [p for _, p in self.history]
+        if len(pens) <= self.stall:
+            return False
+        recent, best = pens[-self.stall - 1:], min(pens[:-self.stall])
+        rose = any(b > a for a, b in zip(recent, recent[1:]))
+        return min(recent[1:]) > (STALL_DECREASE if rose else STALL_FLAT) * best
 
     @property
     def raised(self) -> bool:

@@ -375,15 +375,20 @@ class ContactTerm:
         rmin = np.minimum(R[self.map.fibril_plus], R[self.map.fibril_minus])[self.row_pair]
         return float(max(0.0, (g / rmin[:, None]).max()))
 
-    def update_multipliers(self, x) -> None:
+    def update_multipliers(self, x, relaxation: float = 1.0) -> None:
         """Uzawa update ``lambda <- max(0, lambda + P* g)`` at state ``x`` (g the true overlap
-        of the owned points), then shared by point key (``contact_pairs.gather_by_key``)."""
+        of the owned points), under-relaxed by ``relaxation`` (w: ``w lambda_new + (1 - w)
+        lambda``; 1 the plain update), then shared by point key (``contact_pairs.gather_by_key``)."""
         if self.multipliers is None:
             raise ValueError("update_multipliers needs enforcement 'augmented_lagrangian'")
+        if not 0.0 < relaxation <= 1.0:
+            raise ValueError(f"relaxation must be in (0, 1], got {relaxation}")
         if self.map.n_pairs == 0:
             return
         g = self.penetration(x)
         new = np.maximum(0.0, self.multipliers + float(self.params.penalty) * np.where(np.isfinite(g), g, -np.inf))
+        if relaxation != 1.0:
+            new = relaxation * new + (1.0 - relaxation) * self.multipliers
         self.multipliers = gather_by_key(self._keys, self._keys, new).reshape(self.multipliers.shape)
 
     def set_penalty(self, penalty: float, x=None) -> None:
