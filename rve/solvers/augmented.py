@@ -33,7 +33,8 @@ P* (overlap 3.0e-4 / 3.6e-4 R for 14 updates): two sets of points on one fibril 
 the multipliers of one set push the fibril off it onto the other, and the full update then
 drops the first set's multipliers to zero. The cycle is an eigenvalue of the update near -1,
 which w = 0.5 takes to about 0: each relaxed update halved the overlap (docs/contact.md
-"Relaxed updates when the loop cycles"). ``relaxation=1`` keeps the plain updates.
+"Relaxed updates when the loop cycles"). ``relaxation=1`` keeps the plain updates; None
+takes ``RELAXATION`` at construction.
 
 The system needs (the protocol, no model imported here): ``augmented`` (bool),
 ``max_penetration(x) -> float`` (largest true overlap over min(R+, R-)),
@@ -44,7 +45,7 @@ updates), ``penalty`` / ``set_penalty(P, x=None)`` (for the increase), and
 unconditionally.
 
 * ``AugmentedLagrangian(system, tolerance=None, max_updates=None, growth=None, decrease=0.25,
-  max_growth=1e3, relaxation=0.5, stall=2)``: ``update(x, finish=True) -> bool``
+  max_growth=1e3, relaxation=None, stall=2)``: ``update(x, finish=True) -> bool``
   at a converged solve's state: True when the penetration is below the tolerance (the
   multipliers are left as they are; P* back to its start unless ``finish=False``), else one
   Uzawa update and False (solve again from ``x``). ``history`` lists ``(updates,
@@ -78,7 +79,7 @@ STALL_FLAT = 0.99
 class AugmentedLagrangian:
     def __init__(self, system, tolerance: Optional[float] = None, max_updates: Optional[int] = None,
                  growth: Optional[float] = None, decrease: float = SUFFICIENT_DECREASE,
-                 max_growth: float = MAX_PENALTY_GROWTH, relaxation: float = RELAXATION,
+                 max_growth: float = MAX_PENALTY_GROWTH, relaxation: Optional[float] = None,
                  stall: int = STALL_UPDATES):
         self.system = system
         params = getattr(system, "params", None)
@@ -91,6 +92,7 @@ class AugmentedLagrangian:
             raise ValueError(f"need growth >= 1, 0 < decrease < 1, max_growth >= 1; got {growth}, {decrease}, "
                              f"{max_growth}")
         self.growth, self.decrease, self.max_growth = float(growth), float(decrease), float(max_growth)
+        relaxation = RELAXATION if relaxation is None else relaxation
         if not (0 < relaxation <= 1 and int(stall) >= 1):
             raise ValueError(f"need 0 < relaxation <= 1 and stall >= 1; got {relaxation}, {stall}")
         self.relaxation, self.stall = float(relaxation), int(stall)
