@@ -24,11 +24,12 @@ equilibrium it is, at the configured P*. ``growth=1`` is the plain Uzawa loop.
 
 **Relaxed updates** once the loop cycles: when P* can grow no further and the last
 ``stall`` (2) checks found no overlap below ``STALL_DECREASE`` (0.75) times the smallest
-before them while one of them rose above the check before it (a zigzag), or none below
-``STALL_FLAT`` (0.99) times it (a flat run), every later update of the loop is
-under-relaxed, ``lambda <- w max(0, lambda
-+ P* g) + (1 - w) lambda`` with ``w = relaxation`` (0.5; ``relaxed_from`` the update it
-started at). Why: on the fine periodic cells the loop settled into a two-cycle at the largest
+before them while one of them rose above the check before it (a zigzag), every later update
+of the loop is
+under-relaxed, ``lambda <- w max(0, lambda + P* g) + (1 - w) lambda`` with ``w =
+relaxation`` (0.5; ``relaxed_from`` the update it started at); where the relaxed updates
+cycle again (the same test on the checks since), ``w`` is multiplied by ``relaxation`` once
+more, down to ``relaxation ** RELAXATION_HALVINGS`` (0.125). Why: on the fine periodic cells the loop settled into a two-cycle at the largest
 P* (overlap 3.0e-4 / 3.6e-4 R for 14 updates): two sets of points on one fibril take turns,
 the multipliers of one set push the fibril off it onto the other, and the full update then
 drops the first set's multipliers to zero. The cycle is an eigenvalue of the update near -1,
@@ -73,7 +74,7 @@ MAX_PENALTY_GROWTH = 1e3
 RELAXATION = 0.5
 STALL_UPDATES = 2
 STALL_DECREASE = 0.75
-STALL_FLAT = 0.99
+RELAXATION_HALVINGS = 3
 
 
 class AugmentedLagrangian:
@@ -98,6 +99,8 @@ class AugmentedLagrangian:
         self.relaxation, self.stall = float(relaxation), int(stall)
         #: the update from which the updates are relaxed (None: plain updates so far)
         self.relaxed_from: Optional[int] = None
+        #: the weight of the updates now (1: plain), and the check from which cycling is judged
+        self.weight, self._since = 1.0, 0
         self.updates = 0
         self.history: list = []
         self.penalties: list = []
@@ -127,12 +130,15 @@ class AugmentedLagrangian:
             if finish:
                 self.finish(x)
             return False
-        if self.relaxed_from is None and self._cycling():
-            self.relaxed_from = self.updates
-        if self.relaxed_from is None:
+        if self._cycling():
+            if self.relaxed_from is None:
+                self.relaxed_from = self.updates
+            self.weight = max(self.weight * self.relaxation, self.relaxation ** RELAXATION_HALVINGS)
+            self._since = len(self.history) - 1
+        if self.weight == 1.0:
             self.system.update_multipliers(x)
         else:
-            self.system.update_multipliers(x, self.relaxation)
+            self.system.update_multipliers(x, self.weight)
         self.updates += 1
         if (self.penalty0 is not None and self.growth > 1 and len(self.history) > 1
                 and pen > self.decrease * self.history[-2][1]):
@@ -145,20 +151,20 @@ class AugmentedLagrangian:
 
     def _cycling(self) -> bool:
         """P* can grow no further, and the last ``stall`` checks found no overlap below
-        ``STALL_DECREASE`` times the smallest before them with one of them a rise (a zigzag),
-        or none below ``STALL_FLAT`` times it (a flat run). A loop that falls slowly but
-        steadily keeps the plain updates, which relaxing would slow."""
+        ``STALL_DECREASE`` times the smallest before them, one of them a rise (a zigzag). A
+        loop that falls slowly but steadily keeps the plain updates, which relaxing would
+        slow."""
         if self.relaxation >= 1.0 or self.penalty0 is None:
             return False
         P = float(self.system.penalty)
         if self.growth > 1 and P * self.growth <= self.max_growth * self.penalty0 * (1 + 1e-12):
             return False
-        pens = [p for _, p in self.history]
+        pens = [p for _, p in self.history[self._since:]]
         if len(pens) <= self.stall:
             return False
-        recent, best = pens[-self.stall - 1:], min(pens[:-self.stall])
+        recent = pens[-self.stall - 1:]
         rose = any(b > a for a, b in zip(recent, recent[1:]))
-        return min(recent[1:]) > (STALL_DECREASE if rose else STALL_FLAT) * best
+        return rose and min(recent[1:]) > STALL_DECREASE * min(pens[:-self.stall])
 
     @property
     def raised(self) -> bool:
