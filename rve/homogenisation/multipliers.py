@@ -18,7 +18,10 @@ record untouched, so the penalty path is bit-identical.
   solve) wrapped in the Uzawa loop ``rve.solvers.augmented.solve_with_multipliers`` until the
   largest true overlap is below ``contact.al_tolerance`` R. The info of the last solve, plus
   ``info["augmented_lagrangian"]`` (updates, the overlap history, whether the tolerance was
-  met, the P* of every re-solve, every solve's iterations and wall time); with the penalty, one call of ``solve`` and its info as it is. A solve that did not
+  met, the P* of every re-solve, ``relaxed_from``, every solve's iterations and wall time);
+  with the penalty, one call of ``solve`` and its info as it is. A frictionless loop relaxes
+  its updates once it cycles (``AugmentedLagrangian``); a frictional one keeps the plain
+  updates. A solve that did not
   converge ends the loop (the multipliers of an unconverged state are not updated). The
   step's ``converged`` stays the solve's (an equilibrium at the current multipliers); an
   overlap still above the tolerance (``al_max_iter`` reached) is ``met: false`` and a warning.
@@ -125,8 +128,10 @@ def equilibrium(system, solve, x):
     if not getattr(system, "augmented", False):
         x, info = solve(x)
         return x, _commit(system, x, info)
-    loop = AugmentedLagrangian(system)
     fr = friction_of(system)
+    # a frictional loop keeps the plain updates: its overlaps move with the friction's
+    # re-solves as well, and relaxed updates stalled it (docs/contact.md "Relaxed updates")
+    loop = AugmentedLagrangian(system, relaxation=None if fr is None else 1.0)
     run = _Solves(solve)
     try:
         x, info = _uzawa(loop, fr, run, x)
