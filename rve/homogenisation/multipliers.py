@@ -21,8 +21,8 @@ record untouched, so the penalty path is bit-identical.
   met, the P* of every re-solve, ``relaxed_from``, every solve's iterations and wall time);
   with the penalty, one call of ``solve`` and its info as it is. A frictionless loop relaxes
   its updates once it cycles (``AugmentedLagrangian``); a frictional one keeps the plain
-  updates. A solve that did not
-  converge ends the loop (the multipliers of an unconverged state are not updated). The
+  updates. A solve that did not converge ends the loop (the multipliers of an unconverged
+  state are not updated). The
   step's ``converged`` stays the solve's (an equilibrium at the current multipliers); an
   overlap still above the tolerance (``al_max_iter`` reached) is ``met: false`` and a warning.
 

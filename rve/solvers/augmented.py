@@ -25,17 +25,17 @@ equilibrium it is, at the configured P*. ``growth=1`` is the plain Uzawa loop.
 **Relaxed updates** once the loop cycles: when P* can grow no further and the last
 ``stall`` (2) checks found no overlap below ``STALL_DECREASE`` (0.75) times the smallest
 before them while one of them rose above the check before it (a zigzag), every later update
-of the loop is
-under-relaxed, ``lambda <- w max(0, lambda + P* g) + (1 - w) lambda`` with ``w =
-relaxation`` (0.5; ``relaxed_from`` the update it started at); where the relaxed updates
-cycle again (the same test on the checks since), ``w`` is multiplied by ``relaxation`` once
-more, down to ``relaxation ** RELAXATION_HALVINGS`` (0.125). Why: on the fine periodic cells the loop settled into a two-cycle at the largest
-P* (overlap 3.0e-4 / 3.6e-4 R for 14 updates): two sets of points on one fibril take turns,
-the multipliers of one set push the fibril off it onto the other, and the full update then
-drops the first set's multipliers to zero. The cycle is an eigenvalue of the update near -1,
-which w = 0.5 takes to about 0: each relaxed update halved the overlap (docs/contact.md
-"Relaxed updates when the loop cycles"). ``relaxation=1`` keeps the plain updates; None
-takes ``RELAXATION`` at construction.
+of the loop is under-relaxed, ``lambda <- w max(0, lambda + P* g) + (1 - w) lambda`` with
+``w = relaxation`` (0.5; ``relaxed_from`` the update it started at); where the relaxed
+updates zigzag again (the same test on the checks since), ``w`` is multiplied by
+``relaxation`` once more, down to ``relaxation ** RELAXATION_HALVINGS`` (0.125). Why: on
+the fine periodic cells the loop settled into a two-cycle at the largest P* (overlap 3.0e-4
+/ 3.6e-4 R for 14 updates): two sets of points on one fibril take turns, the multipliers of
+one set push the fibril off it onto the other, and the full update then drops the first
+set's multipliers to zero. The cycle is an eigenvalue of the update near -1, which w = 0.5
+takes to about 0: each relaxed update halved the overlap (docs/contact.md "Relaxed updates
+when the loop cycles"). ``relaxation=1`` keeps the plain updates; None takes
+``RELAXATION`` at construction.
 
 The system needs (the protocol, no model imported here): ``augmented`` (bool),
 ``max_penetration(x) -> float`` (largest true overlap over min(R+, R-)),
