@@ -204,29 +204,20 @@ def test_a_cycling_loop_converges_with_relaxed_updates(growth):
     relaxed updates, switched on where the overlap stops falling at the largest P*, reach the
     fixed point lam = M^-1 F (with growth 4, P* may not grow: max_growth 1)."""
     plain = _Seesaw()
-    loop = AugmentedLagrangian(plain, tolerance=1e-6, max_updates=60, growth=growth, max_growth=1.0,
-                               relaxation=1.0)
-    x, loop = _loop(plain, loop)
+    _, loop = solve_with_multipliers(plain, plain.solve, None, 1e-6, 60, growth=growth, max_growth=1.0,
+                                     relaxation=1.0)
     assert loop.exhausted and loop.relaxed_from is None
     pens = [p for _, p in loop.history]
     assert min(pens[-10:]) > 0.5 * max(pens[-10:]) > 1e-3      # a cycle, not a slow decrease
 
     relaxed = _Seesaw()
-    loop = AugmentedLagrangian(relaxed, tolerance=1e-6, max_updates=60, growth=growth, max_growth=1.0)
-    x, loop = _loop(relaxed, loop)
+    _, loop = solve_with_multipliers(relaxed, relaxed.solve, None, 1e-6, 60, growth=growth, max_growth=1.0)
     assert not loop.exhausted and loop.history[-1][1] <= 1e-6
     assert loop.relaxed_from is not None
     assert relaxed.relaxations[:loop.relaxed_from] == [1.0] * loop.relaxed_from
     assert relaxed.relaxations[loop.relaxed_from] == 0.5
     assert set(relaxed.relaxations[loop.relaxed_from:]) <= {0.5, 0.25, 0.125}
     np.testing.assert_allclose(relaxed.lam, np.linalg.solve(relaxed.M, relaxed.F), rtol=1e-5)
-
-
-def _loop(system, loop):
-    x = system.solve(None)
-    while not (loop.update(x) or loop.exhausted):
-        x = system.solve(x)
-    return x, loop
 
 
 def test_a_loop_that_converges_keeps_the_plain_updates(geometry="curve"):

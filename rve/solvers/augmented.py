@@ -39,8 +39,8 @@ when the loop cycles"). ``relaxation=1`` keeps the plain updates; None takes
 
 The system needs (the protocol, no model imported here): ``augmented`` (bool),
 ``max_penetration(x) -> float`` (largest true overlap over min(R+, R-)),
-``update_multipliers(x)`` (and ``update_multipliers(x, relaxation)`` for the relaxed
-updates), ``penalty`` / ``set_penalty(P, x=None)`` (for the increase), and
+``update_multipliers(x, relaxation)`` (the update's weight, 1 for the plain update),
+``penalty`` / ``set_penalty(P, x=None)`` (for the increase), and
 ``params.al_tolerance`` / ``params.al_max_iter`` for the defaults. A system with
 ``augmented`` False is converged at once (no update), so a caller can wrap every solve
 unconditionally.
@@ -55,7 +55,7 @@ unconditionally.
   ``penalties`` the P* of every solve after an update; ``raised`` whether P* is above its
   start; ``finish(x)`` returns to the starting P* (called by ``update`` when it ends the
   loop; idempotent).
-* ``solve_with_multipliers(system, solve, x, tolerance=None, max_updates=None)``: repeats
+* ``solve_with_multipliers(system, solve, x, tolerance=None, max_updates=None, **options)``: repeats
   ``x = solve(x)`` with updates in between; returns ``(x, loop)``. ``solve`` returns the new
   state (a position vector ``x`` of the system) or a tuple whose first item is it.
 """
@@ -135,10 +135,7 @@ class AugmentedLagrangian:
                 self.relaxed_from = self.updates
             self.weight = max(self.weight * self.relaxation, self.relaxation ** RELAXATION_HALVINGS)
             self._since = len(self.history) - 1
-        if self.weight == 1.0:
-            self.system.update_multipliers(x)
-        else:
-            self.system.update_multipliers(x, self.weight)
+        self.system.update_multipliers(x, self.weight)
         self.updates += 1
         if (self.penalty0 is not None and self.growth > 1 and len(self.history) > 1
                 and pen > self.decrease * self.history[-2][1]):
@@ -178,10 +175,11 @@ class AugmentedLagrangian:
 
 
 def solve_with_multipliers(system, solve: Callable, x, tolerance: Optional[float] = None,
-                           max_updates: Optional[int] = None):
+                           max_updates: Optional[int] = None, **options):
     """``x = solve(x)`` until the Uzawa loop converges (module docstring); ``(x, loop)``.
-    The last item ``solve`` returned is ``loop.last`` (e.g. the Newton result)."""
-    loop = AugmentedLagrangian(system, tolerance, max_updates)
+    The last item ``solve`` returned is ``loop.last`` (e.g. the Newton result); ``options``:
+    ``AugmentedLagrangian``'s other keywords."""
+    loop = AugmentedLagrangian(system, tolerance, max_updates, **options)
     while True:
         out = solve(x)
         loop.last = out

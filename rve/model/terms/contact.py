@@ -387,8 +387,7 @@ class ContactTerm:
             return
         g = self.penetration(x)
         new = np.maximum(0.0, self.multipliers + float(self.params.penalty) * np.where(np.isfinite(g), g, -np.inf))
-        if relaxation != 1.0:
-            new = relaxation * new + (1.0 - relaxation) * self.multipliers
+        new = relaxation * new + (1.0 - relaxation) * self.multipliers   # w = 1: new, exactly
         self.multipliers = gather_by_key(self._keys, self._keys, new).reshape(self.multipliers.shape)
 
     def set_penalty(self, penalty: float, x=None) -> None:
