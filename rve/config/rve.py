@@ -346,6 +346,4 @@ class RVEConfig(SceneConfig):
             object.__setattr__(self, "probes", [ProbeSpec(**p) for p in periodic_probes()])
         elif len(field_probes) != len(self.probes):
             raise ValueError("boundary: periodic takes field probes only (probes: [{name: ..., field: x | y}])")
-        if self.relaxation.coarse_elements:
-            raise ValueError("relaxation.coarse_elements: mesh sequencing is not available in a periodic cell")
         return self

@@ -184,15 +184,59 @@ def periodic_friction_start(cfg, fab, mesh, x_full):
 
 def periodic_relax(cfg, fab, mesh, x0):
     """Relax the designed periodic cell at F = I (the relaxation settings of ``cfg``:
-    energy path with onset continuation, or damped dynamics). Returns ``(x (n_nodes, 9),
+    energy path with onset continuation, or damped dynamics). With
+    ``relaxation.coarse_elements`` (energy path, mesh sequencing): the designed cell is
+    relaxed first on that many elements per fibril (the whole onset schedule, its own
+    Uzawa loop), its minimum interpolated onto ``mesh`` (``rve.fem.transfer``) and relaxed
+    there with ``relaxation.fine_onset_continuation`` + ``[contact.onset]``, so that meshes
+    sequenced from one coarse mesh start in that mesh's packing. Returns ``(x (n_nodes, 9),
     full system, info)``."""
     from ..fabrics.relaxation import relax_settings
-    from ..solvers.relaxation import relax_to_equilibrium
+
     t0 = time.perf_counter()
+    r = cfg.relaxation
+    coarse, settings = None, relax_settings(cfg)
+    if r.method == "energy" and r.coarse_elements and int(r.coarse_elements) != int(cfg.mesh.elements):
+        x0, coarse = _coarse_relaxation(cfg, mesh)
+        settings = relax_settings(cfg, [float(v) for v in (r.fine_onset_continuation or [])]
+                                  + [float(cfg.contact.onset)])
+    x, system, info = _relax_cell(cfg, fab, mesh, x0, settings)
+    info["wall_s"] = time.perf_counter() - t0
+    if coarse is not None:
+        info["coarse_stage"] = coarse
+    return x, system, info
+
+
+def _coarse_relaxation(cfg, mesh):
+    """The mesh sequencing's coarse stage of ``periodic_relax``: ``(x0 on mesh, record)``."""
+    from ..fabrics.setup import fabric_and_mesh
+    from ..fem.transfer import interpolate_nodal
+
+    r = cfg.relaxation
+    update = {"elements": int(r.coarse_elements)}
+    if r.coarse_axial_points is not None:
+        update["axial_points"] = int(r.coarse_axial_points)
+    ccfg = cfg.model_copy(update={"mesh": cfg.mesh.model_copy(update=update),
+                                  "relaxation": r.model_copy(update={"coarse_elements": None})})
+    cfab, cmesh = fabric_and_mesh(ccfg)
+    xc, _, cinfo = periodic_relax(ccfg, cfab, cmesh, cfab.initial_state(cmesh))
+    x0 = interpolate_nodal(cmesh, np.asarray(xc, float).reshape(cmesh.n_nodes, -1), mesh)
+    record = {"elements_per_fibril": int(r.coarse_elements), "dofs": int(cinfo["dofs"]),
+              "converged": bool(cinfo["converged"]), "residual_N": float(cinfo["residual_N"]),
+              "max_overlap_over_R": float(cinfo["max_overlap_over_R"]), "wall_s": float(cinfo["wall_s"])}
+    log.info("periodic relaxation: coarse stage on %d elements per fibril (converged %s), interpolated onto %d",
+             int(r.coarse_elements), record["converged"], int(cfg.mesh.elements))
+    return x0, record
+
+
+def _relax_cell(cfg, fab, mesh, x0, settings):
+    """``periodic_relax`` on one mesh from ``x0`` with the relaxation ``settings``."""
+    from ..solvers.relaxation import relax_to_equilibrium
+
     params = contact_params(cfg.contact, rebuild_every=cfg.relaxation.rebuild_every, conduction=False)
     psys = periodic_system(cfg, fab, mesh, x0, np.eye(3), cfg.relaxation.damping, params)
     xr = psys.restrict(np.asarray(x0, float).reshape(-1))
-    res = relax_to_equilibrium(psys, xr, np.zeros(psys.n), relax_settings(cfg))
+    res = relax_to_equilibrium(psys, xr, np.zeros(psys.n), settings)
     xs, converged, polish = newton_polish(psys, res.x, bool(res.static_converged), cfg.relaxation.static_atol)
     al = None
     if psys.augmented:   # relaxed with the penalty: the multipliers from here
@@ -201,7 +245,7 @@ def periodic_relax(cfg, fab, mesh, x0):
         converged = bool(al["converged"])
     st = psys.contact_state(xs)
     info = {"method": cfg.relaxation.method, "boundary": "periodic", "converged": converged, "polish": polish,
-            "residual_N": free_residual(psys, xs), "wall_s": time.perf_counter() - t0, "dofs": int(psys.n),
+            "residual_N": free_residual(psys, xs), "dofs": int(psys.n),
             "static_newton_iterations": int(res.static_newton_iterations),
             "max_overlap_over_R": float(st["max_overlap_over_R"]), "active_pairs": int(st["active_pairs"]),
             "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),

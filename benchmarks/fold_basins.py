@@ -1,0 +1,111 @@
+"""Is the difference between two meshes at a strain a discretisation error or a different
+equilibrium? Each run's stored state is carried onto the other run's mesh (the Lagrange
+interpolant along every fibril, ``rve.fem.transfer.interpolate_nodal``) and solved there at
+the same strain, from no multipliers (the Uzawa loop rebuilds them), so each mesh is solved
+from both packings (docs/table_accuracy.md "Is the fold state a mesh error or another
+equilibrium").
+
+    python benchmarks/fold_basins.py RUN_A STATES_A RUN_B STATES_B STATE [--mode uniaxial]
+        [--only A|B] [--out DIR]
+
+RUN_*: runs of configs/pipeline.yaml; STATES_*: their state directories; STATE: the state's
+file name (e.g. uniaxial_03.nc). ``--only A`` solves on A's mesh only (B's state carried to
+it), ``--only B`` the other way. For each mesh it prints, for its own stored state and for
+the solution from the other mesh's state: the potential (``periodic_energy``, the true
+overlaps and the multipliers of the state), the face forces x+ x and y+ y, the stack shapes
+(height / width of the yarn sections at the crossings, mean over yarns), the Uzawa record
+and the CPU time of the solve, and the largest and rms centroid distance between the two
+states of that mesh. Two equilibria of one mesh with each other's forces mean that the
+meshes picked different packings; one equilibrium reached from both means the difference
+is the mesh's.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from snap_through import setup, stack_shape  # noqa: E402
+
+
+def figures(cfg, fab, mesh, x, mult, mode, eps):
+    """(energy N mm, x+ x N, y+ y N, stack shapes) of an equilibrium of the cell."""
+    from rve.homogenisation.checkpoint import State
+    from rve.homogenisation.multipliers import seed_multipliers
+    from rve.homogenisation.periodic import cell_gradient, cell_reactions, periodic_energy, periodic_system
+
+    x = np.asarray(x, float).reshape(-1)
+    e = float(periodic_energy(cfg, fab, mesh, x, mode, eps, mult)[0])
+    psys = periodic_system(cfg, fab, mesh, x, cell_gradient(fab, mesh, x))
+    seed_multipliers(psys, mult)
+    rf = cell_reactions(fab, psys, psys.restrict(x))
+    st = State(x=x.reshape(mesh.n_nodes, -1), w=None, origin=None, kind="strained", mode=mode, step=0, strain=eps)
+    return e, float(rf["x+"][0]), float(rf["y+"][1]), stack_shape(fab, mesh, st)
+
+
+def line(label, fig):
+    e, fx, fy, sh = fig
+    return (f"  {label:34s} energy {e:.6e} N mm, x+ x {fx:.5f} N, y+ y {fy:.5f} N, "
+            f"weft h/w {sh['weft'][0]:.3f}/{sh['weft'][1]:.3f}, warp h/w {sh['warp'][0]:.3f}/{sh['warp'][1]:.3f} mm")
+
+
+def solve_on(run, own_states, other_run, other_states, name, mode, out):
+    """Solve ``run``'s mesh at the state's strain from ``other_run``'s state; print both."""
+    from rve.fem.transfer import interpolate_nodal
+    from rve.homogenisation.checkpoint import load_state
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.periodic import periodic_strain_step
+
+    cfg, fab, mesh = setup(run)
+    _, _, other_mesh = setup(other_run)
+    own = load_state(Path(own_states) / name)
+    other = load_state(Path(other_states) / name)
+    eps = float(own.strain)
+    if abs(float(other.strain) - eps) > 1e-12:
+        raise SystemExit(f"the two states are at different strains ({eps} and {other.strain})")
+    x0 = interpolate_nodal(other_mesh, other.x.reshape(other_mesh.n_nodes, -1), mesh)
+    c0 = time.process_time()
+    x, system, info = periodic_strain_step(cfg, fab, mesh, x0, None, mode, 1, eps_range=(eps, eps), multipliers=None)
+    cpu = time.process_time() - c0
+    rec = multiplier_record(system)
+    al = info["static"].get("augmented_lagrangian", {})
+    print(f"\n{run} mesh ({mesh.n_elements} elements), {mode} strain {eps:g}:")
+    print(line(f"its own state ({name})", figures(cfg, fab, mesh, own.x, own.multipliers, mode, eps)))
+    print(line(f"solved from {other_run}'s state", figures(cfg, fab, mesh, x, rec, mode, eps)))
+    d = np.linalg.norm(np.asarray(x).reshape(mesh.n_nodes, -1)[:, :3] - own.x.reshape(mesh.n_nodes, -1)[:, :3], axis=1)
+    print(f"  the two states: centroids {d.max():.4f} mm apart at most, {np.sqrt((d ** 2).mean()):.4f} mm rms")
+    d0 = np.linalg.norm(np.asarray(x).reshape(mesh.n_nodes, -1)[:, :3] - x0[:, :3], axis=1)
+    print(f"  the solution from the carried state: {d0.max():.4f} mm at most, {np.sqrt((d0 ** 2).mean()):.4f} mm rms")
+    print(f"  the solve: converged {info['converged']}, |F| {info['residual_N']:.2e} N, Uzawa updates "
+          f"{al.get('updates')}, met {al.get('met')}, overlap {al.get('max_penetration_over_R', float('nan')):.2e} R, "
+          f"{cpu:.1f} CPU s")
+    if out:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        np.savez(Path(out) / f"{run}_from_{other_run}.npz", x=x, keys=rec[0], values=rec[1], cpu=cpu,
+                 info=json.dumps(info, default=str))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("run_a")
+    ap.add_argument("states_a")
+    ap.add_argument("run_b")
+    ap.add_argument("states_b")
+    ap.add_argument("state")
+    ap.add_argument("--mode", default="uniaxial")
+    ap.add_argument("--only", choices=("A", "B"))
+    ap.add_argument("--out")
+    a = ap.parse_args()
+    if a.only != "B":
+        solve_on(a.run_a, a.states_a, a.run_b, a.states_b, a.state, a.mode, a.out)
+    if a.only != "A":
+        solve_on(a.run_b, a.states_b, a.run_a, a.states_a, a.state, a.mode, a.out)
+
+
+if __name__ == "__main__":
+    main()
