@@ -6,11 +6,12 @@ from both packings (docs/table_accuracy.md "Is the fold state a mesh error or an
 equilibrium").
 
     python benchmarks/fold_basins.py RUN_A STATES_A RUN_B STATES_B STATE [--mode uniaxial]
-        [--only A|B] [--out DIR]
+        [--only A|B] [--set-a KEY=VALUE ...] [--out DIR]
 
 RUN_*: runs of configs/pipeline.yaml; STATES_*: their state directories; STATE: the state's
 file name (e.g. uniaxial_03.nc). ``--only A`` solves on A's mesh only (B's state carried to
-it), ``--only B`` the other way. For each mesh it prints, for its own stored state and for
+it), ``--only B`` the other way. ``--set-a``: config overrides of run A (another mesh, say);
+where A's stored state does not fit the mesh they give, its own-state row is left out. For each mesh it prints, for its own stored state and for
 the solution from the other mesh's state: the potential (``periodic_energy``, the true
 overlaps and the multipliers of the state), the face forces x+ x and y+ y, the stack shapes
 (height / width of the yarn sections at the crossings, mean over yarns), the Uzawa record
@@ -54,14 +55,15 @@ def line(label, fig):
             f"weft h/w {sh['weft'][0]:.3f}/{sh['weft'][1]:.3f}, warp h/w {sh['warp'][0]:.3f}/{sh['warp'][1]:.3f} mm")
 
 
-def solve_on(run, own_states, other_run, other_states, name, mode, out):
-    """Solve ``run``'s mesh at the state's strain from ``other_run``'s state; print both."""
+def solve_on(run, own_states, other_run, other_states, name, mode, out, overrides=()):
+    """Solve ``run``'s mesh (its config with ``overrides``) at the state's strain from
+    ``other_run``'s state; print both."""
     from rve.fem.transfer import interpolate_nodal
     from rve.homogenisation.checkpoint import load_state
     from rve.homogenisation.multipliers import multiplier_record
     from rve.homogenisation.periodic import periodic_strain_step
 
-    cfg, fab, mesh = setup(run)
+    cfg, fab, mesh = setup(run, list(overrides))
     _, _, other_mesh = setup(other_run)
     own = load_state(Path(own_states) / name)
     other = load_state(Path(other_states) / name)
@@ -74,11 +76,16 @@ def solve_on(run, own_states, other_run, other_states, name, mode, out):
     cpu = time.process_time() - c0
     rec = multiplier_record(system)
     al = info["static"].get("augmented_lagrangian", {})
-    print(f"\n{run} mesh ({mesh.n_elements} elements), {mode} strain {eps:g}:")
-    print(line(f"its own state ({name})", figures(cfg, fab, mesh, own.x, own.multipliers, mode, eps)))
+    print(f"\n{run} mesh ({mesh.n_elements} elements{', ' + ' '.join(overrides) if overrides else ''}), "
+          f"{mode} strain {eps:g}:")
+    fits = own.x.size == mesh.n_nodes * 9
+    if fits:
+        print(line(f"its own state ({name})", figures(cfg, fab, mesh, own.x, own.multipliers, mode, eps)))
     print(line(f"solved from {other_run}'s state", figures(cfg, fab, mesh, x, rec, mode, eps)))
-    d = np.linalg.norm(np.asarray(x).reshape(mesh.n_nodes, -1)[:, :3] - own.x.reshape(mesh.n_nodes, -1)[:, :3], axis=1)
-    print(f"  the two states: centroids {d.max():.4f} mm apart at most, {np.sqrt((d ** 2).mean()):.4f} mm rms")
+    if fits:
+        d = np.linalg.norm(np.asarray(x).reshape(mesh.n_nodes, -1)[:, :3] - own.x.reshape(mesh.n_nodes, -1)[:, :3],
+                           axis=1)
+        print(f"  the two states: centroids {d.max():.4f} mm apart at most, {np.sqrt((d ** 2).mean()):.4f} mm rms")
     d0 = np.linalg.norm(np.asarray(x).reshape(mesh.n_nodes, -1)[:, :3] - x0[:, :3], axis=1)
     print(f"  the solution from the carried state: {d0.max():.4f} mm at most, {np.sqrt((d0 ** 2).mean()):.4f} mm rms")
     print(f"  the solve: converged {info['converged']}, |F| {info['residual_N']:.2e} N, Uzawa updates "
@@ -86,7 +93,7 @@ def solve_on(run, own_states, other_run, other_states, name, mode, out):
           f"{cpu:.1f} CPU s")
     if out:
         Path(out).mkdir(parents=True, exist_ok=True)
-        np.savez(Path(out) / f"{run}_from_{other_run}.npz", x=x, keys=rec[0], values=rec[1], cpu=cpu,
+        np.savez(Path(out) / f"{run}_{mesh.n_elements}_from_{other_run}.npz", x=x, keys=rec[0], values=rec[1], cpu=cpu,
                  info=json.dumps(info, default=str))
 
 
@@ -99,10 +106,11 @@ def main():
     ap.add_argument("state")
     ap.add_argument("--mode", default="uniaxial")
     ap.add_argument("--only", choices=("A", "B"))
+    ap.add_argument("--set-a", action="append", default=[])
     ap.add_argument("--out")
     a = ap.parse_args()
     if a.only != "B":
-        solve_on(a.run_a, a.states_a, a.run_b, a.states_b, a.state, a.mode, a.out)
+        solve_on(a.run_a, a.states_a, a.run_b, a.states_b, a.state, a.mode, a.out, a.set_a)
     if a.only != "A":
         solve_on(a.run_b, a.states_b, a.run_a, a.states_a, a.state, a.mode, a.out)
 
