@@ -18,7 +18,8 @@ pinned state):
   uniaxial_y: diag(1, 1 + e); shear: F21 = e, the pinned cell's v = e X1 e2; trellis:
   ``strain.trellis_gradient``);
 * :func:`periodic_relax` -- the relaxed cell at F = I (``rve.solvers.relaxation`` on the
-  reduced system, the config's relaxation settings);
+  reduced system, the config's relaxation settings; with ``relaxation.coarse_elements``
+  from the coarse cell's relaxed minimum, interpolated);
 * :func:`periodic_strain_step` -- one step: F_{n-1} -> F_n, predictor the affine map
   F_n F_{n-1}^-1 of the previous state about the held node, then the static minimisation
   (``cell_statics.static_minimize``), or a part of it (``eps_range``: the step halving of
