@@ -6,12 +6,13 @@ from both packings (docs/table_accuracy.md "Is the fold state a mesh error or an
 equilibrium").
 
     python benchmarks/fold_basins.py RUN_A STATES_A RUN_B STATES_B STATE [--mode uniaxial]
-        [--only A|B] [--set-a KEY=VALUE ...] [--out DIR]
+        [--only A|B] [--set-a KEY=VALUE ...] [--out DIR] [--figures-only]
 
 RUN_*: runs of configs/pipeline.yaml; STATES_*: their state directories; STATE: the state's
 file name (e.g. uniaxial_03.nc). ``--only A`` solves on A's mesh only (B's state carried to
 it), ``--only B`` the other way. ``--set-a``: config overrides of run A (another mesh, say);
-where A's stored state does not fit the mesh they give, its own-state row is left out. For each mesh it prints, for its own stored state and for
+where A's stored state does not fit the mesh they give, its own-state row is left out.
+``--figures-only``: the two stored states' rows alone, no solve. For each mesh it prints, for its own stored state and for
 the solution from the other mesh's state: the potential (``periodic_energy``, the true
 overlaps and the multipliers of the state), the face forces x+ x and y+ y, the stack shapes
 (height / width of the yarn sections at the crossings, mean over yarns), the Uzawa record
@@ -31,28 +32,23 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from snap_through import setup, stack_shape  # noqa: E402
-
-
-def figures(cfg, fab, mesh, x, mult, mode, eps):
-    """(energy N mm, x+ x N, y+ y N, stack shapes) of an equilibrium of the cell."""
-    from rve.homogenisation.checkpoint import State
-    from rve.homogenisation.multipliers import seed_multipliers
-    from rve.homogenisation.periodic import cell_gradient, cell_reactions, periodic_energy, periodic_system
-
-    x = np.asarray(x, float).reshape(-1)
-    e = float(periodic_energy(cfg, fab, mesh, x, mode, eps, mult)[0])
-    psys = periodic_system(cfg, fab, mesh, x, cell_gradient(fab, mesh, x))
-    seed_multipliers(psys, mult)
-    rf = cell_reactions(fab, psys, psys.restrict(x))
-    st = State(x=x.reshape(mesh.n_nodes, -1), w=None, origin=None, kind="strained", mode=mode, step=0, strain=eps)
-    return e, float(rf["x+"][0]), float(rf["y+"][1]), stack_shape(fab, mesh, st)
+from snap_step import figures  # noqa: E402
+from snap_through import setup  # noqa: E402
 
 
 def line(label, fig):
     e, fx, fy, sh = fig
     return (f"  {label:34s} energy {e:.6e} N mm, x+ x {fx:.5f} N, y+ y {fy:.5f} N, "
             f"weft h/w {sh['weft'][0]:.3f}/{sh['weft'][1]:.3f}, warp h/w {sh['warp'][0]:.3f}/{sh['warp'][1]:.3f} mm")
+
+
+def stored_figures(run, states, name, mode):
+    """Print the row of a run's stored state."""
+    from rve.homogenisation.checkpoint import load_state
+
+    cfg, fab, mesh = setup(run)
+    st = load_state(Path(states) / name)
+    print(line(f"{run} ({name})", figures(cfg, fab, mesh, st.x, st.multipliers, mode, float(st.strain))))
 
 
 def solve_on(run, own_states, other_run, other_states, name, mode, out, overrides=()):
@@ -108,7 +104,12 @@ def main():
     ap.add_argument("--only", choices=("A", "B"))
     ap.add_argument("--set-a", action="append", default=[])
     ap.add_argument("--out")
+    ap.add_argument("--figures-only", action="store_true")
     a = ap.parse_args()
+    if a.figures_only:
+        for run, states in ((a.run_a, a.states_a), (a.run_b, a.states_b)):
+            stored_figures(run, states, a.state, a.mode)
+        return
     if a.only != "B":
         solve_on(a.run_a, a.states_a, a.run_b, a.states_b, a.state, a.mode, a.out, a.set_a)
     if a.only != "A":

@@ -33,19 +33,26 @@ def start(path):
     return st.x, st.multipliers
 
 
-def report(cfg, fab, mesh, x, mult, eps, label=""):
+def figures(cfg, fab, mesh, x, mult, mode, eps):
+    """(energy N mm, x+ x N, y+ y N, stack shapes) of an equilibrium of the cell: the
+    potential with the true overlaps (``periodic_energy``), the face forces with the state's
+    multipliers seeded, the yarns' section heights and widths."""
     from rve.homogenisation.checkpoint import State
-    from rve.homogenisation.periodic import cell_gradient, cell_reactions, periodic_energy, periodic_system
     from rve.homogenisation.multipliers import seed_multipliers
+    from rve.homogenisation.periodic import cell_gradient, cell_reactions, periodic_energy, periodic_system
 
-    e = periodic_energy(cfg, fab, mesh, x, "uniaxial", eps, mult)[0]
+    x = np.asarray(x, float).reshape(-1)
+    e = float(periodic_energy(cfg, fab, mesh, x, mode, eps, mult)[0])
     psys = periodic_system(cfg, fab, mesh, x, cell_gradient(fab, mesh, x))
     seed_multipliers(psys, mult)
-    rf = cell_reactions(fab, psys, psys.restrict(np.asarray(x).reshape(-1)))
-    st = State(x=np.asarray(x).reshape(mesh.n_nodes, -1), w=None, origin=None, kind="strained", mode="uniaxial",
-               step=0, strain=eps)
-    sh = stack_shape(fab, mesh, st)
-    print(f"{label:40s} strain {eps:.5f}: energy {e:.6e} N mm, x+ x {rf['x+'][0]:.5f} N, y+ y {rf['y+'][1]:.5f} N, "
+    rf = cell_reactions(fab, psys, psys.restrict(x))
+    st = State(x=x.reshape(mesh.n_nodes, -1), w=None, origin=None, kind="strained", mode=mode, step=0, strain=eps)
+    return e, float(rf["x+"][0]), float(rf["y+"][1]), stack_shape(fab, mesh, st)
+
+
+def report(cfg, fab, mesh, x, mult, eps, label=""):
+    e, fx, fy, sh = figures(cfg, fab, mesh, x, mult, "uniaxial", eps)
+    print(f"{label:40s} strain {eps:.5f}: energy {e:.6e} N mm, x+ x {fx:.5f} N, y+ y {fy:.5f} N, "
           f"weft h/w {sh['weft'][0]:.3f}/{sh['weft'][1]:.3f}, warp h/w {sh['warp'][0]:.3f}/{sh['warp'][1]:.3f} mm")
     return e
 

@@ -29,7 +29,8 @@ from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .setup import clamp_reactions, contact_params, fabric_and_mesh, mechanics_system
 from .stack import stack_geometry
 
-__all__ = ["RelaxedFabric", "relaxation_system", "relax_settings", "relax"]
+__all__ = ["RelaxedFabric", "relaxation_system", "relax_settings", "relax", "sequenced", "coarse_mesh_section",
+           "fine_settings"]
 
 
 @dataclass
@@ -71,16 +72,37 @@ def relax_settings(cfg, schedule=None) -> RelaxSettings:
                          time_budget=r.wall_budget_s, backtrack=r.backtrack)
 
 
+def sequenced(cfg) -> bool:
+    """Whether ``cfg``'s relaxation is mesh-sequenced: the energy path with a
+    ``relaxation.coarse_elements`` other than ``mesh.elements``."""
+    r = cfg.relaxation
+    return r.method == "energy" and bool(r.coarse_elements) and int(r.coarse_elements) != int(cfg.mesh.elements)
+
+
+def coarse_mesh_section(cfg):
+    """The mesh section of the mesh sequencing's coarse stage: ``relaxation.coarse_elements``
+    elements per fibril (and ``coarse_axial_points`` Gauss points where given)."""
+    r = cfg.relaxation
+    update = {"elements": int(r.coarse_elements)}
+    if r.coarse_axial_points is not None:
+        update["axial_points"] = int(r.coarse_axial_points)
+    return cfg.mesh.model_copy(update=update)
+
+
+def fine_settings(cfg) -> RelaxSettings:
+    """The sequenced relaxation's settings on the target mesh: the onset stages
+    ``relaxation.fine_onset_continuation`` + ``[contact.onset]``."""
+    return relax_settings(cfg, [float(v) for v in (cfg.relaxation.fine_onset_continuation or [])]
+                          + [float(cfg.contact.onset)])
+
+
 def _coarse_stage(cfg, system):
     """Mesh sequencing: relax on ``relaxation.coarse_elements`` with the whole onset
     schedule, then interpolate the coarse minimum onto the target mesh (rve.fem.transfer).
     Returns ``(x, RelaxResult, dofs)`` of the coarse stage."""
     from ..fem.transfer import interpolate_nodal
 
-    update = {"elements": int(cfg.relaxation.coarse_elements)}
-    if cfg.relaxation.coarse_axial_points is not None:
-        update["axial_points"] = int(cfg.relaxation.coarse_axial_points)
-    _, csys, cx0 = relaxation_system(cfg, cfg.mesh.model_copy(update=update))
+    _, csys, cx0 = relaxation_system(cfg, coarse_mesh_section(cfg))
     cres = relax_to_equilibrium(csys, cx0, np.zeros(csys.n), relax_settings(cfg))
     x = np.zeros(system.n)
     xn = system.nodal(x)
@@ -105,7 +127,7 @@ def relax(cfg, on_rebuild=None, problem=None) -> RelaxedFabric:
     history = []
     xs = x0
     coarse = None
-    if r.method == "energy" and r.coarse_elements and int(r.coarse_elements) != int(cfg.mesh.elements):
+    if sequenced(cfg):
         xs, cres, cdofs = _coarse_stage(cfg, system)
         for h in cres.history:
             history.append(dict(h, mesh_elements=int(r.coarse_elements)))
@@ -114,8 +136,7 @@ def relax(cfg, on_rebuild=None, problem=None) -> RelaxedFabric:
                   "onset_schedule_over_R": [float(v) for v in r.onset_continuation] + [float(cfg.contact.onset)],
                   "converged": bool(cres.static_converged), "newton_iterations": int(cres.static_newton_iterations),
                   "wall_s": float(cres.timings.get("total", 0.0))}
-        settings = relax_settings(cfg, [float(v) for v in (r.fine_onset_continuation or [])]
-                                  + [float(cfg.contact.onset)])
+        settings = fine_settings(cfg)
         system.rebuild(xs)
     res = relax_to_equilibrium(system, xs, np.zeros(system.n), settings, on_rebuild=on_rebuild)
     for h in res.history:

@@ -192,15 +192,13 @@ def periodic_relax(cfg, fab, mesh, x0):
     there with ``relaxation.fine_onset_continuation`` + ``[contact.onset]``, so that meshes
     sequenced from one coarse mesh start in that mesh's packing. Returns ``(x (n_nodes, 9),
     full system, info)``."""
-    from ..fabrics.relaxation import relax_settings
+    from ..fabrics.relaxation import fine_settings, relax_settings, sequenced
 
     t0 = time.perf_counter()
-    r = cfg.relaxation
     coarse, settings = None, relax_settings(cfg)
-    if r.method == "energy" and r.coarse_elements and int(r.coarse_elements) != int(cfg.mesh.elements):
+    if sequenced(cfg):
         x0, coarse = _coarse_relaxation(cfg, mesh)
-        settings = relax_settings(cfg, [float(v) for v in (r.fine_onset_continuation or [])]
-                                  + [float(cfg.contact.onset)])
+        settings = fine_settings(cfg)
     x, system, info = _relax_cell(cfg, fab, mesh, x0, settings)
     info["wall_s"] = time.perf_counter() - t0
     if coarse is not None:
@@ -210,14 +208,12 @@ def periodic_relax(cfg, fab, mesh, x0):
 
 def _coarse_relaxation(cfg, mesh):
     """The mesh sequencing's coarse stage of ``periodic_relax``: ``(x0 on mesh, record)``."""
+    from ..fabrics.relaxation import coarse_mesh_section
     from ..fabrics.setup import fabric_and_mesh
     from ..fem.transfer import interpolate_nodal
 
     r = cfg.relaxation
-    update = {"elements": int(r.coarse_elements)}
-    if r.coarse_axial_points is not None:
-        update["axial_points"] = int(r.coarse_axial_points)
-    ccfg = cfg.model_copy(update={"mesh": cfg.mesh.model_copy(update=update),
+    ccfg = cfg.model_copy(update={"mesh": coarse_mesh_section(cfg),
                                   "relaxation": r.model_copy(update={"coarse_elements": None})})
     cfab, cmesh = fabric_and_mesh(ccfg)
     xc, _, cinfo = periodic_relax(ccfg, cfab, cmesh, cfab.initial_state(cmesh))
