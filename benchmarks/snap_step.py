@@ -2,13 +2,16 @@
 state or from the result of an earlier call (docs/snap_through.md), with optional config
 overrides, and the figures that tell the branches apart.
 
-    python benchmarks/snap_step.py RUN FROM EPS_FROM EPS_TO OUT.npz [--set KEY=VALUE ...] [--reset]
+    python benchmarks/snap_step.py RUN FROM EPS_FROM EPS_TO OUT.npz [--set KEY=VALUE ...] [--reset] [--follow]
 
 RUN: a run of configs/pipeline.yaml; FROM: a stored state (.nc) or an OUT.npz of an earlier
 call (its x and multipliers); ``--reset`` drops the stored multipliers (a changed n_gp
 cannot reuse them: the Uzawa loop rebuilds them from the penalty overlap). Prints CPU s,
 |F|, the potential (true overlaps; ``periodic_energy``), the face forces and the stack
-shapes of the end state; OUT.npz keeps x and the multipliers.
+shapes of the end state; OUT.npz keeps x and the multipliers. ``--follow``: the step as the
+pipeline takes it, through the one-path test (``strain_step``: the jump test and, on a
+detection, ``strain.branch_method``'s following); it prints the test's record (the kept
+state, and the continuation's folds, inertia and energy along its path).
 """
 from __future__ import annotations
 
@@ -66,6 +69,7 @@ def main():
     ap.add_argument("out")
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--reset", action="store_true")
+    ap.add_argument("--follow", action="store_true")
     a = ap.parse_args()
     from rve.homogenisation.multipliers import multiplier_record
     from rve.homogenisation.periodic import periodic_strain_step
@@ -75,8 +79,14 @@ def main():
     if a.reset:
         m0 = None
     c0, t0 = time.process_time(), time.perf_counter()
-    x, system, info = periodic_strain_step(cfg, fab, mesh, x0, None, "uniaxial", 1, eps_range=(a.eps_from, a.eps_to),
-                                           multipliers=m0)
+    if a.follow:
+        from rve.homogenisation.strain import strain_step
+
+        x, system, info = strain_step(cfg, fab, mesh, x0, None, "uniaxial", 1, multipliers=m0,
+                                      levels=(a.eps_from, a.eps_to))
+    else:
+        x, system, info = periodic_strain_step(cfg, fab, mesh, x0, None, "uniaxial", 1,
+                                               eps_range=(a.eps_from, a.eps_to), multipliers=m0)
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     rec = multiplier_record(system)
     np.savez(a.out, x=x, keys=rec[0], values=rec[1], cpu=cpu, wall=wall, residual=info["residual_N"])
@@ -88,6 +98,24 @@ def main():
     print(f"  largest node move from the start state {d.max():.4f} mm (the affine part {abs(a.eps_to - a.eps_from) * 4.2:.4f} mm at most)")
     report(cfg, fab, mesh, x0, m0 if m0 is not None else start(a.start)[1], a.eps_from, "start")
     report(cfg, fab, mesh, x, rec, a.eps_to, "end")
+    if a.follow:
+        branch_record(info.get("branch") or {})
+
+
+def branch_record(b):
+    """The one-path test's record of a step, one line a check and one an arc point."""
+    keys = ("detections", "branch_jumps", "limit_points", "limit_points_passed", "false_alarms", "kept")
+    print("  branch: " + ", ".join(f"{k} {b.get(k)}" for k in keys))
+    for c in b.get("checks", []):
+        print(f"    check {c['eps']}: energy change {c['energy_change']:+.4e}, work {c['work']:.4e} N mm, "
+              f"inertia {c['inertia']}, jump {c['jump']} {c.get('why', '')}")
+    arc = b.get("arc") or {}
+    if arc:
+        print(f"    arc: converged {arc.get('converged')}, steps {arc.get('arc_steps')}, folds {arc.get('folds')}, "
+              f"kinks {arc.get('kinks')}, rejected {arc.get('rejected')}, factorizations {arc.get('factorizations')}, "
+              f"end inertia {arc.get('end_inertia')}, energy mismatch {arc.get('energy_mismatch')}")
+        for p in arc.get("path") or []:
+            print(f"      eps {p['eps']:.6f}  inertia {p['inertia']}  energy {p['energy']:.7e}  rate {p['energy_rate']:.5e}")
 
 
 if __name__ == "__main__":

@@ -163,6 +163,38 @@ def test_periodic_weave_continuation_is_one_branch_and_reproducible():
     assert np.array_equal(x2, x1)
 
 
+def test_periodic_continuation_with_the_augmented_lagrangian():
+    """The same cell and step with the augmented Lagrangian: the curve of the penalty law
+    shifted by the relaxed state's multipliers is continued (the same saddle branch, its
+    energy change the path integral of the work rate), its end passes the Uzawa loop to
+    al_tolerance and is an equilibrium; the branch being a saddle, the step keeps the naive
+    state, which is the step without the continuation's state bit for bit."""
+    from rve.homogenisation.branch import StepSolution
+    from rve.homogenisation.continuation import periodic_arc
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import relax_fabric, strain_step
+
+    cfg, fab, mesh, _ = _ci_periodic_cell()
+    cfg = cfg.model_copy(update={"contact": cfg.contact.model_copy(update={"enforcement": "augmented_lagrangian"})})
+    x0, sys0, info0 = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    lam = multiplier_record(sys0)
+    assert info0["converged"] and lam is not None and np.abs(lam[1]).max() > 0
+    sol = periodic_arc(cfg, fab, mesh, "shear", multipliers=lam)(StepSolution(x0), 0.0, 0.05)
+    a, al = sol.info["arc"], sol.info["static"]["augmented_lagrangian"]
+    assert a["converged"] and sol.info["converged"] and sol.info["residual_N"] <= cfg.strain.static_atol
+    assert al["met"] and al["max_penetration_over_R"] <= cfg.contact.al_tolerance
+    inertia = {p["inertia"] for p in a["path"]}
+    assert len(inertia) == 1 and inertia.pop() > 0
+    x1, _, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam)
+    b = info["branch"]
+    assert b["detections"] == 1 and b["kept"] == "naive" and b["arc"]["unstable"]
+    assert abs(a["energy_mismatch"]) < 1e-2 * (a["path"][-1]["energy"] - info["energy_mJ"])
+    off = cfg.model_copy(update={"strain": cfg.strain.model_copy(update={"branch_method": "halving",
+                                                                          "branch_max_halvings": 0})})
+    x2, _, _ = strain_step(off, fab, mesh, x0, x0, "shear", 1, multipliers=lam)
+    assert np.array_equal(x2, x1)
+
+
 def test_pinned_load_derivative_is_the_strain_derivative_of_the_residual():
     """``pinned_arc``'s R_eps (the free rows of the tangent times d(end targets)/d eps) is the
     central difference of the free residual in eps at fixed free dofs (the CI weave)."""

@@ -28,9 +28,17 @@ return ``arc(start, eps_from, eps_to) -> StepSolution | None`` (``branch.follow_
 ``arc``): ``start.x`` the full nodal state (n_nodes, 9); the solution's ``x`` likewise,
 ``extra`` its system (pinned: the mechanics system with the clamps; periodic: the full
 system), ``info`` a step record (``converged``, ``residual_N``, ``static``, ``arc``); a failed
-continuation gives ``x`` None and only ``info["arc"]``. None when the contact law is the
-augmented Lagrangian (its multipliers would be frozen along the path; the caller falls back
-to halving).
+continuation gives ``x`` None and only ``info["arc"]``. The pinned cell's arc returns None
+when the contact law is the augmented Lagrangian (the caller falls back to halving).
+
+**The periodic cell with the augmented Lagrangian** (``periodic_arc(..., multipliers=)``): the
+curve is that of the penalty law shifted by the start's multipliers (those of ``start.extra``,
+else ``multipliers``: the step's), held along the path, carried by point key through the map
+rebuilds. The start is an equilibrium of that law (its multipliers are expressed at the
+configured P*), and the shift only moves the fold's strain by the overlap the soft P* lets
+between two Uzawa loops. The end at eps_to is the cell's Uzawa loop (``multipliers.equilibrium``)
+around the static polish, from the continuation's end state: the nearest equilibrium of the
+impenetrable limit to ``al_tolerance``, whose inertia is the continuation's at its end.
 """
 from __future__ import annotations
 
@@ -73,6 +81,20 @@ def _finish(system, x, sp_, info, t0, arc_info):
     pinfo["negative_pivots"] = arc_info.get("end_inertia")
     pinfo["method"] = "arc_length"
     info.update({"static": pinfo, "converged": bool(pinfo["converged"]), "residual_N": free_residual(system, xs),
+                 "arc": arc_info, "wall_s": time.perf_counter() - t0})
+    return xs
+
+
+def _finish_augmented(psys, x, sp_, info, t0, arc_info):
+    """The Uzawa loop at the continuation's end around the cell's static polish (the nearest
+    equilibrium, stable or not, as ``_finish``; module docstring) and its step record."""
+    from .multipliers import equilibrium
+
+    xs, pinfo = equilibrium(psys, lambda xv: static_polish(psys, xv, sp_.static_atol, sp_.static_rounds,
+                                                            sp_.static_max_iter), x)
+    pinfo["negative_pivots"] = arc_info.get("end_inertia")
+    pinfo["method"] = "arc_length"
+    info.update({"static": pinfo, "converged": bool(pinfo["converged"]), "residual_N": free_residual(psys, xs),
                  "arc": arc_info, "wall_s": time.perf_counter() - t0})
     return xs
 
@@ -131,8 +153,10 @@ def pinned_arc(cfg, fab, mesh, origin, mode: str, cell, settings: ArcSettings = 
     return arc
 
 
-def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS):
-    """The periodic cell's continuation (module docstring)."""
+def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS, multipliers=None):
+    """The periodic cell's continuation (module docstring). ``multipliers``: the contact
+    multipliers of a start without a system (the step's start; augmented Lagrangian)."""
+    from .multipliers import multiplier_record, seed_multipliers
     from .periodic import cell_reactions, full_state, macro_gradient, periodic_system
 
     sp_ = cfg.strain
@@ -141,8 +165,7 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
         t0 = time.perf_counter()
         x0 = np.asarray(start.x, float).reshape(-1)
         psys = periodic_system(cfg, fab, mesh, x0, macro_gradient(mode, float(e_from)))
-        if psys.augmented:
-            return None
+        seed_multipliers(psys, multipliers if start.extra is None else multiplier_record(start.extra))
         free = _free(psys)
         base = psys.restrict(x0)
         zero = np.zeros(psys.n)
@@ -189,7 +212,7 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
         F_end = macro_gradient(mode, float(e_to))
         info = {"mode": mode, "strain": float(e_to), "strain_increment": float(e_to - e_from), "boundary": "periodic",
                 "macro_gradient": F_end.tolist()}
-        xs = _finish(psys, red(xf), sp_, info, t0, ainfo)
+        xs = (_finish_augmented if psys.augmented else _finish)(psys, red(xf), sp_, info, t0, ainfo)
         info.update({"energy_mJ": float(psys.energy(xs)), "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
                      "reaction_force": cell_reactions(fab, psys, xs)})
         return StepSolution(full_state(psys, xs), info, psys.full)

@@ -328,7 +328,7 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         return x, system, info
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
         if periodic:
-            arc = periodic_arc(cfg, fab, mesh, mode)
+            arc = periodic_arc(cfg, fab, mesh, mode, multipliers=multipliers)
         else:
             cell = SimpleNamespace(system=lambda xf: mech_system(fab, mesh, cfg, sp_.relax_damping, xf),
                                    targets=end_targets,
