@@ -31,7 +31,7 @@ def start(path):
 
     if str(path).endswith(".npz"):
         d = np.load(path)
-        return d["x"], (d["keys"], d["values"])
+        return d["x"], ((d["keys"], d["values"]) if "keys" in d else None)
     st = load_state(path)
     return st.x, st.multipliers
 
@@ -88,8 +88,9 @@ def main():
         x, system, info = periodic_strain_step(cfg, fab, mesh, x0, None, "uniaxial", 1,
                                                eps_range=(a.eps_from, a.eps_to), multipliers=m0)
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
-    rec = multiplier_record(system)
-    np.savez(a.out, x=x, keys=rec[0], values=rec[1], cpu=cpu, wall=wall, residual=info["residual_N"])
+    rec = multiplier_record(system)   # None with the penalty
+    np.savez(a.out, x=x, cpu=cpu, wall=wall, residual=info["residual_N"],
+             **({} if rec is None else {"keys": rec[0], "values": rec[1]}))
     print(f"step {a.eps_from} -> {a.eps_to} from {a.start} ({' '.join(a.set) or 'run config'}"
           f"{', multipliers reset' if a.reset else ''}): converged {info['converged']}, |F| {info['residual_N']:.2e} N, "
           f"{cpu:.1f} CPU s, {wall:.1f} s wall")
