@@ -247,3 +247,22 @@ def test_table_attributes_count_what_the_path_test_found():
     assert json.loads(ds.attrs["branch_limit_points_passed"]) == {"shear": 0, "uniaxial": 3}
     assert json.loads(ds.attrs["branch_detections"]) == {"shear": 0, "uniaxial": 3}
     assert json.loads(ds.attrs["branch_limit_points"]) == {"shear": 0, "uniaxial": 1}
+
+
+def test_the_dogleg_corrector_passes_both_folds_to_the_same_end():
+    """The trust-region corrector (ArcSettings.corrector = "dogleg") on the toy: the same two
+    folds, the same end state; the dogleg step is the Newton step inside the region and on
+    its boundary otherwise."""
+    from rve.homogenisation.branch import _dogleg
+
+    u0 = np.array([_roots(0.2)[0]])
+    x, info = continue_arc(_problem(), u0, 0.2, 0.5, ArcSettings(corrector="dogleg"))
+    assert info["converged"] and info["folds"] == 2
+    assert x[0] == pytest.approx(_roots(0.5)[0], abs=1e-12)
+    rng = np.random.default_rng(3)
+    dN, dC = rng.standard_normal(5), 0.1 * rng.standard_normal(5)
+    nN = float(np.linalg.norm(dN))
+    assert np.array_equal(_dogleg(dN, dC, nN, 2 * nN), dN)
+    for radius in (0.05, 0.5 * nN, 0.9 * nN):
+        d = _dogleg(dN, dC, nN, radius)
+        assert np.linalg.norm(d) == pytest.approx(radius, rel=1e-12)

@@ -244,3 +244,37 @@ def test_relaxed_update_is_the_weighted_mean_of_the_plain_one_and_the_old_multip
     assert np.abs(plain - old).max() > 1e-3 * old.max()
     with pytest.raises(ValueError, match="relaxation"):
         sysm.update_multipliers(xs, 0.0)
+
+
+class _Slow:
+    """An overlap that falls by 1 % an update whatever P* is: every update asks for a raise."""
+
+    augmented = True
+
+    def __init__(self):
+        self.penalty, self.g, self.set_to = 1.0, 1.0, []
+
+    def solve(self, _x):
+        self.g *= 0.99
+        return self.g
+
+    def max_penetration(self, g):
+        return float(g)
+
+    def update_multipliers(self, g, relaxation=1.0):
+        pass
+
+    def set_penalty(self, P, x=None):
+        self.set_to.append(P)
+        self.penalty = P
+
+
+def test_the_last_penalty_raise_ends_at_the_cap():
+    """P* grows by ``growth`` at each update that does not reduce the overlap enough, and the
+    raise that would pass ``max_growth`` times the starting P* stops at it (4, then 10, not 4
+    for ever); the loop's end puts the starting P* back."""
+    s = _Slow()
+    _, loop = solve_with_multipliers(s, s.solve, None, 1e-6, 5, growth=4.0, max_growth=10.0, relaxation=1.0)
+    assert loop.exhausted
+    assert loop.penalties == [1.0, 4.0, 10.0, 10.0, 10.0]   # the first update has no overlap before it
+    assert s.set_to[-1] == 1.0 and s.penalty == 1.0

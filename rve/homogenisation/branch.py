@@ -141,6 +141,8 @@ class ArcSettings:
     min_step_fraction: float = 1e-3  # floor of the arc step, of the first one
     min_turn_cos: float = 0.95      # a step whose tangent turns further (cos below) is halved,
     kink_fraction: float = 0.02     # unless it is this short (of the first): a corner, accepted
+    corrector: str = "newton"       # "dogleg": a trust region on |R|^2 in the hyperplane
+    dogleg_max_iter: int = 40       # iterations of the dogleg corrector per arc step
 
 
 @dataclass
@@ -303,6 +305,7 @@ class _Arc:
 
     def factor(self, x, eps):
         K, R_eps = self.p.tangent(x, eps)
+        self.last_K = K
         solve, neg = self.p.factor(K)
         self.info["factorizations"] += 1
         return solve, np.asarray(R_eps, float), (None if neg is None else int(neg))
@@ -328,6 +331,71 @@ class _Arc:
         self.info["path"].append({"eps": float(eps), "inertia": neg, "energy": float(Pi), "energy_rate": float(dPi)})
 
     def correct(self, xp, ep, t):
+        """The corrector on the residual and the hyperplane through the predictor normal to
+        ``t`` (``settings.corrector``): ``(x, eps, iterations)`` or None."""
+        if self.s.corrector == "dogleg":
+            return self.correct_dogleg(xp, ep, t)
+        return self.correct_newton(xp, ep, t)
+
+    def correct_dogleg(self, xp, ep, t):
+        """Powell's dogleg on |R|^2 / 2 within the hyperplane (module docstring), in the
+        scaled coordinates y = (x, xi eps) where the arc metric is Euclidean: the step is the
+        bordered Newton step where it lies in the trust region, else the path from the
+        hyperplane-projected Cauchy point towards it; the region grows after good agreement
+        of the linear model and shrinks after poor. Every step keeps the hyperplane (the
+        predictor lies in it and the steps are tangent to it)."""
+        tx, te = t
+        xi = float(np.sqrt(self.xi2))
+        ty = np.concatenate([tx, [xi * te]])
+        x, eps = xp.copy(), float(ep)
+        atol = self.s.path_atol_factor * self.p.atol
+        R = np.asarray(self.p.residual(x, eps), float)
+        radius = None
+        for it in range(self.s.dogleg_max_iter + 1):
+            if not np.all(np.isfinite(R)):
+                return None
+            r = float(np.max(np.abs(R)))
+            log.debug("arc dogleg it=%d |R|=%.3e eps=%.6g radius=%s", it, r, eps, radius)
+            if r <= atol:
+                return x, eps, it
+            if it == self.s.dogleg_max_iter:
+                return None
+            solve, R_eps, _ = self.factor(x, eps)
+            a, b = solve(R), solve(R_eps)
+            d_eps = float(tx @ a) / (self.xi2 * te - float(tx @ b))
+            dN = np.concatenate([-a - d_eps * b, [xi * d_eps]])
+            K = self.last_K
+            J = lambda v: K @ v[:-1] + R_eps * (v[-1] / xi)  # noqa: E731
+            G = np.concatenate([K.T @ R, [float(R_eps @ R) / xi]])
+            G -= float(ty @ G) * ty
+            JG = J(G)
+            alpha = float(G @ G) / max(float(JG @ JG), 1e-300)
+            dC = -alpha * G
+            nN = float(np.linalg.norm(dN))
+            radius = nN if radius is None else radius
+            f0 = float(R @ R)
+            while True:
+                d = _dogleg(dN, dC, nN, radius)
+                x1, e1 = x + d[:-1], eps + d[-1] / xi
+                R1 = np.asarray(self.p.residual(x1, e1), float)
+                lin = R + J(d)
+                pred = f0 - float(lin @ lin)
+                act = f0 - float(R1 @ R1) if np.all(np.isfinite(R1)) else -np.inf
+                rho = act / pred if pred > 0 else -np.inf
+                nd = float(np.linalg.norm(d))
+                if rho < 0.25:
+                    radius = 0.25 * nd
+                elif rho > 0.75 and nd >= 0.99 * radius:
+                    radius = 2.0 * radius
+                if rho > 0.1:
+                    x, eps, R = x1, e1, R1
+                    break
+                if radius < 1e-12 * max(1.0, nN):
+                    return None
+            self.info["newton_iterations"] += 1
+        return None
+
+    def correct_newton(self, xp, ep, t):
         """Newton on the residual and the hyperplane through the predictor normal to ``t``:
         ``(x, eps, iterations)`` or None."""
         tx, te = t
@@ -381,6 +449,21 @@ class _Arc:
             x = x - solve(R)
             self.info["newton_iterations"] += 1
         return None
+
+
+def _dogleg(dN, dC, nN: float, radius: float) -> np.ndarray:
+    """The dogleg step in a region of ``radius``: the Newton step ``dN`` where it fits,
+    else the Cauchy step ``dC`` cut at the boundary, else the path from ``dC`` to ``dN``
+    to the boundary."""
+    if nN <= radius:
+        return dN
+    nC = float(np.linalg.norm(dC))
+    if nC >= radius:
+        return dC * (radius / nC)
+    p = dN - dC
+    a, b, c = float(p @ p), 2.0 * float(dC @ p), nC * nC - radius * radius
+    tau = (-b + np.sqrt(max(b * b - 4.0 * a * c, 0.0))) / (2.0 * a)
+    return dC + tau * p
 
 
 def _path_mismatch(path) -> float:

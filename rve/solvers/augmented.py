@@ -16,7 +16,7 @@ contact point much stiffer than P* closes its overlap by only a fraction ~P*/k p
 equilibria). So when an update has not reduced the largest overlap below ``decrease``
 (0.25) times the one before, P* is multiplied by ``growth`` (default
 ``params.al_penalty_growth``, 4), at most up to
-``max_growth`` (1e3) times the system's P* at the start; the multipliers are kept (the line
+``max_growth`` (1e3) times the system's P* at the start (the last raise ends at that cap); the multipliers are kept (the line
 load at zero overlap is unchanged). When the loop ends (converged, exhausted, or stopped by
 the caller: ``finish``) P* returns to its starting value with the multipliers re-expressed
 so that every point's line load at the final state is unchanged: the state stays the
@@ -139,9 +139,10 @@ class AugmentedLagrangian:
         self.updates += 1
         if (self.penalty0 is not None and self.growth > 1 and len(self.history) > 1
                 and pen > self.decrease * self.history[-2][1]):
-            P = float(self.system.penalty) * self.growth
-            if P <= self.max_growth * self.penalty0 * (1 + 1e-12):
-                self.system.set_penalty(P)
+            P, cap = float(self.system.penalty), self.max_growth * self.penalty0
+            if P < cap * (1 - 1e-12):
+                # the last raise stops at the cap rather than short of it
+                self.system.set_penalty(min(P * self.growth, cap))
         if self.penalty0 is not None:
             self.penalties.append(float(self.system.penalty))
         return False
@@ -154,7 +155,7 @@ class AugmentedLagrangian:
         if self.relaxation >= 1.0 or self.penalty0 is None:
             return False
         P = float(self.system.penalty)
-        if self.growth > 1 and P * self.growth <= self.max_growth * self.penalty0 * (1 + 1e-12):
+        if self.growth > 1 and P < self.max_growth * self.penalty0 * (1 - 1e-12):
             return False
         pens = [p for _, p in self.history[self._since:]]
         if len(pens) <= self.stall:
