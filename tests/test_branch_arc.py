@@ -266,3 +266,5 @@ def test_the_dogleg_corrector_passes_both_folds_to_the_same_end():
     for radius in (0.05, 0.5 * nN, 0.9 * nN):
         d = _dogleg(dN, dC, nN, radius)
         assert np.linalg.norm(d) == pytest.approx(radius, rel=1e-12)
+    with pytest.raises(ValueError, match="corrector"):
+        ArcSettings(corrector="lm")

@@ -144,6 +144,10 @@ class ArcSettings:
     corrector: str = "newton"       # "dogleg": a trust region on |R|^2 in the hyperplane
     dogleg_max_iter: int = 40       # iterations of the dogleg corrector per arc step
 
+    def __post_init__(self):
+        if self.corrector not in ("newton", "dogleg"):
+            raise ValueError(f"ArcSettings.corrector must be 'newton' or 'dogleg', got {self.corrector!r}")
+
 
 @dataclass
 class ArcProblem:
