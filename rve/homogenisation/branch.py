@@ -56,7 +56,10 @@ than ``min_turn_cos`` is halved (it could cut across a fold); a sign change of t
 limit point in eps: the path turns back, on the branch whose inertia the factorisation
 counts, and turns forward again at the next). The continuation stops at the first point
 past eps_b with eps increasing and ends by Newton at eps = eps_b from the chord between the
-last two points. A sharp turn over a step shorter than ``kink_fraction`` of the first is a
+last two points. ``ArcSettings(corrector="dogleg")`` corrects by Powell's dogleg on |R|^2 / 2
+within the hyperplane instead (the bordered Newton step inside a trust region, the projected
+Cauchy step towards it outside), for residuals too nonlinear on the scale of an arc step for
+Newton with backtracking. A sharp turn over a step shorter than ``kink_fraction`` of the first is a
 corner of the curve (the contact law is piecewise smooth), accepted and counted (``kinks``).
 The end is the state on the one continuous branch from ``start``: it
 depends on the curve of equilibria, not on a step size (tested: two step sizes land on the
