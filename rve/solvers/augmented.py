@@ -15,9 +15,9 @@ contact point much stiffer than P* closes its overlap by only a fraction ~P*/k p
 (linear convergence, or a limit cycle where the solves switch between neighbouring
 equilibria). So when an update has not reduced the largest overlap below ``decrease``
 (0.25) times the one before, P* is multiplied by ``growth`` (default
-``params.al_penalty_growth``, 4), at most up to
-``max_growth`` (1e3) times the system's P* at the start (the last raise ends at that cap); the multipliers are kept (the line
-load at zero overlap is unchanged). When the loop ends (converged, exhausted, or stopped by
+``params.al_penalty_growth``, 4), at most up to ``max_growth`` (1e3) times the system's P*
+at the start (the last raise ends at that cap); the multipliers are kept (the line load at
+zero overlap is unchanged). When the loop ends (converged, exhausted, or stopped by
 the caller: ``finish``) P* returns to its starting value with the multipliers re-expressed
 so that every point's line load at the final state is unchanged: the state stays the
 equilibrium it is, at the configured P*. ``growth=1`` is the plain Uzawa loop.
