@@ -268,3 +268,29 @@ def test_the_dogleg_corrector_passes_both_folds_to_the_same_end():
         assert np.linalg.norm(d) == pytest.approx(radius, rel=1e-12)
     with pytest.raises(ValueError, match="corrector"):
         ArcSettings(corrector="lm")
+
+
+def test_periodic_continuation_at_a_raised_penalty_with_the_dogleg():
+    """``strain.arc_penalty`` and ``strain.arc_corrector`` from the config: the CI cell's AL
+    continuation at ten times P* (the multipliers re-expressed there) with the dogleg
+    corrector converges, its end passes the Uzawa loop back at the configured P* (the system
+    it returns is at contact.penalty) and is an equilibrium; a bad corrector is refused,
+    naming the key."""
+    from rve.config import validate_config
+    from rve.homogenisation.branch import StepSolution
+    from rve.homogenisation.continuation import periodic_arc
+    from rve.homogenisation.multipliers import multiplier_record
+    from rve.homogenisation.strain import relax_fabric
+
+    cfg, fab, mesh, _ = _ci_periodic_cell()
+    P = float(cfg.contact.penalty)
+    cfg = cfg.model_copy(update={
+        "contact": cfg.contact.model_copy(update={"enforcement": "augmented_lagrangian"}),
+        "strain": cfg.strain.model_copy(update={"arc_penalty": 10.0 * P, "arc_corrector": "dogleg"})})
+    x0, sys0, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
+    sol = periodic_arc(cfg, fab, mesh, "shear", multipliers=multiplier_record(sys0))(StepSolution(x0), 0.0, 0.05)
+    a, al = sol.info["arc"], sol.info["static"]["augmented_lagrangian"]
+    assert a["converged"] and sol.info["converged"] and sol.info["residual_N"] <= cfg.strain.static_atol
+    assert al["met"] and float(sol.extra.penalty) == P
+    with pytest.raises(Exception, match="arc_corrector"):
+        validate_config({"scene": "rve", "strain": {"arc_corrector": "lm"}})

@@ -23,8 +23,8 @@ from .weaves import WEAVE_PATTERNS
 from .friction import FrictionSection, RVEFrictionSection
 from .fabric import FabricContact, FabricMaterial, FabricMesh, FabricRelaxation, FabricSpec
 from .fields import (
-    DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, SceneConfig, Section, ThermalConductivity,
-    Time, Voltage,
+    DampingCoefficient, Dimensionless, ElectricConductivity, Integer, Length, Penalty, SceneConfig, Section,
+    ThermalConductivity, Time, Voltage,
 )
 
 __all__ = ["default_probes", "thesis_probes", "RVEConfig", "FaultChecks", "RVEMaterial", "Settle", "StrainPath", "ProbeTerminal", "ProbeSpec", "ProbeSolver", "MODES", "PeriodicCell", "periodic_probes", "RVEOutput", "Packing", "FrictionSection", "Pullout"]
@@ -105,6 +105,14 @@ class StrainPath(Section):
                                   "the static equilibria in (dofs, strain), through limit points "
                                   "(rve.homogenisation.continuation; halving where it fails), or step halving "
                                   "from the previous state down to branch_max_halvings")
+    arc_corrector: Literal["newton", "dogleg"] = Field(
+        "newton", description="corrector of the arc-length continuation (branch_method: arc_length): Newton with "
+                              "backtracking, or Powell's dogleg on |R|^2 in the arc's hyperplane "
+                              "(rve.homogenisation.branch)")
+    arc_penalty: Optional[Penalty] = Field(
+        None, gt=0, description="augmented Lagrangian, periodic cell: P* at which the continuation runs (the "
+                                "start's multipliers re-expressed there, as at the Uzawa loop's raised P*; back to "
+                                "contact.penalty for the loop at its end); null: contact.penalty")
     static_rounds: Integer = Field(1, ge=1, description="static solves, each after a map rebuild ('newton')")
     static_max_iter: Integer = Field(
         1000, ge=1, description="iterations of the static solve (energy: the minimiser's cap; a step that "

@@ -36,12 +36,18 @@ curve is that of the penalty law shifted by the start's multipliers (those of ``
 else ``multipliers``: the step's), held along the path, carried by point key through the map
 rebuilds. The start is an equilibrium of that law (its multipliers are expressed at the
 configured P*), and the shift only moves the fold's strain by the overlap the soft P* lets
-between two Uzawa loops. The end at eps_to is the cell's Uzawa loop (``multipliers.equilibrium``)
+between two Uzawa loops. ``strain.arc_penalty`` runs the curve at another P* instead, the
+start's multipliers re-expressed there (``set_penalty(P, x)``: every line load kept), as the
+Uzawa loop's raised P* would see it: the stacks' contacts are then stiff enough for the
+inertia along the path to be that of the impenetrable limit; the multipliers go back to
+the configured P* before the end's loop. ``strain.arc_corrector`` picks the corrector
+(``ArcSettings.corrector``). The end at eps_to is the cell's Uzawa loop (``multipliers.equilibrium``)
 around the static polish, from the continuation's end state: the nearest equilibrium of the
 impenetrable limit to ``al_tolerance``, whose inertia is the continuation's at its end.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -85,11 +91,14 @@ def _finish(system, x, sp_, info, t0, arc_info):
     return xs
 
 
-def _finish_augmented(psys, x, sp_, info, t0, arc_info):
+def _finish_augmented(psys, x, sp_, info, t0, arc_info, penalty):
     """The Uzawa loop at the continuation's end around the cell's static polish (the nearest
-    equilibrium, stable or not, as ``_finish``; module docstring) and its step record."""
+    equilibrium, stable or not, as ``_finish``; module docstring), from the configured P*
+    ``penalty`` (the multipliers re-expressed at ``x``), and its step record."""
     from .multipliers import equilibrium
 
+    if float(psys.penalty) != float(penalty):
+        psys.set_penalty(float(penalty), x)
     xs, pinfo = equilibrium(psys, lambda xv: static_polish(psys, xv, sp_.static_atol, sp_.static_rounds,
                                                             sp_.static_max_iter), x)
     pinfo["negative_pivots"] = arc_info.get("end_inertia")
@@ -106,6 +115,7 @@ def pinned_arc(cfg, fab, mesh, origin, mode: str, cell, settings: ArcSettings = 
     eps)`` (``(Pi, dPi/deps)``), i.e. ``strain.mech_system``, ``end_targets`` and
     ``pinned_energy``."""
     sp_ = cfg.strain
+    settings = dataclasses.replace(settings, corrector=str(sp_.arc_corrector))
     origin = np.asarray(origin, float)
     ends, pinned, _ = clamped_ends(fab, mesh)
     origin_ends = origin[ends, :3]
@@ -160,6 +170,7 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
     from .periodic import cell_reactions, full_state, macro_gradient, periodic_system
 
     sp_ = cfg.strain
+    settings = dataclasses.replace(settings, corrector=str(sp_.arc_corrector))
 
     def arc(start, e_from, e_to):
         t0 = time.perf_counter()
@@ -168,6 +179,9 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
         seed_multipliers(psys, multipliers if start.extra is None else multiplier_record(start.extra))
         free = _free(psys)
         base = psys.restrict(x0)
+        configured = float(psys.penalty) if psys.augmented else None
+        if psys.augmented and sp_.arc_penalty is not None:
+            psys.set_penalty(float(sp_.arc_penalty), base)
         zero = np.zeros(psys.n)
         at = {"eps": float(e_from)}
 
@@ -212,7 +226,10 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
         F_end = macro_gradient(mode, float(e_to))
         info = {"mode": mode, "strain": float(e_to), "strain_increment": float(e_to - e_from), "boundary": "periodic",
                 "macro_gradient": F_end.tolist()}
-        xs = (_finish_augmented if psys.augmented else _finish)(psys, red(xf), sp_, info, t0, ainfo)
+        if psys.augmented:
+            xs = _finish_augmented(psys, red(xf), sp_, info, t0, ainfo, configured)
+        else:
+            xs = _finish(psys, red(xf), sp_, info, t0, ainfo)
         info.update({"energy_mJ": float(psys.energy(xs)), "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
                      "reaction_force": cell_reactions(fab, psys, xs)})
         return StepSolution(full_state(psys, xs), info, psys.full)
