@@ -292,5 +292,11 @@ def test_periodic_continuation_at_a_raised_penalty_with_the_dogleg():
     a, al = sol.info["arc"], sol.info["static"]["augmented_lagrangian"]
     assert a["converged"] and sol.info["converged"] and sol.info["residual_N"] <= cfg.strain.static_atol
     assert al["met"] and float(sol.extra.penalty) == P
+    # the curve ran at the raised P*: the start's potential (its penalty part, at the same
+    # line loads) is not the one at the configured P*
+    soft = cfg.model_copy(update={"strain": cfg.strain.model_copy(update={"arc_penalty": None})})
+    ref = periodic_arc(soft, fab, mesh, "shear", multipliers=multiplier_record(sys0))(StepSolution(x0), 0.0, 0.05)
+    e_soft, e_stiff = ref.info["arc"]["path"][0]["energy"], a["path"][0]["energy"]
+    assert abs(e_stiff - e_soft) > 1e-6 * abs(e_soft)
     with pytest.raises(Exception, match="arc_corrector"):
         validate_config({"scene": "rve", "strain": {"arc_corrector": "lm"}})
