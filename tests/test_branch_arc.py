@@ -278,7 +278,7 @@ def test_periodic_continuation_at_a_raised_penalty_with_the_dogleg():
     naming the key."""
     from rve.config import validate_config
     from rve.homogenisation.branch import StepSolution
-    from rve.homogenisation.continuation import periodic_arc
+    from rve.homogenisation.continuation import arc_settings, periodic_arc
     from rve.homogenisation.multipliers import multiplier_record
     from rve.homogenisation.strain import relax_fabric
 
@@ -288,14 +288,18 @@ def test_periodic_continuation_at_a_raised_penalty_with_the_dogleg():
         "contact": cfg.contact.model_copy(update={"enforcement": "augmented_lagrangian"}),
         "strain": cfg.strain.model_copy(update={"arc_penalty": 10.0 * P, "arc_corrector": "dogleg"})})
     x0, sys0, _ = relax_fabric(cfg, fab, mesh, fab.initial_state(mesh))
-    sol = periodic_arc(cfg, fab, mesh, "shear", multipliers=multiplier_record(sys0))(StepSolution(x0), 0.0, 0.05)
+    settings = arc_settings(cfg)
+    assert settings.corrector == "dogleg"
+    sol = periodic_arc(cfg, fab, mesh, "shear", settings, multipliers=multiplier_record(sys0))(StepSolution(x0), 0.0,
+                                                                                                0.05)
     a, al = sol.info["arc"], sol.info["static"]["augmented_lagrangian"]
     assert a["converged"] and sol.info["converged"] and sol.info["residual_N"] <= cfg.strain.static_atol
     assert al["met"] and float(sol.extra.penalty) == P
     # the curve ran at the raised P*: the start's potential (its penalty part, at the same
     # line loads) is not the one at the configured P*
     soft = cfg.model_copy(update={"strain": cfg.strain.model_copy(update={"arc_penalty": None})})
-    ref = periodic_arc(soft, fab, mesh, "shear", multipliers=multiplier_record(sys0))(StepSolution(x0), 0.0, 0.05)
+    ref = periodic_arc(soft, fab, mesh, "shear", settings, multipliers=multiplier_record(sys0))(StepSolution(x0), 0.0,
+                                                                                                  0.05)
     e_soft, e_stiff = ref.info["arc"]["path"][0]["energy"], a["path"][0]["energy"]
     assert abs(e_stiff - e_soft) > 1e-6 * abs(e_soft)
     with pytest.raises(Exception, match="arc_corrector"):

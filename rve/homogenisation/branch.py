@@ -311,11 +311,15 @@ class _Arc:
                      "newton_iterations": 0, "path": []}
 
     def factor(self, x, eps):
+        solve, R_eps, neg, _ = self.factor_with_tangent(x, eps)
+        return solve, R_eps, neg
+
+    def factor_with_tangent(self, x, eps):
+        """``factor``'s ``(solve, R_eps, negative pivots)`` and the tangent K itself."""
         K, R_eps = self.p.tangent(x, eps)
-        self.last_K = K
         solve, neg = self.p.factor(K)
         self.info["factorizations"] += 1
-        return solve, np.asarray(R_eps, float), (None if neg is None else int(neg))
+        return solve, np.asarray(R_eps, float), (None if neg is None else int(neg)), K
 
     def tangent(self, solve, R_eps, t_prev):
         """The unit tangent (t_x, t_eps) from the bordered system with right-hand side (0, 1)
@@ -367,11 +371,10 @@ class _Arc:
                 return x, eps, it
             if it == self.s.dogleg_max_iter:
                 return None
-            solve, R_eps, _ = self.factor(x, eps)
+            solve, R_eps, _, K = self.factor_with_tangent(x, eps)
             a, b = solve(R), solve(R_eps)
             d_eps = float(tx @ a) / (self.xi2 * te - float(tx @ b))
             dN = np.concatenate([-a - d_eps * b, [xi * d_eps]])
-            K = self.last_K
             J = lambda v: K @ v[:-1] + R_eps * (v[-1] / xi)  # noqa: E731
             G = np.concatenate([K.T @ R, [float(R_eps @ R) / xi]])
             G -= float(ty @ G) * ty

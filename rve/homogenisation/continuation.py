@@ -40,8 +40,9 @@ between two Uzawa loops. ``strain.arc_penalty`` runs the curve at another P* ins
 start's multipliers re-expressed there (``set_penalty(P, x)``: every line load kept), as the
 Uzawa loop's raised P* would see it: the stacks' contacts are then stiff enough for the
 inertia along the path to be that of the impenetrable limit; the multipliers go back to
-the configured P* before the end's loop. ``strain.arc_corrector`` picks the corrector
-(``ArcSettings.corrector``). The end at eps_to is the cell's Uzawa loop (``multipliers.equilibrium``)
+the configured P* before the end's loop. The corrector is the caller's ``settings``
+(``strain.arc_corrector`` in the strain path: ``arc_settings(cfg)``). The end at eps_to is
+the cell's Uzawa loop (``multipliers.equilibrium``)
 around the static polish, from the continuation's end state: the nearest equilibrium of the
 impenetrable limit to ``al_tolerance``, whose inertia is the continuation's at its end.
 """
@@ -57,13 +58,18 @@ from ..solvers.linear import factor_inertia, factorize
 from .branch import ArcProblem, ArcSettings, StepSolution, continue_arc
 from .cell_statics import free_residual, static_polish
 
-__all__ = ["pinned_arc", "periodic_arc", "ARC_SETTINGS"]
+__all__ = ["pinned_arc", "periodic_arc", "ARC_SETTINGS", "arc_settings"]
 
 #: the cells' continuation: the path's points equilibria to 1e5 x the static tolerance (1e-4 N
 #: at the default 1e-9 N: the chord contact's force jumps where a contact point crosses an
 #: element end, and Newton stalls there at 1e-6 to 1e-4 N on the default weave), the end
 #: polished to the static tolerance
 ARC_SETTINGS = ArcSettings(path_atol_factor=1e5)
+
+
+def arc_settings(cfg) -> ArcSettings:
+    """``ARC_SETTINGS`` with the config's corrector (``strain.arc_corrector``)."""
+    return dataclasses.replace(ARC_SETTINGS, corrector=str(cfg.strain.arc_corrector))
 
 
 def _factor(K):
@@ -81,29 +87,20 @@ def _free(system) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def _finish(system, x, sp_, info, t0, arc_info):
-    """The polish of the continuation's end and its step record."""
-    xs, pinfo = static_polish(system, x, sp_.static_atol, sp_.static_rounds, sp_.static_max_iter)
+def _finish(system, x, sp_, info, t0, arc_info, penalty=None):
+    """The polish of the continuation's end (the nearest equilibrium, stable or not) and its
+    step record. With the augmented Lagrangian the polish runs in the Uzawa loop, from the
+    configured P* ``penalty`` (the multipliers re-expressed at ``x`` where the curve ran at
+    another; module docstring); with the penalty ``equilibrium`` is the polish alone."""
+    from .multipliers import equilibrium
+
+    if penalty is not None and float(system.penalty) != float(penalty):
+        system.set_penalty(float(penalty), x)
+    xs, pinfo = equilibrium(system, lambda xv: static_polish(system, xv, sp_.static_atol, sp_.static_rounds,
+                                                              sp_.static_max_iter), x)
     pinfo["negative_pivots"] = arc_info.get("end_inertia")
     pinfo["method"] = "arc_length"
     info.update({"static": pinfo, "converged": bool(pinfo["converged"]), "residual_N": free_residual(system, xs),
-                 "arc": arc_info, "wall_s": time.perf_counter() - t0})
-    return xs
-
-
-def _finish_augmented(psys, x, sp_, info, t0, arc_info, penalty):
-    """The Uzawa loop at the continuation's end around the cell's static polish (the nearest
-    equilibrium, stable or not, as ``_finish``; module docstring), from the configured P*
-    ``penalty`` (the multipliers re-expressed at ``x``), and its step record."""
-    from .multipliers import equilibrium
-
-    if float(psys.penalty) != float(penalty):
-        psys.set_penalty(float(penalty), x)
-    xs, pinfo = equilibrium(psys, lambda xv: static_polish(psys, xv, sp_.static_atol, sp_.static_rounds,
-                                                            sp_.static_max_iter), x)
-    pinfo["negative_pivots"] = arc_info.get("end_inertia")
-    pinfo["method"] = "arc_length"
-    info.update({"static": pinfo, "converged": bool(pinfo["converged"]), "residual_N": free_residual(psys, xs),
                  "arc": arc_info, "wall_s": time.perf_counter() - t0})
     return xs
 
@@ -115,7 +112,6 @@ def pinned_arc(cfg, fab, mesh, origin, mode: str, cell, settings: ArcSettings = 
     eps)`` (``(Pi, dPi/deps)``), i.e. ``strain.mech_system``, ``end_targets`` and
     ``pinned_energy``."""
     sp_ = cfg.strain
-    settings = dataclasses.replace(settings, corrector=str(sp_.arc_corrector))
     origin = np.asarray(origin, float)
     ends, pinned, _ = clamped_ends(fab, mesh)
     origin_ends = origin[ends, :3]
@@ -170,7 +166,6 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
     from .periodic import cell_reactions, full_state, macro_gradient, periodic_system
 
     sp_ = cfg.strain
-    settings = dataclasses.replace(settings, corrector=str(sp_.arc_corrector))
 
     def arc(start, e_from, e_to):
         t0 = time.perf_counter()
@@ -226,10 +221,7 @@ def periodic_arc(cfg, fab, mesh, mode: str, settings: ArcSettings = ARC_SETTINGS
         F_end = macro_gradient(mode, float(e_to))
         info = {"mode": mode, "strain": float(e_to), "strain_increment": float(e_to - e_from), "boundary": "periodic",
                 "macro_gradient": F_end.tolist()}
-        if psys.augmented:
-            xs = _finish_augmented(psys, red(xf), sp_, info, t0, ainfo, configured)
-        else:
-            xs = _finish(psys, red(xf), sp_, info, t0, ainfo)
+        xs = _finish(psys, red(xf), sp_, info, t0, ainfo, configured)
         info.update({"energy_mJ": float(psys.energy(xs)), "macro_stress_N_per_mm": psys.macro_stress(xs)[:2, :2].tolist(),
                      "reaction_force": cell_reactions(fab, psys, xs)})
         return StepSolution(full_state(psys, xs), info, psys.full)

@@ -83,7 +83,7 @@ from ..solvers.relaxation import RelaxSettings, relax_to_equilibrium
 from .branch import BRANCH_COUNTS
 from .cell_statics import (cut_retries, cycle_levels, free_residual, static_minimize, static_polish, strain_levels,
                            trellis_gradient)
-from .continuation import periodic_arc, pinned_arc
+from .continuation import arc_settings, periodic_arc, pinned_arc
 from .friction_history import friction_law, friction_record, friction_summary, seed_friction
 from .multipliers import equilibrium, multiplier_record, seed_multipliers
 
@@ -328,12 +328,12 @@ def strain_step(cfg, fab, mesh, x_prev, origin, mode: str, step: int, multiplier
         return x, system, info
     if sp_.follow_branch:   # one equilibrium path: detect a jump, follow the branch (rve.homogenisation.branch)
         if periodic:
-            arc = periodic_arc(cfg, fab, mesh, mode, multipliers=multipliers)
+            arc = periodic_arc(cfg, fab, mesh, mode, arc_settings(cfg), multipliers=multipliers)
         else:
             cell = SimpleNamespace(system=lambda xf: mech_system(fab, mesh, cfg, sp_.relax_damping, xf),
                                    targets=end_targets,
                                    energy=lambda system, xf, e: pinned_energy(fab, mesh, system, xf, origin, mode, e))
-            arc = pinned_arc(cfg, fab, mesh, origin, mode, cell)
+            arc = pinned_arc(cfg, fab, mesh, origin, mode, cell, arc_settings(cfg))
         return _branch_step(mesh, x_prev, eps_prev, eps, sp_, part, energy, multipliers, arc)
     return part(x_prev, eps_prev, eps, whole=True)
 
