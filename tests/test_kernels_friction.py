@@ -242,3 +242,71 @@ def test_frame_frozen_term_forms_equal_on_both_paths(monkeypatch, eta):
     # the potential's rounding: that of the gap times the forces it is the work of
     _, Rf, _ = fr._frozen_forms(y, fr._frozen_pairs(), False)
     assert abs(a[2] - b[2]) <= 64 * np.finfo(float).eps * np.abs(anchor).max() * np.abs(Rf).sum()
+
+
+def _refreeze_points(seed=5, P=300, G=4, M=6):
+    """Random inputs of the section frame's refreeze: nodes, directors, weights, normals,
+    distances, a quarter of the points inactive, and a held history with an orthonormal
+    committed frame."""
+    rng = np.random.default_rng(seed)
+    X, Gn = rng.normal(size=(P, M, 3)), rng.normal(size=(P, M, 3))
+    D, gw, cb_bar, cb_star = (rng.normal(size=(P, G, M)) for _ in range(4))
+    n = rng.normal(size=(P, G, 3))
+    n /= np.linalg.norm(n, axis=-1)[..., None]
+    rho = 0.3 + rng.random((P, G))
+    active = rng.random((P, G)) > 0.25
+    anchor = 0.1 * rng.normal(size=(P, G, 3))
+    d_ref = rng.normal(size=(P, G, 3))
+    d_ref /= np.linalg.norm(d_ref, axis=-1)[..., None]
+    m_ref = rng.normal(size=(P, G, 3))
+    m_ref -= np.einsum("pgi,pgi->pg", m_ref, d_ref)[..., None] * d_ref
+    m_ref /= np.linalg.norm(m_ref, axis=-1)[..., None]
+    return X, Gn, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref
+
+
+def test_frame_refreeze_kernel_matches_numpy():
+    """``rve.kernels.friction_frame.frame_refreeze`` against the numpy reference the term
+    composes (``frame_frozen_turn``, ``frame_moved_history`` and the frozen offset), on random
+    points, inactive ones included."""
+    from rve.kernels.friction_frame import frame_refreeze
+    from rve.physics.friction_forms import frame_frozen_turn, frame_moved_history
+
+    X, Gn, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref = _refreeze_points()
+    s_bar, s_star = np.full(active.shape, 0.25), np.full(active.shape, 0.75)
+    _, Jd, d, _, Jg, g = frame_frozen_turn(X, Gn, D, gw, n, rho, active)
+    weights = lambda s: cb_bar if s is s_bar else cb_star   # noqa: E731
+    _, a_sel, h, bh = frame_moved_history(X, Gn, s_bar, anchor, d_ref, m_ref, s_star, weights,
+                                          lambda s: D, lambda s: gw)
+    ref = (Jd, Jg, a_sel - np.einsum("pgij,pgj->pgi", Jd, d) - np.einsum("pgij,pgj->pgi", Jg, g), h, bh)
+    out = frame_refreeze(X, Gn, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref)
+    assert np.abs(ref[0][~active]).max() == 0.0 and np.abs(ref[0][active]).max() > 0.1
+    for a, b in zip(ref, out):
+        assert a.shape == b.shape
+        assert np.abs(a - b).max() <= 1e-13 * np.abs(a).max()
+
+
+def test_section_frame_loads_equal_on_both_paths(monkeypatch):
+    """The pinned cell's frictional system with the section frame after a frictional step:
+    its loads at a state off it (``FrictionTerm.loads_at``, the predictor's refreeze) equal
+    on the compiled and the numpy path."""
+    from test_rve_friction_al_periodic import _cfg, _relaxed
+
+    from rve.homogenisation.strain import strain_step
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    assert info["converged"]
+    y = np.asarray(x1, float).reshape(-1) + np.random.default_rng(6).normal(size=system.n) * 3e-5
+    fr = system.term.friction
+    system.rebuild(y)
+    out = {}
+    for path in ("numpy", "numba"):
+        monkeypatch.setenv("RVE_KERNELS", path)
+        out[path] = fr.loads_at(y)
+    a, b = out["numpy"], out["numba"]
+    assert a.keys() == b.keys()
+    assert np.abs(a["Jg"]).max() > 0 and (a["f0"] > 0).sum() > 10
+    for k in a:
+        scale = max(np.abs(a[k]).max(), 1e-300)
+        assert np.abs(a[k] - b[k]).max() <= 1e-12 * scale, k

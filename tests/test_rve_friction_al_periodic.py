@@ -451,16 +451,21 @@ def test_periodic_history_of_a_pair_across_a_cell_face_is_carried_by_key():
     from rve.model.terms.friction import match_rows
     from rve.solvers.system import friction_of
 
-    cfg = _cfg("periodic", "penalty", 0.3, rows=STACKED)
-    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
-    assert _image_points(fr0).size > 0
-    x1, full1, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, friction=fr0)
-    assert info["converged"] and info["residual_N"] <= ATOL
-    rec = friction_record(full1)
-    term1 = full1.term.friction
-    t1 = term1.last.t.reshape(-1, 3)
-    img = _image_points(rec)
-    loaded = img[np.linalg.norm(t1[img], axis=1) > 0]
+    # whether fibrils touch across a cell face depends on the packing the (frictionless,
+    # nonconvex) relaxation lands in, and that on rounding (the MKL build, the kernel path):
+    # the first of these cells whose step leaves points of image pairs carrying a force
+    for rows in (STACKED, [3, 2], [2, 1]):
+        cfg = _cfg("periodic", "penalty", 0.3, rows=rows)
+        fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+        assert _image_points(fr0).size > 0
+        x1, full1, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, friction=fr0)
+        assert info["converged"] and info["residual_N"] <= ATOL
+        rec = friction_record(full1)
+        t1 = full1.term.friction.last.t.reshape(-1, 3)
+        img = _image_points(rec)
+        loaded = img[np.linalg.norm(t1[img], axis=1) > 0]
+        if loaded.size:
+            break
     assert loaded.size > 0
     xf = x1.reshape(-1)
     psys = periodic_system(cfg, fab, mesh, xf, macro_gradient("shear", info["strain"]), friction=True)

@@ -711,7 +711,18 @@ class FrictionTerm:
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
             sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
             X = self._local(x, sel)
-            if self.frame:
+            if self.frame and use_numba():   # the compiled refreeze (rve.kernels.friction_frame): the same arrays
+                from ...kernels.friction_frame import frame_refreeze
+
+                D = geo.direction_weights(sm)
+                extra["gw"][sel] = gw = self._section_weights(sel)(sm)[0]
+                Dw[sel] = D
+                s_bar[sel] = sm
+                Jd[sel], extra["Jg"][sel], anchor[sel], d_ref[sel], extra["m_ref"][sel] = frame_refreeze(
+                    X, self._directors(x, sel), D, gw, geo.n, geo.rho, geo.active,
+                    geo.material_weights(self.s_bar[sel]), geo.material_weights(sm), self.anchor[sel],
+                    self.d_ref[sel], self.m_ref[sel])
+            elif self.frame:
                 Gl = self._directors(x, sel)
                 section = self._section_weights(sel)
                 gw = section(sm)[0]
