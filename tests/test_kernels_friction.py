@@ -289,17 +289,10 @@ def test_section_frame_loads_equal_on_both_paths(monkeypatch):
     """The pinned cell's frictional system with the section frame after a frictional step:
     its loads at a state off it (``FrictionTerm.loads_at``, the predictor's refreeze) equal
     on the compiled and the numpy path."""
-    from test_rve_friction_al_periodic import _cfg, _relaxed
+    from test_rve_friction_al_periodic import section_frame_cell_off_its_step
 
-    from rve.homogenisation.strain import strain_step
-
-    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
-    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
-    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
-    assert info["converged"]
-    y = np.asarray(x1, float).reshape(-1) + np.random.default_rng(6).normal(size=system.n) * 3e-5
+    system, y = section_frame_cell_off_its_step(6)
     fr = system.term.friction
-    system.rebuild(y)
     out = {}
     for path in ("numpy", "numba"):
         monkeypatch.setenv("RVE_KERNELS", path)

@@ -64,6 +64,21 @@ def _relaxed(cfg):
     return _RELAXED[key]
 
 
+def section_frame_cell_off_its_step(seed: int):
+    """The pinned AL cell with ``friction.frame: section`` after a frictional shear step, its
+    map rebuilt at a trial state 3e-5 mm (random, ``seed``) off the step's state: ``(system,
+    y)``."""
+    from rve.homogenisation.strain import strain_step
+
+    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
+    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
+    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
+    assert info["converged"]
+    y = np.asarray(x1, float).reshape(-1) + np.random.default_rng(seed).normal(size=system.n) * 3e-5
+    system.rebuild(y)
+    return system, y
+
+
 def _fresh_residual(cfg, fab, mesh, x, multipliers, friction):
     from rve.homogenisation.jobs import recomputed_residual
 
@@ -627,15 +642,8 @@ def test_section_frame_tangent_of_the_assembled_system():
     trial state off it (points in stick and in slip): the assembled tangent's columns of the
     centroids and first directors of the - sections in contact match differences of the
     residual, and the section frame's blocks couple the directors with the other fibril."""
-    from rve.homogenisation.strain import strain_step
-
-    cfg = _cfg("pinned", "augmented_lagrangian", 0.3, substeps=1, frame="section")
-    fab, mesh, x0, lam0, fr0 = _relaxed(cfg)
-    x1, system, info = strain_step(cfg, fab, mesh, x0, x0, "shear", 1, multipliers=lam0, friction=fr0)
-    assert info["converged"]
-    x = np.asarray(x1, float).reshape(-1) + np.random.default_rng(3).normal(size=system.n) * 3e-5
+    system, x = section_frame_cell_off_its_step(3)
     fr = system.term.friction
-    system.rebuild(x)
     st = fr.state(x)
     assert st.stick.any() and st.slip.any()
     act = np.flatnonzero((st.stick | st.slip).any(axis=1))[:4]
