@@ -245,12 +245,18 @@ def test_frame_frozen_term_forms_equal_on_both_paths(monkeypatch, eta):
 
 
 def _refreeze_points(seed=5, P=300, G=4, M=6):
-    """Random inputs of the section frame's refreeze: nodes, directors, weights, normals,
-    distances, a quarter of the points inactive, and a held history with an orthonormal
-    committed frame."""
+    """Random inputs of the section frame's refreeze: nodes, directors, held and closest
+    material points, weights functions linear in ``s``, normals, distances, a quarter of the
+    points inactive, and a held history with an orthonormal committed frame."""
     rng = np.random.default_rng(seed)
     X, Gn = rng.normal(size=(P, M, 3)), rng.normal(size=(P, M, 3))
-    D, gw, cb_bar, cb_star = (rng.normal(size=(P, G, M)) for _ in range(4))
+    s_bar, s_star = rng.random((P, G)), rng.random((P, G))
+
+    def linear_in_s():
+        a, b = rng.normal(size=(P, G, M)), rng.normal(size=(P, G, M))
+        return lambda s: a + np.asarray(s)[..., None] * b
+
+    weights, directions, director_weights = linear_in_s(), linear_in_s(), linear_in_s()
     n = rng.normal(size=(P, G, 3))
     n /= np.linalg.norm(n, axis=-1)[..., None]
     rho = 0.3 + rng.random((P, G))
@@ -261,25 +267,20 @@ def _refreeze_points(seed=5, P=300, G=4, M=6):
     m_ref = rng.normal(size=(P, G, 3))
     m_ref -= np.einsum("pgi,pgi->pg", m_ref, d_ref)[..., None] * d_ref
     m_ref /= np.linalg.norm(m_ref, axis=-1)[..., None]
-    return X, Gn, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref
+    return (X, Gn, s_bar, anchor, d_ref, m_ref, s_star, n, rho, active, weights, directions, director_weights)
 
 
 def test_frame_refreeze_kernel_matches_numpy():
-    """``rve.kernels.friction_frame.frame_refreeze`` against the numpy reference the term
-    composes (``frame_frozen_turn``, ``frame_moved_history`` and the frozen offset), on random
-    points, inactive ones included."""
+    """``rve.kernels.friction_frame.frame_refreeze`` against the numpy reference
+    (``friction_forms.frame_refreeze``) on random points, inactive ones included."""
     from rve.kernels.friction_frame import frame_refreeze
-    from rve.physics.friction_forms import frame_frozen_turn, frame_moved_history
+    from rve.physics.friction_forms import frame_refreeze as reference
 
-    X, Gn, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref = _refreeze_points()
-    s_bar, s_star = np.full(active.shape, 0.25), np.full(active.shape, 0.75)
-    _, Jd, d, _, Jg, g = frame_frozen_turn(X, Gn, D, gw, n, rho, active)
-    weights = lambda s: cb_bar if s is s_bar else cb_star   # noqa: E731
-    _, a_sel, h, bh = frame_moved_history(X, Gn, s_bar, anchor, d_ref, m_ref, s_star, weights,
-                                          lambda s: D, lambda s: gw)
-    ref = (Jd, Jg, a_sel - np.einsum("pgij,pgj->pgi", Jd, d) - np.einsum("pgij,pgj->pgi", Jg, g), h, bh)
-    out = frame_refreeze(X, Gn, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref)
-    assert np.abs(ref[0][~active]).max() == 0.0 and np.abs(ref[0][active]).max() > 0.1
+    args = _refreeze_points()
+    active = args[9]
+    ref, out = reference(*args), frame_refreeze(*args)
+    Jd = ref[1]
+    assert np.abs(Jd[~active]).max() == 0.0 and np.abs(Jd[active]).max() > 0.1
     for a, b in zip(ref, out):
         assert a.shape == b.shape
         assert np.abs(a - b).max() <= 1e-13 * np.abs(a).max()

@@ -4,20 +4,13 @@
 
 Contract
 --------
-``frame_refreeze(X, G, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref)`` ->
-``(Jd, Jg, anchor', h, b_hat)``: in one pass over the points, the arrays the numpy
-reference builds from ``rve.physics.friction_forms.frame_frozen_turn`` (the frame's turn of
-``a = -rho n`` frozen linear in the - direction and g1: ``Jd``, ``Jg`` (P, G, 3, 3)) and
-``frame_moved_history`` (the anchor re-expressed in the frame at the closest point, ``h`` and
-``b_hat`` the new ``d_ref`` and ``m_ref`` (P, G, 3)), with the frozen potential's offset
-taken off the anchor: ``anchor' = Q anchor + j(X; s_bar) - j(X; s*) - Jd d - Jg g``. Equal
-to the reference to rounding (tests/test_kernels_friction.py).
-
-``X``, ``G`` (P, M, 3) the local nodes' centroids and g1; ``D``, ``gw`` (P, G, M) the
-direction and section-node weights at the closest points ``s*``; ``cb_bar``, ``cb_star``
-(P, G, M) the material weights at the held material points and at ``s*``; ``n`` (P, G, 3),
-``rho`` (P, G), ``active`` (P, G) bool; ``anchor``, ``d_ref``, ``m_ref`` (P, G, 3) the held
-history.
+``frame_refreeze(X, G, s_bar, anchor, d_ref, m_ref, s_star, n, rho, active, weights,
+directions, director_weights)`` -> ``(Dw, Jd, gw, Jg, anchor', h, b_hat)``: the arrays of
+the numpy reference ``rve.physics.friction_forms.frame_refreeze`` (same arguments: the
+weights functions are evaluated here, once each), to rounding (tests/test_kernels_friction.py),
+with the frame's turn of ``a = -rho n`` frozen linear in the - direction and g1 (``Jd``,
+``Jg``), the history moved to ``s_star`` (``h``, ``b_hat``) and the anchor less the turn's
+linear part computed in one pass per point.
 """
 from __future__ import annotations
 
@@ -52,7 +45,7 @@ def _frame_at(X, G, D, gw, p, g, h, gg, bh, wh):
 
 
 @njit(cache=True, nogil=True)
-def _turn_jacobians(h, gg, bh, wh, bn, hg, al1, al2, al3, Jh, Jg, W):
+def _turn_jacobians(h, gg, bh, bn, hg, al1, al2, al3, Jh, Jg, W):
     """``Jh = d(Q a)/dh`` and ``Jg = d(Q a)/dg`` at the state's own frame, ``(al1, al2,
     al3)`` the components of ``a`` in it (``friction_forms.framed_anchor``); ``W`` (6, 3, 3)
     work."""
@@ -93,7 +86,7 @@ def _refreeze(X, G, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref
             al1 = -r * (h[0] * n[p, g, 0] + h[1] * n[p, g, 1] + h[2] * n[p, g, 2])
             al2 = -r * (bh[0] * n[p, g, 0] + bh[1] * n[p, g, 1] + bh[2] * n[p, g, 2])
             al3 = -r * (wh[0] * n[p, g, 0] + wh[1] * n[p, g, 1] + wh[2] * n[p, g, 2])
-            _turn_jacobians(h, gg, bh, wh, bn, hg, al1, al2, al3, Jh, Jgp, W)
+            _turn_jacobians(h, gg, bh, bn, hg, al1, al2, al3, Jh, Jgp, W)
             s = dn if dn > 0.0 else 1.0
             for i in range(3):                  # Jd = Jh (I - h h^T) / |d|
                 hJ = Jh[i, 0] * h[0] + Jh[i, 1] * h[1] + Jh[i, 2] * h[2]
@@ -107,23 +100,22 @@ def _refreeze(X, G, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref
             b3 = rm[0] * anchor[p, g, 0] + rm[1] * anchor[p, g, 1] + rm[2] * anchor[p, g, 2]
             _weighted(cb_bar, X, p, g, jb)
             _weighted(cb_star, X, p, g, js)
-            for i in range(3):
-                q = b1 * h[i] + b2 * bh[i] + b3 * wh[i] + jb[i] - js[i]
-                anchor_out[p, g, i] = q
-                h_out[p, g, i] = h[i]
-                bh_out[p, g, i] = bh[i]
-            for i in range(3):
+            for i in range(3):             # less the frozen turn's linear part, Jd d + Jg g
                 off = 0.0
                 for j in range(3):
                     off += Jd[p, g, i, j] * h[j] * dn + Jgp[i, j] * gg[j]
-                anchor_out[p, g, i] -= off
+                anchor_out[p, g, i] = b1 * h[i] + b2 * bh[i] + b3 * wh[i] + jb[i] - js[i] - off
+                h_out[p, g, i] = h[i]
+                bh_out[p, g, i] = bh[i]
 
 
-def frame_refreeze(X, G, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, m_ref):
-    """``(Jd, Jg, anchor', h, b_hat)`` of the section frame's refreeze (module docstring)."""
+def frame_refreeze(X, G, s_bar, anchor, d_ref, m_ref, s_star, n, rho, active, weights, directions,
+                   director_weights):
+    """``(Dw, Jd, gw, Jg, anchor', h, b_hat)`` of the section frame's refreeze (module docstring)."""
     f = lambda a: np.ascontiguousarray(a, dtype=np.float64)   # noqa: E731
-    X, G, D, gw, n, rho, cb_bar, cb_star, anchor, d_ref, m_ref = map(
-        f, (X, G, D, gw, n, rho, cb_bar, cb_star, anchor, d_ref, m_ref))
+    D, gw = f(directions(s_star)), f(director_weights(s_star))
+    cb_bar, cb_star = f(weights(s_bar)), f(weights(s_star))
+    X, G, n, rho, anchor, d_ref, m_ref = map(f, (X, G, n, rho, anchor, d_ref, m_ref))
     active = np.ascontiguousarray(active, dtype=np.bool_)
     P, Gp = D.shape[0], D.shape[1]
     Jd, Jg = np.zeros((P, Gp, 3, 3)), np.zeros((P, Gp, 3, 3))
@@ -134,4 +126,4 @@ def frame_refreeze(X, G, D, gw, n, rho, active, cb_bar, cb_star, anchor, d_ref, 
                   anchor[a:b], d_ref[a:b], m_ref[a:b], Jd[a:b], Jg[a:b], out[a:b], h[a:b], bh[a:b])
 
     run_chunked(P, chunk, MIN_CHUNK)
-    return Jd, Jg, out, h, bh
+    return D, Jd, gw, Jg, out, h, bh

@@ -97,7 +97,8 @@ from .contact_forms import chord_direction_weights
 __all__ = ["FrictionPoints", "friction_state", "friction_forces", "start_history", "material_weights",
            "tangential_gap", "frozen_potential", "moved_history", "minus_direction", "turned_anchor",
            "frozen_turn", "section_frame", "framed_anchor", "frame_friction_forces", "frame_friction_state",
-           "frame_tangential_gap", "frame_moved_history", "frame_frozen_turn", "frame_frozen_potential"]
+           "frame_tangential_gap", "frame_moved_history", "frame_frozen_turn", "frame_frozen_potential",
+           "frame_refreeze"]
 
 
 def material_weights(s_plus, s_bar) -> np.ndarray:
@@ -737,6 +738,23 @@ def frame_moved_history(X, G, s_bar, anchor, d_ref, m_ref, s_star, weights, dire
     g = np.einsum("pgk,pki->pgi", director_weights(s_star), G)
     Qa = framed_anchor(anchor, d_ref, m_ref, h, g)
     return np.array(s_star, float, copy=True), Qa + jb - js, h, section_frame(h, g)[0]
+
+
+def frame_refreeze(X, G, s_bar, anchor, d_ref, m_ref, s_star, n, rho, active, weights, directions,
+                   director_weights):
+    """The section frame's loads refrozen at local nodes ``(X, G)`` (``FrictionTerm.loads_at``):
+    ``(Dw, Jd, gw, Jg, anchor', h, b_hat)``, the frame's turn frozen at the state
+    (``frame_frozen_turn`` with the direction and section-node weights at ``s_star``), the
+    history moved to ``s_star`` (``frame_moved_history``: ``h``, ``b_hat`` the new ``d_ref``,
+    ``m_ref``), and its anchor less the frozen turn's linear part, ``anchor' = Q anchor + j(X;
+    s_bar) - j(X; s_star) - Jd d - Jg g``, so that the frozen gap is the law's at the state.
+    The compiled kernel ``rve.kernels.friction_frame.frame_refreeze`` gives the same arrays."""
+    gw = director_weights(s_star)
+    Dw, Jd, d, gw, Jg, g = frame_frozen_turn(X, G, directions(s_star), gw, n, rho, active)
+    _, a_moved, h, bh = frame_moved_history(X, G, s_bar, anchor, d_ref, m_ref, s_star, weights, directions,
+                                            director_weights)
+    a_moved = a_moved - np.einsum("pgij,pgj->pgi", Jd, d) - np.einsum("pgij,pgj->pgi", Jg, g)
+    return Dw, Jd, gw, Jg, a_moved, h, bh
 
 
 def frame_frozen_turn(X, G, D, gw, n, rho, active):

@@ -75,7 +75,7 @@ from ...physics.contact_curve import curve_basis
 from ...physics.contact_forms import penalty_law
 from ...physics.contact_smooth import hermite_basis
 from ...physics.friction_forms import (frame_friction_forces, frame_friction_state, frame_frozen_potential,
-                                      frame_frozen_turn, frame_moved_history, frame_tangential_gap, friction_forces,
+                                      frame_frozen_turn, frame_refreeze, frame_tangential_gap, friction_forces,
                                       friction_state, frozen_potential, frozen_turn, material_weights,
                                       minus_direction, moved_history, section_frame, start_history, tangential_gap)
 from ...kernels import use_numba
@@ -711,28 +711,17 @@ class FrictionTerm:
             n0[sel] = np.where(geo.active[..., None], geo.n, 0.0)
             sm = np.where(geo.active, geo.s_minus, self.s_bar[sel])
             X = self._local(x, sel)
-            if self.frame and use_numba():   # the compiled refreeze (rve.kernels.friction_frame): the same arrays
-                from ...kernels.friction_frame import frame_refreeze
-
-                D = geo.direction_weights(sm)
-                extra["gw"][sel] = gw = self._section_weights(sel)(sm)[0]
-                Dw[sel] = D
-                s_bar[sel] = sm
-                Jd[sel], extra["Jg"][sel], anchor[sel], d_ref[sel], extra["m_ref"][sel] = frame_refreeze(
-                    X, self._directors(x, sel), D, gw, geo.n, geo.rho, geo.active,
-                    geo.material_weights(self.s_bar[sel]), geo.material_weights(sm), self.anchor[sel],
-                    self.d_ref[sel], self.m_ref[sel])
-            elif self.frame:
-                Gl = self._directors(x, sel)
+            if self.frame:
+                if use_numba():   # the compiled refreeze (rve.kernels.friction_frame): the same arrays
+                    from ...kernels.friction_frame import frame_refreeze as refreeze
+                else:
+                    refreeze = frame_refreeze
                 section = self._section_weights(sel)
-                gw = section(sm)[0]
-                Dw[sel], Jd[sel], d, extra["gw"][sel], extra["Jg"][sel], g = frame_frozen_turn(
-                    X, Gl, geo.direction_weights(sm), gw, geo.n, geo.rho, geo.active)
-                s_bar[sel], a_sel, d_ref[sel], extra["m_ref"][sel] = frame_moved_history(
-                    X, Gl, self.s_bar[sel], self.anchor[sel], self.d_ref[sel], self.m_ref[sel], sm,
-                    geo.material_weights, geo.direction_weights, lambda s: section(s)[0])
-                anchor[sel] = (a_sel - np.einsum("pgij,pgj->pgi", Jd[sel], d)
-                               - np.einsum("pgij,pgj->pgi", extra["Jg"][sel], g))
+                s_bar[sel] = sm
+                Dw[sel], Jd[sel], extra["gw"][sel], extra["Jg"][sel], anchor[sel], d_ref[sel], extra["m_ref"][sel] = \
+                    refreeze(X, self._directors(x, sel), self.s_bar[sel], self.anchor[sel], self.d_ref[sel],
+                             self.m_ref[sel], sm, geo.n, geo.rho, geo.active, geo.material_weights,
+                             geo.direction_weights, lambda s: section(s)[0])
             else:
                 Dw[sel], Jd[sel], d = frozen_turn(X, geo.direction_weights(sm), geo.n, geo.rho, geo.active)
                 s_bar[sel], a_sel, d_ref[sel] = moved_history(X, None, self.s_bar[sel], self.anchor[sel], sm,
